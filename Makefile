@@ -1,0 +1,25 @@
+# Entry points for a fresh machine; each target sets up what is missing first.
+VENV ?= .venv
+PY := $(VENV)/bin/python
+MPIRUN := OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1 OMPI_MCA_rmaps_base_oversubscribe=1 mpirun -n 2
+
+.PHONY: setup demo test test-serial test-mpi verify bench clean
+
+setup:
+	@bash scripts/bootstrap.sh
+
+demo: setup
+	$(VENV)/bin/fabricfem demo
+
+test: setup
+	$(PY) -m pytest -q tests
+	$(MPIRUN) $(PY) -m pytest -q -p no:cacheprovider -m mpi tests
+
+verify: setup
+	$(VENV)/bin/fabricfem verify
+
+bench: setup
+	$(VENV)/bin/fabricfem bench
+
+clean:
+	rm -rf results .pytest_cache

@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# Idempotent set-up for a fresh Debian bookworm machine:
+#   1. Debian packages (dolfinx 0.5.2 stack, gmsh, meshio, OpenMPI) via apt, as root or with sudo;
+#   2. a virtual environment .venv from /usr/bin/python3 --system-site-packages;
+#   3. the project installed editable, numpy pinned to the Debian numpy (numpy 2 breaks petsc4py).
+set -euo pipefail
+here="$(cd "$(dirname "$0")/.." && pwd)"
+cd "$here"
+VENV="${FABRICFEM_VENV:-$here/.venv}"
+DEBS="python3-dolfinx python3-petsc4py python3-mpi4py python3-gmsh python3-meshio python3-venv \
+python3-dolfinx-mpc python3-scipy openmpi-bin"
+
+missing=""
+for p in $DEBS; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
+done
+if [ -n "$missing" ]; then
+  echo "[bootstrap] installing Debian packages:$missing"
+  SUDO=""
+  [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $missing
+fi
+
+if [ ! -x "$VENV/bin/python" ]; then
+  echo "[bootstrap] creating $VENV"
+  /usr/bin/python3 -m venv --system-site-packages "$VENV"
+fi
+
+stamp="$VENV/.fabricfem-installed"
+if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
+  numpy_version="$(/usr/bin/python3 -c 'import numpy; print(numpy.__version__)')"
+  echo "numpy==$numpy_version" > "$VENV/constraints.txt"
+  echo "[bootstrap] installing fabricfem (editable), numpy pinned to $numpy_version"
+  "$VENV/bin/python" -m pip install -q --disable-pip-version-check -c "$VENV/constraints.txt" -e ".[dev]"
+  touch "$stamp"
+fi
