@@ -1,0 +1,370 @@
+"""A fabric sheet as a finite-element model: spaces, fields, loads and constraints.
+
+`ShellModel` assembles the pieces of `fabricfem.forms` into the discrete residual
+
+    R(w; lambda) = dPi_int/dw - lambda F_ref,
+
+where w = (u, theta) (Naghdi shell) or w = u (membrane), F_ref collects all dead
+loads (gravity, edge tractions, pressure, edge moments, point loads) at load factor 1
+and prescribed non-zero displacements/rotations are also scaled by lambda.
+Units: SI (m, N, Pa, kg, s, rad).
+"""
+from __future__ import annotations
+
+from typing import Callable, Sequence
+
+import numpy as np
+import ufl
+from dolfinx import fem
+from dolfinx.fem import petsc as fem_petsc
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fabricfem.forms import loads as load_forms
+from fabricfem.forms import shell as shell_forms
+from fabricfem.materials import Fabric, SquareRootBending
+
+Locator = str | Callable[[np.ndarray], np.ndarray]
+
+MODELS = ("naghdi", "membrane")
+
+
+def _normalize_rows(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+class ShellModel:
+    """Geometrically nonlinear fabric sheet on a `fabricfem.meshes.FabricMesh`.
+
+    Args:
+        fabric_mesh: the surface mesh with tags and warp/normal fields.
+        fabric: material (Fabric).
+        model: "naghdi" (membrane + bending + transverse shear, rotations) or "membrane".
+        degree: polynomial degree of the fields (2; the displacement of the Naghdi
+            shell on triangles is enriched with a cubic bubble).
+        psri_degrees: (full, reduced) quadrature degrees of the PSRI split.
+        bending_eps: regularisation [1/m] of |K| for the square-root bending law
+            (default 1e-3 kappa0).
+        rebase: after each converged load step, rotate the director base onto the current
+            director and zero the angles, so that only increments are parametrised (no
+            singularity at |theta1| = pi/2 however far the sheet turns). Off while a non-zero
+            rotation is prescribed.
+    """
+
+    def __init__(self, fabric_mesh, fabric: Fabric, model: str = "naghdi", degree: int = 2,
+                 psri_degrees: tuple[int, int] = (4, 2), bending_eps: float | None = None,
+                 rebase: bool = True):
+        if model not in MODELS:
+            raise ValueError(f"model must be one of {MODELS}, got {model!r}")
+        if not isinstance(fabric, Fabric):
+            raise ValueError(f"fabric must be a fabricfem.materials.Fabric, got {type(fabric).__name__}")
+        self.fmesh = fabric_mesh
+        self.mesh = fabric_mesh.mesh
+        self.comm = self.mesh.comm
+        self.fabric = fabric
+        self.model = model
+        mesh = self.mesh
+        cell = mesh.ufl_cell()
+        family = "Lagrange"
+        P = ufl.FiniteElement(family, cell, degree)
+        if model == "naghdi":
+            if cell.cellname() == "triangle":
+                P_u = P + ufl.FiniteElement("Bubble", cell, 3)
+            else:
+                P_u = P
+            element = ufl.MixedElement([ufl.VectorElement(P_u, dim=3), ufl.VectorElement(P, dim=2)])
+        else:
+            element = ufl.VectorElement(P, dim=3)
+        self.W = fem.FunctionSpace(mesh, element)
+        self.w = fem.Function(self.W, name="state")
+        self.w_test = ufl.TestFunction(self.W)
+        self.w_trial = ufl.TrialFunction(self.W)
+        if model == "naghdi":
+            self.u, self.theta = ufl.split(self.w)
+            self.v, self.eta = ufl.split(self.w_test)
+        else:
+            self.u, self.theta = self.w, None
+            self.v, self.eta = self.w_test, None
+
+        # Reference geometry and frames as P2 vector fields on the surface
+        self.V2 = fem.VectorFunctionSpace(mesh, (family, degree), dim=3)
+        x = self.V2.tabulate_dof_coordinates().T
+        n0 = _normalize_rows(np.asarray(fabric_mesh.normal(x), dtype=float).T)
+        warp = np.asarray(fabric_mesh.warp(x), dtype=float).T
+        t1 = _normalize_rows(warp - np.sum(warp * n0, axis=1, keepdims=True) * n0)
+        t2 = np.cross(n0, t1)
+        self.phi0 = self._vector_field(x.T, "reference_position")
+        self.n0 = self._vector_field(n0, "reference_normal")
+        self.t1 = self._vector_field(t1, "warp")
+        self.t2 = self._vector_field(t2, "weft")
+        # Director base, re-based between load steps (rebase_director)
+        self.a3 = self._vector_field(n0, "director_base")
+        self.a1 = self._vector_field(t1, "director_base_1")
+        self.a2 = self._vector_field(t2, "director_base_2")
+
+        # Stiffness constants (Constants: changing a material does not recompile forms)
+        t = fabric.thickness
+        self.A = fem.Constant(mesh, PETSc.ScalarType(t * fabric.plane_stress_matrix))
+        self.D = fem.Constant(mesh, PETSc.ScalarType(fabric.bending_matrix))
+        self.shear_stiffness = fem.Constant(
+            mesh, PETSc.ScalarType(fabric.shear_correction * fabric.transverse_shear_modulus * t))
+        self.thickness = fem.Constant(mesh, PETSc.ScalarType(t))
+        self.load_factor = fem.Constant(mesh, PETSc.ScalarType(0.0))
+
+        if model == "naghdi":
+            law = fabric.bending_law
+            eps = bending_eps
+            if isinstance(law, SquareRootBending) and eps is None:
+                eps = 1e-3 * law.kappa0
+            self.energy = shell_forms.naghdi_energy(
+                self.u, self.theta, self.phi0, self.n0, (self.a3, self.a1, self.a2), (self.t1, self.t2),
+                self.A, self.D, self.shear_stiffness, self.thickness, law=law, law_eps=eps,
+                degrees=psri_degrees)
+        else:
+            self.energy = shell_forms.membrane_energy(self.u, self.phi0, self.t1, self.t2, self.A)
+
+        self.dx = ufl.Measure("dx", domain=mesh)
+        self.ds = ufl.Measure("ds", domain=mesh, subdomain_data=fabric_mesh.facet_tags)
+        self._external: list = []
+        self._point_loads: list[tuple[np.ndarray, np.ndarray]] = []
+        self.bcs: list = []
+        self._scaled_bcs: list[tuple[fem.Function, np.ndarray]] = []
+        self._compiled = False
+        self.rebase = rebase and model == "naghdi"
+        self._rotation_prescribed = False
+
+    # ------------------------------------------------------------------ fields
+    def _vector_field(self, values: np.ndarray, name: str) -> fem.Function:
+        f = fem.Function(self.V2, name=name)
+        f.x.array[:] = np.ascontiguousarray(values).reshape(-1)
+        return f
+
+    @property
+    def ndofs(self) -> int:
+        im = self.W.dofmap.index_map
+        return im.size_global * self.W.dofmap.index_map_bs
+
+    # ------------------------------------------------------------------ loads
+    def _ds(self, tag: str):
+        return self.ds(self.fmesh.tag(tag))
+
+    def add_gravity(self, g: Sequence[float] = (0.0, 0.0, -9.81)):
+        """Weight of the sheet, areal density rho t [kg/m^2] times g [m/s^2]."""
+        if self.fabric.areal_density <= 0:
+            raise ValueError("gravity needs a positive fabric density (Fabric.density, kg/m^3)")
+        gv = fem.Constant(self.mesh, PETSc.ScalarType(g))
+        self._external.append(load_forms.body_force(self.v, self.fabric.areal_density, gv, self.dx))
+
+    def add_body_force(self, force_per_area: Sequence[float]):
+        """Dead force per unit reference area [N/m^2]."""
+        f = fem.Constant(self.mesh, PETSc.ScalarType(force_per_area))
+        self._external.append(ufl.dot(f, self.v) * self.dx)
+
+    def add_edge_traction(self, tag: str, traction: Sequence[float]):
+        """Dead force per unit reference edge length [N/m] on the edge named `tag`."""
+        T = fem.Constant(self.mesh, PETSc.ScalarType(traction))
+        self._external.append(load_forms.edge_traction(self.v, T, self._ds(tag)))
+
+    def add_pressure(self, pressure: float):
+        """Dead pressure [Pa] along the reference normal."""
+        q = fem.Constant(self.mesh, PETSc.ScalarType(pressure))
+        self._external.append(load_forms.surface_pressure(self.v, q, self.n0, self.dx))
+
+    def add_edge_moment(self, tag: str, moment: Sequence[float]):
+        """Moment per unit edge length [N m/m] as (m1, m2) about the director axes (t1, t2)."""
+        if self.model != "naghdi":
+            raise ValueError("edge moments need the 'naghdi' model (the membrane has no rotations)")
+        m = fem.Constant(self.mesh, PETSc.ScalarType(moment))
+        self._external.append(load_forms.edge_moment(self.eta, m, self._ds(tag)))
+
+    def add_point_load(self, point: Sequence[float], force: Sequence[float]):
+        """Force [N] on the mesh node nearest to `point` (which must be a node, within 1e-8 m)."""
+        self._point_loads.append((np.asarray(point, dtype=float), np.asarray(force, dtype=float)))
+
+    # ------------------------------------------------------------ constraints
+    def _subspace(self, field: str, component: int):
+        if self.model == "naghdi":
+            return self.W.sub(0 if field == "u" else 1).sub(component)
+        return self.W.sub(component)
+
+    def _locate(self, where: Locator, space_pair) -> np.ndarray:
+        if callable(where):
+            return fem.locate_dofs_geometrical(space_pair, where)
+        facets = self.fmesh.facets(where)
+        fdim = self.mesh.topology.dim - 1
+        return fem.locate_dofs_topological(space_pair, fdim, facets)
+
+    def constrain(self, where: Locator, u: Sequence[float | None] | None = None,
+                  theta: Sequence[float | None] | None = None):
+        """Prescribe displacement components u [m] and rotations theta [rad] on an edge tag or a
+        geometric locator. None leaves a component free; non-zero values are scaled by the load factor."""
+        if not callable(where):
+            self.fmesh.tag(where)  # ValueError naming an unknown tag
+        if theta is not None and self.model != "naghdi":
+            raise ValueError("theta constraints need the 'naghdi' model")
+        for field, values, n in (("u", u, 3), ("theta", theta, 2)):
+            if values is None:
+                continue
+            if len(values) != n:
+                raise ValueError(f"{field} must have {n} components (None for free), got {values!r}")
+            for i, val in enumerate(values):
+                if val is None:
+                    continue
+                sub = self._subspace(field, i)
+                V, _ = sub.collapse()
+                dofs = self._locate(where, (sub, V))
+                g = fem.Function(V)
+                if val != 0.0:
+                    self._rotation_prescribed |= field == "theta"
+                    self._scaled_bcs.append((g, np.full(g.x.array.shape, float(val))))
+                self.bcs.append(fem.dirichletbc(g, dofs, sub))
+        return self
+
+    def clamp(self, where: Locator):
+        """All displacements and rotations zero."""
+        return self.constrain(where, u=(0.0, 0.0, 0.0), theta=(0.0, 0.0) if self.model == "naghdi" else None)
+
+    def set_load_factor(self, lam: float):
+        self.load_factor.value = lam
+        for g, values in self._scaled_bcs:
+            g.x.array[:] = lam * values
+
+    # -------------------------------------------------------- director base
+    def after_converged_step(self):
+        """Hook called by the solvers after each converged step."""
+        if self.rebase and not self._rotation_prescribed:
+            self.rebase_director()
+
+    def rebase_director(self):
+        """Rotate the director base (a3, a1, a2) by the current angles and set the angles to zero.
+
+        With R = R_a2(th2) R_a1(th1): a3' = d, a1' = cos th2 a1 - sin th2 a3,
+        a2' = sin th1 sin th2 a1 + cos th1 a2 + sin th1 cos th2 a3; re-orthonormalised at the nodes.
+        The displacement, the director at the nodes and hence the state are unchanged.
+        """
+        if not hasattr(self, "_rebase_expressions"):
+            th1, th2 = self.theta[0], self.theta[1]
+            c1, s1, c2, s2 = ufl.cos(th1), ufl.sin(th1), ufl.cos(th2), ufl.sin(th2)
+            a3, a1, a2 = self.a3, self.a1, self.a2
+            points = self.V2.element.interpolation_points()
+            self._rebase_expressions = [
+                fem.Expression(shell_forms.director(self.theta, a3, a1, a2), points),
+                fem.Expression(c2 * a1 - s2 * a3, points),
+                fem.Expression(s1 * s2 * a1 + c1 * a2 + s1 * c2 * a3, points)]
+            self._theta_dofs = self.W.sub(1).collapse()[1]
+        new = []
+        for expr in self._rebase_expressions:
+            f = fem.Function(self.V2)
+            f.interpolate(expr)
+            new.append(f.x.array.reshape(-1, 3).copy())
+        d = _normalize_rows(new[0])
+        b1 = _normalize_rows(new[1] - np.sum(new[1] * d, axis=1, keepdims=True) * d)
+        b2 = np.cross(d, b1)
+        for field_, values in ((self.a3, d), (self.a1, b1), (self.a2, b2)):
+            field_.x.array[:] = values.reshape(-1)
+        self.w.x.array[self._theta_dofs] = 0.0
+
+    def director_field(self) -> fem.Function:
+        """Current director d as a P2 vector Function (for output)."""
+        if self.model != "naghdi":
+            raise ValueError("the membrane model has no director")
+        f = fem.Function(self.V2, name="director")
+        f.interpolate(fem.Expression(shell_forms.director(self.theta, self.a3, self.a1, self.a2),
+                                     self.V2.element.interpolation_points()))
+        return f
+
+    # --------------------------------------------------------------- assembly
+    def compile(self):
+        """JIT-compile the residual and Jacobian forms and assemble F_ref."""
+        if self._compiled:
+            return
+        self.residual_form = ufl.derivative(self.energy, self.w, self.w_test)
+        self.jacobian_form = ufl.derivative(self.residual_form, self.w, self.w_trial)
+        self._R = fem.form(self.residual_form)
+        self._J = fem.form(self.jacobian_form)
+        self.F_ref = fem_petsc.create_vector(self._R)
+        with self.F_ref.localForm() as f:
+            f.set(0.0)
+        if self._external:
+            fem_petsc.assemble_vector(self.F_ref, fem.form(sum(self._external[1:], self._external[0])))
+        self.F_ref.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        for point, force in self._point_loads:
+            for i in range(3):
+                dof = self.owned_node_dof(point, "u", i)
+                if dof is not None:
+                    self.F_ref.setValueLocal(dof, force[i], addv=PETSc.InsertMode.ADD_VALUES)
+        self.F_ref.assemble()
+        fem_petsc.set_bc(self.F_ref, self.bcs, scale=0.0)
+        self._compiled = True
+
+    def residual(self, x: PETSc.Vec, b: PETSc.Vec):
+        """b = R_int(x) - lambda F_ref with Dirichlet rows set to x - lambda g."""
+        x.copy(self.w.vector)
+        self.w.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        with b.localForm() as bl:
+            bl.set(0.0)
+        fem_petsc.assemble_vector(b, self._R)
+        fem_petsc.apply_lifting(b, [self._J], [self.bcs], x0=[x], scale=-1.0)
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        b.axpy(-float(self.load_factor.value), self.F_ref)
+        fem_petsc.set_bc(b, self.bcs, x, -1.0)
+
+    def internal_force(self, x: PETSc.Vec, b: PETSc.Vec):
+        """b = R_int(x) (no load, no boundary rows modified)."""
+        x.copy(self.w.vector)
+        self.w.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        with b.localForm() as bl:
+            bl.set(0.0)
+        fem_petsc.assemble_vector(b, self._R)
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+
+    def jacobian(self, x: PETSc.Vec, A: PETSc.Mat):
+        x.copy(self.w.vector)
+        self.w.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        A.zeroEntries()
+        fem_petsc.assemble_matrix(A, self._J, bcs=self.bcs)
+        A.assemble()
+
+    def create_matrix(self) -> PETSc.Mat:
+        self.compile()
+        return fem_petsc.create_matrix(self._J)
+
+    def create_vector(self) -> PETSc.Vec:
+        self.compile()
+        return fem_petsc.create_vector(self._R)
+
+    # ----------------------------------------------------------------- probes
+    def owned_node_dof(self, point: Sequence[float], field: str, component: int) -> int | None:
+        """Local index (in W) of the owned dof of `field` component at the node at `point`; None if
+        another rank owns it. Raises ValueError if no node lies within 1e-8 m (relative to size)."""
+        sub = self._subspace(field, component)
+        V, to_parent = sub.collapse()
+        X = V.tabulate_dof_coordinates()
+        n_owned = V.dofmap.index_map.size_local
+        dist = np.linalg.norm(X[:n_owned] - np.asarray(point, dtype=float), axis=1)
+        local_best = (dist.min() if n_owned else np.inf)
+        best = self.comm.allreduce(local_best, op=MPI.MIN)
+        scale = max(1.0, float(np.abs(X).max(initial=0.0)))
+        scale = self.comm.allreduce(scale, op=MPI.MAX)
+        if best > 1e-8 * scale:
+            raise ValueError(f"point {tuple(point)} is not a mesh node (nearest node {best:.3e} m away)")
+        owner = self.comm.allreduce(self.comm.rank if local_best == best else self.comm.size, op=MPI.MIN)
+        if self.comm.rank != owner:
+            return None
+        return int(to_parent[int(np.argmin(dist))])
+
+    def node_value(self, point: Sequence[float], field: str = "u") -> np.ndarray:
+        """Value of the displacement [m] (or rotation [rad]) at a mesh node, identical on all ranks."""
+        n = 3 if field == "u" else 2
+        out = np.zeros(n)
+        for i in range(n):
+            dof = self.owned_node_dof(point, field, i)
+            if dof is not None:
+                out[i] = self.w.x.array[dof]
+        return self.comm.allreduce(out, op=MPI.SUM)
+
+    def displacement(self) -> fem.Function:
+        """Displacement as a collapsed vector Function (for output)."""
+        if self.model == "naghdi":
+            return self.w.sub(0).collapse()
+        return self.w

@@ -1,0 +1,96 @@
+"""Newton's method by PETSc SNES with the exact UFL Jacobian (MUMPS LU by default)."""
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+
+import numpy as np
+from petsc4py import PETSc
+
+DEFAULT_OPTIONS = {
+    "snes_type": "newtonls",
+    "snes_linesearch_type": "basic",
+    "snes_rtol": 1e-9,
+    "snes_stol": 1e-10,
+    "snes_max_it": 25,
+    "ksp_type": "preonly",
+    "pc_type": "lu",
+    "pc_factor_mat_solver_type": "mumps",
+}
+
+_prefix_counter = itertools.count()
+
+
+class SolverError(RuntimeError):
+    """A solve that did not converge; carries the last converged load factor and the reason."""
+
+    def __init__(self, message: str, last_converged_load_factor: float | None = None, reason: str = ""):
+        super().__init__(message)
+        self.last_converged_load_factor = last_converged_load_factor
+        self.reason = reason
+
+
+@dataclass
+class NewtonResult:
+    converged: bool
+    iterations: int
+    reason: str
+    residual_norms: list[float] = field(default_factory=list)
+
+
+_REASONS = {v: k for k, v in vars(PETSc.SNES.ConvergedReason).items() if isinstance(v, int)}
+
+
+class NewtonSolver:
+    """SNES Newton solver for a model exposing residual/jacobian callbacks (e.g. ShellModel).
+
+    SNES iterates on its own vector; the callbacks copy it into the Function the forms read
+    (see shared notes: aliasing the two slows Newton down). `options` are PETSc options
+    (without prefix) overriding DEFAULT_OPTIONS; the absolute tolerance defaults to
+    1e-10 |F_ref| so that it scales with the load.
+    """
+
+    def __init__(self, model, options: dict | None = None):
+        self.model = model
+        model.compile()
+        self.prefix = f"fabricfem_newton_{next(_prefix_counter)}_"
+        opts = dict(DEFAULT_OPTIONS)
+        fref = model.F_ref.norm()
+        opts["snes_atol"] = 1e-10 * fref if fref > 0 else 1e-12
+        opts.update(options or {})
+        self.options = opts
+        petsc_opts = PETSc.Options()
+        for k, v in opts.items():
+            petsc_opts[self.prefix + k] = v
+        self.b = model.create_vector()
+        self.A = model.create_matrix()
+        self.x = model.create_vector()
+        snes = PETSc.SNES().create(model.comm)
+        snes.setOptionsPrefix(self.prefix)
+        snes.setFunction(lambda s, x, b: model.residual(x, b), self.b)
+        snes.setJacobian(lambda s, x, A, P: model.jacobian(x, A), self.A)
+        snes.setFromOptions()
+        snes.getKSP().setFromOptions()
+        snes.getKSP().getPC().setFromOptions()
+        self._norms: list[float] = []
+        snes.setMonitor(lambda s, it, norm: self._norms.append(float(norm)))
+        self.snes = snes
+
+    def solve(self) -> NewtonResult:
+        """Solve R(w; lambda) = 0 at the current load factor, starting from the model's state.
+        On failure the model's state is left as SNES left it (the caller restores)."""
+        self._norms = []
+        self.model.w.vector.copy(self.x)
+        self.snes.solve(None, self.x)
+        reason = self.snes.getConvergedReason()
+        finite = bool(np.isfinite(self.x.norm()))
+        converged = reason > 0 and finite
+        if converged:
+            self.x.copy(self.model.w.vector)
+            self.model.w.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        name = _REASONS.get(reason, str(reason)) if finite else "NAN_IN_SOLUTION"
+        return NewtonResult(converged, self.snes.getIterationNumber(), name, list(self._norms))
+
+    def destroy(self):
+        for obj in (self.snes, self.A, self.b, self.x):
+            obj.destroy()

@@ -1,0 +1,163 @@
+"""Geometrically nonlinear Naghdi shell in total Lagrangian form on a manifold mesh.
+
+Kinematics (seed 001, eqs. 1-6; thesis ch. 2): the mid-surface moves from phi0 to
+phi = phi0 + u and the unit director moves from the reference normal n0 to d.
+With the tangential gradient of the embedded surface (3x3 tensors acting on the
+tangent plane) the strain measures read, coordinate-free,
+
+    membrane      E   = 1/2 (F^T F - F0^T F0)                              (seed 001 eq. 3)
+    transverse    g   = F^T d - F0^T n0                                     (seed 001 eq. 4)
+    bending       K   = -1/2 (F^T grad d + grad d^T F)
+                        + 1/2 (F0^T grad n0 + grad n0^T F0)                 (seed 001 eq. 5, symmetrised)
+
+with F = grad phi, F0 = grad phi0. Components are taken in the orthonormal
+material frame (e1 = warp, e2 = weft) of the reference surface. The director is
+parametrised by two rotations about the reference director frame (n0, t1, t2),
+
+    d = cos(th1) cos(th2) n0 + cos(th1) sin(th2) t1 - sin(th1) t2,
+
+so th2 is a right-handed rotation about t2 and th1 one about t1. Measured from the
+local frame (not a global axis) there is no singularity on closed surfaces; the
+frame can be re-based on the current director between load steps so that only
+increments are parametrised (fabricfem.shell.ShellModel.rebase_director).
+
+Locking is avoided by partial selective reduced integration (PSRI, as in FEniCSx-Shells):
+membrane and shear energies are split into alpha (full) and 1 - alpha (reduced
+quadrature) with alpha = t^2 / h^2.
+"""
+from __future__ import annotations
+
+import ufl
+
+
+def director(theta, n0, t1, t2):
+    """Unit director from the two rotation angles theta = (th1, th2) [rad] and the frame (n0, t1, t2)."""
+    c1, s1 = ufl.cos(theta[0]), ufl.sin(theta[0])
+    c2, s2 = ufl.cos(theta[1]), ufl.sin(theta[1])
+    return c1 * c2 * n0 + c1 * s2 * t1 - s1 * t2
+
+
+def material_frame(F0, t1, t2):
+    """Orthonormal warp/weft vectors e1, e2 in the reference tangent plane (Gram-Schmidt of F0 t1, F0 t2)."""
+    a1 = F0 * t1
+    e1 = a1 / ufl.sqrt(ufl.dot(a1, a1))
+    a2 = F0 * t2 - ufl.dot(F0 * t2, e1) * e1
+    e2 = a2 / ufl.sqrt(ufl.dot(a2, a2))
+    return e1, e2
+
+
+def membrane_strain(F, F0):
+    """Green-Lagrange membrane strain tensor E = (F^T F - F0^T F0) / 2 (seed 001 eq. 3)."""
+    return 0.5 * (F.T * F - F0.T * F0)
+
+
+def bending_strain(F, F0, d, n0):
+    """Change of curvature K (seed 001 eq. 5, symmetrised), sign chosen so K > 0 bends towards -n0."""
+    grad_d, grad_n0 = ufl.grad(d), ufl.grad(n0)
+    return -0.5 * (F.T * grad_d + grad_d.T * F) + 0.5 * (F0.T * grad_n0 + grad_n0.T * F0)
+
+
+def shear_strain(F, F0, d, n0):
+    """Transverse shear strain vector g = F^T d - F0^T n0 (seed 001 eq. 4)."""
+    return F.T * d - F0.T * n0
+
+
+def voigt(T, e1, e2):
+    """In-plane Voigt components [T11, T22, 2 T12] of a surface tensor in the frame (e1, e2)."""
+    return ufl.as_vector([ufl.dot(e1, T * e1), ufl.dot(e2, T * e2), 2.0 * ufl.dot(e1, T * e2)])
+
+
+def quadratic_energy(strain_voigt, C):
+    """1/2 eps . C eps for a Voigt strain and a 3x3 stiffness C (UFL tensor)."""
+    return 0.5 * ufl.dot(strain_voigt, C * strain_voigt)
+
+
+def kawabata_energy(kappa, coefficients):
+    """Energy per unit area of M(K) = sum_i a_i K^i extended oddly (seed 001 eq. 15): sum_i a_i |K|^(i+1) / (i+1)."""
+    return sum(a * abs(kappa) ** (i + 2) / (i + 2) if i > 0 else a * kappa ** 2 / 2
+               for i, a in enumerate(coefficients))
+
+
+def square_root_energy(kappa, B0, kappa0, eps):
+    """Energy of seed 002 eq. 9, m = 2 B0 sqrt(kappa0 |K|) up to kappa0 then B0 (|K| + kappa0).
+
+    |K| is regularised as sqrt(K^2 + eps^2) - eps so that the tangent stays finite at K = 0
+    (the exact law has infinite initial stiffness); eps [1/m] is documented by the caller.
+    """
+    k = ufl.sqrt(kappa ** 2 + eps ** 2) - eps
+    w_inner = 4.0 / 3.0 * B0 * ufl.sqrt(kappa0) * k ** 1.5
+    w_kink = 4.0 / 3.0 * B0 * kappa0 ** 2
+    w_outer = w_kink + 0.5 * B0 * (k ** 2 - kappa0 ** 2) + B0 * kappa0 * (k - kappa0)
+    return ufl.conditional(ufl.le(k, kappa0), w_inner, w_outer)
+
+
+def bending_energy(kappa_voigt, D, law=None, eps=None):
+    """Bending energy per unit area: 1/2 K.D K, or a nonlinear law on K11, K22 plus linear coupling and twist."""
+    if law is None:
+        return quadratic_energy(kappa_voigt, D)
+    k11, k22, k12x2 = kappa_voigt[0], kappa_voigt[1], kappa_voigt[2]
+    coupling = D[0, 1] * k11 * k22 + 0.5 * D[2, 2] * k12x2 ** 2
+    if hasattr(law, "coefficients"):
+        return kawabata_energy(k11, law.coefficients) + kawabata_energy(k22, law.coefficients) + coupling
+    return (square_root_energy(k11, law.B0, law.kappa0, eps)
+            + square_root_energy(k22, law.B0, law.kappa0, eps) + coupling)
+
+
+def psri_measures(mesh, full_degree: int = 4, reduced_degree: int = 2):
+    """Full and reduced quadrature measures for partial selective reduced integration."""
+    dx_full = ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": full_degree})
+    dx_reduced = ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": reduced_degree})
+    return dx_full, dx_reduced
+
+
+def naghdi_energy(u, theta, phi0, n0, director_base, warp_weft, A, D, shear_stiffness, thickness,
+                  law=None, law_eps=None, degrees=(4, 2)):
+    """Total strain energy of the shell with PSRI (UFL form of rank 0).
+
+    u: displacement [m]; theta: rotations [rad]; phi0: reference position (P2 Function);
+    n0: reference unit normal; director_base = (a3, a1, a2): the frame the rotations are
+    measured from (a3 = n0 initially); warp_weft = (t1, t2): reference material directions;
+    A = t Q [N/m] membrane stiffness; D [N m] bending stiffness (Voigt 3x3);
+    shear_stiffness = k_s G13 t [N/m].
+    """
+    mesh = u.ufl_domain()
+    F0 = ufl.grad(phi0)
+    F = F0 + ufl.grad(u)
+    d = director(theta, *director_base)
+    e1, e2 = material_frame(F0, *warp_weft)
+    eps_m = voigt(membrane_strain(F, F0), e1, e2)
+    kappa = voigt(bending_strain(F, F0, d, n0), e1, e2)
+    gamma_vec = shear_strain(F, F0, d, n0)
+    gamma = ufl.as_vector([ufl.dot(gamma_vec, e1), ufl.dot(gamma_vec, e2)])
+
+    psi_m = quadratic_energy(eps_m, A)
+    psi_b = bending_energy(kappa, D, law, law_eps)
+    psi_s = 0.5 * shear_stiffness * ufl.dot(gamma, gamma)
+
+    dx_full, dx_reduced = psri_measures(mesh, *degrees)
+    h = ufl.CellDiameter(mesh)
+    alpha = thickness ** 2 / h ** 2
+    return (psi_b * dx_full + alpha * (psi_m + psi_s) * dx_full
+            + (1.0 - alpha) * (psi_m + psi_s) * dx_reduced)
+
+
+def membrane_energy(u, phi0, t1, t2, A, degree: int = 4):
+    """Membrane-only (no bending, no shear) strain energy 1/2 E.A E [J] (seed 001 eq. 3, eq. 8)."""
+    mesh = u.ufl_domain()
+    F0 = ufl.grad(phi0)
+    F = F0 + ufl.grad(u)
+    e1, e2 = material_frame(F0, t1, t2)
+    eps_m = voigt(membrane_strain(F, F0), e1, e2)
+    dx = ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": degree})
+    return quadratic_energy(eps_m, A) * dx
+
+
+def nominal_stress(u, phi0, t1, t2, A, thickness):
+    """First Piola-Kirchhoff stress P = F S (3x3, Pa) with S = (A / t) E resolved in the material frame."""
+    F0 = ufl.grad(phi0)
+    F = F0 + ufl.grad(u)
+    e1, e2 = material_frame(F0, t1, t2)
+    S_v = A * voigt(membrane_strain(F, F0), e1, e2) / thickness
+    S = (S_v[0] * ufl.outer(e1, e1) + S_v[1] * ufl.outer(e2, e2)
+         + S_v[2] * (ufl.outer(e1, e2) + ufl.outer(e2, e1)))
+    return F * S
