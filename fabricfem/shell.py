@@ -20,6 +20,7 @@ from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from fabricfem import probe
 from fabricfem.forms import loads as load_forms
 from fabricfem.forms import shell as shell_forms
 from fabricfem.materials import Fabric, SquareRootBending
@@ -335,26 +336,13 @@ class ShellModel:
 
     # ----------------------------------------------------------------- probes
     def owned_node_dof(self, point: Sequence[float], field: str, component: int) -> int | None:
-        """Local index (in W) of the owned dof of `field` component at the node at `point`; None if
-        another rank owns it. Raises ValueError if no node lies within 1e-8 m (relative to size)."""
-        sub = self._subspace(field, component)
-        V, to_parent = sub.collapse()
-        X = V.tabulate_dof_coordinates()
-        n_owned = V.dofmap.index_map.size_local
-        dist = np.linalg.norm(X[:n_owned] - np.asarray(point, dtype=float), axis=1)
-        local_best = (dist.min() if n_owned else np.inf)
-        best = self.comm.allreduce(local_best, op=MPI.MIN)
-        scale = max(1.0, float(np.abs(X).max(initial=0.0)))
-        scale = self.comm.allreduce(scale, op=MPI.MAX)
-        if best > 1e-8 * scale:
-            raise ValueError(f"point {tuple(point)} is not a mesh node (nearest node {best:.3e} m away)")
-        owner = self.comm.allreduce(self.comm.rank if local_best == best else self.comm.size, op=MPI.MIN)
-        if self.comm.rank != owner:
-            return None
-        return int(to_parent[int(np.argmin(dist))])
+        """Local index (in W) of `field` component at the node at `point` on its owning rank, else None."""
+        V, to_parent = self._subspace(field, component).collapse()
+        node = probe.owned_node(V, point)
+        return None if node is None else int(to_parent[node])
 
     def node_value(self, point: Sequence[float], field: str = "u") -> np.ndarray:
-        """Value of the displacement [m] (or rotation [rad]) at a mesh node, identical on all ranks."""
+        """Displacement [m] (field "u") or rotation angles [rad] ("theta") at a mesh node, on all ranks."""
         n = 3 if field == "u" else 2
         out = np.zeros(n)
         for i in range(n):
@@ -362,6 +350,10 @@ class ShellModel:
             if dof is not None:
                 out[i] = self.w.x.array[dof]
         return self.comm.allreduce(out, op=MPI.SUM)
+
+    def director_at(self, point: Sequence[float]) -> np.ndarray:
+        """Unit director at a mesh node, on all ranks."""
+        return probe.node_value(self.director_field(), point)
 
     def displacement(self) -> fem.Function:
         """Displacement as a collapsed vector Function (for output)."""

@@ -1,0 +1,11 @@
+"""Fabric meshes: gmsh-built 2D manifolds in 3D with material directions.
+
+Every mesh is a :class:`FabricMesh` (coordinates in metres) carrying the
+warp direction E1 (first material direction), the reference normal N and,
+derived from them, the weft direction E2 = N x E1.
+"""
+from .gmsh_io import FabricMesh, model_to_mesh
+from .plate import plate
+from .tube import tube
+
+__all__ = ["FabricMesh", "model_to_mesh", "plate", "tube"]

@@ -1,0 +1,149 @@
+"""Arc-length continuation with the adaptive step of Eischen and Bigliani (seed 001, eqs. 17-26).
+
+Equilibrium F_ext(lambda) - P(Phi) = 0 with F_ext = lambda F_ref (eq. 17) is augmented by the
+constraint (eq. 19)
+
+    f = [ (Phi - Phi_n).(Phi - Phi_n) + psi^2 (lambda - lambda_n)^2 ]^(1/2) - gamma_n ds = 0,
+
+whose arc length is accelerated by gamma_n = N_p / N_{n-1} (eq. 20). Each corrector iteration
+solves K du_I = F_ref and K du_II = F_ext - P with one factorisation (eqs. 23-25) and updates
+
+    dlambda = -[ f (f + gamma_n ds) + (Phi - Phi_n).du_II ] / [ psi^2 (lambda - lambda_n) + (Phi - Phi_n).du_I ]   (eq. 21)
+    dPhi    = dlambda du_I + du_II                                                                              (eq. 22)
+
+psi (default 1) scales the load factor against the state, as in Schweizerhof and Wriggers
+(psi = 1 is the seed's form). Only load-controlled problems qualify: prescribed
+displacements must be zero.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from petsc4py import PETSc
+
+from fabricfem.solvers.newton import SolverError
+
+
+@dataclass
+class ArcLengthStep:
+    load_factor: float
+    iterations: int
+    arc_length: float
+    residual_norms: list[float] = field(default_factory=list)
+
+
+def acceleration_factor(step_index: int, target_iterations: int, last_iterations: int) -> float:
+    """gamma_n of seed 001 eq. 20: 1 for the first step, N_p / N_{n-1} afterwards."""
+    if step_index <= 1:
+        return 1.0
+    return target_iterations / max(last_iterations, 1)
+
+
+def arc_length(model, ds: float, max_steps: int, lambda_max: float | None = None,
+               target_iterations: int = 5, psi: float = 1.0, max_iterations: int = 20,
+               rtol: float = 1e-9, gamma_bounds: tuple[float, float] = (0.25, 2.0),
+               on_step: Callable[[ArcLengthStep], None] | None = None,
+               petsc_options: dict | None = None) -> list[ArcLengthStep]:
+    """Trace the equilibrium path from the model's current state in `max_steps` arc-length steps
+    (or until lambda_max is passed; the last step then ends beyond it).
+
+    ds: initial arc length (units of the state vector, i.e. m and rad). Divergence of a step
+    halves ds and retries; below 1e-6 of the initial ds a SolverError is raised with the last
+    converged load factor.
+    """
+    if model._scaled_bcs:
+        raise ValueError("arc_length: prescribed non-zero displacements/rotations are not supported; "
+                         "use loads (F_ext = lambda F_ref)")
+    if ds <= 0:
+        raise ValueError(f"ds must be positive, got {ds}")
+    model.compile()
+    K = model.create_matrix()
+    residual, du_I, du_II = model.create_vector(), model.create_vector(), model.create_vector()
+    x = model.create_vector()
+    model.w.vector.copy(x)
+    ksp = PETSc.KSP().create(model.comm)
+    ksp.setOperators(K)
+    ksp.setOptionsPrefix("fabricfem_arclength_")
+    opts = PETSc.Options()
+    for k, v in {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps",
+                 **(petsc_options or {})}.items():
+        opts["fabricfem_arclength_" + k] = v
+    ksp.setFromOptions()
+    F_ref = model.F_ref
+    fscale = max(F_ref.norm(), 1e-300)
+
+    lam_n = float(model.load_factor.value)
+    x_n = x.copy()
+    direction = None  # previous converged increment (dPhi, dlambda) for the predictor sign
+    history: list[ArcLengthStep] = []
+    last_iterations = target_iterations
+    ds_min = 1e-6 * ds
+
+    def assemble_and_factor(xv, lam):
+        model.set_load_factor(lam)
+        model.residual(xv, residual)  # residual = P - lambda F_ref
+        model.jacobian(xv, K)
+        ksp.setOperators(K)
+
+    for n in range(1, max_steps + 1):
+        gamma = float(np.clip(acceleration_factor(n, target_iterations, last_iterations), *gamma_bounds))
+        length = gamma * ds
+        while True:
+            # Predictor along the tangent du_I = K^-1 F_ref
+            x_n.copy(x)
+            assemble_and_factor(x, lam_n)
+            ksp.solve(F_ref, du_I)
+            dlam = length / np.sqrt(du_I.dot(du_I) + psi ** 2)
+            if direction is not None and (du_I.dot(direction[0]) + psi ** 2 * direction[1]) < 0:
+                dlam = -dlam
+            x.axpy(dlam, du_I)
+            lam = lam_n + dlam
+            norms, converged, it = [], False, 0
+            for it in range(1, max_iterations + 1):
+                assemble_and_factor(x, lam)
+                rnorm = residual.norm()
+                norms.append(rnorm)
+                delta = x - x_n
+                ell = np.sqrt(delta.dot(delta) + psi ** 2 * (lam - lam_n) ** 2)
+                f = ell - length
+                if not np.isfinite(rnorm):
+                    break
+                if rnorm < rtol * fscale * max(abs(lam), 1.0) and abs(f) < 1e-9 * length:
+                    converged = True
+                    break
+                ksp.solve(F_ref, du_I)
+                residual.scale(-1.0)  # F_ext - P
+                ksp.solve(residual, du_II)
+                dl = -(f * (f + length) + delta.dot(du_II)) / (psi ** 2 * (lam - lam_n) + delta.dot(du_I))
+                x.axpy(dl, du_I)
+                x.axpy(1.0, du_II)
+                lam += dl
+                delta.destroy()
+            if converged:
+                break
+            length *= 0.5
+            ds *= 0.5
+            if length < ds_min:
+                x_n.copy(model.w.vector)
+                model.set_load_factor(lam_n)
+                raise SolverError(f"arc-length step {n} diverged (residual {norms[-1] if norms else float('nan'):.3e}) "
+                                  f"and the arc length fell below {ds_min:.3g}; last converged load factor {lam_n:.6g}",
+                                  last_converged_load_factor=lam_n, reason="ARC_LENGTH_DIVERGED")
+        increment = x - x_n
+        direction = (increment, lam - lam_n)
+        x.copy(x_n)
+        lam_n = lam
+        x.copy(model.w.vector)
+        model.w.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        model.set_load_factor(lam)
+        last_iterations = it
+        record = ArcLengthStep(lam, it, length, norms)
+        history.append(record)
+        if on_step:
+            on_step(record)
+        if lambda_max is not None and lam >= lambda_max:
+            break
+    ksp.destroy()
+    return history

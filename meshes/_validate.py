@@ -1,0 +1,45 @@
+"""Argument checks shared by the mesh generators (ValueError naming the parameter)."""
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+CELLS = ("triangle", "quadrilateral")
+
+
+def positive_length(name: str, value: float) -> float:
+    """``value`` as a float; it must be finite and > 0 (metres)."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: must be a positive length in metres, got {value!r}") from None
+    if not (math.isfinite(v) and v > 0.0):
+        raise ValueError(f"{name}: must be a positive length in metres, got {value!r}")
+    return v
+
+
+def count(name: str, value: int, minimum: int = 1) -> int:
+    """``value`` as an int; it must be an integer >= ``minimum``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f"{name}: must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def choice(name: str, value: str, allowed: Sequence[str]) -> str:
+    """``value`` if it is one of ``allowed``."""
+    if value not in allowed:
+        raise ValueError(f"{name}: unknown value {value!r}; expected one of {list(allowed)}")
+    return value
+
+
+def point3(name: str, value: Sequence[float]) -> np.ndarray:
+    """``value`` as a finite float array of shape (3,)."""
+    try:
+        p = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: must be 3 finite coordinates, got {value!r}") from None
+    if p.shape != (3,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"{name}: must be 3 finite coordinates, got {value!r}")
+    return p

@@ -1,0 +1,95 @@
+"""Open circular cylinder (a sleeve) as a fabric surface.
+
+Axis along +x from x = 0 (``end0``, shoulder) to x = length (``end1``,
+wrist), radius ``radius`` (metres), with ``n_around`` elements around the
+circumference and ``n_along`` along the axis; the thesis meshes 10x13,
+15x20, 20x26 and 30x39 are ``n_around x n_along``.
+
+Construction (gmsh built-in kernel, rank 0): the circle x = 0 is split into
+k arcs, k the smallest divisor of ``n_around`` that is >= 3 (each arc is then
+shorter than pi, as gmsh requires, and gets ``n_around / k`` equal segments);
+all arcs are extruded together along +x with ``n_along`` layers.  Adjacent
+patches share their lateral edges, so the mesh is conforming all around,
+including where the angle wraps.  All first-order nodes lie on the circle, at
+angles 2 pi j / n_around; second-order nodes are placed on the circle too.
+Quadrilaterals come from recombined layers; triangles split each layer quad
+into two.
+
+Material frame: warp ``E1 = +x`` (along the sleeve, first material
+direction), normal ``N`` = outward radial ``(0, y, z) / r`` (the cells are
+oriented so that ``ufl.CellNormal`` points outwards), weft
+``E2 = N x E1`` (circumferential; at (0, 0, R) it is +y).
+"""
+from __future__ import annotations
+
+import numpy as np
+from dolfinx.mesh import GhostMode
+from mpi4py import MPI
+
+from . import _validate, directions
+from .gmsh_io import FabricMesh, mesh_from_gmsh
+
+
+def _n_arcs(n_around: int) -> int:
+    """Smallest divisor of ``n_around`` that is at least 3."""
+    return next(k for k in range(3, n_around + 1) if n_around % k == 0)
+
+
+def _build(model, length: float, radius: float, n_around: int, n_along: int,
+           cell: str, order: int) -> None:
+    """Geometry, physical groups and mesh of the tube in ``model``."""
+    geo = model.geo
+    k = _n_arcs(n_around)
+    centre = geo.addPoint(0.0, 0.0, 0.0)
+    angles = 2.0 * np.pi * np.arange(k) / k
+    points = [geo.addPoint(0.0, radius * np.cos(a), radius * np.sin(a)) for a in angles]
+    # arcs run with increasing angle about +x
+    arcs = [geo.addCircleArc(points[i], centre, points[(i + 1) % k]) for i in range(k)]
+    for arc in arcs:
+        geo.mesh.setTransfiniteCurve(arc, n_around // k + 1)
+    out = geo.extrude([(1, a) for a in arcs], length, 0.0, 0.0, numElements=[n_along],
+                      recombine=(cell == "quadrilateral"))
+    # per extruded curve: (1, top curve), (2, surface), (1, side), (1, side)
+    tops = [tag for dim, tag in out[0::4]]
+    surfaces = [tag for dim, tag in out[1::4]]
+    geo.remove([(0, centre)])
+    geo.synchronize()
+    model.setPhysicalName(1, model.addPhysicalGroup(1, arcs), "end0")
+    model.setPhysicalName(1, model.addPhysicalGroup(1, tops), "end1")
+    model.setPhysicalName(2, model.addPhysicalGroup(2, surfaces), "fabric")
+    model.mesh.generate(2)
+    if order > 1:
+        model.mesh.setOrder(order)
+
+
+def tube(length: float, radius: float, n_around: int, n_along: int, cell: str = "quadrilateral",
+         comm: MPI.Comm = MPI.COMM_WORLD, order: int = 1, *,
+         ghost_mode: GhostMode = GhostMode.shared_facet) -> FabricMesh:
+    """Mesh of the open cylinder ``0 <= x <= length``, ``y^2 + z^2 = radius^2``.
+
+    Args:
+        length: Axial length (m), > 0.
+        radius: Radius (m), > 0.
+        n_around: Elements around the circumference (>= 3).
+        n_along: Elements along the axis (>= 1).
+        cell: ``"quadrilateral"`` or ``"triangle"`` (2 per quadrilateral).
+        comm: Communicator; gmsh runs on its rank 0 only.
+        order: Geometry order, 1 or 2 (6-node triangles / 9-node quads).
+        ghost_mode: dolfinx ghost mode of the distributed mesh.
+
+    Returns:
+        FabricMesh with warp +x, outward radial normal, edge tags
+        ``end0`` (x = 0) and ``end1`` (x = length).
+    """
+    length = _validate.positive_length("length", length)
+    radius = _validate.positive_length("radius", radius)
+    n_around = _validate.count("n_around", n_around, minimum=3)
+    n_along = _validate.count("n_along", n_along)
+    cell = _validate.choice("cell", cell, _validate.CELLS)
+    order = _validate.choice("order", _validate.count("order", order), (1, 2))
+    mesh, cell_tags, facet_tags, names = mesh_from_gmsh(
+        lambda model: _build(model, length, radius, n_around, n_along, cell, order),
+        comm, 0, gdim=3, name="tube", ghost_mode=ghost_mode)
+    return FabricMesh(mesh=mesh, facet_tags=facet_tags, tags=names,
+                      warp=directions.constant((1.0, 0.0, 0.0)),
+                      normal=directions.radial_from_x_axis(), cell_tags=cell_tags)
