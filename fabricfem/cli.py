@@ -1,2 +1,82 @@
-def main(argv=None):
-    return 0
+"""Command line: `fabricfem verify [CASE ...] [--json]`, `fabricfem demo`, `fabricfem bench ...`."""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+
+from mpi4py import MPI
+
+
+def _print(*args, **kw):
+    if MPI.COMM_WORLD.rank == 0:
+        print(*args, **kw, flush=True)
+
+
+def verify(names: list[str], as_json: bool) -> int:
+    from fabricfem.verify import load_cases
+    cases = load_cases()
+    unknown = [n for n in names if n not in cases]
+    if unknown:
+        _print(f"fabricfem verify: unknown case(s) {unknown}; available: {sorted(cases)}", file=sys.stderr)
+        return 2
+    results = []
+    for name in names or list(cases):
+        if not as_json:
+            _print(f"running {name} ...")
+        try:
+            results += cases[name]()
+        except Exception as exc:  # a case that crashes fails, with its reason
+            from fabricfem.verify import CaseResult
+            _print(f"  {name} raised {type(exc).__name__}: {exc}", file=sys.stderr)
+            results.append(CaseResult(name, f"error: {type(exc).__name__}: {exc}", float("nan"), float("nan"),
+                                      float("nan"), 0.0, False, 0, 0.0))
+    if as_json:
+        _print(json.dumps([r.as_dict() for r in results], indent=1))
+    else:
+        header = f"{'case':<26} {'quantity':<64} {'value':>12} {'reference':>12} {'rel_err':>9} {'tol':>8} " \
+                 f"{'ok':>4} {'ndofs':>7} {'wall_s':>7}"
+        _print(header)
+        _print("-" * len(header))
+        for r in results:
+            _print(f"{r.case:<26} {r.quantity[:64]:<64} {r.value:>12.5g} {r.reference:>12.5g} {r.rel_error:>9.2e} "
+                   f"{r.tolerance:>8.1e} {'PASS' if r.passed else 'FAIL':>4} {r.ndofs:>7d} {r.wall_s:>7.1f}")
+        n_fail = sum(not r.passed for r in results)
+        _print(f"\n{len(results) - n_fail} passed, {n_fail} failed")
+    return 0 if all(r.passed for r in results) else 1
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="fabricfem", description=__doc__)
+    sub = parser.add_subparsers(dest="command", required=True)
+    p_verify = sub.add_parser("verify", help="run verification cases against independent references")
+    p_verify.add_argument("cases", nargs="*", help="case names (default: all)")
+    p_verify.add_argument("--json", action="store_true", help="print a JSON list of results")
+    p_verify.add_argument("--list", action="store_true", help="list the cases and exit")
+    p_demo = sub.add_parser("demo", help="the default demo: a fabric strip rolled up by an end moment")
+    p_demo.add_argument("--out", default="results/demo", help="output folder (XDMF, PNG, CSV)")
+    p_bench = sub.add_parser("bench", help="benchmarks (results/ CSV and PNG)")
+    p_bench.add_argument("name", choices=["rollup-profile"], help="benchmark to run")
+    p_bench.add_argument("--out", default="results/bench")
+    args = parser.parse_args(argv)
+
+    if args.command == "verify":
+        if args.list:
+            from fabricfem.verify import load_cases
+            for name, fn in load_cases().items():
+                _print(f"{name:<26} {(fn.__doc__ or '').strip().splitlines()[0]}")
+            return 0
+        return verify(args.cases, args.json)
+    if args.command == "demo":
+        from fabricfem.demo import rollup_demo
+        rollup_demo(args.out)
+        return 0
+    if args.command == "bench":
+        from fabricfem.bench import rollup_profile
+        rollup_profile(args.out)
+        return 0
+    return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -13,6 +13,7 @@ DEFAULT_OPTIONS = {
     "snes_rtol": 1e-9,
     "snes_stol": 1e-10,
     "snes_max_it": 25,
+    "snes_divergence_tolerance": -1,  # the first Newton step of a bending step often overshoots
     "ksp_type": "preonly",
     "pc_type": "lu",
     "pc_factor_mat_solver_type": "mumps",

@@ -1,0 +1,94 @@
+"""Outputs: XDMF time series (ParaView), CSV tables and off-screen PNG renders (pyvista).
+
+Everything here is parallel-correct: XDMF is written collectively, renders gather the
+owned cells to rank 0.
+"""
+from __future__ import annotations
+
+import csv
+import os
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+from dolfinx import fem, io
+from mpi4py import MPI
+
+
+class SurfaceSeries:
+    """Displacement (and optional scalar fields) of a shell over time in one XDMF file.
+
+    dolfinx 0.5 writes functions of the mesh's own (P1) degree, so fields are interpolated to P1.
+    """
+
+    def __init__(self, path: str | Path, mesh):
+        self.path = Path(path)
+        if mesh.comm.rank == 0:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+        mesh.comm.barrier()
+        self.mesh = mesh
+        self.V1 = fem.VectorFunctionSpace(mesh, ("Lagrange", 1), dim=3)
+        self.u1 = fem.Function(self.V1, name="displacement")
+        self.file = io.XDMFFile(mesh.comm, str(self.path), "w")
+        self.file.write_mesh(mesh)
+
+    def write(self, displacement: fem.Function, time: float):
+        self.u1.interpolate(displacement)
+        self.file.write_function(self.u1, time)
+
+    def close(self):
+        self.file.close()
+
+
+def write_csv(path: str | Path, header: Sequence[str], rows: Sequence[Sequence[float]], comm=MPI.COMM_WORLD):
+    """CSV table written by rank 0."""
+    if comm.rank != 0:
+        return
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(header)
+        writer.writerows(rows)
+
+
+def gather_surface(mesh, displacement: fem.Function | None = None) -> tuple[np.ndarray, np.ndarray] | None:
+    """Deformed owned cells of all ranks on rank 0: (points (n, 3), cells (m, k) into points)."""
+    V1 = fem.VectorFunctionSpace(mesh, ("Lagrange", 1), dim=3)
+    u1 = fem.Function(V1)
+    if displacement is not None:
+        u1.interpolate(displacement)
+    n_cells = mesh.topology.index_map(mesh.topology.dim).size_local
+    dofs = V1.dofmap.list.array.reshape(-1, V1.dofmap.dof_layout.num_dofs)[:n_cells]
+    X = V1.tabulate_dof_coordinates() + u1.x.array.reshape(-1, 3)
+    if dofs.shape[1] == 4:  # dolfinx quadrilaterals are tensor-ordered; VTK wants them cyclic
+        dofs = dofs[:, [0, 1, 3, 2]]
+    cell_points = X[dofs]  # (m, k, 3), one copy of each vertex per cell
+    gathered = mesh.comm.gather(cell_points, root=0)
+    if mesh.comm.rank != 0:
+        return None
+    allcells = np.concatenate(gathered)
+    m, k, _ = allcells.shape
+    return allcells.reshape(-1, 3), np.arange(m * k).reshape(m, k)
+
+
+def render_surfaces(path: str | Path, surfaces: list[tuple[np.ndarray, np.ndarray]], title: str = "",
+                    colors: Sequence[str] | None = None, camera: str = "xz"):
+    """Render gathered surfaces (points, cells) to a PNG off-screen (rank 0 only)."""
+    if MPI.COMM_WORLD.rank != 0:
+        return
+    os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")
+    import pyvista as pv
+    pv.OFF_SCREEN = True
+    plotter = pv.Plotter(off_screen=True, window_size=(1200, 800))
+    for i, (points, cells) in enumerate(surfaces):
+        k = cells.shape[1]
+        faces = np.hstack([np.full((len(cells), 1), k), cells]).ravel()
+        surface = pv.PolyData(points, faces)
+        color = colors[i] if colors else None
+        plotter.add_mesh(surface, color=color, show_edges=False)
+    if title:
+        plotter.add_text(title, font_size=12)
+    {"xz": plotter.view_xz, "xy": plotter.view_xy, "yz": plotter.view_yz, "iso": plotter.view_isometric}[camera]()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    plotter.screenshot(str(path))
+    plotter.close()
