@@ -43,7 +43,7 @@ def acceleration_factor(step_index: int, target_iterations: int, last_iterations
 
 def arc_length(model, ds: float, max_steps: int, lambda_max: float | None = None,
                target_iterations: int = 5, psi: float = 1.0, max_iterations: int = 20,
-               rtol: float = 1e-9, gamma_bounds: tuple[float, float] = (0.25, 2.0),
+               rtol: float = 1e-9, stol: float = 1e-10, gamma_bounds: tuple[float, float] = (0.25, 2.0),
                on_step: Callable[[ArcLengthStep], None] | None = None,
                petsc_options: dict | None = None) -> list[ArcLengthStep]:
     """Trace the equilibrium path from the model's current state in `max_steps` arc-length steps
@@ -51,7 +51,8 @@ def arc_length(model, ds: float, max_steps: int, lambda_max: float | None = None
 
     ds: initial arc length (units of the state vector, i.e. m and rad). Divergence of a step
     halves ds and retries; below 1e-6 of the initial ds a SolverError is raised with the last
-    converged load factor.
+    converged load factor. A step has converged when |F_ext - P| < rtol |F_ref| max(1, |lambda|) and
+    the constraint holds, or when the Newton correction is below stol relative to the state.
     """
     if model._scaled_bcs:
         raise ValueError("arc_length: prescribed non-zero displacements/rotations are not supported; "
@@ -117,10 +118,15 @@ def arc_length(model, ds: float, max_steps: int, lambda_max: float | None = None
                 residual.scale(-1.0)  # F_ext - P
                 ksp.solve(residual, du_II)
                 dl = -(f * (f + length) + delta.dot(du_II)) / (psi ** 2 * (lam - lam_n) + delta.dot(du_I))
-                x.axpy(dl, du_I)
+                du_II.axpy(dl, du_I)  # the correction of eq. 22
                 x.axpy(1.0, du_II)
                 lam += dl
                 delta.destroy()
+                # Converged when the correction is at round-off (like SNES's step criterion)
+                if (du_II.norm() <= stol * x.norm() and abs(dl) <= stol * max(abs(lam), 1.0)
+                        and abs(f) < 1e-6 * length):
+                    converged = True
+                    break
             if converged:
                 break
             length *= 0.5
