@@ -18,14 +18,16 @@ class LoadStep:
 
 def solve_load_path(model, targets: Sequence[float] | float, solver: NewtonSolver | None = None,
                     initial_step: float | None = None, min_step: float = 1e-6, max_step: float | None = None,
-                    easy_iterations: int = 5, growth: float = 1.5,
+                    easy_iterations: int = 5, growth: float = 1.5, extrapolate: bool = True,
                     on_target: Callable[[float], None] | None = None,
                     progress: Callable[[LoadStep], None] | None = None) -> list[LoadStep]:
     """Drive the load factor of `model` from its current value through the increasing `targets`.
 
     Each target is reached exactly (`on_target(lambda)` is called there). A step whose Newton
     solve fails (divergence, NaN, too many iterations) is undone and retried at half size; a
-    step that converges within `easy_iterations` lets the next one grow by `growth`. When the
+    step that converges within `easy_iterations` lets the next one grow by `growth`. With
+    `extrapolate`, each step starts from the secant predictor through the last two converged states
+    (increments are measured before the director is re-based, so they stay valid after it). When the
     step falls below `min_step` a SolverError is raised carrying the last converged load factor
     and the model is left in that last converged state.
     """
@@ -40,13 +42,18 @@ def solve_load_path(model, targets: Sequence[float] | float, solver: NewtonSolve
     step = initial_step or span / 10.0
     max_step = max_step or span
     history: list[LoadStep] = []
+    increment, increment_dlam = None, None  # last converged increment of the state, for the predictor
     for target in targets:
         while lam < target - 1e-14 * max(1.0, abs(target)):
             trial = min(lam + step, target)
             saved = model.w.x.array.copy()
+            if extrapolate and increment is not None:
+                # Secant predictor: w = w_n + (dlambda / dlambda_prev) (w_n - w_{n-1})
+                model.w.x.array[:] += (trial - lam) / increment_dlam * increment
             model.set_load_factor(trial)
             result = solver.solve()
             if result.converged:
+                increment, increment_dlam = model.w.x.array - saved, trial - lam
                 lam = trial
                 model.after_converged_step()
                 record = LoadStep(lam, result.iterations, result.residual_norms)

@@ -43,17 +43,18 @@ def _tip_angle_tracker(model: ShellModel, tip, sign: float):
 
 
 def rollup(m_values=(0.25, 0.5, 0.75, 1.0), L: float = 1.0, width: float = 0.1, t: float = 1e-3, E: float = 1e7,
-           nx: int = 40, comm=MPI.COMM_WORLD) -> tuple[ShellModel, dict[float, np.ndarray], float]:
-    """Roll the strip up by an end moment M = m 2 pi EI / L; returns the tip position at each m."""
+           nx: int = 40, comm=MPI.COMM_WORLD) -> tuple[ShellModel, dict[float, np.ndarray], float, list]:
+    """Roll the strip up by an end moment M = m 2 pi EI / L; returns the model, the tip position at each m,
+    EI and the load-step history."""
     model = strip_model(L, width, E, t, nx, comm=comm)
     EI = E * width * t ** 3 / 12.0
     M = 2.0 * np.pi * EI / L
     model.add_edge_moment("right", (0.0, -M / width))  # about -y: the strip curls towards +z
     tip = np.array([L, 0.0, 0.0])
     positions = {}
-    solve_load_path(model, list(m_values), initial_step=0.05,
-                    on_target=lambda m: positions.__setitem__(round(m, 12), tip + model.node_value(tip)))
-    return model, positions, EI
+    history = solve_load_path(model, list(m_values), initial_step=0.05,
+                              on_target=lambda m: positions.__setitem__(round(m, 12), tip + model.node_value(tip)))
+    return model, positions, EI, history
 
 
 @case("rollup-cantilever")
@@ -62,7 +63,7 @@ def rollup_cantilever() -> list:
     (t/L = 1/1000); at m = 1 the tip returns to the clamped end."""
     L = 1.0
     with Timer() as timer:
-        model, positions, EI = rollup(L=L)
+        model, positions, _, _ = rollup(L=L)
     out = []
     for m, tip in positions.items():
         exact = references.rollup_tip(L, m * 2.0 * np.pi / L)
@@ -125,10 +126,10 @@ def moment_loaded_cantilever(lambdas=(0.5, 1.0, 1.5, 2.0), nx: int = 20) -> list
     return out
 
 
-def rollup_tip_half(comm=MPI.COMM_WORLD) -> np.ndarray:
-    """Tip position of the roll-up at m = 0.5 (used to compare 1 and 2 MPI ranks)."""
-    _, positions, _ = rollup(m_values=(0.5,), comm=comm)
-    return positions[0.5]
+def rollup_tip_half(comm=MPI.COMM_WORLD) -> tuple[np.ndarray, int]:
+    """Tip position of the roll-up at m = 0.5 and the number of dofs (to compare 1 and 2 MPI ranks)."""
+    model, positions, _, _ = rollup(m_values=(0.5,), comm=comm)
+    return positions[0.5], model.ndofs
 
 
 @case("mpi-consistency")
@@ -137,9 +138,9 @@ def mpi_consistency() -> list:
     Serially this launches `mpirun -n 2` on fabricfem.verify.cantilevers; under mpirun it compares
     COMM_WORLD with COMM_SELF in-process."""
     with Timer() as timer:
-        serial = rollup_tip_half(MPI.COMM_SELF)
+        serial, ndofs = rollup_tip_half(MPI.COMM_SELF)
         if MPI.COMM_WORLD.size > 1:
-            parallel = rollup_tip_half(MPI.COMM_WORLD)
+            parallel, _ = rollup_tip_half(MPI.COMM_WORLD)
         else:
             env = dict(os.environ, OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
                        OMPI_MCA_rmaps_base_oversubscribe="1")
@@ -150,10 +151,10 @@ def mpi_consistency() -> list:
             parallel = np.array(json.loads(proc.stdout.strip().splitlines()[-1]))
     diff = np.linalg.norm(parallel - serial) / np.linalg.norm(serial)
     return [result("mpi-consistency", "|tip(2 ranks) - tip(1 rank)| / |tip|, roll-up m = 0.5", diff, 0.0, 1e-8,
-                   0, timer.elapsed, scale=1.0)]
+                   ndofs, timer.elapsed, scale=1.0)]
 
 
 if __name__ == "__main__":  # the parallel half of mpi-consistency
-    tip = rollup_tip_half(MPI.COMM_WORLD)
+    tip, _ = rollup_tip_half(MPI.COMM_WORLD)
     if MPI.COMM_WORLD.rank == 0:
         print(json.dumps(tip.tolist()))
