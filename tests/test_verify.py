@@ -8,12 +8,11 @@ from fabricfem.cli import main
 from fabricfem.verify import load_cases
 
 CASES = load_cases()
-PARALLEL_CASES = {"plate-point-load", "membrane-patch", "mpi-consistency", "rollup-cantilever"}
 
 
 def _params():
-    for name in CASES:
-        marks = [pytest.mark.mpi] if name in PARALLEL_CASES else []
+    for name, fn in CASES.items():
+        marks = [pytest.mark.mpi] if fn.mpi else []
         yield pytest.param(name, marks=marks, id=name)
 
 

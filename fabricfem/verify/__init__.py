@@ -37,10 +37,12 @@ def result(case: str, quantity: str, value: float, reference: float, tolerance: 
                       bool(rel <= tolerance), int(ndofs), float(wall_s))
 
 
-def case(name: str):
+def case(name: str, mpi: bool = False):
+    """Register a verification case; `mpi=True` also runs it under `mpirun -n 2` in the tests."""
     def register(fn):
         CASES[name] = fn
         fn.case_name = name
+        fn.mpi = mpi
         return fn
     return register
 
@@ -59,6 +61,9 @@ class Timer:
 
 
 def load_cases() -> dict[str, Callable[[], list[CaseResult]]]:
-    """Import the case modules (registration happens on import)."""
-    from fabricfem.verify import cantilevers, membrane, plates  # noqa: F401
+    """Import every module of this package (cases register themselves with @case on import)."""
+    import importlib
+    import pkgutil
+    for module in pkgutil.iter_modules(__path__):
+        importlib.import_module(f"{__name__}.{module.name}")
     return CASES

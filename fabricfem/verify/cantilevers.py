@@ -57,7 +57,7 @@ def rollup(m_values=(0.25, 0.5, 0.75, 1.0), L: float = 1.0, width: float = 0.1, 
     return model, positions, EI, history
 
 
-@case("rollup-cantilever")
+@case("rollup-cantilever", mpi=True)
 def rollup_cantilever() -> list:
     """Tip position against the exact circle of radius EI / M, |error| / L < 1% at m = 0.25 ... 1
     (t/L = 1/1000); at m = 1 the tip returns to the clamped end."""
@@ -132,7 +132,7 @@ def rollup_tip_half(comm=MPI.COMM_WORLD) -> tuple[np.ndarray, int]:
     return positions[0.5], model.ndofs
 
 
-@case("mpi-consistency")
+@case("mpi-consistency", mpi=True)
 def mpi_consistency() -> list:
     """Roll-up at m = 0.5 on 1 and on 2 MPI ranks: tip positions agree within 1e-8 relative.
     Serially this launches `mpirun -n 2` on fabricfem.verify.cantilevers; under mpirun it compares

@@ -24,7 +24,7 @@ def stress_samples(model: ShellModel) -> np.ndarray:
     return expr.eval(np.arange(n_cells, dtype=np.int32)).reshape(-1, 3, 3)
 
 
-@case("membrane-patch")
+@case("membrane-patch", mpi=True)
 def membrane_patch(n: int = 8, traction: float = 1.0) -> list:
     """1 m square fixed on its top edge, 1 N/m pulling on the bottom edge (membrane model, nu = 0,
     E t = 1000 N/m, in-plane): the nominal stress is P_yy = traction / t everywhere and the other

@@ -33,7 +33,7 @@ def centre_deflection(model: ShellModel) -> float:
     return float(model.node_value((SIDE / 2, SIDE / 2, 0.0))[2])
 
 
-@case("plate-point-load")
+@case("plate-point-load", mpi=True)
 def plate_point_load(n: int = 8) -> list:
     """P = 1 N at the centre, 64 quadrilaterals on the quarter (the thesis's resolution): w_c = -5.60e-3 m
     (thesis: -0.611 b^2 P / (E t^3), i.e. Timoshenko's 0.0056 P a^2 / D); tolerance 3% as in the issue."""
