@@ -81,14 +81,17 @@ def kawabata_energy(kappa, coefficients):
 def square_root_energy(kappa, B0, kappa0, eps):
     """Energy of seed 002 eq. 9, m = 2 B0 sqrt(kappa0 |K|) up to kappa0 then B0 (|K| + kappa0).
 
-    |K| is regularised as sqrt(K^2 + eps^2) - eps so that the tangent stays finite at K = 0
-    (the exact law has infinite initial stiffness); eps [1/m] is documented by the caller.
+    |K| is regularised as r = sqrt(K^2 + eps^2) (eps [1/m] set by the caller): the energy
+    4/3 B0 sqrt(kappa0) (r^(3/2) - eps^(3/2)) gives m -> 2 B0 sqrt(kappa0 |K|) for |K| >> eps and a
+    finite initial stiffness 2 B0 sqrt(kappa0 / eps) (the exact law has an infinite one); beyond
+    r = kappa0 the branch B0 (r^2 - kappa0^2) / 2 + B0 kappa0 (r - kappa0) continues it with
+    continuous moment.
     """
-    k = ufl.sqrt(kappa ** 2 + eps ** 2) - eps
-    w_inner = 4.0 / 3.0 * B0 * ufl.sqrt(kappa0) * k ** 1.5
-    w_kink = 4.0 / 3.0 * B0 * kappa0 ** 2
-    w_outer = w_kink + 0.5 * B0 * (k ** 2 - kappa0 ** 2) + B0 * kappa0 * (k - kappa0)
-    return ufl.conditional(ufl.le(k, kappa0), w_inner, w_outer)
+    r = ufl.sqrt(kappa ** 2 + eps ** 2)
+    w_inner = 4.0 / 3.0 * B0 * ufl.sqrt(kappa0) * (r ** 1.5 - eps ** 1.5)
+    w_kink = 4.0 / 3.0 * B0 * ufl.sqrt(kappa0) * (kappa0 ** 1.5 - eps ** 1.5)
+    w_outer = w_kink + 0.5 * B0 * (r ** 2 - kappa0 ** 2) + B0 * kappa0 * (r - kappa0)
+    return ufl.conditional(ufl.le(r, kappa0), w_inner, w_outer)
 
 
 def bending_energy(kappa_voigt, D, law=None, eps=None):
@@ -111,14 +114,15 @@ def psri_measures(mesh, full_degree: int = 4, reduced_degree: int = 2):
 
 
 def naghdi_energy(u, theta, phi0, n0, director_base, warp_weft, A, D, shear_stiffness, thickness,
-                  law=None, law_eps=None, degrees=(4, 2)):
+                  law=None, law_eps=None, degrees=(4, 2), cell_size=None):
     """Total strain energy of the shell with PSRI (UFL form of rank 0).
 
     u: displacement [m]; theta: rotations [rad]; phi0: reference position (P2 Function);
     n0: reference unit normal; director_base = (a3, a1, a2): the frame the rotations are
     measured from (a3 = n0 initially); warp_weft = (t1, t2): reference material directions;
     A = t Q [N/m] membrane stiffness; D [N m] bending stiffness (Voigt 3x3);
-    shear_stiffness = k_s G13 t [N/m].
+    shear_stiffness = k_s G13 t [N/m]; cell_size: h of the PSRI weight [m] (default ufl.CellDiameter,
+    which FFCx supports on affine cells only: pass a DG0 field on curved meshes).
     """
     mesh = u.ufl_domain()
     F0 = ufl.grad(phi0)
@@ -135,7 +139,7 @@ def naghdi_energy(u, theta, phi0, n0, director_base, warp_weft, A, D, shear_stif
     psi_s = 0.5 * shear_stiffness * ufl.dot(gamma, gamma)
 
     dx_full, dx_reduced = psri_measures(mesh, *degrees)
-    h = ufl.CellDiameter(mesh)
+    h = ufl.CellDiameter(mesh) if cell_size is None else cell_size
     alpha = thickness ** 2 / h ** 2
     return (psi_b * dx_full + alpha * (psi_m + psi_s) * dx_full
             + (1.0 - alpha) * (psi_m + psi_s) * dx_reduced)
