@@ -366,6 +366,21 @@ class ShellModel:
                 out[i] = self.w.x.array[dof]
         return self.comm.allreduce(out, op=MPI.SUM)
 
+    def reaction(self, where: Locator, field: str = "u", component: int = 0) -> float:
+        """Sum over the dofs of `field` component on an edge tag or locator of the internal force
+        R_int (the support reaction, N, or moment reaction, N m), same on all ranks."""
+        self.compile()
+        b = self.create_vector()
+        self.internal_force(self.w.vector, b)
+        sub = self._subspace(field, component)
+        V, _ = sub.collapse()
+        dofs = self._locate(where, (sub, V))[0]
+        n_owned = self.W.dofmap.index_map.size_local * self.W.dofmap.index_map_bs
+        owned = dofs[dofs < n_owned]
+        local = float(b.array[owned].sum()) if len(owned) else 0.0
+        b.destroy()
+        return self.comm.allreduce(local, op=MPI.SUM)
+
     def director_at(self, point: Sequence[float]) -> np.ndarray:
         """Unit director at a mesh node, on all ranks."""
         return probe.node_value(self.director_field(), point)

@@ -1,0 +1,191 @@
+"""Posing ellipsoidal segments from joint and marker positions (thesis sec. 5.1, Fig. 35).
+
+For a segment with joints J1, J2 and auxiliary marker M (positions in m):
+
+    x^c = (J1 + J2) / 2                                              (thesis sec. 5.1, "Center")
+    e1 = (J2 - J1) / |J2 - J1|
+    e2 = [(M - x^c) - ((M - x^c) . e1) e1] / |...|,   e3 = e1 x e2     (thesis sec. 5.1, "Orientations")
+
+so e1 runs along the segment, e2 points from the axis towards the marker and the ellipsoid radii
+(r1, r2, r3) are the semi-axes along (e1, e2, e3). A `Body` is a set of named segments sharing named
+joints; a kinematics source (`fabricfem.body.motion`) supplies the joint and marker positions at
+time t [s], and `Body.pose(t)` returns the posed ellipsoids.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from fabricfem.body.ellipsoid import Ellipsoid, _as_points
+from fabricfem.body.motion import KinematicsSource
+
+MIN_SEGMENT_LENGTH = 1e-9    # m: J1 and J2 closer than this are treated as coincident
+MIN_MARKER_OFFSET = 1e-9     # m: marker closer than this to the long axis does not fix a direction
+
+
+def _point(name: str, value) -> np.ndarray:
+    p = np.asarray(value, dtype=float)
+    if p.shape != (3,) or not np.all(np.isfinite(p)):
+        raise ValueError(f"{name} must be a finite point of shape (3,), got {value!r}")
+    return p
+
+
+def segment_frame(J1, J2, M, center_fraction: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """Centre x^c [m] and rotation R = [e1 e2 e3] of a segment (thesis sec. 5.1).
+
+    Args:
+        J1, J2: proximal and distal joint positions [m].
+        M: auxiliary marker [m], not on the line J1-J2.
+        center_fraction: x^c = J1 + f (J2 - J1); the thesis uses f = 1/2.
+    """
+    j1, j2, m = _point("J1", J1), _point("J2", J2), _point("marker", M)
+    if not (0.0 <= center_fraction <= 1.0):
+        raise ValueError(f"center_fraction must lie in [0, 1], got {center_fraction!r}")
+    axis = j2 - j1
+    length = float(np.linalg.norm(axis))
+    if length < MIN_SEGMENT_LENGTH:
+        raise ValueError(f"J1 and J2 coincide (|J2 - J1| = {length:.3g} m): the long axis is undefined")
+    center = j1 + center_fraction * axis
+    e1 = axis / length
+    offset = m - center
+    perpendicular = offset - np.dot(offset, e1) * e1
+    distance = float(np.linalg.norm(perpendicular))
+    if distance < MIN_MARKER_OFFSET or distance < 1e-9 * max(float(np.linalg.norm(offset)), length):
+        raise ValueError("marker M is collinear with the long axis J1-J2: it does not fix the rotation "
+                         "about the axis")
+    e2 = perpendicular / distance
+    e3 = np.cross(e1, e2)
+    return center, np.column_stack([e1, e2, e3])
+
+
+@dataclass(frozen=True)
+class Segment:
+    """A body segment: an ellipsoid posed from two joints and a marker.
+
+    Args:
+        name: segment name, e.g. "forearm".
+        proximal: name of joint J1 (e.g. "elbow").
+        distal: name of joint J2 (e.g. "wrist").
+        marker: name of the auxiliary marker M.
+        radii: semi-axes (r1 along J1->J2, r2 towards the marker, r3) [m], each > 0.
+        center_fraction: centre position along J1->J2 (1/2 in the thesis).
+    """
+
+    name: str
+    proximal: str
+    distal: str
+    marker: str
+    radii: tuple[float, float, float]
+    center_fraction: float = 0.5
+
+    def __post_init__(self):
+        if not isinstance(self.name, str) or not self.name:
+            raise ValueError(f"name must be a non-empty string, got {self.name!r}")
+        if self.proximal == self.distal:
+            raise ValueError(f"segment {self.name!r}: proximal and distal joints must differ "
+                             f"(J1 == J2 == {self.proximal!r})")
+        radii = tuple(float(r) for r in self.radii)
+        if len(radii) != 3 or not all(math.isfinite(r) and r > 0.0 for r in radii):
+            raise ValueError(f"segment {self.name!r}: radii must be three positive lengths, got {self.radii!r}")
+        if not (0.0 <= self.center_fraction <= 1.0):
+            raise ValueError(f"segment {self.name!r}: center_fraction must lie in [0, 1]")
+        object.__setattr__(self, "radii", radii)
+
+    def pose(self, positions: Mapping[str, np.ndarray]) -> Ellipsoid:
+        """The ellipsoid for the given joint/marker positions [m] (a name -> (3,) mapping)."""
+        center, rotation = segment_frame(positions[self.proximal], positions[self.distal],
+                                         positions[self.marker], self.center_fraction)
+        return Ellipsoid(center, rotation, np.array(self.radii))
+
+
+def _vee(skew: np.ndarray) -> np.ndarray:
+    """Axial vector of the skew part of a 3x3 matrix."""
+    return 0.5 * np.array([skew[2, 1] - skew[1, 2], skew[0, 2] - skew[2, 0], skew[1, 0] - skew[0, 1]])
+
+
+class Body:
+    """Named ellipsoidal segments joined at named joints, driven by a kinematics source.
+
+    Args:
+        segments: the segments (unique names).
+        kinematics: source of joint and marker positions over time (see `fabricfem.body.motion`).
+    """
+
+    def __init__(self, segments: Sequence[Segment], kinematics: KinematicsSource):
+        names = [s.name for s in segments]
+        if len(names) == 0:
+            raise ValueError("segments must not be empty")
+        if len(set(names)) != len(names):
+            raise ValueError(f"segments: duplicate segment names in {names}")
+        available = set(kinematics.names)
+        for s in segments:
+            missing = [p for p in (s.proximal, s.distal, s.marker) if p not in available]
+            if missing:
+                raise ValueError(f"segment {s.name!r}: kinematics has no point named {missing} "
+                                 f"(available: {sorted(available)})")
+        self.segments: dict[str, Segment] = {s.name: s for s in segments}
+        self.kinematics = kinematics
+
+    @property
+    def joints(self) -> tuple[str, ...]:
+        """Joint names (the J1/J2 names of the segments)."""
+        seen: dict[str, None] = {}
+        for s in self.segments.values():
+            seen.setdefault(s.proximal)
+            seen.setdefault(s.distal)
+        return tuple(seen)
+
+    def segment(self, name: str) -> Segment:
+        if name not in self.segments:
+            raise ValueError(f"segment: unknown segment name {name!r} (known: {sorted(self.segments)})")
+        return self.segments[name]
+
+    def pose(self, t: float) -> dict[str, Ellipsoid]:
+        """Posed ellipsoids at time t [s], by segment name."""
+        positions = self.kinematics.positions(t)
+        return {name: s.pose(positions) for name, s in self.segments.items()}
+
+    def joint_position(self, name: str, t: float) -> np.ndarray:
+        """Position [m] of a joint or marker at time t [s]."""
+        if name not in self.kinematics.names:
+            raise ValueError(f"name: unknown joint or marker {name!r}")
+        return np.asarray(self.kinematics.positions(t)[name], dtype=float)
+
+    def velocities(self, t: float, dt: float = 1e-4) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Rigid-body velocity (v_center [m/s], omega [rad/s]) of each segment at time t [s].
+
+        Central differences of the posed frames over +-dt (one-sided at the ends of the kinematics'
+        time range): v_c = dx^c/dt, omega = axial(dR/dt R^T); truncation error O(dt^2) (O(dt) one-sided).
+        """
+        if not (math.isfinite(dt) and dt > 0.0):
+            raise ValueError(f"dt must be a positive time step [s], got {dt!r}")
+        t0, t1 = self.kinematics.time_range
+        ta, tb = max(t - dt, t0), min(t + dt, t1)
+        if tb <= ta:
+            raise ValueError(f"t: no time window around t = {t} within {self.kinematics.time_range}")
+        before, now, after = self.pose(ta), self.pose(t), self.pose(tb)
+        out = {}
+        for name in self.segments:
+            v_c = (after[name].center - before[name].center) / (tb - ta)
+            rate = (after[name].rotation - before[name].rotation) / (tb - ta)
+            out[name] = (v_c, _vee(rate @ now[name].rotation.T))
+        return out
+
+    def gap(self, x, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Smallest gap over all segments at time t [s] (see `Ellipsoid.gap`).
+
+        Returns:
+            (g [m] (N,), unit outward normal (N, 3), index (N,) into `list(self.segments)`).
+        """
+        pts, _ = _as_points(x)
+        posed = list(self.pose(t).values())
+        gaps = np.empty((len(posed), len(pts)))
+        normals = np.empty((len(posed), len(pts), 3))
+        for k, e in enumerate(posed):  # loop over the few segments, vectorised over the points
+            gaps[k], normals[k] = e.gap(pts)
+        nearest = np.argmin(gaps, axis=0)
+        cols = np.arange(len(pts))
+        return gaps[nearest, cols], normals[nearest, cols], nearest

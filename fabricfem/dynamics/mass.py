@@ -1,0 +1,169 @@
+"""Inertia and damping operators of the shell: consistent and lumped mass, Rayleigh and air damping.
+
+Units: SI. Areal density rho t [kg/m^2] (Fabric.areal_density), rotational inertia rho t^3/12 [kg]
+per unit area, air-drag coefficient eta [kg/(m^2 s)], Rayleigh coefficients a [1/s] and b [s].
+
+Rotational inertia. The Naghdi director is d = cos th1 cos th2 a3 + cos th1 sin th2 a1 - sin th1 a2
+(fabricfem.forms.shell.director). The thesis neglects the angular-velocity-squared term of the
+acceleration (thesis eq. 2.65); here the director velocity is also linearised about the director base,
+d' ~ th2' a1 - th1' a2, so |d'|^2 ~ |theta'|^2 and the kinetic energy density is
+
+    T = 1/2 rho t |u'|^2 + 1/2 rho t^3/12 |theta'|^2,
+
+which gives a constant mass matrix (thesis eq. 2.67 without the deformation dependence). The exact
+metric of the angles is diag(1, cos^2 th1), so the rotational inertia is exact at theta = 0 and off by
+O(th1^2) relative for finite angles; translational inertia is exact. The director base must therefore
+stay fixed during a dynamic run (ShellModel.rebase = False; the integrators switch it off).
+"""
+from __future__ import annotations
+
+import numpy as np
+import ufl
+from dolfinx import fem
+from dolfinx.fem import petsc as fem_petsc
+from ffcx.element_interface import create_element
+from petsc4py import PETSc
+
+import basix
+from fabricfem.forms import shell as shell_forms
+
+
+def _check_density(model) -> float:
+    rho_t = float(model.fabric.areal_density)
+    if not rho_t > 0.0:
+        raise ValueError(f"dynamics needs a positive fabric density (Fabric.density [kg/m^3]); "
+                         f"areal density is {rho_t!r} kg/m^2")
+    return rho_t
+
+
+def rotational_inertia_factor(model) -> float:
+    """t^2/12 [m^2]: rotational over translational inertia per unit area (thesis eq. 2.82)."""
+    return float(model.fabric.thickness) ** 2 / 12.0
+
+
+def mass_form(model):
+    """Consistent mass bilinear form [kg]: rho t u.v + rho t^3/12 theta.eta (thesis eq. 2.67, linearised director)."""
+    rho_t = fem.Constant(model.mesh, PETSc.ScalarType(_check_density(model)))
+    trial = ufl.split(model.w_trial) if model.model == "naghdi" else (model.w_trial,)
+    form = rho_t * ufl.dot(trial[0], model.v) * model.dx
+    if model.model == "naghdi":
+        j = fem.Constant(model.mesh, PETSc.ScalarType(rotational_inertia_factor(model)))
+        form += rho_t * j * ufl.dot(trial[1], model.eta) * model.dx
+    return form
+
+
+def air_drag_form(model, eta: float):
+    """Bilinear form of the air drag f_d = -eta v (seed 002), eta [kg/(m^2 s)] per unit reference area."""
+    trial = ufl.split(model.w_trial)[0] if model.model == "naghdi" else model.w_trial
+    return fem.Constant(model.mesh, PETSc.ScalarType(eta)) * ufl.dot(trial, model.v) * model.dx
+
+
+def _strains(model, w):
+    """Voigt membrane strain, bending strain and shear strain (Naghdi) of the state `w` (UFL)."""
+    F0 = ufl.grad(model.phi0)
+    if model.model == "naghdi":
+        u, theta = ufl.split(w)
+    else:
+        u, theta = w, None
+    F = F0 + ufl.grad(u)
+    e1, e2 = shell_forms.material_frame(F0, model.t1, model.t2)
+    eps_m = shell_forms.voigt(shell_forms.membrane_strain(F, F0), e1, e2)
+    if theta is None:
+        return eps_m, None, None
+    d = shell_forms.director(theta, model.a3, model.a1, model.a2)
+    kappa = shell_forms.voigt(shell_forms.bending_strain(F, F0, d, model.n0), e1, e2)
+    g = shell_forms.shear_strain(F, F0, d, model.n0)
+    return eps_m, kappa, ufl.as_vector([ufl.dot(g, e1), ufl.dot(g, e2)])
+
+
+def material_stiffness_form(model, w_frozen: fem.Function, psri_degrees: tuple[int, int] = (4, 2)):
+    """Material part K_M of the tangent stiffness at the state `w_frozen` (thesis eq. 2.85).
+
+    K_M = int deps.A Deps + dkappa.D Dkappa + k_s G t dgamma.Dgamma with the strain variations taken at
+    w_frozen and the PSRI split of the energy; the geometric part (stress times second variation of
+    the strains) is left out, as in the thesis. A nonlinear bending law is replaced by its linear
+    rigidity D here (damping only).
+    """
+    eps_m, kappa, gamma = _strains(model, w_frozen)
+    test, trial = model.w_test, model.w_trial
+
+    def bilinear(strain, C):
+        return ufl.dot(ufl.derivative(strain, w_frozen, test), C * ufl.derivative(strain, w_frozen, trial))
+
+    membrane = bilinear(eps_m, model.A)
+    if kappa is None:
+        return membrane * ufl.Measure("dx", domain=model.mesh, metadata={"quadrature_degree": 4})
+    shear = model.shear_stiffness * ufl.dot(ufl.derivative(gamma, w_frozen, test),
+                                            ufl.derivative(gamma, w_frozen, trial))
+    bending = bilinear(kappa, model.D)
+    dx_full, dx_reduced = shell_forms.psri_measures(model.mesh, *psri_degrees)
+    alpha = model.thickness ** 2 / ufl.CellDiameter(model.mesh) ** 2
+    return bending * dx_full + alpha * (membrane + shear) * dx_full + (1.0 - alpha) * (membrane + shear) * dx_reduced
+
+
+def _subspaces(model) -> list[tuple[object, str]]:
+    """(scalar subspace, 'u' or 'theta') for every field component of W."""
+    if model.model == "naghdi":
+        return [(model.W.sub(0).sub(i), "u") for i in range(3)] + [(model.W.sub(1).sub(j), "theta") for j in range(2)]
+    return [(model.W.sub(i), "u") for i in range(3)]
+
+
+def _hrz_nodal_factors(model, scalar_element) -> tuple[np.ndarray, int]:
+    """Per owned cell and local node A: area_e int_e N_A^2 / sum_B int_e N_B^2 [m^2] (thesis eq. 2.82, lambda)."""
+    mesh = model.mesh
+    cellname = mesh.ufl_cell().cellname()
+    basix_cell = {"triangle": basix.CellType.triangle, "quadrilateral": basix.CellType.quadrilateral}[cellname]
+    element = create_element(scalar_element)
+    degree = 2 * scalar_element.degree() + 2
+    points, weights = basix.make_quadrature(basix_cell, degree)
+    N = element.tabulate(0, points)[0]  # (n_points, n_nodes)
+    n_cells = mesh.topology.index_map(mesh.topology.dim).size_local
+    cells = np.arange(n_cells, dtype=np.int32)
+    detJ = np.abs(fem.Expression(ufl.JacobianDeterminant(mesh), points).eval(cells)).reshape(n_cells, -1)
+    wJ = detJ * weights[None, :]  # (cells, points)
+    diag = wJ @ (N ** 2)  # int_e N_A^2, (cells, nodes)
+    area = wJ.sum(axis=1)  # int_e 1
+    return area[:, None] * diag / diag.sum(axis=1, keepdims=True), n_cells
+
+
+def lumped_mass(model, translational: bool = True, rotational: bool = True) -> PETSc.Vec:
+    """Diagonal (lumped) mass of thesis eq. 2.82 [kg, kg m^2] as a ghosted PETSc Vec on W.
+
+    M_AA = lambda_e rho t int_e N_A^2 for the displacements and t^2/12 of that for the rotations,
+    lambda_e = int_e rho t / sum_B int_e rho t N_B^2 (the element's mass is preserved; all entries are
+    positive for P2, Q2 and P2 + bubble, unlike row-sum lumping). Dirichlet rows are not modified.
+    `translational` / `rotational` select which fields get their entries (the others are 0).
+    """
+    rho_t = _check_density(model)
+    m = model.create_vector()
+    with m.localForm() as local:
+        local.set(0.0)
+        array = local.array
+        cache: dict[str, np.ndarray] = {}
+        for sub, field in _subspaces(model):
+            if (field == "u" and not translational) or (field == "theta" and not rotational):
+                continue
+            V, to_parent = sub.collapse()
+            if field not in cache:
+                cache[field], _ = _hrz_nodal_factors(model, V.ufl_element())
+            factors = cache[field]
+            cell_dofs = V.dofmap.list.array.reshape(-1, V.dofmap.dof_layout.num_dofs)[:factors.shape[0]]
+            parent = np.asarray(to_parent)[cell_dofs]
+            scale = rho_t * (rotational_inertia_factor(model) if field == "theta" else 1.0)
+            np.add.at(array, parent.ravel(), scale * factors.ravel())
+    m.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    m.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+    return m
+
+
+def assemble_matrix(form, bcs=None, diagonal: float = 1.0) -> PETSc.Mat:
+    """Assemble a bilinear form (compiled here) into a new PETSc matrix."""
+    compiled = fem.form(form)
+    A = fem_petsc.assemble_matrix(compiled, bcs=bcs or [], diagonal=diagonal)
+    A.assemble()
+    return A
+
+
+def consistent_mass(model, bcs=None, diagonal: float = 1.0) -> PETSc.Mat:
+    """Consistent mass matrix [kg] (mass_form), optionally with Dirichlet rows/columns eliminated."""
+    return assemble_matrix(mass_form(model), bcs, diagonal)

@@ -1,0 +1,421 @@
+"""Periodic unit-cell homogenization at finite strain (thesis 000, sec. 4.2.2 and 4.3.2-4.3.3).
+
+The cell Y (a dolfinx 3D mesh, lengths in m) is loaded by a macroscopic deformation gradient Phi:
+the microscopic placement is y = Phi Y + u* (eq. 4.52) with the fluctuation u* periodic between
+the given pairs of faces, rigid translations removed by pinning u* = 0 at one vertex, and every
+face not in a pair left traction-free (the thesis' top and bottom faces). Equilibrium DIV P = 0
+(eqs. 4.57, 4.61) is solved by Newton on dolfinx_mpc assemblers, Phi applied in equal increments
+of Phi - 1. The homogenized second Piola-Kirchhoff stress is the volume average (eq. 4.64)
+
+    S = phi / |Y_s| int_{Y_s} F^{-1} P dV,   phi = |Y_s| / |Y|          (eqs. 4.64, 4.65)
+
+where Y_s is the meshed (solid) region and |Y| the volume of the reference bounding box; the
+conjugate strain is E = (Phi^T Phi - 1) / 2 (eq. 4.59). Stresses are in Pa.
+
+Material: `psi` is a strain-energy density [J/m^3] given as a UFL callable psi(C) of the right
+Cauchy-Green tensor C, or a mapping {cell tag: psi} used with `cell_tags`. Extra fields (a yarn
+axis Function, say) enter through closures.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Mapping, Sequence, Union
+
+import dolfinx.cpp as _cpp
+import dolfinx.fem as fem
+import dolfinx.fem.petsc as fem_petsc
+import dolfinx.mesh as dmesh
+import dolfinx_mpc
+import numpy as np
+import ufl
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fabricfem.solvers.mpc_newton import MPCNewtonSolver
+from fabricfem.solvers.newton import SolverError
+
+StrainEnergy = Callable[[ufl.core.expr.Expr], ufl.core.expr.Expr]
+Locator = Callable[[np.ndarray], np.ndarray]
+
+GEOMETRIC_TOLERANCE = 1e-8  # relative to the cell diagonal: points closer than this coincide
+
+
+@dataclass(frozen=True)
+class PeriodicPair:
+    """Two opposite faces with u*(slave point) = u*(slave point - translation).
+
+    `slave` and `master` are facet-tag values (with `facet_tags` given to the problem) or,
+    for geometric pairs, `slave` is a locator x (3, n) -> bool (n,) and `translation` is required.
+    `translation` [m] is the vector from the master face to the slave face; with tags it
+    defaults to the difference of the faces' vertex centroids (exact for meshes whose opposite
+    faces match, which dolfinx_mpc does not otherwise require).
+    """
+
+    slave: int | Locator
+    master: int | None = None
+    translation: Sequence[float] | None = None
+
+
+@dataclass
+class UnitCellStep:
+    """One converged load step: Phi and E dimensionless, S and P in Pa."""
+
+    Phi: np.ndarray
+    E: np.ndarray  # eq. 4.59
+    S: np.ndarray  # eq. 4.64, homogenized second Piola-Kirchhoff stress
+    P: np.ndarray  # phi / |Y_s| int_{Y_s} P dV, homogenized first Piola-Kirchhoff stress
+    newton_iterations: int
+    residual_norms: list[float] = field(default_factory=list)
+
+
+@dataclass
+class UnitCellResult:
+    steps: list[UnitCellStep]
+    volume_fraction: float
+    solid_volume: float  # |Y_s| [m^3]
+    cell_volume: float  # |Y| [m^3]
+    ndofs: int
+    fluctuation: fem.Function  # u* at the last step [m]
+
+    @property
+    def S(self) -> np.ndarray:
+        return self.steps[-1].S
+
+    @property
+    def E(self) -> np.ndarray:
+        return self.steps[-1].E
+
+
+def green_lagrange(Phi: np.ndarray) -> np.ndarray:
+    """E = (Phi^T Phi - 1) / 2 (eq. 4.59)."""
+    Phi = np.asarray(Phi, dtype=float)
+    return 0.5 * (Phi.T @ Phi - np.eye(3))
+
+
+def _check_Phi(Phi) -> np.ndarray:
+    Phi = np.asarray(Phi, dtype=float)
+    if Phi.shape != (3, 3) or not np.all(np.isfinite(Phi)):
+        raise ValueError(f"Phi must be a finite 3 x 3 deformation gradient, got {Phi!r}")
+    det = np.linalg.det(Phi)
+    if det <= 0:
+        raise ValueError(f"Phi must have det(Phi) > 0 (orientation-preserving), got det = {det:.6g}")
+    return Phi
+
+
+def load_path(Phi, steps: int) -> list[np.ndarray]:
+    """Phi_n = 1 + (n / steps)(Phi - 1), n = 1 ... steps; every Phi_n must have det > 0."""
+    if int(steps) != steps or steps < 1:
+        raise ValueError(f"steps must be a positive integer, got {steps!r}")
+    Phi = _check_Phi(Phi)
+    path = [np.eye(3) + (n / steps) * (Phi - np.eye(3)) for n in range(1, int(steps) + 1)]
+    dets = np.linalg.det(np.array(path))
+    if np.any(dets <= 0):
+        raise ValueError(f"Phi: the linear load path 1 + t (Phi - 1) passes det <= 0 (min {dets.min():.3g}); "
+                         "apply it in several calls through intermediate deformations")
+    return path
+
+
+def _owned_facet_vertex_coordinates(mesh: dmesh.Mesh, facets: np.ndarray) -> np.ndarray:
+    """Coordinates (n, 3) of the owned vertices of the given facets (each vertex once)."""
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim - 1, 0)
+    f2v = mesh.topology.connectivity(tdim - 1, 0)
+    per_facet = f2v.offsets[1] - f2v.offsets[0]  # one facet type per mesh
+    verts = np.unique(f2v.array.reshape(-1, per_facet)[facets].ravel())
+    verts = verts[verts < mesh.topology.index_map(0).size_local].astype(np.int32)
+    nodes = _cpp.mesh.entities_to_geometry(mesh._mesh, 0, verts, False).ravel()
+    return mesh.geometry.x[nodes]
+
+
+@dataclass(frozen=True)
+class _Face:
+    """A planar face: centroid c, unit normal n and bounding box, for geometric membership tests."""
+
+    centroid: np.ndarray
+    normal: np.ndarray
+    lower: np.ndarray
+    upper: np.ndarray
+    tolerance: float
+
+    def contains(self, x: np.ndarray) -> np.ndarray:
+        on_plane = np.abs(self.normal @ (x - self.centroid[:, None])) <= self.tolerance
+        inside = np.all((x >= self.lower[:, None] - self.tolerance) & (x <= self.upper[:, None] + self.tolerance),
+                        axis=0)
+        return on_plane & inside
+
+
+def _tagged_face(mesh: dmesh.Mesh, facet_tags, tag: int, tolerance: float) -> _Face:
+    """Fit the plane of the facets tagged `tag` (all ranks); ValueError if missing or not planar."""
+    comm = mesh.comm
+    facets = facet_tags.indices[facet_tags.values == tag]
+    x = _owned_facet_vertex_coordinates(mesh, facets)
+    count = comm.allreduce(len(x), op=MPI.SUM)
+    if count < 3:
+        raise ValueError(f"periodic_pairs: facet tag {tag} marks no face of the mesh (found {count} vertices)")
+    centroid = comm.allreduce(x.sum(axis=0), op=MPI.SUM) / count
+    d = x - centroid
+    scatter = comm.allreduce(d.T @ d, op=MPI.SUM)
+    normal = np.linalg.eigh(scatter)[1][:, 0]  # direction of least spread
+    lower = comm.allreduce(x.min(axis=0) if len(x) else np.full(3, np.inf), op=MPI.MIN)
+    upper = comm.allreduce(x.max(axis=0) if len(x) else np.full(3, -np.inf), op=MPI.MAX)
+    offplane = comm.allreduce(float(np.abs(d @ normal).max()) if len(x) else 0.0, op=MPI.MAX)
+    if offplane > tolerance:
+        raise ValueError(f"periodic_pairs: the face with facet tag {tag} is not planar "
+                         f"(vertices up to {offplane:.3g} m off its mean plane)")
+    return _Face(centroid, normal, lower, upper, tolerance)
+
+
+def _bounding_box(mesh: dmesh.Mesh) -> tuple[np.ndarray, np.ndarray]:
+    x = mesh.geometry.x
+    return mesh.comm.allreduce(x.min(axis=0), op=MPI.MIN), mesh.comm.allreduce(x.max(axis=0), op=MPI.MAX)
+
+
+def _pin_point(mesh: dmesh.Mesh, excluded: Callable[[np.ndarray], np.ndarray], target: np.ndarray) -> np.ndarray:
+    """The mesh vertex nearest `target` that no slave face contains (same choice on every rank)."""
+    nv = mesh.topology.index_map(0).size_local
+    nodes = _cpp.mesh.entities_to_geometry(mesh._mesh, 0, np.arange(nv, dtype=np.int32), False).ravel()
+    x = mesh.geometry.x[nodes]
+    x = x[~excluded(x.T)] if len(x) else x
+    if len(x):
+        dist = np.linalg.norm(x - target, axis=1)
+        # ties broken by coordinates so that every partition picks the same vertex
+        best = x[np.lexsort((x[:, 2], x[:, 1], x[:, 0], np.round(dist, 12)))[0]]
+        candidate = (round(float(np.linalg.norm(best - target)), 12), *best.tolist())
+    else:
+        candidate = (np.inf, 0.0, 0.0, 0.0)
+    winner = min(mesh.comm.allgather(candidate))
+    if not np.isfinite(winner[0]):
+        raise ValueError("periodic_pairs: every vertex lies on a slave face; no point left to pin")
+    return np.array(winner[1:])
+
+
+class UnitCellProblem:
+    """Finite-strain periodic unit cell; build once, then `solve(Phi, steps)` along load paths.
+
+    Parameters:
+        mesh: dolfinx mesh of the solid part of the cell (3D, coordinates in m)
+        psi: strain energy psi(C) [J/m^3] (UFL), or {cell tag: psi} together with `cell_tags`
+        periodic_pairs: PeriodicPair list (all by facet tag, or all by locator)
+        facet_tags: MeshTags of facets, needed for pairs given by tag
+        cell_tags: MeshTags of cells, needed when psi is a mapping; Y_s is the union of its tags
+        volume_fraction: phi of eq. 4.65 in (0, 1]; None computes |Y_s| / |bounding box of the mesh|
+        degree: Lagrange degree of u* (1 or 2)
+        quadrature_degree: default 2 * degree
+        rtol, stol, max_it: Newton tolerances (see MPCNewtonSolver)
+    """
+
+    def __init__(self, mesh: dmesh.Mesh, psi: Union[StrainEnergy, Mapping[int, StrainEnergy]],
+                 periodic_pairs: Sequence[PeriodicPair], facet_tags=None, cell_tags=None,
+                 volume_fraction: float | None = None, degree: int = 1, quadrature_degree: int | None = None,
+                 rtol: float = 1e-10, stol: float = 1e-13, max_it: int = 25):
+        if mesh.topology.dim != 3 or mesh.geometry.dim != 3:
+            raise ValueError("mesh must be a 3D volume mesh")
+        if degree not in (1, 2):
+            raise ValueError(f"degree must be 1 or 2, got {degree!r}")
+        if volume_fraction is not None and not (np.isfinite(volume_fraction) and 0.0 < volume_fraction <= 1.0):
+            raise ValueError(f"volume_fraction must lie in (0, 1], got {volume_fraction!r}")
+        self.mesh, self.comm = mesh, mesh.comm
+        lower, upper = _bounding_box(mesh)
+        self.length_scale = float(np.linalg.norm(upper - lower))  # cell diagonal [m]
+        tol = GEOMETRIC_TOLERANCE * self.length_scale
+
+        materials = self._materials(psi, cell_tags)
+        q = 2 * degree if quadrature_degree is None else int(quadrature_degree)
+        self.dx = ufl.Measure("dx", domain=mesh, subdomain_data=cell_tags, metadata={"quadrature_degree": q})
+
+        V = fem.VectorFunctionSpace(mesh, ("Lagrange", degree))
+        slave_faces, translations = self._pairs(periodic_pairs, facet_tags, tol)
+
+        def on_slave_face(x: np.ndarray) -> np.ndarray:
+            hit = np.zeros(x.shape[1], dtype=bool)
+            for face in slave_faces:
+                hit |= face(x)
+            return hit
+
+        def to_master(x: np.ndarray) -> np.ndarray:
+            # a point on several slave faces (edge, corner) is moved by each translation, so that
+            # every slave's master lies on no slave face (no chained constraints)
+            out = x.copy()
+            for face, t in zip(slave_faces, translations):
+                out[:, face(x)] -= t[:, None]
+            return out
+
+        self.pin = _pin_point(mesh, on_slave_face, 0.5 * (lower + upper))
+        pinned = fem.locate_dofs_geometrical(V, lambda x: np.linalg.norm(x - self.pin[:, None], axis=0) <= tol)
+        self.bcs = [fem.dirichletbc(np.zeros(3, dtype=np.float64), pinned, V)]
+
+        mpc = dolfinx_mpc.MultiPointConstraint(V)
+        if isinstance(periodic_pairs[0].slave, (int, np.integer)):
+            slave_facets = np.unique(np.concatenate(
+                [facet_tags.indices[facet_tags.values == p.slave] for p in periodic_pairs]))
+            all_slaves = dmesh.meshtags(mesh, mesh.topology.dim - 1, slave_facets.astype(np.int32), 1)
+            mpc.create_periodic_constraint_topological(V, all_slaves, 1, to_master, self.bcs)
+        else:
+            mpc.create_periodic_constraint_geometrical(V, on_slave_face, to_master, self.bcs)
+        mpc.finalize()
+        self.mpc = mpc
+        self.u = fem.Function(mpc.function_space, name="fluctuation")  # u* [m]
+
+        self.Phi = fem.Constant(mesh, np.eye(3))
+        F = self.Phi + ufl.grad(self.u)  # eq. 4.54
+        C = F.T * F
+        v = ufl.TestFunction(V)
+        energy = sum(w(C) * self._dx(tag) for tag, w in materials)
+        residual = ufl.derivative(energy, self.u, v)  # eq. 4.61: int P : grad(du*) dV
+        self.residual = residual
+        self.newton = MPCNewtonSolver(residual, self.u, mpc, self.bcs, rtol=rtol, stol=stol, max_it=max_it,
+                                      form_compiler_params={"quadrature_degree": q})
+        self._plain_residual = self.newton.L
+
+        # Volume integrals of S and P (18 components) against a DG0 test function: one compiled form.
+        averages = []
+        for tag, w in materials:
+            Cv = ufl.variable(C)
+            S = ufl.diff(w(Cv), Cv)
+            S = S + S.T  # S = 2 dpsi/dC, symmetrized: C is symmetric
+            P = F * S
+            flat = ufl.as_vector([S[i, j] for i in range(3) for j in range(3)] +
+                                 [P[i, j] for i in range(3) for j in range(3)])
+            averages.append((flat, tag))
+        W = fem.FunctionSpace(mesh, ufl.VectorElement("DG", mesh.ufl_cell(), 0, dim=18))
+        t = ufl.TestFunction(W)
+        self._stress_form = fem.form(sum(ufl.inner(flat, t) * self._dx(tag) for flat, tag in averages))
+        self._stress_vector = fem_petsc.create_vector(self._stress_form)
+        self._owned_stress = W.dofmap.index_map.size_local * W.dofmap.index_map_bs
+
+        one = fem.Constant(mesh, 1.0)
+        self.solid_volume = self.comm.allreduce(
+            fem.assemble_scalar(fem.form(sum(one * self._dx(tag) for tag, _ in materials))), op=MPI.SUM)
+        box_volume = float(np.prod(upper - lower))
+        self.volume_fraction = self.solid_volume / box_volume if volume_fraction is None else float(volume_fraction)
+        if not (0.0 < self.volume_fraction <= 1.0 + 1e-12):
+            raise ValueError(f"volume_fraction computed from the mesh is {self.volume_fraction:.6g}, outside (0, 1]")
+        self.cell_volume = self.solid_volume / self.volume_fraction
+
+    def _dx(self, tag: int | None) -> ufl.Measure:
+        return self.dx if tag is None else self.dx(tag)
+
+    @staticmethod
+    def _materials(psi, cell_tags) -> list[tuple[int | None, StrainEnergy]]:
+        if callable(psi):
+            return [(None, psi)]
+        if not isinstance(psi, Mapping) or not psi:
+            raise ValueError("psi must be a callable psi(C) or a non-empty mapping {cell tag: psi}")
+        if cell_tags is None:
+            raise ValueError("cell_tags are required when psi is a mapping {cell tag: psi}")
+        present = set(np.unique(np.concatenate(cell_tags.mesh.comm.allgather(cell_tags.values))).tolist())
+        missing = [tag for tag in psi if tag not in present]
+        if missing:
+            raise ValueError(f"psi: cell tags {missing} do not occur in cell_tags (present: {sorted(present)})")
+        for tag, w in psi.items():
+            if not callable(w):
+                raise ValueError(f"psi[{tag}] must be a callable psi(C)")
+        return list(psi.items())
+
+    def _pairs(self, pairs, facet_tags, tol) -> tuple[list[Locator], list[np.ndarray]]:
+        if not pairs:
+            raise ValueError("periodic_pairs must contain at least one PeriodicPair")
+        by_tag = [isinstance(p.slave, (int, np.integer)) for p in pairs]
+        if any(by_tag) and not all(by_tag):
+            raise ValueError("periodic_pairs must be all by facet tag or all by locator, not mixed")
+        faces, translations = [], []
+        for p in pairs:
+            if by_tag[0]:
+                if facet_tags is None:
+                    raise ValueError("facet_tags are required for periodic_pairs given by tag")
+                slave = _tagged_face(self.mesh, facet_tags, int(p.slave), tol)
+                if p.translation is None:
+                    if p.master is None:
+                        raise ValueError(f"periodic_pairs: pair with slave tag {p.slave} needs a master tag "
+                                         "or a translation")
+                    master = _tagged_face(self.mesh, facet_tags, int(p.master), tol)
+                    t = slave.centroid - master.centroid
+                else:
+                    t = np.asarray(p.translation, dtype=float)
+                faces.append(slave.contains)
+            else:
+                if not callable(p.slave) or p.translation is None:
+                    raise ValueError("periodic_pairs: a pair given by locator needs a callable slave and a translation")
+                faces.append(p.slave)
+                t = np.asarray(p.translation, dtype=float)
+            if t.shape != (3,) or not np.all(np.isfinite(t)) or np.linalg.norm(t) <= tol:
+                raise ValueError(f"periodic_pairs: translation must be a non-zero finite 3-vector, got {t!r}")
+            translations.append(t)
+        return faces, translations
+
+    @property
+    def ndofs(self) -> int:
+        return self.newton.ndofs
+
+    def homogenized_stress(self) -> tuple[np.ndarray, np.ndarray]:
+        """(S, P) [Pa] at the current state: phi / |Y_s| int_{Y_s} (F^{-1} P, P) dV (eq. 4.64)."""
+        b = self._stress_vector
+        with b.localForm() as b_local:
+            b_local.set(0.0)
+        fem_petsc.assemble_vector(b, self._stress_form)
+        local = b.array_r[: self._owned_stress].reshape(-1, 18).sum(axis=0)
+        total = self.comm.allreduce(local, op=MPI.SUM)
+        scale = self.volume_fraction / self.solid_volume  # eq. 4.64
+        return scale * total[:9].reshape(3, 3), scale * total[9:].reshape(3, 3)
+
+    def _force_scale(self) -> float:
+        """Norm of the nodal forces of the current state without the periodic condensation [N]:
+        the boundary forces the periodicity has to balance (zero only for a stress-free state)."""
+        b = fem_petsc.assemble_vector(self._plain_residual)
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        norm = b.norm()
+        b.destroy()
+        return float(norm) if norm > 0 else float(np.finfo(float).tiny)
+
+    def solve(self, Phi, steps: int = 1) -> UnitCellResult:
+        """Apply Phi in `steps` equal increments of Phi - 1 from the current state of u*
+        (zero for a new problem); SolverError if a step does not converge."""
+        path = load_path(Phi, steps)
+        out = []
+        for n, Phi_n in enumerate(path, start=1):
+            self.Phi.value[:] = Phi_n
+            result = self.newton.solve(self._force_scale(), self.length_scale)
+            if not result.converged:
+                raise SolverError(f"unit cell: Newton {result.reason} after {result.iterations} iterations at load "
+                                  f"step {n}/{steps} (Phi = {Phi_n.tolist()}); residual norms "
+                                  f"{[f'{r:.3g}' for r in result.residual_norms]}",
+                                  last_converged_load_factor=(n - 1) / steps, reason=result.reason)
+            S, P = self.homogenized_stress()
+            if not (np.all(np.isfinite(S)) and np.all(np.isfinite(P))):
+                raise SolverError(f"unit cell: non-finite homogenized stress at load step {n}/{steps}")
+            out.append(UnitCellStep(Phi_n.copy(), green_lagrange(Phi_n), S, P, result.iterations,
+                                    result.residual_norms))
+        return UnitCellResult(out, self.volume_fraction, self.solid_volume, self.cell_volume, self.ndofs, self.u)
+
+
+def solve_unit_cell(mesh: dmesh.Mesh, psi: Union[StrainEnergy, Mapping[int, StrainEnergy]], Phi,
+                    periodic_pairs: Sequence[PeriodicPair], facet_tags=None, cell_tags=None,
+                    volume_fraction: float | None = None, steps: int = 1, degree: int = 1,
+                    quadrature_degree: int | None = None) -> UnitCellResult:
+    """Homogenized S (eq. 4.64) and P of the unit cell `mesh` under Phi applied in `steps` increments.
+
+    See UnitCellProblem for the parameters; returns a UnitCellResult with one UnitCellStep per step.
+    """
+    load_path(Phi, steps)  # validate before the (expensive) set-up
+    problem = UnitCellProblem(mesh, psi, periodic_pairs, facet_tags=facet_tags, cell_tags=cell_tags,
+                              volume_fraction=volume_fraction, degree=degree, quadrature_degree=quadrature_degree)
+    return problem.solve(Phi, steps)
+
+
+def box_periodic_pairs(mesh: dmesh.Mesh, axes: Sequence[int] = (0, 1, 2)):
+    """Facet tags of an axis-aligned box mesh (faces min/max of axis a tagged 2a+1 / 2a+2) and the
+    PeriodicPairs (slave = max face, master = min face) along `axes`."""
+    lower, upper = _bounding_box(mesh)
+    tol = GEOMETRIC_TOLERANCE * float(np.linalg.norm(upper - lower))
+    fdim = mesh.topology.dim - 1
+    indices, values = [], []
+    for axis in range(3):
+        for side, coordinate in ((1, lower[axis]), (2, upper[axis])):
+            facets = dmesh.locate_entities_boundary(mesh, fdim, lambda x, a=axis, c=coordinate: np.abs(x[a] - c) <= tol)
+            indices.append(facets)
+            values.append(np.full(len(facets), 2 * axis + side, dtype=np.int32))
+    indices, values = np.concatenate(indices), np.concatenate(values)
+    order = np.argsort(indices, kind="stable")
+    tags = dmesh.meshtags(mesh, fdim, indices[order].astype(np.int32), values[order])
+    pairs = [PeriodicPair(slave=2 * a + 2, master=2 * a + 1) for a in axes]
+    return tags, pairs

@@ -1,0 +1,148 @@
+"""Newton's method on dolfinx_mpc assemblers (multi-point constraints such as periodicity).
+
+dolfinx_mpc 0.5.0 has MPC-aware assemblers but no nonlinear problem class. This module
+supplies one: the residual and Jacobian are assembled onto the master dofs (slave rows
+condensed away, unit diagonal on slave rows), the Newton correction is solved by a KSP
+(MUMPS LU by default), and after each update `mpc.backsubstitution` fills the slave dofs.
+
+The state Function must live on `mpc.function_space` (the original space with the master
+dofs of other processes added as ghosts), not on the space the MPC was built from.
+"""
+from __future__ import annotations
+
+import itertools
+from typing import Sequence
+
+import dolfinx.cpp as _cpp
+import dolfinx.fem as fem
+import dolfinx.fem.petsc as fem_petsc
+import dolfinx_mpc
+import numpy as np
+import ufl
+from petsc4py import PETSc
+
+from fabricfem.solvers.newton import NewtonResult
+
+DEFAULT_KSP_OPTIONS = {
+    "ksp_type": "preonly",
+    "pc_type": "lu",
+    "pc_factor_mat_solver_type": "mumps",
+}
+
+_prefix_counter = itertools.count()
+
+
+class MPCNewtonSolver:
+    """Newton solver for R(u; v) = 0 with u constrained by a finalized MultiPointConstraint.
+
+    Parameters:
+        residual: UFL form R(u; v), linear in the test function v of the MPC's original space
+        u: the unknown, a Function on `mpc.function_space`
+        mpc: finalized dolfinx_mpc.MultiPointConstraint
+        bcs: Dirichlet conditions on the original space (also given to the MPC when it was built)
+        jacobian: UFL form dR/du; by default ufl.derivative(residual, u, TrialFunction)
+        rtol: converged when |R| <= rtol * force_scale (`force_scale` is passed to `solve`, in N)
+        stol: or when the Newton correction |du| <= stol * length_scale (in m)
+        max_it: at most this many Newton iterations
+        ksp_options: PETSc options of the linear solver (default MUMPS LU)
+        form_compiler_params: FFCx parameters of both forms
+    """
+
+    def __init__(self, residual: ufl.Form, u: fem.Function, mpc: dolfinx_mpc.MultiPointConstraint,
+                 bcs: Sequence[fem.DirichletBCMetaClass] = (), jacobian: ufl.Form | None = None,
+                 rtol: float = 1e-10, stol: float = 1e-13, max_it: int = 25,
+                 ksp_options: dict | None = None, form_compiler_params: dict | None = None):
+        if not mpc.finalized:
+            raise ValueError("mpc must be finalized before building the Newton solver")
+        if u.function_space is not mpc.function_space:
+            raise ValueError("u must be a Function on mpc.function_space (the MPC's own space)")
+        for name, value in (("rtol", rtol), ("stol", stol)):
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+        if int(max_it) < 1:
+            raise ValueError(f"max_it must be >= 1, got {max_it!r}")
+        self.u, self.mpc, self.bcs = u, mpc, list(bcs)
+        self.rtol, self.stol, self.max_it = float(rtol), float(stol), int(max_it)
+        if jacobian is None:
+            trial = ufl.TrialFunction(residual.arguments()[0].ufl_function_space())
+            jacobian = ufl.derivative(residual, u, trial)
+        params = form_compiler_params or {}
+        self.L = fem.form(residual, form_compiler_params=params)
+        self.a = fem.form(jacobian, form_compiler_params=params)
+        V = mpc.function_space
+        self.A = dolfinx_mpc.cpp.mpc.create_matrix(self.a, mpc._cpp_object, mpc._cpp_object)
+        self.b = _cpp.la.petsc.create_vector(V.dofmap.index_map, V.dofmap.index_map_bs)
+        self.du = _cpp.la.petsc.create_vector(V.dofmap.index_map, V.dofmap.index_map_bs)
+        self.comm = V.mesh.comm
+        ksp = PETSc.KSP().create(self.comm)
+        prefix = f"fabricfem_mpc_newton_{next(_prefix_counter)}_"
+        ksp.setOptionsPrefix(prefix)
+        opts = PETSc.Options()
+        for k, v in {**DEFAULT_KSP_OPTIONS, **(ksp_options or {})}.items():
+            opts[prefix + k] = v
+        ksp.setOperators(self.A)
+        ksp.setFromOptions()
+        self.ksp = ksp
+
+    @property
+    def ndofs(self) -> int:
+        """Global number of scalar dofs of u (slaves included)."""
+        imap = self.mpc.function_space.dofmap.index_map
+        return imap.size_global * self.mpc.function_space.dofmap.index_map_bs
+
+    def assemble_residual(self) -> PETSc.Vec:
+        """Condensed residual at the current u, with the Dirichlet rows set to u - g."""
+        x = self.u.vector
+        with self.b.localForm() as b_local:
+            b_local.set(0.0)
+        dolfinx_mpc.assemble_vector(self.L, self.mpc, b=self.b)
+        dolfinx_mpc.apply_lifting(self.b, [self.a], [self.bcs], self.mpc, x0=[x], scale=-1.0)
+        self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        fem_petsc.set_bc(self.b, self.bcs, x, -1.0)
+        return self.b
+
+    def _assemble_jacobian(self) -> None:
+        self.A.zeroEntries()
+        dolfinx_mpc.assemble_matrix(self.a, self.mpc, bcs=self.bcs, A=self.A)
+        self.A.assemble()
+
+    def solve(self, force_scale: float, length_scale: float) -> NewtonResult:
+        """Iterate from the current u until converged; u keeps the last iterate either way.
+
+        `force_scale` [N] sets the residual tolerance rtol * force_scale; `length_scale` [m] sets
+        the correction tolerance stol * length_scale. Returns a NewtonResult (reason
+        CONVERGED_FNORM_ABS, CONVERGED_SNORM, DIVERGED_MAX_IT, DIVERGED_LINEAR_SOLVE or NAN_IN_SOLUTION).
+        """
+        if not (np.isfinite(force_scale) and force_scale > 0):
+            raise ValueError(f"force_scale must be a positive finite number, got {force_scale!r}")
+        if not (np.isfinite(length_scale) and length_scale > 0):
+            raise ValueError(f"length_scale must be a positive finite number, got {length_scale!r}")
+        x = self.u.vector
+        norms: list[float] = []
+        for it in range(self.max_it + 1):
+            rnorm = self.assemble_residual().norm()
+            norms.append(float(rnorm))
+            if not np.isfinite(rnorm):
+                return NewtonResult(False, it, "NAN_IN_SOLUTION", norms)
+            if rnorm <= self.rtol * force_scale:
+                return NewtonResult(True, it, "CONVERGED_FNORM_ABS", norms)
+            if it == self.max_it:
+                break
+            self._assemble_jacobian()
+            self.ksp.solve(self.b, self.du)
+            if self.ksp.getConvergedReason() < 0:
+                return NewtonResult(False, it, "DIVERGED_LINEAR_SOLVE", norms)
+            x.axpy(-1.0, self.du)  # Newton update u <- u - J^{-1} R
+            x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+            self.mpc.backsubstitution(x)
+            dnorm = self.du.norm()
+            if not np.isfinite(dnorm):
+                return NewtonResult(False, it + 1, "NAN_IN_SOLUTION", norms)
+            if dnorm <= self.stol * length_scale:
+                norms.append(float(self.assemble_residual().norm()))
+                return NewtonResult(True, it + 1, "CONVERGED_SNORM", norms)
+        return NewtonResult(False, self.max_it, "DIVERGED_MAX_IT", norms)
+
+    def destroy(self) -> None:
+        for obj in (self.ksp, self.A, self.b, self.du):
+            obj.destroy()
