@@ -106,8 +106,8 @@ class YarnFamily:
 
     half_period: float = 1.0e-3
     amplitude: float = 0.2e-3
-    width: float = 0.6e-3
-    height: float = 0.4e-3
+    width: float = 0.5e-3
+    height: float = 0.5e-3 / 1.5
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "half_period", _positive("half_period", self.half_period))

@@ -167,3 +167,119 @@ def assemble_matrix(form, bcs=None, diagonal: float = 1.0) -> PETSc.Mat:
 def consistent_mass(model, bcs=None, diagonal: float = 1.0) -> PETSc.Mat:
     """Consistent mass matrix [kg] (mass_form), optionally with Dirichlet rows/columns eliminated."""
     return assemble_matrix(mass_form(model), bcs, diagonal)
+
+
+class InertiaDamping:
+    """Mass M and damping C = a M + b K_M(d^n) + C_air of a model (thesis eqs. 2.82, 2.84-2.85; seed 002).
+
+    Args:
+        model: a ShellModel (compiled here).
+        lumped: use the diagonal mass of eq. 2.82 (and a diagonal air drag) instead of the consistent ones.
+        rayleigh: (a [1/s], b [s]) of C = a M + b K_M; K_M is the material stiffness at the last converged
+            state, frozen during a step (thesis eq. 2.85).
+        air_drag: eta [kg/(m^2 s)] of the drag force per unit area f_d = -eta v (translations only).
+
+    Products act on all rows; the callers zero the Dirichlet rows. `jacobian_form(c_mass, c_damp)` gives the
+    consistent (non-diagonal) parts c_mass M + c_damp C as a UFL form, `diagonal` the lumped ones.
+    """
+
+    def __init__(self, model, lumped: bool = False, rayleigh: tuple[float, float] = (0.0, 0.0), air_drag: float = 0.0):
+        if len(rayleigh) != 2:
+            raise ValueError(f"rayleigh must be a pair (a [1/s], b [s]), got {rayleigh!r}")
+        a, b = (float(c) for c in rayleigh)
+        for name, value in (("rayleigh[0] (mass-proportional a)", a), ("rayleigh[1] (stiffness-proportional b)", b),
+                            ("air_drag (eta)", float(air_drag))):
+            if not (np.isfinite(value) and value >= 0.0):
+                raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
+        model.compile()
+        self.model = model
+        self.lumped = bool(lumped)
+        self.a, self.b, self.eta = a, b, float(air_drag)
+        self.w_frozen = fem.Function(model.W, name="damping_state")
+        self.mass_ufl = mass_form(model)
+        self.stiffness_ufl = material_stiffness_form(model, self.w_frozen) if b > 0 else None
+        if self.lumped:
+            self.mass_diag = lumped_mass(model)
+            diag = self.mass_diag.copy()
+            diag.scale(a)
+            if self.eta > 0:
+                drag = lumped_mass(model, rotational=False)
+                diag.axpy(self.eta / float(model.fabric.areal_density), drag)
+            self.damping_diag = diag
+            self.M = None
+            consistent_damping = None
+        else:
+            self.mass_diag = self.damping_diag = None
+            self.M = consistent_mass(model)  # no Dirichlet elimination: products need the full rows
+            consistent_damping = a * self.mass_ufl if a > 0 else None
+            if self.eta > 0:
+                drag = air_drag_form(model, self.eta)
+                consistent_damping = drag if consistent_damping is None else consistent_damping + drag
+        if self.stiffness_ufl is not None:
+            bK = fem.Constant(model.mesh, PETSc.ScalarType(b)) * self.stiffness_ufl
+            consistent_damping = bK if consistent_damping is None else consistent_damping + bK
+        self.damping_ufl = consistent_damping
+        self._damping_form = fem.form(consistent_damping) if consistent_damping is not None else None
+        self.C = fem_petsc.create_matrix(self._damping_form) if self._damping_form is not None else None
+        self._assemble_damping()
+
+    @property
+    def has_damping(self) -> bool:
+        return self.C is not None or (self.damping_diag is not None and self.damping_diag.norm() > 0)
+
+    def _assemble_damping(self):
+        if self.C is None:
+            return
+        self.C.zeroEntries()
+        fem_petsc.assemble_matrix(self.C, self._damping_form)
+        self.C.assemble()
+
+    def freeze(self, d: PETSc.Vec):
+        """Re-evaluate b K_M at the converged state d (thesis eq. 2.85: C fixed during a step)."""
+        if self.stiffness_ufl is None:
+            return
+        d.copy(self.w_frozen.vector)
+        self.w_frozen.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        self._assemble_damping()
+
+    def mass_action(self, x: PETSc.Vec, out: PETSc.Vec):
+        """out = M x."""
+        if self.lumped:
+            out.pointwiseMult(self.mass_diag, x)
+        else:
+            self.M.mult(x, out)
+
+    def damping_action(self, x: PETSc.Vec, out: PETSc.Vec):
+        """out = C x."""
+        out.set(0.0)
+        if self.C is not None:
+            self.C.mult(x, out)
+        if self.damping_diag is not None:
+            tmp = x.duplicate()
+            tmp.pointwiseMult(self.damping_diag, x)
+            out.axpy(1.0, tmp)
+            tmp.destroy()
+
+    def jacobian_form(self, c_mass, c_damp):
+        """UFL form c_mass M + c_damp C of the non-diagonal parts (None if there are none); c_* are Constants."""
+        form = None if self.lumped else c_mass * self.mass_ufl
+        if self.damping_ufl is not None:
+            form = c_damp * self.damping_ufl if form is None else form + c_damp * self.damping_ufl
+        return form
+
+    def jacobian_diagonal(self, c_mass: float, c_damp: float) -> PETSc.Vec | None:
+        """c_mass M_L + c_damp C_L of the lumped parts (None for consistent mass)."""
+        if not self.lumped:
+            return None
+        out = self.mass_diag.copy()
+        out.scale(c_mass)
+        out.axpy(c_damp, self.damping_diag)
+        return out
+
+    def kinetic_energy(self, v: PETSc.Vec) -> float:
+        """1/2 v.M v [J]."""
+        tmp = v.duplicate()
+        self.mass_action(v, tmp)
+        energy = 0.5 * tmp.dot(v)
+        tmp.destroy()
+        return float(energy)

@@ -30,13 +30,16 @@ class Problem:
     """A particle system with its loads and supports.
 
     gravity [m/s^2] (3-vector), point_forces [N] (n, 3) or None, pinned: indices of fixed particles,
-    obstacles: penalty planes (obstacles.TablePlane), damping c [1/s] (force -c m v).
+    fixed: optional (n, 3) boolean mask of single fixed coordinates (e.g. the x and y of one particle on a
+    frictionless table, whose vertical reactions leave horizontal translation free), obstacles: penalty planes
+    (obstacles.TablePlane), damping c [1/s] (force -c m v).
     """
 
     system: ParticleSystem
     gravity: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, -STANDARD_GRAVITY]))
     point_forces: np.ndarray | None = None
     pinned: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    fixed: np.ndarray | None = None
     obstacles: tuple[TablePlane, ...] = ()
     damping: float = 0.0
 
@@ -52,6 +55,10 @@ class Problem:
         self.pinned = np.unique(np.asarray(self.pinned, dtype=int).ravel())
         if len(self.pinned) and (self.pinned.min() < 0 or self.pinned.max() >= n):
             raise ValueError(f"pinned indices must lie in [0, {n})")
+        if self.fixed is not None:
+            self.fixed = np.asarray(self.fixed, dtype=bool)
+            if self.fixed.shape != (n, 3):
+                raise ValueError(f"fixed must be a boolean mask of shape ({n}, 3)")
         if not (math.isfinite(self.damping) and self.damping >= 0):
             raise ValueError(f"damping must be >= 0 [1/s], got {self.damping!r}")
         self.obstacles = tuple(self.obstacles)
@@ -61,6 +68,14 @@ class Problem:
         """Boolean mask of particles that are not pinned."""
         mask = np.ones(self.system.n, dtype=bool)
         mask[self.pinned] = False
+        return mask
+
+    @property
+    def free(self) -> np.ndarray:
+        """Boolean (n, 3) mask of free coordinates (not pinned, not fixed)."""
+        mask = np.repeat(self.movable[:, None], 3, axis=1)
+        if self.fixed is not None:
+            mask &= ~self.fixed
         return mask
 
     def external_forces(self, load_factor: float = 1.0) -> np.ndarray:
@@ -190,13 +205,14 @@ def simulate(problem: Problem, dt: float, n_steps: int, x0: np.ndarray | None = 
     if x.shape != (sys_.n, 3) or v.shape != (sys_.n, 3):
         raise ValueError(f"x0 and v0 must have shape ({sys_.n}, 3)")
     movable = problem.movable
-    v[~movable] = 0.0
+    free = problem.free
+    v[~free] = 0.0
     limited = tuple(s for s in sys_.springs if s.name in limited_sets) if strain_limit is not None else ()
     if strain_limit is not None and not limited:
         raise ValueError(f"limited_sets {limited_sets} match no spring set of the system")
     monitored = limited or sys_.springs[:1]
     c = problem.damping
-    inv_m = np.where(movable, 1.0 / np.where(m > 0, m, 1.0), 0.0)[:, None]
+    inv_m = np.where(free, (1.0 / np.where(m > 0, m, 1.0))[:, None], 0.0)
 
     def accel(x_, v_):
         return (problem.forces(x_) - c * m[:, None] * v_) * inv_m
@@ -227,8 +243,9 @@ def simulate(problem: Problem, dt: float, n_steps: int, x0: np.ndarray | None = 
         x_new = x + dt * v_half
         if limited:
             x_lim, k = provot_correction(x_new, limited, strain_limit, movable)
+            x_lim = np.where(free, x_lim, x_new)
             sweeps += k
-            v_half = v_half + (x_lim - x_new) / dt
+            v_half = v_half + (x_lim - x_new) * free / dt
             x_new = x_lim
         x = x_new
         a = accel(x, v_half)
@@ -253,7 +270,7 @@ def critical_time_step(problem: Problem) -> float:
     K = _tangent(problem, sys_.positions)
     row = np.asarray(abs(K).sum(axis=1)).ravel()
     m3 = np.repeat(np.where(sys_.mass > 0, sys_.mass, np.inf), 3)
-    free = np.repeat(problem.movable, 3)
+    free = problem.free.ravel()
     omega2 = np.max(row[free] / m3[free])
     return 2.0 / math.sqrt(omega2)
 
@@ -299,7 +316,7 @@ def relax_seed(problem: Problem, x0: np.ndarray | None = None, momentum: float =
         raise ValueError(f"c_disp must be > 0 [m/N], got {c_disp!r}")
     c_acc = momentum / c_disp
     eps = problem.system.spacing / 10000.0
-    movable = problem.movable[:, None]
+    movable = problem.free
     scale = problem.force_scale()
     disp = np.zeros_like(x)
     for k in range(1, max_iterations + 1):
@@ -315,22 +332,34 @@ def relax_seed(problem: Problem, x0: np.ndarray | None = None, momentum: float =
 
 
 def relax_newton(problem: Problem, x0: np.ndarray | None = None, tol: float = 1e-9, load_steps: int = 1,
-                 max_iterations: int = 200) -> StaticResult:
+                 max_iterations: int = 200, max_step: float | None = None, definite: bool = False) -> StaticResult:
     """Static equilibrium (seed 001 eq. 48) by Newton's method on the resultant forces.
 
     Each load step (load factor i / load_steps on gravity and point loads) solves (K + mu D) dx = F with the
     sparse tangent K (springs with compressive geometric stiffness clipped, flexion Hessian, penalty); D is the
     diagonal of K and mu >= 0 a Levenberg-Marquardt shift raised when the step is not a descent direction or
     the backtracking line search on the total potential energy fails, lowered after success.
-    Converged when max |resultant on a free particle| <= tol * force_scale. Raises DivergenceError otherwise.
+    Converged when max |resultant on a free particle| <= tol * force_scale (tol raised to the rounding floor
+    1000 eps k_max |x| / force_scale if larger). Each iteration moves no particle by more than max_step
+    (default half the spacing), a trust region that keeps the linearized step from stretching the stiff
+    springs of a rotating, nearly inextensible cloth. definite=False uses the exact spring Hessian (with
+    compressive geometric stiffness). Raises DivergenceError if it does not converge.
     """
     if not (isinstance(load_steps, (int, np.integer)) and load_steps >= 1):
         raise ValueError(f"load_steps must be an integer >= 1, got {load_steps!r}")
     if not (math.isfinite(tol) and tol > 0):
         raise ValueError(f"tol must be > 0, got {tol!r}")
     x = (problem.system.positions if x0 is None else np.asarray(x0, dtype=float)).copy()
-    free = np.repeat(problem.movable, 3)
+    free = problem.free.ravel()
     scale = problem.force_scale()
+    max_step = 0.5 * problem.system.spacing if max_step is None else max_step
+    if not (math.isfinite(max_step) and max_step > 0):
+        raise ValueError(f"max_step must be > 0 [m], got {max_step!r}")
+    # Forces are differences of spring forces k (l - l0) computed from coordinates of size |x|: below about
+    # 1000 eps k_max |x| / force_scale the residual is rounding noise, so the tolerance is not set below it.
+    k_max = max([float(np.max(s.stiffness)) for s in problem.system.springs]
+                + [ob.stiffness for ob in problem.obstacles])
+    tol = max(tol, 1e3 * np.finfo(float).eps * k_max * float(np.max(np.abs(x))) / scale)
     total, history = 0, []
     res = float("nan")
     for step in range(1, load_steps + 1):
@@ -346,7 +375,7 @@ def relax_newton(problem: Problem, x0: np.ndarray | None = None, tol: float = 1e
             if it == max_iterations:
                 raise DivergenceError(f"relax_newton: no convergence in {max_iterations} iterations at load "
                                       f"factor {lf:g} (residual {res:.3g} of the force scale)")
-            K = _tangent(problem, x)[free][:, free]
+            K = _tangent(problem, x, definite)[free][:, free]
             D = sp.diags(np.maximum(K.diagonal(), 1e-300))
             Pi0 = problem.potential_energy(x, lf)
             accepted = False
@@ -358,7 +387,8 @@ def relax_newton(problem: Problem, x0: np.ndarray | None = None, tol: float = 1e
                     p = np.full_like(F, np.nan)
                 slope = float(F @ p)
                 if np.all(np.isfinite(p)) and slope > 0:
-                    alpha = 1.0
+                    # trust region: no particle moves more than max_step per iteration
+                    alpha = min(1.0, max_step / float(np.max(np.abs(p))))
                     for _ in range(20):
                         xt = x.copy()
                         xt.ravel()[free] += alpha * p

@@ -3,7 +3,8 @@
 dolfinx_mpc 0.5.0 has MPC-aware assemblers but no nonlinear problem class. This module
 supplies one: the residual and Jacobian are assembled onto the master dofs (slave rows
 condensed away, unit diagonal on slave rows), the Newton correction is solved by a KSP
-(MUMPS LU by default), and after each update `mpc.backsubstitution` fills the slave dofs.
+(MUMPS LU by default), and after each update the slave dofs are refilled from their masters
+(`mpc.homogenize` then `mpc.backsubstitution`: in 0.5.0 the latter adds to the slave entries).
 
 The state Function must live on `mpc.function_space` (the original space with the master
 dofs of other processes added as ghosts), not on the space the MPC was built from.
@@ -134,6 +135,8 @@ class MPCNewtonSolver:
                 return NewtonResult(False, it, "DIVERGED_LINEAR_SOLVE", norms)
             x.axpy(-1.0, self.du)  # Newton update u <- u - J^{-1} R
             x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+            # backsubstitution ADDS the master combination to the slave entries: zero them first
+            self.mpc.homogenize(x)
             self.mpc.backsubstitution(x)
             dnorm = self.du.norm()
             if not np.isfinite(dnorm):

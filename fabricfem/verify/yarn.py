@@ -153,6 +153,9 @@ class YarnBlock:
         problem = fem_petsc.NonlinearProblem(self.residual, self.u, bcs,
                                              form_compiler_params={"quadrature_degree": 1})
         solver = NewtonSolver(self.mesh.comm, problem)
+        # Incremental criterion, relative to the first increment. At strains ~1e-6 the residual carries
+        # round-off ~1e-10 of itself (cancellation in I - C^-1 and J - 1), so Newton stalls near 1e-11;
+        # 1e-8 is reached in 3 iterations and moves the measured moduli by < 1e-8 relative.
         solver.convergence_criterion = "incremental"
         solver.rtol, solver.atol, solver.max_it = 1e-8, 1e-30, 10
         ksp = solver.krylov_solver
@@ -205,7 +208,8 @@ def bonet_burton_constants(strain: float = 1e-6, n: int = 2) -> list:
 
     Tolerance 1e-4 relative: at strain 1e-6 the nonlinear terms of the law (and the difference between
     nominal and true stress or engineering and Green strain) are O(strain) times stiffness ratios
-    C_ij / E <= 20, i.e. < 2e-5; the exact homogeneous solution is in the P1 space.
+    C_ij / E <= 20, i.e. < 2e-5; the exact homogeneous solution is in the P1 space. (Measured: the errors
+    scale linearly with the strain, 1.3e-6 on E_L at strain 1e-6, so they are the nonlinearity, not the map.)
     The stress at F = I must vanish (round-off only: 1e-12 of E_L).
     """
     name = "bonet-burton-constants"

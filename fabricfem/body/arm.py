@@ -1,0 +1,81 @@
+"""The default arm of the sleeve study (thesis sec. 5.3): upper arm and forearm ellipsoids.
+
+Source: 2012 Anthropometric Survey of U.S. Army Personnel (ANSUR II), C. C. Gordon et al., Natick
+technical report NATICK/TR-15/007, 2014, adult male sample. Values used:
+
+    measured (ANSUR II male medians, as specified for this project; not re-read from the report here)
+        acromion-radiale length (upper arm)      0.335 m
+        radiale-stylion length (forearm)         0.267 m
+        biceps circumference, flexed             0.350 m   (rounded)
+        forearm circumference, flexed            0.300 m   (rounded)
+    derived (this module)
+        cross-section radius r = C / (2 pi) of a circle of the same girth:
+            upper arm 0.0557 m, forearm 0.0477 m  (both below the sleeve radius R = 0.06 m of the thesis,
+            so the sleeve of sec. 5.3 fits over the arm with 4.3 mm and 12.3 mm clearance)
+        long semi-axis r1 = L / 2 (the ellipsoid tips reach the joint centres, x^c = (J1 + J2) / 2 as in
+            thesis sec. 5.1)
+
+Flexed girths (muscle contracted) overestimate the relaxed arm slightly; the circle-equivalent radius
+ignores the flattening of the real cross-section.
+
+Frame of the default arm (matching `fabricfem.meshes.tube`, whose axis is +x from x = 0): shoulder at
+the origin, elbow at x = 0.335 m, wrist at x = 0.602 m; flexion about +z moves the forearm towards +y.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from fabricfem.body.motion import ElbowFlexion, KinematicsSource
+from fabricfem.body.pose import Body, Segment
+
+
+@dataclass(frozen=True)
+class ArmDimensions:
+    """Arm segment lengths and girths [m] (defaults: ANSUR II adult male, see module docstring)."""
+
+    upper_arm_length: float = 0.335
+    forearm_length: float = 0.267
+    upper_arm_girth: float = 0.350
+    forearm_girth: float = 0.300
+
+    def __post_init__(self):
+        for name in ("upper_arm_length", "forearm_length", "upper_arm_girth", "forearm_girth"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
+                raise ValueError(f"{name} must be a positive length [m], got {v!r}")
+
+    @property
+    def upper_arm_radius(self) -> float:
+        """Circle-equivalent radius C / (2 pi) [m] (derived)."""
+        return self.upper_arm_girth / (2.0 * math.pi)
+
+    @property
+    def forearm_radius(self) -> float:
+        """Circle-equivalent radius C / (2 pi) [m] (derived)."""
+        return self.forearm_girth / (2.0 * math.pi)
+
+    def segments(self) -> tuple[Segment, Segment]:
+        """The two segments: radii (L / 2, r, r)."""
+        r_u, r_f = self.upper_arm_radius, self.forearm_radius
+        return (Segment("upper_arm", "shoulder", "elbow", "upper_arm_marker",
+                        (0.5 * self.upper_arm_length, r_u, r_u)),
+                Segment("forearm", "elbow", "wrist", "forearm_marker",
+                        (0.5 * self.forearm_length, r_f, r_f)))
+
+
+DEFAULT_ARM = ArmDimensions()
+
+
+def elbow_flexion(dimensions: ArmDimensions = DEFAULT_ARM, angular_velocity: float = math.radians(45.0),
+                  final_angle: float = math.radians(57.0), **kwargs) -> ElbowFlexion:
+    """Elbow flexion of the default arm (along +x, flexing about +z), see `ElbowFlexion`."""
+    elbow = (dimensions.upper_arm_length, 0.0, 0.0)
+    wrist = (dimensions.upper_arm_length + dimensions.forearm_length, 0.0, 0.0)
+    return ElbowFlexion(shoulder=(0.0, 0.0, 0.0), elbow=elbow, wrist=wrist, angular_velocity=angular_velocity,
+                        final_angle=final_angle, **kwargs)
+
+
+def default_arm(kinematics: KinematicsSource | None = None, dimensions: ArmDimensions = DEFAULT_ARM) -> Body:
+    """Upper arm + forearm body; kinematics default: 57 degree elbow flexion at 45 deg/s."""
+    return Body(dimensions.segments(), kinematics if kinematics is not None else elbow_flexion(dimensions))
