@@ -1,4 +1,5 @@
-"""Command line: `fabricfem verify [CASE ...] [--json]`, `fabricfem demo`, `fabricfem bench ...`."""
+"""Command line: `fabricfem run SCENE`, `fabricfem verify [CASE ...] [--json]`, `fabricfem demo`,
+`fabricfem bench ...`."""
 from __future__ import annotations
 
 import argparse
@@ -53,6 +54,8 @@ def main(argv: list[str] | None = None) -> int:
     p_verify.add_argument("cases", nargs="*", help="case names (default: all)")
     p_verify.add_argument("--json", action="store_true", help="print a JSON list of results")
     p_verify.add_argument("--list", action="store_true", help="list the cases and exit")
+    p_run = sub.add_parser("run", help="run a scene file (TOML), e.g. scenes/rollup.toml")
+    p_run.add_argument("scene", help="path of the scene file")
     p_demo = sub.add_parser("demo", help="the default demo: a fabric strip rolled up by an end moment")
     p_demo.add_argument("--out", default="results/demo", help="output folder (XDMF, PNG, CSV)")
     p_bench = sub.add_parser("bench", help="benchmarks (results/ CSV and PNG)")
@@ -67,6 +70,16 @@ def main(argv: list[str] | None = None) -> int:
                 _print(f"{name:<26} {(fn.__doc__ or '').strip().splitlines()[0]}")
             return 0
         return verify(args.cases, args.json)
+    if args.command == "run":
+        from fabricfem import scene as scene_module
+        from fabricfem.run import run_scene
+        try:
+            scene = scene_module.load(args.scene)
+        except scene_module.SceneError as exc:
+            _print(f"fabricfem run: {exc}", file=sys.stderr)
+            return 2
+        run_scene(scene)
+        return 0
     if args.command == "demo":
         from fabricfem.demo import rollup_demo
         rollup_demo(args.out)
