@@ -9,3 +9,10 @@ from .plate import plate
 from .tube import tube
 
 __all__ = ["FabricMesh", "model_to_mesh", "plate", "tube"]
+
+# Woven unit cells (3D hexahedral yarn meshes, thesis ch. 4.3)
+from .unit_cell import MeshResolution, UnitCellMesh, unit_cell  # noqa: E402
+from .yarn_geometry import PlainWeave, YarnFamily, YarnPath, amplitude_from_crimp, check_weave  # noqa: E402
+
+__all__ += ["MeshResolution", "UnitCellMesh", "unit_cell", "PlainWeave", "YarnFamily", "YarnPath",
+            "amplitude_from_crimp", "check_weave"]

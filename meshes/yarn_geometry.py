@@ -162,7 +162,7 @@ class YarnFamily:
         return self.amplitude * (math.pi / self.half_period) ** 2
 
 
-def _default_warp() -> YarnFamily:
+def _default_yarn() -> YarnFamily:
     return YarnFamily()
 
 
@@ -175,7 +175,7 @@ class YarnPath:
         c(s) = s e_axis + offset e_other + sign * A cos(pi s / p) e_z
 
     Local frame: unit tangent T(s), in-plane binormal B (+y for warp, -x for
-    weft; constant), principal normal N = T x B... chosen so that (T, B, N)
+    weft; constant), principal normal N = T x B, so that (T, B, N)
     is right-handed and N has a positive z component.  A point is
     c(s) + u B + v N with the section coordinates (u, v); the yarn is
     (u / a)^2 + (v / b)^2 <= 1.  ``start``, ``end`` bound s for the meshed piece.
@@ -203,11 +203,6 @@ class YarnPath:
         """dz/ds."""
         k = math.pi / self.family.half_period
         return -self.sign * self.family.amplitude * k * np.sin(k * s)
-
-    def curvature_term(self, s: np.ndarray) -> np.ndarray:
-        """d^2z/ds^2 (1/m)."""
-        k = math.pi / self.family.half_period
-        return -self.sign * self.family.amplitude * k * k * np.cos(k * s)
 
     def centre(self, s: np.ndarray) -> np.ndarray:
         """Centreline points (n, 3)."""
@@ -316,10 +311,6 @@ class YarnPath:
                + v[None, :, None] * self.normal(s)[:, None, :])
         return pts.reshape(-1, 3)
 
-    def translated(self, name: str, shift: float, sign: float) -> "YarnPath":
-        """The same family's yarn at transverse position ``offset + shift`` with ``sign``."""
-        return YarnPath(name, self.family, self.axis, self.offset + shift, sign, self.start, self.end)
-
 
 @dataclass(frozen=True)
 class PlainWeave:
@@ -331,8 +322,8 @@ class PlainWeave:
     with :meth:`balanced` from the thesis parameters (sec. 4.3.5).
     """
 
-    warp: YarnFamily = field(default_factory=_default_warp)
-    weft: YarnFamily = field(default_factory=_default_warp)
+    warp: YarnFamily = field(default_factory=_default_yarn)
+    weft: YarnFamily = field(default_factory=_default_yarn)
 
     def __post_init__(self) -> None:
         for name in ("warp", "weft"):
@@ -351,7 +342,8 @@ class PlainWeave:
         Args:
             half_period: projected yarn length between crossings (m).
             crimp: crimp ratio, >= 0.
-            volume_fraction: phi = |Y_s| / |Y| (eq. 4.65), in (0, 1).
+            volume_fraction: phi = |Y_s| / |Y| (eq. 4.65), in (0, 1); ValueError
+                naming it if the resulting yarns would overlap (:func:`check_weave`).
             aspect_ratio: width / height of the cross-section (thesis: 1.5).
             crimp_model: see :func:`amplitude_from_crimp`.
         """
@@ -375,7 +367,13 @@ class PlainWeave:
                              f"aspect_ratio {ratio})")
         width = optimize.brentq(lambda w: fraction(w) - phi, 1e-9 * p, widest, xtol=1e-15 * p)
         yarn = YarnFamily(p, amplitude, width, width / ratio)
-        return cls(yarn, yarn)
+        weave = cls(yarn, yarn)
+        try:
+            check_weave(weave)
+        except ValueError as error:
+            raise ValueError(f"volume_fraction: {phi} with crimp {crimp} and aspect_ratio {ratio} needs "
+                             f"yarns {width:.4g} m wide that do not fit: {error}") from None
+        return weave
 
     def half_thickness(self) -> float:
         """Half the fabric thickness max(A_w + b_w, A_f + b_f) (m)."""
