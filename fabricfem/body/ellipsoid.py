@@ -120,7 +120,7 @@ def _closest_sorted(y: np.ndarray, r: np.ndarray) -> np.ndarray:
     return z
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)  # numpy fields: compare explicitly, not with ==
 class Ellipsoid:
     """A rigid ellipsoid (thesis sec. 3.2.3 / 5.1).
 
