@@ -313,30 +313,32 @@ class ShellModel:
         fem_petsc.set_bc(self.F_ref, self.bcs, scale=0.0)
         self._compiled = True
 
-    def residual(self, x: PETSc.Vec, b: PETSc.Vec):
-        """b = R_int(x) - lambda F_ref with Dirichlet rows set to x - lambda g."""
+    def set_state(self, x: PETSc.Vec):
+        """Copy a solver vector into the Function the forms read (never alias the two: see docs)."""
         x.copy(self.w.vector)
         self.w.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+
+    def _assemble_internal(self, x: PETSc.Vec, b: PETSc.Vec, lift: bool):
+        self.set_state(x)
         with b.localForm() as bl:
             bl.set(0.0)
         fem_petsc.assemble_vector(b, self._R)
-        fem_petsc.apply_lifting(b, [self._J], [self.bcs], x0=[x], scale=-1.0)
+        if lift:
+            fem_petsc.apply_lifting(b, [self._J], [self.bcs], x0=[x], scale=-1.0)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+
+    def residual(self, x: PETSc.Vec, b: PETSc.Vec):
+        """b = R_int(x) - lambda F_ref with Dirichlet rows set to x - lambda g."""
+        self._assemble_internal(x, b, lift=True)
         b.axpy(-float(self.load_factor.value), self.F_ref)
         fem_petsc.set_bc(b, self.bcs, x, -1.0)
 
     def internal_force(self, x: PETSc.Vec, b: PETSc.Vec):
         """b = R_int(x) (no load, no boundary rows modified)."""
-        x.copy(self.w.vector)
-        self.w.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
-        with b.localForm() as bl:
-            bl.set(0.0)
-        fem_petsc.assemble_vector(b, self._R)
-        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        self._assemble_internal(x, b, lift=False)
 
     def jacobian(self, x: PETSc.Vec, A: PETSc.Mat):
-        x.copy(self.w.vector)
-        self.w.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        self.set_state(x)
         A.zeroEntries()
         fem_petsc.assemble_matrix(A, self._J, bcs=self.bcs)
         A.assemble()

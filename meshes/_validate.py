@@ -9,15 +9,20 @@ import numpy as np
 CELLS = ("triangle", "quadrilateral")
 
 
-def positive_length(name: str, value: float) -> float:
-    """``value`` as a float; it must be finite and > 0 (metres)."""
+def positive(name: str, value: float, kind: str = "number") -> float:
+    """``value`` as a float; it must be finite and > 0, else ValueError naming ``name``."""
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{name}: must be a positive length in metres, got {value!r}") from None
+        raise ValueError(f"{name}: must be a positive {kind}, got {value!r}") from None
     if not (math.isfinite(v) and v > 0.0):
-        raise ValueError(f"{name}: must be a positive length in metres, got {value!r}")
+        raise ValueError(f"{name}: must be a positive {kind}, got {value!r}")
     return v
+
+
+def positive_length(name: str, value: float) -> float:
+    """``value`` as a float; it must be finite and > 0 (metres)."""
+    return positive(name, value, "length in metres")
 
 
 def count(name: str, value: int, minimum: int = 1) -> int:

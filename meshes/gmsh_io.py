@@ -132,7 +132,7 @@ def _ufl_domain(cell_name: str, degree: int, gdim: int) -> ufl.Mesh:
     return ufl.Mesh(ufl.VectorElement("Lagrange", cell, degree))
 
 
-def _tags(mesh: Mesh, dim: int, entities: np.ndarray, values: np.ndarray) -> MeshTagsMetaClass:
+def entity_tags(mesh: Mesh, dim: int, entities: np.ndarray, values: np.ndarray) -> MeshTagsMetaClass:
     """MeshTags from entities given by input node indices (any rank may pass none)."""
     local, local_values = dolfinx.cpp.io.distribute_entity_data(
         mesh._mesh, dim, np.ascontiguousarray(entities, dtype=np.int64),
@@ -201,14 +201,14 @@ def model_to_mesh(model: Any, comm: MPI.Comm, rank: int = 0, gdim: int = 3,
 
     cell_tags = None
     if header["has_cell_tags"]:
-        cell_tags = _tags(mesh, tdim, cells, data["cell_values"])
+        cell_tags = entity_tags(mesh, tdim, cells, data["cell_values"])
         cell_tags.name = "cell_tags"
 
     mesh.topology.create_entities(tdim - 1)
     if header["facet_type"] >= 0:
         facet_cell = dolfinx.cpp.mesh.cell_entity_type(cell_type, tdim - 1, 0)
         facets = data["facets"][:, dolfinx.cpp.io.perm_gmsh(facet_cell, data["facets"].shape[1])]
-        facet_tags = _tags(mesh, tdim - 1, facets, data["facet_values"])
+        facet_tags = entity_tags(mesh, tdim - 1, facets, data["facet_values"])
     else:
         facet_tags = dolfinx.mesh.meshtags(mesh, tdim - 1, np.empty(0, np.int32), np.empty(0, np.int32))
     facet_tags.name = "facet_tags"

@@ -31,6 +31,7 @@ import ufl
 from dolfinx.mesh import GhostMode, Mesh, MeshTagsMetaClass
 from mpi4py import MPI
 
+from .gmsh_io import entity_tags
 from .yarn_geometry import PlainWeave, YarnPath, _option, check_weave
 
 __all__ = ["MeshResolution", "REFINEMENTS", "UnitCellMesh", "section_mesh", "unit_cell"]
@@ -155,17 +156,6 @@ def _yarn_block(yarn: YarnPath, res: MeshResolution, node_offset: int
               "end": node_offset + n_seg * n_disc + quads,
               "surface": lateral}
     return nodes, hexes, facets
-
-
-def _tags(mesh: Mesh, dim: int, entities: np.ndarray, values: np.ndarray) -> MeshTagsMetaClass:
-    """MeshTags from entities given by input node indices (any rank may pass none)."""
-    local, local_values = dolfinx.cpp.io.distribute_entity_data(
-        mesh._mesh, dim, np.ascontiguousarray(entities, dtype=np.int64),
-        np.ascontiguousarray(values, dtype=np.int32))
-    mesh.topology.create_connectivity(dim, 0)
-    mesh.topology.create_connectivity(dim, mesh.topology.dim)
-    adj = dolfinx.cpp.graph.AdjacencyList_int32(np.ascontiguousarray(local, dtype=np.int32))
-    return dolfinx.mesh.meshtags_from_entities(mesh, dim, adj, local_values.astype(np.int32))
 
 
 @dataclass
@@ -352,10 +342,10 @@ def unit_cell(geometry: PlainWeave | None = None, option: str = "quarter",
                                     ghost_mode=ghost_mode,
                                     partitioner=dolfinx.mesh.create_cell_partitioner())
     tdim = mesh.topology.dim
-    cell_tags = _tags(mesh, tdim, cells_all, cell_values_all)
+    cell_tags = entity_tags(mesh, tdim, cells_all, cell_values_all)
     cell_tags.name = "yarns"
     mesh.topology.create_entities(tdim - 1)
-    facet_tags = _tags(mesh, tdim - 1, facets_all, facet_values_all)
+    facet_tags = entity_tags(mesh, tdim - 1, facets_all, facet_values_all)
     facet_tags.name = "facet_tags"
 
     V = dolfinx.fem.VectorFunctionSpace(mesh, ("DG", 0))

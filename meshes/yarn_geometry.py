@@ -33,18 +33,13 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import integrate, optimize
 
+from . import _validate
+
 OPTIONS = ("quarter", "full")
 CRIMP_MODELS = ("sinusoid", "kawabata")
 
 
-def _positive(name: str, value: float) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name}: must be a positive number, got {value!r}") from None
-    if not (math.isfinite(v) and v > 0.0):
-        raise ValueError(f"{name}: must be a positive number, got {value!r}")
-    return v
+_positive = _validate.positive
 
 
 def _non_negative(name: str, value: float) -> float:

@@ -132,7 +132,7 @@ def arc_length(model, ds: float, max_steps: int, lambda_max: float | None = None
             length *= 0.5
             ds *= 0.5
             if length < ds_min:
-                x_n.copy(model.w.vector)
+                model.set_state(x_n)
                 model.set_load_factor(lam_n)
                 raise SolverError(f"arc-length step {n} diverged (residual {norms[-1] if norms else float('nan'):.3e}) "
                                   f"and the arc length fell below {ds_min:.3g}; last converged load factor {lam_n:.6g}",
@@ -141,8 +141,7 @@ def arc_length(model, ds: float, max_steps: int, lambda_max: float | None = None
         direction = (increment, lam - lam_n)
         x.copy(x_n)
         lam_n = lam
-        x.copy(model.w.vector)
-        model.w.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        model.set_state(x)
         model.set_load_factor(lam)
         last_iterations = it
         record = ArcLengthStep(lam, it, length, norms)

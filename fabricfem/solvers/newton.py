@@ -87,8 +87,7 @@ class NewtonSolver:
         finite = bool(np.isfinite(self.x.norm()))
         converged = reason > 0 and finite
         if converged:
-            self.x.copy(self.model.w.vector)
-            self.model.w.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+            self.model.set_state(self.x)
         name = _REASONS.get(reason, str(reason)) if finite else "NAN_IN_SOLUTION"
         return NewtonResult(converged, self.snes.getIterationNumber(), name, list(self._norms))
 
