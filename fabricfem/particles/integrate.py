@@ -8,17 +8,18 @@ viscous damping. Pinned particles keep their positions and have zero velocity.
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from fabricfem.particles.obstacles import TablePlane
-from fabricfem.particles.springs import ParticleSystem, SpringSet, elastic_energy, internal_forces, stiffness_matrix
+from fabricfem.particles.obstacles import TableTop
+from fabricfem.particles.springs import (ParticleSystem, SpringSet, elastic_energy, internal_forces, scatter_add,
+                                         stiffness_matrix)
 
 STANDARD_GRAVITY = 9.80665  # m/s^2
-_DEBUG = False
 
 
 class DivergenceError(RuntimeError):
@@ -32,7 +33,7 @@ class Problem:
     gravity [m/s^2] (3-vector), point_forces [N] (n, 3) or None, pinned: indices of fixed particles,
     fixed: optional (n, 3) boolean mask of single fixed coordinates (e.g. the x and y of one particle on a
     frictionless table, whose vertical reactions leave horizontal translation free), obstacles: penalty planes
-    (obstacles.TablePlane), damping c [1/s] (force -c m v).
+    (obstacles.TableTop), damping c [1/s] (force -c m v).
     """
 
     system: ParticleSystem
@@ -40,7 +41,7 @@ class Problem:
     point_forces: np.ndarray | None = None
     pinned: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     fixed: np.ndarray | None = None
-    obstacles: tuple[TablePlane, ...] = ()
+    obstacles: tuple[TableTop, ...] = ()
     damping: float = 0.0
 
     def __post_init__(self):
@@ -149,10 +150,10 @@ def provot_correction(x: np.ndarray, springs: tuple[SpringSet, ...], tau: float,
         corr = ((length - (1.0 + tau) * l0[over]) / (length * share[over]))[:, None] * d
         delta = np.zeros_like(x)
         count = np.zeros(n)
-        np.add.at(delta, i[over], wi[over, None] * corr)
-        np.add.at(delta, j[over], -wj[over, None] * corr)
-        np.add.at(count, i[over], wi[over])
-        np.add.at(count, j[over], wj[over])
+        scatter_add(delta, i[over], wi[over, None] * corr)
+        scatter_add(delta, j[over], -wj[over, None] * corr)
+        count += np.bincount(i[over], weights=wi[over], minlength=n)
+        count += np.bincount(j[over], weights=wj[over], minlength=n)
         x += delta / np.maximum(count, 1.0)[:, None]
     raise DivergenceError(f"Provot correction: strain still above tau + tolerance after {max_iterations} sweeps "
                           f"(max strain {np.max(strains(x, springs)):.4g}, tau = {tau})")
@@ -177,14 +178,15 @@ class Trajectory:
 
 def simulate(problem: Problem, dt: float, n_steps: int, x0: np.ndarray | None = None, v0: np.ndarray | None = None,
              strain_limit: float | None = None, limited_sets: tuple[str, ...] = ("structural", "shear"),
-             record_every: int = 1, energy_growth: float = 10.0) -> Trajectory:
+             record_every: int = 1, energy_growth: float = 10.0, strain_limit_sweeps: int = 2000) -> Trajectory:
     """Velocity Verlet (kick-drift-kick, symplectic and second order without damping):
 
         v_{n+1/2} = v_n + dt/2 a(x_n, v_n),  x_{n+1} = x_n + dt v_{n+1/2},  v_{n+1} = v_{n+1/2} + dt/2 a(x_{n+1}, v_{n+1/2})
 
     with a = (F(x) - c m v) / m (damping taken with the velocity at the start of each half kick). If
     strain_limit = tau is given, Provot's correction is applied to the springs of `limited_sets` after each
-    drift, and the velocities take up the position change (v += dx_corr / dt).
+    drift (at most strain_limit_sweeps Jacobi sweeps, see provot_correction), and the velocities take up the
+    position change (v += dx_corr / dt).
 
     Blow-up detection: a non-finite state, or a total energy above E_0 + energy_growth * E_scale with
     E_scale = |E_0| + m_total |g| diag + |point loads| diag (diag = size of the reference configuration),
@@ -242,7 +244,7 @@ def simulate(problem: Problem, dt: float, n_steps: int, x0: np.ndarray | None = 
         v_half = v + 0.5 * dt * a
         x_new = x + dt * v_half
         if limited:
-            x_lim, k = provot_correction(x_new, limited, strain_limit, movable)
+            x_lim, k = provot_correction(x_new, limited, strain_limit, movable, max_iterations=strain_limit_sweeps)
             x_lim = np.where(free, x_lim, x_new)
             sweeps += k
             v_half = v_half + (x_lim - x_new) * free / dt
@@ -289,8 +291,9 @@ class StaticResult:
 
 def _tangent(problem: Problem, x: np.ndarray, definite: bool = True) -> sp.csr_matrix:
     K = stiffness_matrix(problem.system, x, definite)
-    for ob in problem.obstacles:
-        K = K + sp.diags(ob.stiffness_diagonal(x))
+    if problem.obstacles:
+        blocks = sum(ob.stiffness_blocks(x) for ob in problem.obstacles)
+        K = K + sp.block_diag(list(blocks), format="csr")
     return K.tocsr()
 
 
@@ -382,7 +385,9 @@ def relax_newton(problem: Problem, x0: np.ndarray | None = None, tol: float = 1e
             for _ in range(30):
                 A = (K + mu * D).tocsc() if mu > 0 else K.tocsc()
                 try:
-                    p = spla.spsolve(A, F)
+                    with warnings.catch_warnings():  # a singular K shows up as a non-finite p: raise mu
+                        warnings.simplefilter("ignore", spla.MatrixRankWarning)
+                        p = spla.spsolve(A, F)
                 except RuntimeError:  # exactly singular factor
                     p = np.full_like(F, np.nan)
                 slope = float(F @ p)
@@ -405,7 +410,6 @@ def relax_newton(problem: Problem, x0: np.ndarray | None = None, tol: float = 1e
             if not accepted:
                 raise DivergenceError(f"relax_newton: line search failed at load factor {lf:g}, iteration {it}")
             x = xt
-            if _DEBUG: print(f'it {it} res {res:.3e} alpha {alpha:g} mu {mu:g}')
             mu = 0.0 if mu < 1e-5 else 0.1 * mu
             total += 1
         history.append((lf, it))

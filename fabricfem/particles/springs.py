@@ -208,6 +208,13 @@ def chain(n_springs: int, rest_length: float, stiffness: float, particle_mass: f
 # Forces, energies and stiffness (vectorized over springs / triples)
 
 
+def scatter_add(out: np.ndarray, index: np.ndarray, values: np.ndarray) -> None:
+    """out[index] += values for repeated indices (np.bincount per axis; much faster than np.add.at)."""
+    n = len(out)
+    for c in range(out.shape[1]):  # 3 axes
+        out[:, c] += np.bincount(index, weights=values[:, c], minlength=n)
+
+
 def _spring_state(x: np.ndarray, s: SpringSet):
     d = x[s.j] - x[s.i]
     length = np.linalg.norm(d, axis=1)
@@ -228,8 +235,8 @@ def spring_forces(x: np.ndarray, s: SpringSet, out: np.ndarray | None = None) ->
     out = np.zeros_like(x) if out is None else out
     d, length, k = _spring_state(x, s)
     f = (k * (length - s.rest_length) / length)[:, None] * d
-    np.add.at(out, s.i, f)
-    np.add.at(out, s.j, -f)
+    scatter_add(out, s.i, f)
+    scatter_add(out, s.j, -f)
     return out
 
 
@@ -286,9 +293,9 @@ def bending_forces(x: np.ndarray, s: BendingSet, out: np.ndarray | None = None) 
     k_phi Delta phi / b = E I Delta phi / (b^2 (1 - nu^2)) (eq. 47); the middle particle balances them."""
     out = np.zeros_like(x) if out is None else out
     ga, gb, gc = _bending_gradients(x[s.a], x[s.b], x[s.c], s.stiffness)
-    np.add.at(out, s.a, -ga)
-    np.add.at(out, s.b, -gb)
-    np.add.at(out, s.c, -gc)
+    scatter_add(out, s.a, -ga)
+    scatter_add(out, s.b, -gb)
+    scatter_add(out, s.c, -gc)
     return out
 
 
