@@ -97,7 +97,8 @@ def material_stiffness_form(model, w_frozen: fem.Function, psri_degrees: tuple[i
                                             ufl.derivative(gamma, w_frozen, trial))
     bending = bilinear(kappa, model.D)
     dx_full, dx_reduced = shell_forms.psri_measures(model.mesh, *psri_degrees)
-    alpha = model.thickness ** 2 / ufl.CellDiameter(model.mesh) ** 2
+    h = model._cell_size() if hasattr(model, "_cell_size") else ufl.CellDiameter(model.mesh)  # as in the energy
+    alpha = model.thickness ** 2 / h ** 2
     return bending * dx_full + alpha * (membrane + shear) * dx_full + (1.0 - alpha) * (membrane + shear) * dx_reduced
 
 

@@ -1,0 +1,102 @@
+"""Explicit central differences with the lumped mass of thesis eq. 2.82 (Newmark beta = 0, gamma = 1/2).
+
+    d^{n+1} = d^n + dt v^n + dt^2 / 2 a^n                                            (eq. 2.76, beta = 0)
+    v~      = v^n + dt / 2 a^n
+    (M_L + dt/2 C_L) a^{n+1} = lambda(t_{n+1}) F_ref - f_int(d^{n+1}) - C_L v~ - b K_M v~   (eq. 2.84)
+    v^{n+1} = v~ + dt / 2 a^{n+1}
+
+C_L = a M_L + eta M_L^translational / (rho t) is diagonal and treated implicitly (still explicit: a division);
+the stiffness-proportional part b K_M(d^n) acts on the predictor velocity v~ (a matrix-vector product).
+Dirichlet rows: d = lambda(t) g, a = 0, v = (d^{n+1} - d^n) / dt there.
+
+The step must not exceed the critical time step (fabricfem.dynamics.stability, thesis eqs. 2.86-2.87);
+a larger one is refused (ValueError) unless force=True. Units: SI.
+"""
+from __future__ import annotations
+
+from dolfinx.fem import petsc as fem_petsc
+
+from fabricfem.dynamics import stability
+from fabricfem.dynamics.newmark import LoadFactor, TimeIntegrator
+
+
+class CentralDifference(TimeIntegrator):
+    """Explicit central-difference integrator (lumped mass, no linear solves).
+
+    Args:
+        model, dt, load_factor, rayleigh, air_drag, energy_bound: see TimeIntegrator.
+        force: allow dt above the critical time step (for stability studies; a blow-up still stops the run).
+        dt_crit: critical time step [s] to check against (default: stability.critical_time_step(model, rayleigh)).
+        damping_update_every: re-evaluate K_M(d^n) of the stiffness-proportional damping every this many steps.
+    """
+
+    def __init__(self, model, dt: float, load_factor: LoadFactor = 1.0, rayleigh: tuple[float, float] = (0.0, 0.0),
+                 air_drag: float = 0.0, force: bool = False, dt_crit: float | None = None,
+                 energy_bound: float | str | None = "auto", damping_update_every: int = 1):
+        if dt_crit is None:
+            dt_crit = stability.critical_time_step(model, rayleigh)
+        if not (dt_crit > 0):
+            raise ValueError(f"dt_crit must be positive, got {dt_crit!r}")
+        if isinstance(dt, (int, float)) and dt > dt_crit and not force:
+            raise ValueError(f"dt = {dt:.6g} s exceeds the critical time step dt_crit = {dt_crit:.6g} s of central "
+                             f"differences (thesis eqs. 2.86-2.87, ratio {dt / dt_crit:.3g}); use a smaller dt or "
+                             f"force=True")
+        if int(damping_update_every) < 1:
+            raise ValueError(f"damping_update_every must be >= 1, got {damping_update_every!r}")
+        super().__init__(model, dt, load_factor, rayleigh, air_drag, lumped=True, energy_bound=energy_bound)
+        self.dt_crit = float(dt_crit)
+        self.damping_update_every = int(damping_update_every)
+        m = self.ops.mass_diag.getArray(readonly=True)
+        free = m.copy()
+        free[self.bc_rows] = 1.0
+        if free.size and free.min() <= 0:
+            raise ValueError("the lumped mass has non-positive entries on free dofs")
+        self._v_pred = model.create_vector()
+        self._rhs = model.create_vector()
+        self._denominator = None
+
+    def _set_denominator(self):
+        """M_L + dt/2 C_L (diagonal), 1 on Dirichlet rows."""
+        self._denominator = self.ops.mass_diag.copy()
+        self._denominator.axpy(0.5 * self.dt, self.ops.damping_diag)
+        self._denominator.getArray()[self.bc_rows] = 1.0
+
+    def step(self) -> int:
+        dt = self.dt
+        if self._denominator is None:
+            self._set_denominator()
+        t_new = self.t + dt
+        d_old_bc = self.d.getArray(readonly=True)[self.bc_rows].copy()
+        # d^{n+1} = d^n + dt v^n + dt^2/2 a^n ; v~ = v^n + dt/2 a^n
+        self.d.axpy(dt, self.v)
+        self.d.axpy(0.5 * dt ** 2, self.a)
+        self.v.copy(self._v_pred)
+        self._v_pred.axpy(0.5 * dt, self.a)
+        lam = self.load(t_new)
+        self.model.set_load_factor(lam)
+        fem_petsc.set_bc(self.d, self.model.bcs)  # prescribed displacements lambda(t) g
+        self._sync_model()
+        if self.ops.stiffness_ufl is not None and self.step_count % self.damping_update_every == 0:
+            self.ops.freeze(self.d)
+        rhs = self._rhs
+        self.model.internal_force(self.d, rhs)  # f_int(d^{n+1})
+        rhs.scale(-1.0)
+        rhs.axpy(float(self.model.load_factor.value), self.model.F_ref)
+        if self.ops.has_damping:
+            self.ops.damping_action(self._v_pred, self._cv)
+            rhs.axpy(-1.0, self._cv)
+        self.zero_bc_rows(rhs)
+        self.a.pointwiseDivide(rhs, self._denominator)
+        self._v_pred.copy(self.v)
+        self.v.axpy(0.5 * dt, self.a)
+        d_new_bc = self.d.getArray(readonly=True)[self.bc_rows]
+        self.v.getArray()[self.bc_rows] = (d_new_bc - d_old_bc) / dt
+        self.t = t_new
+        return 0
+
+    def destroy(self):
+        for vec in (self._v_pred, self._rhs):
+            vec.destroy()
+        if self._denominator is not None:
+            self._denominator.destroy()
+        super().destroy()

@@ -1,0 +1,131 @@
+"""Critical time step of explicit central differences (thesis eqs. 2.86-2.87) and a measured check.
+
+Thesis: dt_crit = 2 / omega_max (eq. 2.86), omega_max ~ 2 c / h (eq. 2.87), c = sqrt(E / rho) the bar-wave
+speed, h the element size. That estimate is for linear elements and membrane waves only. For the
+quadratic elements of ShellModel with the lumped mass of eq. 2.82 two things change (measured on this
+code with dense eigenvalue solves of K vs M_L, see tests/test_dynamics.py and the free-vibration case):
+
+* membrane: omega_m = kappa c / h_min with c = sqrt(E_max / (rho (1 - nu12 nu21))) (plane-stress wave)
+  and kappa the largest single-element frequency times h / c: 4.90 for the 1D quadratic bar
+  (2 sqrt 6), up to 6.0 for a Q2 square and 7.3 for a P2 right triangle (nu in [0, 0.45]); we use 6.1
+  and 7.4 (eq. 2.87 has kappa = 2 for linear elements).
+* thickness shear: the rotational inertia rho t^3 / 12 against the shear stiffness k G13 t gives
+  omega_s = chi sqrt(12 k G13 / rho) / t, far above omega_m for thin shells (h / t > ~ 5). chi = 1.01 for
+  Q2 and 1.1 for P2 + bubble triangles (measured 1.0046 and 1.09 at h / t = 20).
+
+omega_max = sqrt(omega_m^2 + omega_s^2) (Naghdi) or omega_m (membrane). With Rayleigh damping
+xi = a / (2 omega) + b omega / 2 the limit shrinks to dt = 2 / omega (sqrt(1 + xi^2) - xi)
+(Belytschko, Liu, Moran, Nonlinear Finite Elements, eq. 6.2.x). `discrete_max_frequency` computes the
+true omega_max of the assembled system (power iteration with SLEPc) and `measured_critical_time_step`
+finds the largest stable step by bisection.
+"""
+from __future__ import annotations
+
+from typing import Callable
+
+import numpy as np
+from mpi4py import MPI
+
+MEMBRANE_KAPPA = {"quadrilateral": 6.1, "triangle": 7.4}
+THICKNESS_SHEAR_CHI = {"quadrilateral": 1.01, "triangle": 1.1}
+
+
+def plane_stress_wave_speed(fabric) -> float:
+    """c = sqrt(E_max / (rho (1 - nu12 nu21))) [m/s] (thesis eq. 2.87 has sqrt(E / rho), the nu = 0 value)."""
+    rho = float(fabric.density)
+    if not rho > 0:
+        raise ValueError(f"the wave speed needs a positive fabric density, got {rho!r} kg/m^3")
+    return float(np.sqrt(max(fabric.E1, fabric.E2) / (rho * (1.0 - fabric.nu12 * fabric.nu21))))
+
+
+def min_edge_length(mesh) -> float:
+    """Smallest cell edge length h_min [m] over all ranks (straight edges between the end vertices)."""
+    from dolfinx.cpp.mesh import entities_to_geometry
+    mesh.topology.create_entities(1)
+    n_edges = mesh.topology.index_map(1).size_local
+    nodes = entities_to_geometry(mesh._mesh, 1, np.arange(n_edges, dtype=np.int32), False)
+    x = mesh.geometry.x
+    local = float(np.linalg.norm(x[nodes[:, 0]] - x[nodes[:, -1]], axis=1).min(initial=np.inf))
+    return mesh.comm.allreduce(local, op=MPI.MIN)
+
+
+def max_frequency_estimate(model) -> float:
+    """omega_max^h [rad/s] from mesh size and material (eq. 2.87 extended, see the module docstring)."""
+    cell = model.mesh.ufl_cell().cellname()
+    c = plane_stress_wave_speed(model.fabric)
+    omega_m = MEMBRANE_KAPPA[cell] * c / min_edge_length(model.mesh)  # eq. 2.87 with the element's kappa
+    if model.model != "naghdi":
+        return omega_m
+    fabric = model.fabric
+    omega_s = (THICKNESS_SHEAR_CHI[cell] * np.sqrt(12.0 * fabric.shear_correction * fabric.transverse_shear_modulus
+                                                   / fabric.density) / fabric.thickness)
+    return float(np.hypot(omega_m, omega_s))
+
+
+def critical_time_step(model, rayleigh: tuple[float, float] = (0.0, 0.0), omega_max: float | None = None) -> float:
+    """dt_crit = 2 / omega_max (thesis eq. 2.86), reduced for Rayleigh damping (a [1/s], b [s])."""
+    omega = max_frequency_estimate(model) if omega_max is None else float(omega_max)
+    a, b = rayleigh
+    xi = a / (2.0 * omega) + b * omega / 2.0
+    return float(2.0 / omega * (np.sqrt(1.0 + xi ** 2) - xi))
+
+
+def discrete_max_frequency(model, iterations: int = 200, rtol: float = 1e-6) -> float:
+    """Largest omega of K(d) phi = omega^2 M_L phi on the free dofs (current state, lumped mass), by SLEPc."""
+    from slepc4py import SLEPc
+
+    from fabricfem.dynamics.mass import lumped_mass
+    model.compile()
+    K = model.create_matrix()
+    model.jacobian(model.w.vector, K)  # Dirichlet rows: identity
+    m = lumped_mass(model)
+    # Dirichlet rows get a huge mass so their eigenvalue (1 / m) is ~0 and never the largest
+    for bc in model.bcs:
+        dofs, n_owned = bc.dof_indices()
+        owned = dofs[:n_owned]
+        m.getArray()[owned[owned < m.getLocalSize()]] = 1e300
+    inv_sqrt = m.copy()
+    inv_sqrt.sqrtabs()
+    inv_sqrt.reciprocal()
+    K.diagonalScale(inv_sqrt, inv_sqrt)  # M^-1/2 K M^-1/2
+    eps = SLEPc.EPS().create(model.comm)
+    eps.setOperators(K)
+    eps.setProblemType(SLEPc.EPS.ProblemType.HEP)
+    eps.setWhichEigenpairs(SLEPc.EPS.Which.LARGEST_REAL)
+    eps.setDimensions(1)
+    eps.setTolerances(rtol, iterations)
+    eps.solve()
+    if eps.getConverged() < 1:
+        raise RuntimeError("SLEPc did not converge the largest eigenvalue")
+    value = eps.getEigenvalue(0).real
+    for obj in (eps, K, m, inv_sqrt):
+        obj.destroy()
+    return float(np.sqrt(value))
+
+
+def measured_critical_time_step(run_is_stable: Callable[[float], bool], dt_low: float, dt_high: float,
+                                rel_tol: float = 0.01, max_iter: int = 30) -> float:
+    """Largest stable time step in [dt_low, dt_high] by bisection.
+
+    `run_is_stable(dt)` runs an explicit simulation with step dt (e.g. force=True, a fixed number of steps)
+    and returns False when it blew up. dt_low must be stable, dt_high unstable (ValueError otherwise).
+    """
+    if not (0 < dt_low < dt_high):
+        raise ValueError(f"need 0 < dt_low < dt_high, got dt_low = {dt_low!r}, dt_high = {dt_high!r}")
+    if not run_is_stable(dt_low):
+        raise ValueError(f"dt_low = {dt_low:.6g} s is not stable")
+    if run_is_stable(dt_high):
+        raise ValueError(f"dt_high = {dt_high:.6g} s is stable: raise it")
+    for _ in range(max_iter):
+        if dt_high - dt_low <= rel_tol * dt_low:
+            break
+        mid = 0.5 * (dt_low + dt_high)
+        if run_is_stable(mid):
+            dt_low = mid
+        else:
+            dt_high = mid
+    return dt_low
+
+
+__all__ = ["plane_stress_wave_speed", "min_edge_length", "max_frequency_estimate", "critical_time_step",
+           "discrete_max_frequency", "measured_critical_time_step"]
