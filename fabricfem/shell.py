@@ -134,6 +134,7 @@ class ShellModel:
         self._compiled = False
         self.rebase = rebase and model == "naghdi"
         self._rotation_prescribed = False
+        self._collapsed: dict = {}  # (field, component) -> collapsed subspace and map, for probes
 
     # ------------------------------------------------------------------ fields
     def _cell_size(self) -> fem.Function:
@@ -354,7 +355,10 @@ class ShellModel:
     # ----------------------------------------------------------------- probes
     def owned_node_dof(self, point: Sequence[float], field: str, component: int) -> int | None:
         """Local index (in W) of `field` component at the node at `point` on its owning rank, else None."""
-        V, to_parent = self._subspace(field, component).collapse()
+        key = (field, component)
+        if key not in self._collapsed:
+            self._collapsed[key] = self._subspace(field, component).collapse()
+        V, to_parent = self._collapsed[key]
         node = probe.owned_node(V, point)
         return None if node is None else int(to_parent[node])
 
