@@ -12,6 +12,14 @@ of Phi - 1. The homogenized second Piola-Kirchhoff stress is the volume average 
 where Y_s is the meshed (solid) region and |Y| the volume of the reference bounding box; the
 conjugate strain is E = (Phi^T Phi - 1) / 2 (eq. 4.59). Stresses are in Pa.
 
+Rigid motions: the translations are removed by the pin; rotations are not periodic once pairs span
+two independent directions, so they are excluded too. With pairs along one direction only, or a
+cell of disconnected bodies (yarns without contact), rigid rotations remain and the tangent is
+singular: MUMPS then returns one of the equivalent states (seen with a box periodic in x only) or
+the solve fails with SolverError; no further rigid modes are removed here.
+Pairs are pure translations (full cell, thesis option A); the anti-symmetric quarter cell
+(option B, z -> -z with u_z flipped) is not supported yet.
+
 Material: `psi` is a strain-energy density [J/m^3] given as a UFL callable psi(C) of the right
 Cauchy-Green tensor C, or a mapping {cell tag: psi} used with `cell_tags`. Extra fields (a yarn
 axis Function, say) enter through closures.
@@ -103,28 +111,36 @@ def _check_Phi(Phi) -> np.ndarray:
 
 
 def load_path(Phi, steps: int) -> list[np.ndarray]:
-    """Phi_n = 1 + (n / steps)(Phi - 1), n = 1 ... steps; every Phi_n must have det > 0."""
-    if int(steps) != steps or steps < 1:
+    """Phi_n = 1 + (n / steps)(Phi - 1), n = 1 ... steps; det(1 + t (Phi - 1)) must stay > 0 on the
+    whole path t in (0, 1], not only at the steps."""
+    if isinstance(steps, bool) or int(steps) != steps or steps < 1:
         raise ValueError(f"steps must be a positive integer, got {steps!r}")
     Phi = _check_Phi(Phi)
-    path = [np.eye(3) + (n / steps) * (Phi - np.eye(3)) for n in range(1, int(steps) + 1)]
-    dets = np.linalg.det(np.array(path))
-    if np.any(dets <= 0):
-        raise ValueError(f"Phi: the linear load path 1 + t (Phi - 1) passes det <= 0 (min {dets.min():.3g}); "
-                         "apply it in several calls through intermediate deformations")
-    return path
+    H = Phi - np.eye(3)
+    # det(1 + t H) = 1 + t tr H + t^2 (tr^2 H - tr H^2) / 2 + t^3 det H
+    cubic = [np.linalg.det(H), 0.5 * (np.trace(H) ** 2 - np.trace(H @ H)), np.trace(H), 1.0]
+    roots = np.roots(cubic) if np.any(np.abs(cubic[:3]) > 0) else np.array([])
+    real = roots[np.abs(roots.imag) <= 1e-6 * max(1.0, np.abs(roots).max(initial=0.0))].real
+    if np.any((real > 0) & (real <= 1.0)):
+        raise ValueError(f"Phi: the linear load path 1 + t (Phi - 1) reaches det = 0 at t = "
+                         f"{real[(real > 0) & (real <= 1)].min():.3g}; apply Phi in several calls through "
+                         "intermediate deformations")
+    return [np.eye(3) + (n / steps) * H for n in range(1, int(steps) + 1)]
 
 
-def _owned_facet_vertex_coordinates(mesh: dmesh.Mesh, facets: np.ndarray) -> np.ndarray:
-    """Coordinates (n, 3) of the owned vertices of the given facets (each vertex once)."""
+def _facet_vertex_coordinates(mesh: dmesh.Mesh, facets: np.ndarray) -> np.ndarray:
+    """Coordinates (n, 3) of the vertices of the given facets, gathered from all ranks, each vertex
+    once (by global index), so that every rank sees the same complete face."""
     tdim = mesh.topology.dim
     mesh.topology.create_connectivity(tdim - 1, 0)
     f2v = mesh.topology.connectivity(tdim - 1, 0)
     per_facet = f2v.offsets[1] - f2v.offsets[0]  # one facet type per mesh
-    verts = np.unique(f2v.array.reshape(-1, per_facet)[facets].ravel())
-    verts = verts[verts < mesh.topology.index_map(0).size_local].astype(np.int32)
+    verts = np.unique(f2v.array.reshape(-1, per_facet)[facets].ravel()).astype(np.int32)
     nodes = _cpp.mesh.entities_to_geometry(mesh._mesh, 0, verts, False).ravel()
-    return mesh.geometry.x[nodes]
+    global_ids = mesh.topology.index_map(0).local_to_global(verts)
+    ids = np.concatenate(mesh.comm.allgather(np.asarray(global_ids, dtype=np.int64)))
+    x = np.concatenate(mesh.comm.allgather(mesh.geometry.x[nodes]))
+    return x[np.unique(ids, return_index=True)[1]]
 
 
 @dataclass(frozen=True)
@@ -145,29 +161,34 @@ class _Face:
 
 
 def _tagged_face(mesh: dmesh.Mesh, facet_tags, tag: int, tolerance: float) -> _Face:
-    """Fit the plane of the facets tagged `tag` (all ranks); ValueError if missing or not planar."""
-    comm = mesh.comm
-    facets = facet_tags.indices[facet_tags.values == tag]
-    x = _owned_facet_vertex_coordinates(mesh, facets)
-    count = comm.allreduce(len(x), op=MPI.SUM)
-    if count < 3:
-        raise ValueError(f"periodic_pairs: facet tag {tag} marks no face of the mesh (found {count} vertices)")
-    centroid = comm.allreduce(x.sum(axis=0), op=MPI.SUM) / count
+    """Fit the plane of the facets tagged `tag` (same result on all ranks); ValueError if missing or
+    not planar."""
+    x = _facet_vertex_coordinates(mesh, facet_tags.indices[facet_tags.values == tag])
+    if len(x) < 3:
+        raise ValueError(f"periodic_pairs: facet tag {tag} marks no face of the mesh (found {len(x)} vertices)")
+    centroid = x.mean(axis=0)
     d = x - centroid
-    scatter = comm.allreduce(d.T @ d, op=MPI.SUM)
-    normal = np.linalg.eigh(scatter)[1][:, 0]  # direction of least spread
-    lower = comm.allreduce(x.min(axis=0) if len(x) else np.full(3, np.inf), op=MPI.MIN)
-    upper = comm.allreduce(x.max(axis=0) if len(x) else np.full(3, -np.inf), op=MPI.MAX)
-    offplane = comm.allreduce(float(np.abs(d @ normal).max()) if len(x) else 0.0, op=MPI.MAX)
+    normal = np.linalg.eigh(d.T @ d)[1][:, 0]  # direction of least spread
+    offplane = float(np.abs(d @ normal).max())
     if offplane > tolerance:
         raise ValueError(f"periodic_pairs: the face with facet tag {tag} is not planar "
                          f"(vertices up to {offplane:.3g} m off its mean plane)")
-    return _Face(centroid, normal, lower, upper, tolerance)
+    return _Face(centroid, normal, x.min(axis=0), x.max(axis=0), tolerance)
+
+
+def _allreduce(comm: MPI.Comm, a: np.ndarray, op: MPI.Op) -> np.ndarray:
+    """Element-wise reduction of a float array over `comm` (the pickle path cannot MIN/MAX arrays)."""
+    a = np.ascontiguousarray(a, dtype=np.float64)
+    out = np.empty_like(a)
+    comm.Allreduce(a, out, op=op)
+    return out
 
 
 def _bounding_box(mesh: dmesh.Mesh) -> tuple[np.ndarray, np.ndarray]:
     x = mesh.geometry.x
-    return mesh.comm.allreduce(x.min(axis=0), op=MPI.MIN), mesh.comm.allreduce(x.max(axis=0), op=MPI.MAX)
+    lower = x.min(axis=0) if len(x) else np.full(3, np.inf)
+    upper = x.max(axis=0) if len(x) else np.full(3, -np.inf)
+    return _allreduce(mesh.comm, lower, MPI.MIN), _allreduce(mesh.comm, upper, MPI.MAX)
 
 
 def _pin_point(mesh: dmesh.Mesh, excluded: Callable[[np.ndarray], np.ndarray], target: np.ndarray) -> np.ndarray:
@@ -310,6 +331,14 @@ class UnitCellProblem:
         for tag, w in psi.items():
             if not callable(w):
                 raise ValueError(f"psi[{tag}] must be a callable psi(C)")
+        # every owned cell needs an energy, otherwise the tangent is singular there
+        mesh = cell_tags.mesh
+        owned = mesh.topology.index_map(mesh.topology.dim).size_local
+        covered = np.unique(cell_tags.indices[np.isin(cell_tags.values, list(psi)) & (cell_tags.indices < owned)])
+        uncovered = mesh.comm.allreduce(owned - len(covered), op=MPI.SUM)
+        if uncovered:
+            raise ValueError(f"psi: {uncovered} cells carry no tag of psi {sorted(psi)} in cell_tags (no strain "
+                             "energy there); mesh only the solid and give every cell a material")
         return list(psi.items())
 
     def _pairs(self, pairs, facet_tags, tol) -> tuple[list[Locator], list[np.ndarray]]:
@@ -354,7 +383,7 @@ class UnitCellProblem:
             b_local.set(0.0)
         fem_petsc.assemble_vector(b, self._stress_form)
         local = b.array_r[: self._owned_stress].reshape(-1, 18).sum(axis=0)
-        total = self.comm.allreduce(local, op=MPI.SUM)
+        total = _allreduce(self.comm, local, MPI.SUM)
         scale = self.volume_fraction / self.solid_volume  # eq. 4.64
         return scale * total[:9].reshape(3, 3), scale * total[9:].reshape(3, 3)
 
