@@ -1,0 +1,264 @@
+"""A ShellModel with frictional contact against rigid ellipsoids, for the implicit solvers.
+
+`ContactProblem(model, obstacles, ...)` wraps a `fabricfem.shell.ShellModel` and exposes the same
+callbacks (compile, residual, jacobian, create_vector, create_matrix, set_load_factor,
+after_converged_step, w, load_factor, F_ref, comm, ...), so `NewtonSolver(problem)` and
+`solve_load_path(problem, ...)` work unchanged. The residual becomes R_shell(x) - f_contact(x), with the
+nodal forces of fabricfem.contact.nodal / friction on the owned displacement nodes (ghost nodes are
+skipped, so nothing is counted twice under MPI), and the Jacobian gets the 3x3 nodal blocks.
+
+Normal methods: "penalty" (Box 3: p = k_N <-g>) and "augmented" (eq. 3.69: p = <lambda - k_N g>, Uzawa
+update lambda <- p between Newton solves, `solve_augmented`). Friction: Coulomb with coefficient
+`friction` and tangential penalty eps_T (fabricfem.contact.friction); history committed in
+`after_converged_step`. Units: SI (m, N, Pa, Pa/m).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+from dolfinx import fem
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fabricfem.body.ellipsoid import Ellipsoid
+from fabricfem.body.pose import Body
+from fabricfem.contact import friction as friction_law
+from fabricfem.contact import nodal
+from fabricfem.contact.torque import adjacent_segments, contact_torque
+from fabricfem.solvers.newton import NewtonSolver, SolverError
+
+METHODS = ("penalty", "augmented")
+
+
+@dataclass
+class ContactState:
+    """Contact quantities at the owned nodes for one configuration (forces on the cloth)."""
+
+    position: np.ndarray      # (N, 3) deformed node positions x [m]
+    gap: np.ndarray           # (N,) signed gaps g [m], positive outside
+    normal: np.ndarray        # (N, 3) unit outward body normals
+    segment: np.ndarray       # (N,) index of the nearest segment
+    pressure: np.ndarray      # (N,) p [Pa]
+    traction: np.ndarray      # (N, 3) friction traction t_T [Pa]
+    slip: np.ndarray          # (N,) sliding nodes
+    force: np.ndarray         # (N, 3) f = w (p n + t_T) [N], zero on Dirichlet components
+    stiffness: np.ndarray     # (N, 3, 3) -df/dx [N/m]
+
+
+@dataclass
+class AugmentationReport:
+    augmentations: int
+    max_penetration: float
+    newton_iterations: list[int]
+
+
+class ContactProblem:
+    """Frictional node-to-ellipsoid contact added to a ShellModel.
+
+    Args:
+        model: the ShellModel (quadrilateral mesh); add its loads and constraints before wrapping.
+        obstacles: a sequence of Ellipsoid, or a Body (posed at `time`).
+        method: "penalty" or "augmented".
+        penalty: k_N [Pa/m] (default nodal.default_penalty: 10 E t / h^2).
+        friction: Coulomb coefficient mu >= 0.
+        tangential_penalty: eps_T [Pa/m] (default k_N).
+        time: body time t [s] when `obstacles` is a Body.
+    """
+
+    def __init__(self, model, obstacles: Sequence[Ellipsoid] | Body, method: str = "penalty",
+                 penalty: float | None = None, friction: float = 0.0, tangential_penalty: float | None = None,
+                 time: float = 0.0):
+        if method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        self.model = model
+        self.method = method
+        self.mu = friction_law.friction_coefficient(friction)
+        self.body: Body | None = obstacles if isinstance(obstacles, Body) else None
+        self.time = float(time)
+        self.nodes = nodal.contact_nodes(model)
+        self.penalty = (nodal.default_penalty(model, self.nodes.element_size) if penalty is None
+                        else nodal.positive_parameter("penalty", penalty))
+        self.tangential_penalty = (self.penalty if tangential_penalty is None
+                                   else nodal.positive_parameter("tangential_penalty", tangential_penalty))
+        self.set_obstacles(obstacles)
+        N = self.nodes.count
+        self.multiplier = np.zeros(N)                        # lambda_i [Pa]
+        # Stick points (segment frame) and their segment: the last converged node position where the node
+        # was out of contact, so that a node touching down during a step slips relative to where it was.
+        self._stick_local = np.zeros((N, 3))
+        self._stick_segment = np.full(N, -1, dtype=np.int64)
+        self._store_stick_points(self.nodes.reference, np.zeros((N, 3)))
+        self._free = ~self.nodes.constrained
+        self.state: ContactState | None = None
+
+    # ------------------------------------------------------------------ delegation
+    def __getattr__(self, name):
+        # everything not defined here (w, load_factor, F_ref, comm, ndofs, node_value, reaction, ...)
+        model = self.__dict__.get("model")
+        if model is None:
+            raise AttributeError(name)
+        return getattr(model, name)
+
+    def compile(self):
+        self.model.compile()
+
+    def set_load_factor(self, lam: float):
+        self.model.set_load_factor(lam)
+
+    def create_vector(self) -> PETSc.Vec:
+        return self.model.create_vector()
+
+    def create_matrix(self) -> PETSc.Mat:
+        return self.model.create_matrix()
+
+    # ------------------------------------------------------------------ obstacles
+    def set_obstacles(self, obstacles: Sequence[Ellipsoid] | Body):
+        """Replace the obstacles (e.g. the posed segments at a new time)."""
+        if isinstance(obstacles, Body):
+            self.body = obstacles
+            self.ellipsoids = list(obstacles.pose(self.time).values())
+            return
+        ellipsoids = list(obstacles)
+        if not ellipsoids or not all(isinstance(e, Ellipsoid) for e in ellipsoids):
+            raise ValueError("obstacles must be a Body or a non-empty sequence of Ellipsoid")
+        self.ellipsoids = ellipsoids
+
+    def set_time(self, t: float):
+        """Pose the Body at time t [s] (stick points follow their segments)."""
+        if self.body is None:
+            raise ValueError("set_time needs a Body as obstacles")
+        self.time = float(t)
+        self.ellipsoids = list(self.body.pose(self.time).values())
+
+    # ------------------------------------------------------------------ contact evaluation
+    def _stick_points(self, x: np.ndarray, segment: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Stick points at the current pose and a mask of the nodes that have one on their current
+        segment (the others -- nearest segment changed during the step -- get the node itself)."""
+        points = x.copy()
+        known = np.zeros(len(x), dtype=bool)
+        for k, e in enumerate(self.ellipsoids):  # loop over the few segments
+            mask = (self._stick_segment == k) & (segment == k)
+            points[mask] = e.to_global(self._stick_local[mask])
+            known |= mask
+        return points, known
+
+    def _store_stick_points(self, x: np.ndarray, traction: np.ndarray):
+        """a = x + t_T / eps_T on the nearest segment, in its frame (out of contact: t_T = 0, a = x)."""
+        _, _, segment = nodal.nearest_gap(x, self.ellipsoids)
+        stick = friction_law.updated_stick_point(x, traction, self.tangential_penalty)
+        self._stick_segment = segment
+        for k, e in enumerate(self.ellipsoids):
+            mask = segment == k
+            self._stick_local[mask] = e.to_local(stick[mask])
+
+    def evaluate(self, state_array: np.ndarray | None = None) -> ContactState:
+        """Contact state at the owned nodes for the local state array of model.w (owned + ghosts)."""
+        arr = self.model.w.x.array if state_array is None else state_array
+        x = self.nodes.reference + arr[self.nodes.dofs]
+        g, n, seg = nodal.nearest_gap(x, self.ellipsoids)
+        p = nodal.normal_pressure(g, self.multiplier, self.penalty)
+        force, stiffness = nodal.normal_force_and_tangent(self.nodes.area, p, n, self.penalty)
+        traction = np.zeros_like(x)
+        slip = np.zeros(len(x), dtype=bool)
+        if self.mu > 0.0:
+            stick, known = self._stick_points(x, seg)
+            fr = friction_law.return_map(x, stick, n, p, self.mu, self.tangential_penalty, self.penalty)
+            fr.tangent[~known] = 0.0   # stick point = x: no traction and no stiffness this step
+            traction, slip = fr.traction, fr.slip
+            w = self.nodes.area
+            force = force + w[:, None] * traction
+            stiffness = stiffness - w[:, None, None] * fr.tangent
+        # components with a Dirichlet condition take no contact force (the support carries it): the force
+        # reported (totals, torque) is the one that enters the residual
+        force = np.where(self._free, force, 0.0)
+        self.state = ContactState(x, g, n, seg, p, traction, slip, force, stiffness)
+        return self.state
+
+    # ------------------------------------------------------------------ solver callbacks
+    def residual(self, x: PETSc.Vec, b: PETSc.Vec):
+        """b = R_shell(x) - f_contact(x) (Dirichlet rows untouched)."""
+        self.model.residual(x, b)
+        s = self.evaluate()
+        arr = b.getArray()
+        free = self._free
+        arr[self.nodes.dofs[free]] -= s.force[free]   # owned rows only: no double counting of ghosts
+
+    def jacobian(self, x: PETSc.Vec, A: PETSc.Mat):
+        """A = J_shell(x) + sum_i K_i (3x3 nodal blocks on the free displacement rows and columns)."""
+        self.model.jacobian(x, A)
+        s = self.evaluate()
+        free = self._free.astype(float)
+        blocks = s.stiffness * free[:, :, None] * free[:, None, :]
+        rows = self.nodes.dofs.astype(PETSc.IntType)
+        A.setValuesLocalRCV(rows, rows, blocks, addv=PETSc.InsertMode.ADD_VALUES)
+        A.assemble()
+
+    def after_converged_step(self):
+        """Commit the friction history (stick points) and let the shell re-base its director."""
+        s = self.evaluate()
+        if self.mu > 0.0:
+            self._store_stick_points(s.position, s.traction)
+        self.model.after_converged_step()
+
+    # ------------------------------------------------------------------ augmented Lagrangian
+    def max_penetration(self) -> float:
+        """max(0, -min g) over all nodes [m], same on all ranks."""
+        s = self.evaluate()
+        local = float(np.max(-s.gap, initial=0.0))
+        return self.comm.allreduce(local, op=MPI.MAX)
+
+    def augment(self):
+        """Uzawa update lambda <- < lambda - k_N g > (eq. 3.69)."""
+        s = self.evaluate()
+        self.multiplier = nodal.normal_pressure(s.gap, self.multiplier, self.penalty)
+
+    def solve_augmented(self, solver: NewtonSolver | None = None, tolerance: float = 1e-6,
+                        max_augmentations: int = 50) -> AugmentationReport:
+        """Newton solves at fixed multipliers, each followed by an Uzawa update, until the largest
+        penetration is below `tolerance` [m] (Box 6, outer loop). Raises SolverError on a failed
+        Newton solve or when the tolerance is not met after `max_augmentations` updates."""
+        if self.method != "augmented":
+            raise ValueError("solve_augmented needs method='augmented'")
+        tolerance = nodal.positive_parameter("tolerance", tolerance)
+        solver = solver or NewtonSolver(self)
+        iterations = []
+        for k in range(int(max_augmentations) + 1):
+            result = solver.solve()
+            iterations.append(result.iterations)
+            if not result.converged:
+                raise SolverError(f"augmented Lagrangian: Newton {result.reason} after {result.iterations} "
+                                  f"iterations at augmentation {k}", reason=result.reason)
+            penetration = self.max_penetration()
+            if penetration < tolerance:
+                return AugmentationReport(k, penetration, iterations)
+            self.augment()
+        raise SolverError(f"augmented Lagrangian: penetration {penetration:.3e} m still above {tolerance:.1e} m "
+                          f"after {max_augmentations} augmentations")
+
+    # ------------------------------------------------------------------ output
+    def total_force(self) -> np.ndarray:
+        """Sum of the contact forces on the cloth [N] (3,), same on all ranks."""
+        s = self.evaluate()
+        return self.comm.allreduce(s.force.sum(axis=0), op=MPI.SUM)
+
+    def pressure_field(self) -> fem.Function:
+        """Contact pressure p [Pa] as a P2 (Q2) scalar Function (for output)."""
+        s = self.evaluate()
+        f = fem.Function(self.nodes.scalar_space, name="contact_pressure")
+        f.x.array[self.nodes.node_index] = s.pressure
+        f.x.scatter_forward()
+        return f
+
+    def joint_torque(self, joint: str, axis: Sequence[float]) -> float:
+        """Torque [N m] about `joint` along `axis` of the contact forces that the cloth exerts on the
+        segments adjacent to the joint (fabricfem.body.motion.joint_torque convention), all ranks."""
+        if self.body is None:
+            raise ValueError("joint_torque needs a Body as obstacles")
+        s = self.evaluate()
+        names = list(self.body.segments)
+        segments = adjacent_segments(self.body, joint)
+        centre = self.body.joint_position(joint, self.time)
+        return contact_torque(s.position, -s.force, s.segment, [names.index(n) for n in segments],
+                              centre, axis, self.comm)

@@ -1,0 +1,44 @@
+"""Joint torque of the contact forces (thesis ch. 5 intro): the moment about a joint centre of all
+contact forces (normal + friction) acting on the body segments adjacent to that joint.
+
+"Clothing contact forces on a given body segment only contribute resisting torque to the joints
+directly connected to the segment" (thesis ch. 5). Sign convention of
+`fabricfem.body.motion.joint_torque`: tau = a . sum_i (x_i - J) x f_i [N m] for forces f_i [N] that
+the clothing exerts on the body at x_i [m] (the opposite of the forces on the cloth nodes).
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+from mpi4py import MPI
+
+from fabricfem.body.motion import joint_torque
+
+
+def adjacent_segments(body, joint: str) -> list[str]:
+    """Names of the segments of `body` whose proximal or distal joint is `joint`."""
+    names = [n for n, s in body.segments.items() if joint in (s.proximal, s.distal)]
+    if not names:
+        raise ValueError(f"joint: no segment of the body is attached to {joint!r} (joints: {body.joints})")
+    return names
+
+
+def contact_torque(points: np.ndarray, forces_on_body: np.ndarray, segment: np.ndarray,
+                   segments: Sequence[int], joint, axis, comm: MPI.Comm | None = None) -> float:
+    """tau = a . sum_{i on segments} (x_i - J) x f_i [N m], summed over the ranks of `comm`.
+
+    Args:
+        points: (N, 3) contact node positions [m] (owned nodes only under MPI).
+        forces_on_body: (N, 3) forces the cloth exerts on the body [N].
+        segment: (N,) index of the segment each node touches.
+        segments: indices of the segments adjacent to the joint.
+        joint: joint centre J [m]; axis: flexion axis (normalised here).
+    """
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    forces_on_body = np.asarray(forces_on_body, dtype=float).reshape(-1, 3)
+    mask = np.isin(np.asarray(segment), np.asarray(list(segments), dtype=int))
+    local = joint_torque(points[mask], forces_on_body[mask], joint, axis) if mask.any() else 0.0
+    if comm is None:
+        return float(local)
+    return float(comm.allreduce(local, op=MPI.SUM))
