@@ -20,6 +20,17 @@ def positive(name: str, value: float, kind: str = "number") -> float:
     return v
 
 
+def non_negative(name: str, value: float, kind: str = "number") -> float:
+    """``value`` as a float; it must be finite and >= 0, else ValueError naming ``name``."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: must be a non-negative {kind}, got {value!r}") from None
+    if not (math.isfinite(v) and v >= 0.0):
+        raise ValueError(f"{name}: must be a non-negative {kind}, got {value!r}")
+    return v
+
+
 def positive_length(name: str, value: float) -> float:
     """``value`` as a float; it must be finite and > 0 (metres)."""
     return positive(name, value, "length in metres")

@@ -42,14 +42,7 @@ CRIMP_MODELS = ("sinusoid", "kawabata")
 _positive = _validate.positive
 
 
-def _non_negative(name: str, value: float) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name}: must be a non-negative number, got {value!r}") from None
-    if not (math.isfinite(v) and v >= 0.0):
-        raise ValueError(f"{name}: must be a non-negative number, got {value!r}")
-    return v
+_non_negative = _validate.non_negative
 
 
 def sinusoid_arc_length(half_period: float, amplitude: float, start: float, end: float) -> float:

@@ -30,16 +30,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fabricfem.meshes._validate import non_negative
+
 
 def friction_coefficient(mu: float) -> float:
     """mu >= 0 or ValueError naming `friction`."""
-    try:
-        v = float(mu)
-    except (TypeError, ValueError):
-        raise ValueError(f"friction (Coulomb coefficient mu) must be a number >= 0, got {mu!r}") from None
-    if not (np.isfinite(v) and v >= 0.0):
-        raise ValueError(f"friction (Coulomb coefficient mu) must be finite and >= 0, got {mu!r}")
-    return v
+    return non_negative("friction (Coulomb coefficient mu)", mu)
 
 
 @dataclass

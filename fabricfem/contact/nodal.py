@@ -38,19 +38,14 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fabricfem.body.ellipsoid import Ellipsoid
+from fabricfem.meshes._validate import positive
 
 DEFAULT_PENALTY_FACTOR = 10.0
 
 
 def positive_parameter(name: str, value: float) -> float:
     """A finite positive float or ValueError naming `name`."""
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a positive number, got {value!r}") from None
-    if not (np.isfinite(v) and v > 0.0):
-        raise ValueError(f"{name} must be positive and finite, got {value!r}")
-    return v
+    return positive(name, value)
 
 
 @dataclass
