@@ -2,7 +2,6 @@
 import json
 
 import pytest
-from mpi4py import MPI
 
 from fabricfem.cli import main
 from fabricfem.verify import load_cases
