@@ -204,10 +204,10 @@ def test_bending_rigidity_override(case):
     fabric = Fabric(E1=E, E2=E, G12=E / 2.0, nu12=0.0, thickness=T, bending_rigidity=(B1, B2))
     K_final = 1.0 / L_STRIP  # tip rotation 1 rad at load factor 1
     if case == "warp-strip":
-        model, along, B = strip(fabric), "x", B1
+        model, along = strip(fabric), "x"
         model.add_edge_moment("right", (0.0, -K_final * B1))  # about t2 = -(-y): curls towards +z
     elif case == "weft-strip":
-        model, along, B = strip(fabric, along="y"), "y", B2
+        model, along = strip(fabric, along="y"), "y"
         model.add_edge_moment("top", (K_final * B2, 0.0))     # about t1 = +x: curls towards +z
     else:
         fmesh = plate(L_STRIP, W_STRIP, NX_STRIP, 1, cell="quadrilateral")
