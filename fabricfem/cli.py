@@ -59,8 +59,10 @@ def main(argv: list[str] | None = None) -> int:
     p_demo = sub.add_parser("demo", help="the default demo: a fabric strip rolled up by an end moment")
     p_demo.add_argument("--out", default="results/demo", help="output folder (XDMF, PNG, CSV)")
     p_bench = sub.add_parser("bench", help="benchmarks (results/ CSV and PNG)")
-    p_bench.add_argument("name", choices=["rollup-profile"], help="benchmark to run")
+    p_bench.add_argument("name", choices=["rollup-profile", "stability-map"], help="benchmark to run")
     p_bench.add_argument("--out", default="results/bench")
+    p_bench.add_argument("--quick", action="store_true",
+                         help="stability-map only: one k/rho, the smallest mesh, short runs (smoke test)")
     args = parser.parse_args(argv)
 
     if args.command == "verify":
@@ -85,6 +87,10 @@ def main(argv: list[str] | None = None) -> int:
         rollup_demo(args.out)
         return 0
     if args.command == "bench":
+        if args.name == "stability-map":
+            from fabricfem.benchmarks import stability_map
+            stability_map(args.out, quick=args.quick)
+            return 0
         from fabricfem.bench import rollup_profile
         rollup_profile(args.out)
         return 0
