@@ -59,7 +59,8 @@ class ContactProblem:
 
     Args:
         model: the ShellModel (quadrilateral mesh); add its loads and constraints before wrapping.
-        obstacles: a sequence of Ellipsoid, or a Body (posed at `time`).
+        obstacles: a sequence of Ellipsoid (or of fabricfem.contact.obstacles Plane / RoundedBox, which
+            duck-type it), or a Body (posed at `time`).
         method: "penalty" or "augmented".
         penalty: k_N [Pa/m] (default nodal.default_penalty: 10 E t / h^2).
         friction: Coulomb coefficient mu >= 0.
@@ -121,8 +122,12 @@ class ContactProblem:
             self.ellipsoids = list(obstacles.pose(self.time).values())
             return
         ellipsoids = list(obstacles)
-        if not ellipsoids or not all(isinstance(e, Ellipsoid) for e in ellipsoids):
-            raise ValueError("obstacles must be a Body or a non-empty sequence of Ellipsoid")
+        # any rigid obstacle with the Ellipsoid interface used here (gap, to_local, to_global), e.g. the
+        # planes and rounded boxes of fabricfem.contact.obstacles
+        if not ellipsoids or not all(isinstance(e, Ellipsoid) or all(callable(getattr(e, m, None)) for m in
+                                     ("gap", "to_local", "to_global")) for e in ellipsoids):
+            raise ValueError("obstacles must be a Body or a non-empty sequence of Ellipsoid (or obstacles with "
+                             "gap, to_local and to_global, fabricfem.contact.obstacles)")
         self.ellipsoids = ellipsoids
 
     def set_time(self, t: float):
