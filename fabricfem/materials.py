@@ -78,6 +78,10 @@ class Fabric:
         G13: transverse shear modulus [Pa] (default G12), shear correction factor 5/6
         bending_rigidity: optional (B1, B2) [N m] overriding E t^3/12 (warp, weft)
         bending_law: optional nonlinear moment-curvature law per direction
+        membrane_law: optional fitted membrane energy W(E11, E22, 2 E12) [J/m^2]
+            (fabricfem.fitted_law.FittedMembraneLaw, built with fitted_law.fitted_fabric); when given,
+            ShellModel uses it instead of 1/2 eps.A eps and E1, E2, G12, nu12 describe its
+            small-strain stiffness only
     """
 
     E1: float
@@ -91,6 +95,7 @@ class Fabric:
     bending_law: KawabataBending | SquareRootBending | None = None
     name: str = "fabric"
     shear_correction: float = field(default=5.0 / 6.0)
+    membrane_law: object | None = None
 
     def __post_init__(self):
         _positive("E1", self.E1)
@@ -111,6 +116,10 @@ class Fabric:
                 raise ValueError("bending_rigidity must be a pair (B1, B2) in N m")
             _positive("bending_rigidity[0]", self.bending_rigidity[0])
             _positive("bending_rigidity[1]", self.bending_rigidity[1])
+        if self.membrane_law is not None and not (hasattr(self.membrane_law, "exponents")
+                                                  and hasattr(self.membrane_law, "coefficients")):
+            raise ValueError("membrane_law must be a fabricfem.fitted_law.FittedMembraneLaw (exponents and "
+                             f"coefficients), got {type(self.membrane_law).__name__}")
 
     @classmethod
     def isotropic(cls, E: float, nu: float, thickness: float, density: float = 0.0, **kw) -> "Fabric":

@@ -11,6 +11,7 @@ Units: SI (m, N, Pa, kg, s, rad).
 """
 from __future__ import annotations
 
+import functools
 from typing import Callable, Sequence
 
 import numpy as np
@@ -22,6 +23,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fabricfem import probe
+from fabricfem.forms import fitted as fitted_forms
 from fabricfem.forms import loads as load_forms
 from fabricfem.forms import shell as shell_forms
 from fabricfem.materials import Fabric, SquareRootBending
@@ -112,6 +114,14 @@ class ShellModel:
             mesh, PETSc.ScalarType(fabric.shear_correction * fabric.transverse_shear_modulus * t))
         self.thickness = fem.Constant(mesh, PETSc.ScalarType(t))
         self.load_factor = fem.Constant(mesh, PETSc.ScalarType(0.0))
+        membrane_density = None
+        if fabric.membrane_law is not None:
+            # fitted membrane energy W(E11, E22, 2 E12) [J/m^2] (fabricfem.fitted_law) instead of 1/2 eps.A eps
+            self.membrane_coefficients = fem.Constant(
+                mesh, PETSc.ScalarType(np.asarray(fabric.membrane_law.coefficients, dtype=float)))
+            membrane_density = functools.partial(fitted_forms.polynomial_energy,
+                                                 exponents=fabric.membrane_law.exponents,
+                                                 coefficients=self.membrane_coefficients)
 
         if model == "naghdi":
             law = fabric.bending_law
@@ -121,9 +131,10 @@ class ShellModel:
             self.energy = shell_forms.naghdi_energy(
                 self.u, self.theta, self.phi0, self.n0, (self.a3, self.a1, self.a2), (self.t1, self.t2),
                 self.A, self.D, self.shear_stiffness, self.thickness, law=law, law_eps=eps,
-                degrees=psri_degrees, cell_size=self._cell_size())
+                degrees=psri_degrees, cell_size=self._cell_size(), membrane_density=membrane_density)
         else:
-            self.energy = shell_forms.membrane_energy(self.u, self.phi0, self.t1, self.t2, self.A)
+            self.energy = shell_forms.membrane_energy(self.u, self.phi0, self.t1, self.t2, self.A,
+                                                      membrane_density=membrane_density)
 
         self.dx = ufl.Measure("dx", domain=mesh)
         self.ds = ufl.Measure("ds", domain=mesh, subdomain_data=fabric_mesh.facet_tags)

@@ -114,7 +114,7 @@ def psri_measures(mesh, full_degree: int = 4, reduced_degree: int = 2):
 
 
 def naghdi_energy(u, theta, phi0, n0, director_base, warp_weft, A, D, shear_stiffness, thickness,
-                  law=None, law_eps=None, degrees=(4, 2), cell_size=None):
+                  law=None, law_eps=None, degrees=(4, 2), cell_size=None, membrane_density=None):
     """Total strain energy of the shell with PSRI (UFL form of rank 0).
 
     u: displacement [m]; theta: rotations [rad]; phi0: reference position (P2 Function);
@@ -122,7 +122,9 @@ def naghdi_energy(u, theta, phi0, n0, director_base, warp_weft, A, D, shear_stif
     measured from (a3 = n0 initially); warp_weft = (t1, t2): reference material directions;
     A = t Q [N/m] membrane stiffness; D [N m] bending stiffness (Voigt 3x3);
     shear_stiffness = k_s G13 t [N/m]; cell_size: h of the PSRI weight [m] (default ufl.CellDiameter,
-    which FFCx supports on affine cells only: pass a DG0 field on curved meshes).
+    which FFCx supports on affine cells only: pass a DG0 field on curved meshes);
+    membrane_density: optional callable W(eps) [J/m^2] of the Voigt membrane strain (E11, E22, 2 E12)
+    replacing 1/2 eps.A eps (a fitted law, forms.fitted); it is PSRI-split like the quadratic one.
     """
     mesh = u.ufl_domain()
     F0 = ufl.grad(phi0)
@@ -134,7 +136,7 @@ def naghdi_energy(u, theta, phi0, n0, director_base, warp_weft, A, D, shear_stif
     gamma_vec = shear_strain(F, F0, d, n0)
     gamma = ufl.as_vector([ufl.dot(gamma_vec, e1), ufl.dot(gamma_vec, e2)])
 
-    psi_m = quadratic_energy(eps_m, A)
+    psi_m = quadratic_energy(eps_m, A) if membrane_density is None else membrane_density(eps_m)
     psi_b = bending_energy(kappa, D, law, law_eps)
     psi_s = 0.5 * shear_stiffness * ufl.dot(gamma, gamma)
 
@@ -145,15 +147,17 @@ def naghdi_energy(u, theta, phi0, n0, director_base, warp_weft, A, D, shear_stif
             + (1.0 - alpha) * (psi_m + psi_s) * dx_reduced)
 
 
-def membrane_energy(u, phi0, t1, t2, A, degree: int = 4):
-    """Membrane-only (no bending, no shear) strain energy 1/2 E.A E [J] (seed 001 eq. 3, eq. 8)."""
+def membrane_energy(u, phi0, t1, t2, A, degree: int = 4, membrane_density=None):
+    """Membrane-only (no bending, no shear) strain energy 1/2 E.A E [J] (seed 001 eq. 3, eq. 8), or
+    int W(eps) dA with a callable membrane_density W [J/m^2] of the Voigt strain (forms.fitted)."""
     mesh = u.ufl_domain()
     F0 = ufl.grad(phi0)
     F = F0 + ufl.grad(u)
     e1, e2 = material_frame(F0, t1, t2)
     eps_m = voigt(membrane_strain(F, F0), e1, e2)
     dx = ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": degree})
-    return quadratic_energy(eps_m, A) * dx
+    psi_m = quadratic_energy(eps_m, A) if membrane_density is None else membrane_density(eps_m)
+    return psi_m * dx
 
 
 def nominal_stress(u, phi0, t1, t2, A, thickness):
