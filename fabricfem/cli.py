@@ -1,5 +1,5 @@
 """Command line: `fabricfem run SCENE`, `fabricfem verify [CASE ...] [--json]`, `fabricfem demo`,
-`fabricfem bench ...`."""
+`fabricfem bench ...`, `fabricfem study sleeve [--quick] [--out DIR]`."""
 from __future__ import annotations
 
 import argparse
@@ -63,6 +63,10 @@ def main(argv: list[str] | None = None) -> int:
     p_bench.add_argument("--out", default="results/bench")
     p_bench.add_argument("--quick", action="store_true",
                          help="stability-map only: one k/rho, the smallest mesh, short runs (smoke test)")
+    p_study = sub.add_parser("study", help="parameter studies (CSV + PNG per figure)")
+    p_study.add_argument("name", choices=["sleeve"], help="study to run (sleeve: thesis sec. 5.3)")
+    p_study.add_argument("--quick", action="store_true", help="coarse mesh and few angle steps (reduced)")
+    p_study.add_argument("--out", default="results/sleeve_study")
     args = parser.parse_args(argv)
 
     if args.command == "verify":
@@ -85,6 +89,10 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "demo":
         from fabricfem.demo import rollup_demo
         rollup_demo(args.out)
+        return 0
+    if args.command == "study":
+        from fabricfem.study import run_study
+        run_study(args.out, quick=args.quick)
         return 0
     if args.command == "bench":
         if args.name == "stability-map":

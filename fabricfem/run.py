@@ -103,7 +103,16 @@ def build_model(scene: Scene, comm=MPI.COMM_WORLD) -> ShellModel:
     return model
 
 
-def run_scene(scene: Scene, comm=MPI.COMM_WORLD) -> list[LoadStep]:
+def run_scene(scene: Scene, comm=MPI.COMM_WORLD):
+    """Run a scene: sleeve scenes (with [body]/[motion]/[contact]) go to fabricfem.sleeve, others are
+    static load-stepping scenes (returns the list of LoadStep)."""
+    if "body" in scene.data:
+        from fabricfem.sleeve import run_sleeve_scene
+        return run_sleeve_scene(scene, comm)
+    return run_static_scene(scene, comm)
+
+
+def run_static_scene(scene: Scene, comm=MPI.COMM_WORLD) -> list[LoadStep]:
     say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
     out = Path(scene.get("output", {}).get("dir", f"results/{scene.get('scene', {}).get('name', 'scene')}"))
     probe = scene.get("output", {}).get("probe")

@@ -37,6 +37,27 @@ typos). Units are SI. Example (scenes/rollup.toml):
     [output]
     dir = "results/rollup"
     probe = [0.3, 0.0, 0.0]   # a node whose displacement is reported
+
+A sleeve scene (scenes/sleeve.toml, run by fabricfem.sleeve) has a tube [mesh], a [fabric], no
+[solver] and no [[support]] (the shoulder end end0 is held), and three more sections:
+
+    [body]
+    type = "default_arm"          # upper arm + forearm ellipsoids (fabricfem.body.default_arm)
+    upper_arm_girth = 0.35        # m, optional (also forearm_girth, upper_arm_length, forearm_length);
+                                  # girth / (2 pi) must stay below mesh.radius
+    [motion]
+    type = "elbow_flexion"
+    final_angle = 57.0            # deg, in (0, 180)
+    angular_velocity = 45.0       # deg/s
+    steps = 19                    # quasi-static angle steps
+    [contact]
+    method = "penalty"            # penalty | augmented
+    friction = 0.1                # Coulomb mu >= 0
+    penalty = 1e7                 # Pa/m, optional (default 10 E t / h^2)
+    stabilization = 0.01          # viscous regularisation c / (E t / R^2), optional
+    gravity = false               # sleeve weight along -y
+
+[output] may add render_angles = [19.0, 38.0, 57.0] (deg) and body_samples (points per ellipsoid ring).
 """
 from __future__ import annotations
 
@@ -65,10 +86,22 @@ SCHEMA: dict[str, dict[str, tuple[type | tuple, bool]]] = {
              "point": (list, False)},
     "solver": {"targets": ((list, int, float), True), "initial_step": ((int, float), False),
                "min_step": ((int, float), False), "petsc_options": (dict, False)},
-    "output": {"dir": (str, False), "probe": (list, False), "render": (bool, False)},
+    "output": {"dir": (str, False), "probe": (list, False), "render": (bool, False),
+               "render_angles": (list, False), "body_samples": (int, False)},
+    # sleeve scenes (fabricfem.sleeve): the wearer, its motion and the contact
+    "body": {"type": (str, True), "upper_arm_length": ((int, float), False), "forearm_length": ((int, float), False),
+             "upper_arm_girth": ((int, float), False), "forearm_girth": ((int, float), False)},
+    "motion": {"type": (str, True), "final_angle": ((int, float), False), "angular_velocity": ((int, float), False),
+               "steps": (int, False)},
+    "contact": {"method": (str, False), "friction": ((int, float), False), "penalty": ((int, float), False),
+                "stabilization": ((int, float), False), "gravity": (bool, False)},
 }
 LIST_SECTIONS = {"support", "load"}
 REQUIRED_SECTIONS = {"mesh", "fabric", "solver"}
+SLEEVE_SECTIONS = {"body", "motion", "contact"}     # a scene with any of them is a sleeve scene
+BODY_TYPES = {"default_arm"}
+MOTION_TYPES = {"elbow_flexion"}
+CONTACT_METHODS = {"penalty", "augmented"}
 MESH_KEYS = {"plate": {"lx", "ly", "nx", "ny"}, "tube": {"length", "radius", "n_around", "n_along"}}
 LOAD_TYPES = {"gravity", "body_force", "edge_traction", "pressure", "edge_moment", "point"}
 
@@ -115,7 +148,9 @@ def validate(data: dict, source: str = "scene") -> Scene:
         if section not in SCHEMA:
             raise SceneError(f"{source}: unknown section [{section}]{_suggest(section, SCHEMA)}; "
                              f"allowed: {sorted(SCHEMA)}")
-    for section in REQUIRED_SECTIONS:
+    sleeve = bool(SLEEVE_SECTIONS & set(data))
+    required = (REQUIRED_SECTIONS - {"solver"}) | SLEEVE_SECTIONS if sleeve else REQUIRED_SECTIONS
+    for section in sorted(required):
         if section not in data:
             raise SceneError(f"{source}: missing section [{section}]")
     for section, content in data.items():
@@ -138,7 +173,56 @@ def validate(data: dict, source: str = "scene") -> Scene:
     for i, load in enumerate(data.get("load", [])):
         if load["type"] not in LOAD_TYPES:
             raise SceneError(f"load[{i}].type: unknown load {load['type']!r}{_suggest(load['type'], LOAD_TYPES)}")
+    if sleeve:
+        _check_sleeve(data)
     return Scene(data)
+
+
+def _positive(where: str, value) -> None:
+    if not value > 0:
+        raise SceneError(f"{where}: must be positive, got {value!r}")
+
+
+def _check_sleeve(data: dict) -> None:
+    """Sleeve scenes: a tube, a known body and motion, non-negative friction, and an arm that fits inside
+    the sleeve (largest segment radius girth / (2 pi) below mesh.radius)."""
+    import math
+    mesh, body, motion, contact = data["mesh"], data["body"], data["motion"], data["contact"]
+    if mesh["type"] != "tube":
+        raise SceneError(f"mesh.type: a sleeve scene needs a 'tube' mesh, got {mesh['type']!r}")
+    if body["type"] not in BODY_TYPES:
+        raise SceneError(f"body.type: unknown body {body['type']!r}{_suggest(body['type'], BODY_TYPES)}; "
+                         f"allowed: {sorted(BODY_TYPES)}")
+    if motion["type"] not in MOTION_TYPES:
+        raise SceneError(f"motion.type: unknown motion {motion['type']!r}{_suggest(motion['type'], MOTION_TYPES)}; "
+                         f"allowed: {sorted(MOTION_TYPES)}")
+    method = contact.get("method", "penalty")
+    if method not in CONTACT_METHODS:
+        raise SceneError(f"contact.method: unknown method {method!r}{_suggest(method, CONTACT_METHODS)}; "
+                         f"allowed: {sorted(CONTACT_METHODS)}")
+    friction = contact.get("friction", 0.1)
+    if not (math.isfinite(friction) and friction >= 0.0):
+        raise SceneError(f"contact.friction: the Coulomb coefficient must be >= 0, got {friction!r}")
+    for key in ("penalty", "stabilization"):
+        if key in contact:
+            _positive(f"contact.{key}", contact[key])
+    for key in ("length", "radius"):
+        _positive(f"mesh.{key}", mesh[key])
+    for key in ("upper_arm_length", "forearm_length", "upper_arm_girth", "forearm_girth"):
+        if key in body:
+            _positive(f"body.{key}", body[key])
+    if "final_angle" in motion and not 0 < motion["final_angle"] < 180:
+        raise SceneError(f"motion.final_angle: must lie in (0, 180) degrees, got {motion['final_angle']!r}")
+    for key in ("angular_velocity", "steps"):
+        if key in motion:
+            _positive(f"motion.{key}", motion[key])
+    from fabricfem.body.arm import DEFAULT_ARM
+    for key in ("upper_arm_girth", "forearm_girth"):
+        girth = body.get(key, getattr(DEFAULT_ARM, key))
+        if girth / (2.0 * math.pi) >= mesh["radius"]:
+            raise SceneError(f"body.{key}: an arm of girth {girth} m (radius {girth / (2 * math.pi):.4f} m) does not "
+                             f"fit inside a sleeve of mesh.radius {mesh['radius']} m; the arm must start inside "
+                             f"the sleeve without penetration")
 
 
 def load(path: str | Path) -> Scene:

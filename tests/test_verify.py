@@ -12,6 +12,8 @@ CASES = load_cases()
 def _params():
     for name, fn in CASES.items():
         marks = [pytest.mark.mpi] if fn.mpi else []
+        if fn.known_failure:
+            marks.append(pytest.mark.xfail(reason=fn.known_failure, strict=False))
         yield pytest.param(name, marks=marks, id=name)
 
 

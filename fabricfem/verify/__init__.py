@@ -37,12 +37,17 @@ def result(case: str, quantity: str, value: float, reference: float, tolerance: 
                       bool(rel <= tolerance), int(ndofs), float(wall_s))
 
 
-def case(name: str, mpi: bool = False):
-    """Register a verification case; `mpi=True` also runs it under `mpirun -n 2` in the tests."""
+def case(name: str, mpi: bool = False, known_failure: str | None = None):
+    """Register a verification case; `mpi=True` also runs it under `mpirun -n 2` in the tests.
+
+    `known_failure` states why a case does not pass yet (an open issue): `fabricfem verify` still
+    reports it as FAIL, the test suite marks it xfail with that reason.
+    """
     def register(fn):
         CASES[name] = fn
         fn.case_name = name
         fn.mpi = mpi
+        fn.known_failure = known_failure
         return fn
     return register
 

@@ -1,0 +1,687 @@
+"""The arm-in-sleeve problem (thesis sec. 5.3): a tube of fabric over a flexing two-ellipsoid arm.
+
+Setup (SI units): the sleeve is an open cylinder of length L [m] and radius R [m] along +x
+(`fabricfem.meshes.tube`), its shoulder end (tag end0, x = 0) held (all displacement components zero,
+rotations free: "boundary conditions are specified to restrain the motion of fabric nodes around the
+shoulder", sec. 5.3), its wrist end free. The arm is `fabricfem.body.default_arm`: upper arm fixed,
+forearm flexing about the elbow (+z axis through x = 0.335 m) at constant angular velocity up to
+57 degrees. Contact: `fabricfem.contact.ContactProblem` (nodal penalty or augmented Lagrangian,
+Coulomb friction with stick points that move with the segments).
+
+Solution route: quasi-static. The explicit central-difference integrator needs time steps below the
+thickness-shear limit (about 1e-7 s for t = 1 mm), i.e. ~1e7 steps for the 1.27 s flexion, which is
+out of reach here; the implicit Newmark integrator works but the inertia of a 436 kg/m^3 sleeve at
+45 deg/s is negligible against its elastic forces. So the flexion is a sequence of Newton solves at
+increasing angle alpha_k with the body posed at t_k = alpha_k / omega, each starting from the previous
+equilibrium; the friction history (stick points) is committed after each converged step
+(`ContactProblem.after_converged_step`). A step whose Newton solve fails is undone and split in two
+(down to `min_angle_step`), otherwise `SleeveError` names the angle.
+
+Gravity is off by default (the thesis gives no orientation of the arm; with it on, g = 9.81 m/s^2
+along -y, opposite to the flexion, the sleeve's own weight is rho t g = 4.3 Pa for fabric I).
+
+Elbow torque (thesis ch. 5 intro): the moment about the elbow of all contact forces (normal + friction)
+that the sleeve exerts on the forearm,
+
+    tau = a . sum_{i on forearm} (x_i - J_elbow) x f_i          (fabricfem.body.motion.joint_torque)
+
+and the resisting torque reported is -tau [N m], positive when the sleeve opposes flexion.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import asdict, dataclass, field, replace
+from typing import Callable
+
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fabricfem.body.arm import DEFAULT_ARM, default_arm, elbow_flexion
+from fabricfem.body.motion import ElbowFlexion
+from fabricfem.body.pose import Body
+from fabricfem.contact.problem import ContactProblem
+from fabricfem.contact.torque import contact_torque
+from fabricfem.materials import Fabric
+from fabricfem.meshes import tube
+from fabricfem.shell import ShellModel
+from fabricfem.solvers.newton import NewtonSolver, SolverError
+
+GRAVITY = 9.81                       # m/s^2
+ELBOW_AXIS = (0.0, 0.0, 1.0)          # flexion axis of the default arm
+
+
+class Stabilized:
+    """Viscous regularisation of the quasi-static steps: the residual gets a nodal drag
+
+        r_i = c w_i (x_i - x_i^n)      [N]   (backward-Euler viscous force eta v with c = eta / dt)
+
+    on the free displacement components of every node (w_i: lumped area [m^2], x^n: the last converged
+    positions), and the Jacobian c w_i I. Tube buckling makes the elastic tangent indefinite on the way
+    to 57 degrees and an unregularised Newton step then fails; the drag keeps the step's tangent positive
+    definite and follows the stable branch, at the price of a fictitious force that is reported
+    (`drag_force`, compared with the contact force in SleeveStep.drag_ratio). c = 0 switches it off.
+    Wraps a ContactProblem with the callback interface the NewtonSolver expects.
+    """
+
+    def __init__(self, contact: ContactProblem, coefficient: float):
+        self.contact = contact
+        self.coefficient = float(coefficient)
+        nodes = contact.nodes
+        self._free = ~nodes.constrained
+        self._dofs = nodes.dofs
+        self._area = nodes.area
+        self.commit()
+
+    def __getattr__(self, name):
+        contact = self.__dict__.get("contact")
+        if contact is None:
+            raise AttributeError(name)
+        return getattr(contact, name)
+
+    def compile(self):
+        self.contact.compile()
+
+    def create_vector(self):
+        return self.contact.create_vector()
+
+    def create_matrix(self):
+        return self.contact.create_matrix()
+
+    def set_load_factor(self, lam: float):
+        self.contact.set_load_factor(lam)
+
+    def commit(self):
+        """Remember the current (converged) nodal displacements as x^n."""
+        self._previous = self.contact.w.x.array[self._dofs].copy()
+
+    def drag(self) -> np.ndarray:
+        """(N, 3) drag forces c w (x - x^n) [N] on the owned nodes (zero on held components)."""
+        u = self.contact.w.x.array[self._dofs]
+        return np.where(self._free, self.coefficient * self._area[:, None] * (u - self._previous), 0.0)
+
+    def drag_force(self) -> float:
+        """Largest nodal drag [N] over all ranks."""
+        local = float(np.max(np.linalg.norm(self.drag(), axis=1), initial=0.0))
+        return self.contact.comm.allreduce(local, op=MPI.MAX)
+
+    def residual(self, x, b):
+        self.contact.residual(x, b)
+        if self.coefficient > 0.0:
+            arr = b.getArray()
+            f = self.drag()
+            arr[self._dofs[self._free]] += f[self._free]
+
+    def jacobian(self, x, A):
+        self.contact.jacobian(x, A)
+        if self.coefficient > 0.0:
+            n = len(self._area)
+            blocks = (self.coefficient * self._area)[:, None, None] * np.broadcast_to(np.eye(3), (n, 3, 3))
+            free = self._free.astype(float)
+            blocks = blocks * free[:, :, None] * free[:, None, :]
+            rows = self._dofs.astype(PETSc.IntType)
+            A.setValuesLocalRCV(rows, rows, blocks, addv=PETSc.InsertMode.ADD_VALUES)
+            A.assemble()
+
+    def after_converged_step(self):
+        self.contact.after_converged_step()
+        self.commit()
+
+
+class SleeveError(SolverError):
+    """The quasi-static flexion could not proceed (Newton failed below the minimum angle step)."""
+
+
+@dataclass(frozen=True)
+class SleeveConfig:
+    """All parameters of one sleeve computation (SI units; angles in degrees for readability).
+
+    Defaults: thesis sec. 5.3 (L = 0.5 m, R = 0.06 m, t = 1 mm, E = 1.2 MPa, G = 0.1 MPa, rho = 436 kg/m^3,
+    mu = 0.1, 57 degrees). nu12 = 0 (the thesis gives none). Mesh III (20 x 26) by default.
+    """
+
+    length: float = 0.5                  # m
+    radius: float = 0.06                 # m
+    n_around: int = 20
+    n_along: int = 26
+    thickness: float = 1e-3              # m
+    E: float = 1.2e6                     # Pa, E1 = E2
+    G: float = 1e5                       # Pa, G12 (and G13)
+    nu12: float = 0.0
+    density: float = 436.0               # kg/m^3
+    friction: float = 0.1                # Coulomb mu
+    method: str = "penalty"              # penalty | augmented
+    penalty: float | None = None         # k_N [Pa/m]; default 10 E t / h^2
+    augmentation_tolerance: float = 1e-5  # m, largest penetration after Uzawa updates (augmented)
+    gravity: bool = False                # g along -y
+    final_angle: float = 57.0            # deg
+    angle_steps: int = 19                # equal steps to the final angle
+    angular_velocity: float = 45.0       # deg/s (sets the body time t = alpha / omega only)
+    min_angle_step: float = 0.05         # deg
+    hold_rotations: bool = False         # also clamp the director rotations at the shoulder
+    stabilization: float = 1e-2          # c / (E t / R^2): viscous regularisation of unstable steps (Stabilized)
+    predictor: bool = True               # forearm contact nodes follow the forearm's rotation (_predict)
+    relaxation_steps: int = 40           # pseudo-time relaxations at one angle after a stabilised solve
+    drag_tolerance: float = 1e-3         # accept a relaxed state when sum|drag| < this * sum|contact force|
+    name: str = "sleeve"
+
+    def __post_init__(self):
+        for key in ("length", "radius", "thickness", "E", "G", "final_angle", "angular_velocity",
+                    "min_angle_step", "augmentation_tolerance"):
+            v = getattr(self, key)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
+                raise ValueError(f"{key} must be a positive number, got {v!r}")
+        if not (isinstance(self.density, (int, float)) and self.density >= 0.0):
+            raise ValueError(f"density must be >= 0 [kg/m^3], got {self.density!r}")
+        if not (isinstance(self.friction, (int, float)) and math.isfinite(self.friction) and self.friction >= 0.0):
+            raise ValueError(f"friction must be a number >= 0, got {self.friction!r}")
+        if self.method not in ("penalty", "augmented"):
+            raise ValueError(f"method must be 'penalty' or 'augmented', got {self.method!r}")
+        if self.penalty is not None and not (math.isfinite(self.penalty) and self.penalty > 0.0):
+            raise ValueError(f"penalty must be positive [Pa/m], got {self.penalty!r}")
+        for key in ("n_around", "n_along", "angle_steps"):
+            v = getattr(self, key)
+            if not (isinstance(v, int) and v >= 1):
+                raise ValueError(f"{key} must be a positive integer, got {v!r}")
+        if self.final_angle >= 180.0:
+            raise ValueError(f"final_angle must be below 180 degrees, got {self.final_angle!r}")
+        check_fit(self.radius)
+
+    @property
+    def fabric(self) -> Fabric:
+        return Fabric(E1=self.E, E2=self.E, G12=self.G, nu12=self.nu12, thickness=self.thickness,
+                      density=self.density, name=self.name)
+
+    def with_(self, **changes) -> "SleeveConfig":
+        return replace(self, **changes)
+
+
+def check_fit(radius: float, arm=DEFAULT_ARM) -> float:
+    """Clearance [m] between the sleeve radius and the thickest arm segment; ValueError naming `radius`
+    when the arm does not fit inside the undeformed sleeve (the arm must start without penetration)."""
+    thickest = max(arm.upper_arm_radius, arm.forearm_radius)
+    if radius <= thickest:
+        raise ValueError(f"radius: the sleeve radius {radius} m must exceed the arm's largest radius "
+                         f"{thickest:.4f} m (the arm must start inside the sleeve without penetration)")
+    return radius - thickest
+
+
+@dataclass
+class SleeveProblem:
+    """The assembled sleeve problem."""
+
+    config: SleeveConfig
+    model: ShellModel
+    contact: ContactProblem
+    body: Body
+    flexion: ElbowFlexion
+    solver: NewtonSolver
+    system: Stabilized
+
+    @property
+    def comm(self):
+        return self.model.comm
+
+    def time_at(self, angle_deg: float) -> float:
+        """Body time t [s] at which the flexion reaches `angle_deg`."""
+        return self.flexion.t_start + math.radians(angle_deg) / self.flexion.angular_velocity
+
+    def resisting_torque(self) -> float:
+        """-tau [N m] about the elbow along +z of the forces the sleeve exerts on the forearm (all ranks)."""
+        s = self.contact.evaluate()
+        names = list(self.body.segments)
+        elbow = self.body.joint_position("elbow", self.contact.time)
+        tau = contact_torque(s.position, -s.force, s.segment, [names.index("forearm")], elbow, ELBOW_AXIS,
+                             self.comm)
+        return -tau
+
+    def min_gap(self) -> float:
+        """Smallest signed gap [m] over all nodes and ranks (negative: penetration)."""
+        s = self.contact.evaluate()
+        return self.comm.allreduce(float(np.min(s.gap, initial=np.inf)), op=MPI.MIN)
+
+
+def build_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
+                 petsc_options: dict | None = None) -> SleeveProblem:
+    """Mesh, fabric, shoulder support, arm body and contact of a sleeve computation."""
+    # second-order geometry: the Q2 mid-side nodes lie on the circle (on a first-order mesh they sit on the
+    # chords, at R cos(pi / n_around): 1.4 mm closer to the arm on mesh I, a third of the 4.3 mm clearance)
+    fmesh = tube(config.length, config.radius, config.n_around, config.n_along, cell="quadrilateral", order=2,
+                 comm=comm)
+    # no director re-basing: re-basing moves the discrete equilibrium by O(h^2) between steps (measured on
+    # mesh I: a residual of 10% of the contact forces after every step); the rotations stay far from the
+    # two-angle singularity (|theta1| = pi/2) during a 57-degree flexion
+    model = ShellModel(fmesh, config.fabric, rebase=False)
+    model.constrain("end0", u=(0.0, 0.0, 0.0), theta=(0.0, 0.0) if config.hold_rotations else None)
+    if config.gravity:
+        model.add_gravity((0.0, -GRAVITY, 0.0))
+    flexion = elbow_flexion(angular_velocity=math.radians(config.angular_velocity),
+                            final_angle=math.radians(config.final_angle))
+    body = default_arm(flexion)
+    contact = ContactProblem(model, body, method=config.method, penalty=config.penalty, friction=config.friction,
+                             time=flexion.t_start)
+    system = Stabilized(contact, 0.0)
+    options = {"snes_max_it": 30}
+    options.update(petsc_options or {})
+    solver = NewtonSolver(system, options)
+    if not config.gravity:
+        # no dead load: F_ref = 0, the absolute tolerance would be 1e-12 N; use the scale of the contact
+        # forces instead (1e-10 of E t L, a force unit of the sleeve)
+        solver.snes.setTolerances(atol=1e-10 * config.E * config.thickness * config.length)
+    return SleeveProblem(config, model, contact, body, flexion, solver, system)
+
+
+@dataclass
+class SleeveStep:
+    angle: float            # deg
+    torque: float           # N m, resisting (positive opposes flexion)
+    torque_all: float       # N m, resisting torque of the contact forces on both segments about the elbow
+    newton_iterations: int
+    max_penetration: float  # m
+    contact_force: float    # N, |sum of contact forces on the cloth|
+    wall: float             # s since the start of the flexion
+    drag_ratio: float = 0.0  # fictitious drag / contact force left in an accepted relaxed state (0: exact)
+
+
+@dataclass
+class SleeveHistory:
+    config: SleeveConfig
+    steps: list[SleeveStep] = field(default_factory=list)
+    ndofs: int = 0
+    wall: float = 0.0
+    timings: dict = field(default_factory=dict)
+    initial_gap: float = math.nan   # m, smallest sleeve-arm gap at the start pose
+    failure: str = ""               # why the flexion stopped early ("" when it reached the final angle)
+
+    @property
+    def completed(self) -> bool:
+        return not self.failure
+
+    @property
+    def angles(self) -> np.ndarray:
+        return np.array([s.angle for s in self.steps])
+
+    @property
+    def torques(self) -> np.ndarray:
+        return np.array([s.torque for s in self.steps])
+
+    def torque_at(self, angle: float) -> float:
+        """Resisting torque [N m] at `angle` [deg] (linear interpolation of the history)."""
+        return float(np.interp(angle, self.angles, self.torques))
+
+    HEADER = ("angle_deg", "torque_Nm", "torque_both_segments_Nm", "newton_iterations", "max_penetration_m",
+              "contact_force_N", "wall_s", "drag_ratio")
+
+    def rows(self) -> list[list[float]]:
+        return [[s.angle, s.torque, s.torque_all, s.newton_iterations, s.max_penetration, s.contact_force, s.wall, s.drag_ratio]
+                for s in self.steps]
+
+
+def _solve_once(problem: SleeveProblem) -> tuple[bool, int, str]:
+    """One Newton solve (augmented: Newton + Uzawa updates) at the current pose and drag coefficient."""
+    contact, cfg = problem.contact, problem.config
+    if cfg.method == "augmented":
+        try:
+            report = contact.solve_augmented(problem.solver, tolerance=cfg.augmentation_tolerance)
+        except SolverError as exc:
+            return False, 0, str(exc)
+        return True, sum(report.newton_iterations), "augmented"
+    result = problem.solver.solve()
+    return result.converged, result.iterations, result.reason
+
+
+def _drag_ratio(problem: SleeveProblem) -> float:
+    """sum |drag| / sum |contact force| over all nodes (0 when no drag acts)."""
+    system, contact = problem.system, problem.contact
+    if system.coefficient == 0.0:
+        return 0.0
+    comm = problem.comm
+    drag = comm.allreduce(float(np.linalg.norm(system.drag(), axis=1).sum()), op=MPI.SUM)
+    force = comm.allreduce(float(np.linalg.norm(contact.evaluate().force, axis=1).sum()), op=MPI.SUM)
+    return drag / force if force > 0.0 else (0.0 if drag == 0.0 else math.inf)
+
+
+def _equilibrate(problem: SleeveProblem) -> tuple[bool, int, str, float]:
+    """Equilibrium at the current pose, starting from the last converged state.
+
+    A plain Newton solve first; if it fails, stabilised solves (viscous drag, `Stabilized`) in pseudo-time
+    at the same pose, each restarting the drag from the last one (dynamic relaxation), until a plain
+    Newton solve converges from the relaxed state or the drag falls below drag_tolerance x contact force.
+    Returns (converged, Newton iterations, reason, remaining drag ratio).
+    """
+    cfg, system = problem.config, problem.system
+    saved = system.w.x.array.copy()
+    saved_multiplier = problem.contact.multiplier.copy()
+    system.coefficient = 0.0
+    ok, total, reason = _solve_once(problem)
+    if ok or cfg.stabilization == 0.0:
+        return ok, total, reason, 0.0
+    system.w.x.array[:] = saved
+    problem.contact.multiplier = saved_multiplier.copy()
+    coefficient = cfg.stabilization * cfg.E * cfg.thickness / cfg.radius ** 2
+    ratio = math.inf
+    for _ in range(cfg.relaxation_steps):
+        system.coefficient = coefficient
+        ok, its, reason = _solve_once(problem)
+        total += its
+        if not ok:
+            system.coefficient = 0.0
+            return False, total, f"stabilised: {reason}", ratio
+        ratio = _drag_ratio(problem)
+        system.commit()
+        relaxed = system.w.x.array.copy()
+        relaxed_multiplier = problem.contact.multiplier.copy()
+        system.coefficient = 0.0
+        ok, its, reason = _solve_once(problem)
+        total += its
+        if ok:
+            return True, total, reason, 0.0
+        system.w.x.array[:] = relaxed
+        problem.contact.multiplier = relaxed_multiplier
+        if ratio < cfg.drag_tolerance:
+            # accept the relaxed state: its fictitious drag is below the tolerance (reported)
+            system.coefficient = coefficient
+            system.commit()
+            system.coefficient = 0.0
+            return True, total, "relaxed", ratio
+    system.coefficient = 0.0
+    return False, total, f"no equilibrium after {cfg.relaxation_steps} relaxations (drag ratio {ratio:.2e})", ratio
+
+
+def _predict(problem: SleeveProblem, angle_from: float, angle_to: float, touching: float = 1e-3):
+    """Predictor for the step angle_from -> angle_to [deg]: the nodes on the forearm (nearest segment,
+    gap below `touching` [m]) follow its rigid rotation about the elbow, x <- J + R (x - J), so that the
+    step starts without the penetration the moving body would otherwise cause."""
+    contact = problem.contact
+    s = contact.evaluate()
+    names = list(problem.body.segments)
+    moving = (s.segment == names.index("forearm")) & (s.gap < touching) & contact._free.all(axis=1)
+    if not moving.any():
+        return
+    from fabricfem.body.motion import rotation_about
+    elbow = problem.body.joint_position("elbow", contact.time)
+    rotation = rotation_about(ELBOW_AXIS, math.radians(angle_to - angle_from))
+    x_new = elbow + (s.position[moving] - elbow) @ rotation.T
+    dofs = contact.nodes.dofs[moving]
+    contact.w.x.array[dofs] = x_new - contact.nodes.reference[moving]
+    contact.w.x.scatter_forward()
+
+
+def _record(problem: SleeveProblem, angle: float, iterations: int, t0: float, drag_ratio: float) -> SleeveStep:
+    contact = problem.contact
+    all_torque = -contact.joint_torque("elbow", ELBOW_AXIS)
+    return SleeveStep(angle=angle, torque=problem.resisting_torque(), torque_all=all_torque,
+                      newton_iterations=iterations, max_penetration=contact.max_penetration(),
+                      contact_force=float(np.linalg.norm(contact.total_force())), wall=time.perf_counter() - t0,
+                      drag_ratio=drag_ratio)
+
+
+def run_quasistatic(problem: SleeveProblem, angles: np.ndarray | None = None,
+                    on_step: Callable[[SleeveStep], None] | None = None,
+                    stop_on_failure: bool = True) -> SleeveHistory:
+    """Flex the elbow through `angles` [deg] (default: `angle_steps` equal steps to `final_angle`) by
+    Newton solves at the posed body; returns the torque history (the first entry is the start pose).
+
+    `on_step(step)` is called after every requested angle (progress, output). Failed steps are halved
+    down to `config.min_angle_step`; then SleeveError, or, with stop_on_failure=False, the history up to
+    the last converged angle with `history.failure` set (the model stays in that last converged state).
+    """
+    cfg, contact, system = problem.config, problem.contact, problem.system
+    if angles is None:
+        angles = np.linspace(0.0, cfg.final_angle, cfg.angle_steps + 1)[1:]
+    angles = np.asarray(angles, dtype=float)
+    if np.any(np.diff(angles) <= 0.0) or angles[0] <= 0.0 or angles[-1] > cfg.final_angle + 1e-9:
+        raise ValueError(f"angles must increase strictly within (0, {cfg.final_angle}] deg, got {angles}")
+    t0 = time.perf_counter()
+    history = SleeveHistory(cfg, ndofs=problem.model.ndofs)
+    contact.set_time(problem.time_at(0.0))
+    gap0 = problem.min_gap()
+    if gap0 <= 0.0:
+        raise ValueError(f"radius: the arm penetrates the undeformed sleeve (min gap {gap0:.3e} m)")
+    history.initial_gap = gap0
+    # start pose: the load factor 1 switches on the dead load (gravity) if any
+    contact.set_load_factor(1.0)
+    ok, its, reason, ratio = _equilibrate(problem)
+    if not ok:
+        raise SleeveError(f"sleeve: the start pose did not converge ({reason})")
+    system.after_converged_step()
+    start = _record(problem, 0.0, its, t0, ratio)
+    history.steps.append(start)
+    if on_step:
+        on_step(start)
+    current = 0.0
+    for target in angles:
+        step = target - current
+        iterations, worst_ratio = 0, 0.0
+        while current < target - 1e-12:
+            trial = min(current + step, target)
+            saved = system.w.x.array.copy()
+            saved_multiplier = contact.multiplier.copy()
+            if cfg.predictor:
+                _predict(problem, current, trial)
+            contact.set_time(problem.time_at(trial))
+            ok, its, reason, ratio = _equilibrate(problem)
+            iterations += its
+            if ok:
+                system.after_converged_step()
+                current = trial
+                worst_ratio = max(worst_ratio, ratio)
+                continue
+            system.w.x.array[:] = saved
+            contact.multiplier = saved_multiplier
+            contact.set_time(problem.time_at(current))
+            step *= 0.5
+            if step < cfg.min_angle_step:
+                message = (f"sleeve: Newton failed at elbow angle {trial:.4g} deg ({reason}); the angle step fell "
+                           f"below min_angle_step = {cfg.min_angle_step} deg; last converged angle {current:.4g} deg")
+                if stop_on_failure:
+                    raise SleeveError(message, last_converged_load_factor=current, reason=reason)
+                if current > history.steps[-1].angle:
+                    history.steps.append(_record(problem, current, iterations, t0, worst_ratio))
+                history.failure = message
+                history.wall = time.perf_counter() - t0
+                return history
+        record = _record(problem, target, iterations, t0, worst_ratio)
+        if not np.isfinite(record.torque):
+            raise SleeveError(f"sleeve: the torque is not finite at {target} deg")
+        history.steps.append(record)
+        if on_step:
+            on_step(record)
+    history.wall = time.perf_counter() - t0
+    return history
+
+
+def run_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
+               on_step: Callable[[SleeveStep], None] | None = None, stop_on_failure: bool = True) -> SleeveHistory:
+    """Build and flex one sleeve configuration; returns its torque history."""
+    t0 = time.perf_counter()
+    problem = build_sleeve(config, comm)
+    history = run_quasistatic(problem, on_step=on_step, stop_on_failure=stop_on_failure)
+    history.wall = time.perf_counter() - t0
+    problem.solver.destroy()
+    return history
+
+
+def config_dict(config: SleeveConfig) -> dict:
+    return asdict(config)
+
+
+def config_from_scene(scene) -> SleeveConfig:
+    """SleeveConfig of a validated sleeve scene (fabricfem.scene); ValueError naming the key otherwise."""
+    mesh, fabric = scene["mesh"], scene["fabric"]
+    motion, contact, body = scene["motion"], scene["contact"], scene["body"]
+    if fabric["E1"] != fabric["E2"]:
+        raise ValueError("fabric.E2: the sleeve study uses E1 = E2 (thesis sec. 5.3)")
+    dims = {k: float(body[k]) for k in ("upper_arm_length", "forearm_length", "upper_arm_girth", "forearm_girth")
+            if k in body}
+    if dims:
+        raise ValueError(f"body: custom arm dimensions {sorted(dims)} are not supported by the sleeve runner yet "
+                         f"(the default arm is used)")
+    kw = dict(length=float(mesh["length"]), radius=float(mesh["radius"]), n_around=mesh["n_around"],
+              n_along=mesh["n_along"], thickness=float(fabric["thickness"]), E=float(fabric["E1"]),
+              G=float(fabric["G12"]), nu12=float(fabric["nu12"]), density=float(fabric.get("density", 0.0)),
+              friction=float(contact.get("friction", 0.1)), method=contact.get("method", "penalty"),
+              penalty=None if "penalty" not in contact else float(contact["penalty"]),
+              gravity=bool(contact.get("gravity", False)), final_angle=float(motion.get("final_angle", 57.0)),
+              angle_steps=int(motion.get("steps", 19)), angular_velocity=float(motion.get("angular_velocity", 45.0)),
+              name=scene.get("scene", {}).get("name", "sleeve"))
+    if "stabilization" in contact:
+        kw["stabilization"] = float(contact["stabilization"])
+    return SleeveConfig(**kw)
+
+
+# ---------------------------------------------------------------------------------------------- outputs
+def body_surface(ellipsoids, samples: int = 24) -> tuple[np.ndarray, np.ndarray]:
+    """Triangulated surfaces of posed ellipsoids: (points (n, 3) [m], triangles (m, 3))."""
+    points, cells, offset = [], [], 0
+    n_theta, n_phi = samples, 2 * samples
+    for e in ellipsoids:
+        pts = e.surface_points(n_theta, n_phi)
+        i, j = np.meshgrid(np.arange(n_theta - 1), np.arange(n_phi), indexing="ij")
+        a = i * n_phi + j
+        b = i * n_phi + (j + 1) % n_phi
+        c, d = a + n_phi, b + n_phi
+        tri = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([b, d, c], -1).reshape(-1, 3)])
+        points.append(pts.reshape(-1, 3))
+        cells.append(tri + offset)
+        offset += len(points[-1])
+    return np.concatenate(points), np.concatenate(cells)
+
+
+def plot_torque(path, curves: dict[str, tuple[np.ndarray, np.ndarray]], title: str = ""):
+    """Resisting torque [N m] vs elbow angle [deg] for named curves (PNG, rank 0)."""
+    if MPI.COMM_WORLD.rank != 0:
+        return
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from pathlib import Path
+    fig, ax = plt.subplots(figsize=(6, 4))
+    for label, (angle, torque) in curves.items():
+        ax.plot(angle, torque, marker="o", ms=3, label=label)
+    ax.set_xlabel("elbow flexion angle [deg]")
+    ax.set_ylabel("resisting torque [N m]")
+    ax.set_title(title)
+    ax.grid(True, alpha=0.3)
+    ax.legend()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def _render_pressure(path, problem: SleeveProblem, title: str):
+    """Deformed sleeve coloured by contact pressure [Pa] with the posed arm (pyvista, off-screen)."""
+    from fabricfem import io as fio
+    from dolfinx import fem as dfem
+    pressure = problem.contact.pressure_field()
+    V1 = dfem.FunctionSpace(problem.model.mesh, ("Lagrange", 1))
+    p1 = dfem.Function(V1)
+    p1.interpolate(pressure)
+    surface = fio.gather_surface(problem.model.mesh, problem.model.displacement())
+    # per-cell-vertex pressure, in the same (owned cells, one copy per vertex) layout as gather_surface
+    n_cells = problem.model.mesh.topology.index_map(2).size_local
+    dofs = V1.dofmap.list.array.reshape(-1, V1.dofmap.dof_layout.num_dofs)[:n_cells][:, [0, 1, 3, 2]]
+    values = problem.comm.gather(p1.x.array[dofs].reshape(-1), root=0)
+    if problem.comm.rank != 0:
+        return
+    import os
+    os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")
+    import pyvista as pv
+    points, cells = surface
+    cloth = pv.PolyData(points, np.hstack([np.full((len(cells), 1), 4), cells]).ravel())
+    cloth.point_data["contact pressure [Pa]"] = np.concatenate(values)
+    bp, bc = body_surface(problem.contact.ellipsoids)
+    arm = pv.PolyData(bp, np.hstack([np.full((len(bc), 1), 3), bc]).ravel())
+    plotter = pv.Plotter(off_screen=True, window_size=(1200, 800))
+    plotter.add_mesh(arm, color="wheat", opacity=0.35)
+    values = cloth.point_data["contact pressure [Pa]"]
+    # no scalar bar: its tick layout crashes VTK 9.x off-screen here (segfault in vtkScalarBarActor); the
+    # colour range is printed in the title instead
+    plotter.add_mesh(cloth, scalars="contact pressure [Pa]", cmap="viridis", show_edges=True,
+                     show_scalar_bar=False, clim=(0.0, max(float(values.max()), 1e-12)))
+    plotter.add_text(f"{title}\ncolour: 0 (dark) to {values.max():.3g} Pa (yellow)", font_size=11)
+    plotter.view_xy()
+    plotter.screenshot(str(path))
+    plotter.close()
+
+
+def run_sleeve_scene(scene, comm: MPI.Comm = MPI.COMM_WORLD) -> SleeveHistory:
+    """`fabricfem run` for sleeve scenes: flex the arm and write, under output.dir,
+    cloth.xdmf (sleeve displacement and contact pressure per angle), body_NNNN.vtp + body.pvd (arm surfaces
+    per angle), torque.csv (resisting elbow torque vs angle), torque.png and pressure_<angle>.png renders."""
+    from pathlib import Path
+    from dolfinx import fem as dfem
+    from dolfinx import io as dio
+    from fabricfem import io as fio
+    say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
+    config = config_from_scene(scene)
+    output = scene.get("output", {})
+    out = Path(output.get("dir", f"results/{config.name}"))
+    render = output.get("render", True)
+    render_angles = [float(a) for a in output.get("render_angles", [config.final_angle / 3,
+                                                                    2 * config.final_angle / 3,
+                                                                    config.final_angle])]
+    samples = int(output.get("body_samples", 24))
+    t0 = time.perf_counter()
+    problem = build_sleeve(config, comm)
+    say(f"sleeve: {config.n_around} x {config.n_along} Q2 tube, {problem.model.ndofs} dofs, {comm.size} rank(s); "
+        f"mu = {config.friction}, {config.method} contact, gravity {'on' if config.gravity else 'off'}; "
+        f"flexion to {config.final_angle} deg in {config.angle_steps} quasi-static steps")
+    if comm.rank == 0:
+        out.mkdir(parents=True, exist_ok=True)
+    comm.barrier()
+    V2 = problem.model.V2
+    u_out = dfem.Function(V2, name="displacement")
+    P = dfem.FunctionSpace(problem.model.mesh, ("Lagrange", 2))
+    p_out = dfem.Function(P, name="contact_pressure")
+    xdmf = dio.XDMFFile(comm, str(out / "cloth.xdmf"), "w")
+    xdmf.write_mesh(problem.model.mesh)
+    frames: list[tuple[float, str]] = []
+    pending = sorted(render_angles)
+
+    def on_step(step: SleeveStep):
+        u_out.interpolate(problem.model.displacement())
+        p_out.interpolate(problem.contact.pressure_field())
+        xdmf.write_function(u_out, step.angle)
+        xdmf.write_function(p_out, step.angle)
+        if comm.rank == 0:
+            import pyvista as pv
+            bp, bc = body_surface(problem.contact.ellipsoids, samples)
+            name = f"body_{len(frames):04d}.vtp"
+            pv.PolyData(bp, np.hstack([np.full((len(bc), 1), 3), bc]).ravel()).save(str(out / name))
+            frames.append((step.angle, name))
+        while render and pending and step.angle >= pending[0] - 1e-9:
+            angle = pending.pop(0)
+            _render_pressure(out / f"pressure_{angle:04.1f}deg.png", problem,
+                             f"{config.name}: elbow {step.angle:.1f} deg, contact pressure [Pa]")
+        done = step.angle / config.final_angle
+        elapsed = time.perf_counter() - t0
+        eta = elapsed * (1 - done) / max(done, 1e-12) if done > 0 else float("nan")
+        say(f"  angle {step.angle:6.2f} deg  torque {step.torque:+.4e} N m  Newton {step.newton_iterations:3d}  "
+            f"penetration {step.max_penetration:.1e} m  [{done:5.1%}, {elapsed:6.1f} s, about {eta:6.1f} s left]")
+
+    history = run_quasistatic(problem, on_step=on_step, stop_on_failure=False)
+    xdmf.close()
+    history.wall = time.perf_counter() - t0
+    fio.write_csv(out / "torque.csv", SleeveHistory.HEADER, history.rows(), comm)
+    if comm.rank == 0:
+        with open(out / "body.pvd", "w") as f:
+            f.write('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n<Collection>\n')
+            for angle, name in frames:
+                f.write(f'  <DataSet timestep="{angle}" file="{name}"/>\n')
+            f.write("</Collection>\n</VTKFile>\n")
+    plot_torque(out / "torque.png", {f"mu = {config.friction}": (history.angles, history.torques)},
+                f"{config.name}: elbow resisting torque")
+    problem.solver.destroy()
+    last = history.steps[-1]
+    say(f"done: {len(history.steps) - 1} angle steps to {last.angle:.2f} deg, "
+        f"{sum(s.newton_iterations for s in history.steps)} Newton iterations, {history.wall:.1f} s; "
+        f"torque at {last.angle:.2f} deg: {last.torque:.4e} N m; largest penetration "
+        f"{max(s.max_penetration for s in history.steps):.2e} m; start clearance {history.initial_gap * 1e3:.2f} mm")
+    if history.failure:
+        say(f"STOPPED EARLY: {history.failure}")
+    say(f"wrote {out}/cloth.xdmf, body.pvd (+ body_*.vtp), torque.csv, torque.png"
+        + (", pressure_*.png" if render else ""))
+    return history

@@ -1,0 +1,114 @@
+"""sleeve-trends: the trends of the thesis's sleeve study (sec. 5.3) checked on our study outputs.
+
+Reads results/sleeve_study/<figure>.csv when a full study (`fabricfem study sleeve`) has been run;
+otherwise runs the reduced quick study (mesh I, 6 degrees in 2 steps) and says so in every quantity
+("[reduced]"). The thesis's statements are the references (they are trends, not numbers):
+
+* torque at the final angle higher for mu = 0.5 than for mu = 0.1 (sec. 5.3.1-5.3.2);
+* the looser sleeve (R = 0.07 m) gives less torque than R = 0.06 m above 20 degrees (sec. 5.3.3);
+* doubling the thickness multiplies the torque by 1.6 to 2.4 ("roughly double", membrane-dominated,
+  sec. 5.3.4; the band is the task's reading of "roughly");
+* fabrics II and III give at least ten times fabric I's torque ("roughly proportional to the stiffness",
+  E ratios 292 and 6000, sec. 5.3.5);
+* the mu = 0.5 mesh series changes by less than 10% between the two finest meshes.
+
+A curve that stopped early (quasi-static Newton failure) is compared at the largest angle both curves
+reached, and the quantity names that angle; the model is not tuned to make a trend hold.
+"""
+from __future__ import annotations
+
+import csv
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from fabricfem.verify import CaseResult, Timer, case
+
+STUDY_DIR = Path("results/sleeve_study")
+
+
+def _read(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    rows = defaultdict(list)
+    with open(path) as f:
+        for r in csv.DictReader(f):
+            rows[r["variant"]].append((float(r["angle_deg"]), float(r["torque_Nm"])))
+    return {k: (np.array([a for a, _ in v]), np.array([t for _, t in v])) for k, v in rows.items()}
+
+
+def _curves(directory: Path) -> dict[str, dict[str, tuple[np.ndarray, np.ndarray]]]:
+    return {p.stem: _read(p) for p in directory.glob("*.csv") if p.stem != "failures"}
+
+
+def _common(a, b) -> float:
+    return float(min(a[0][-1], b[0][-1]))
+
+
+def _at(curve, angle: float) -> float:
+    return float(np.interp(angle, curve[0], curve[1]))
+
+
+def _check(name: str, quantity: str, value: float, reference: float, passed: bool, wall: float) -> CaseResult:
+    rel = abs(value - reference) / abs(reference) if reference else abs(value)
+    return CaseResult(name, quantity, float(value), float(reference), float(rel), float("nan"), bool(passed), 0, wall)
+
+
+def trends(figures, tag: str, wall: float) -> list[CaseResult]:
+    out = []
+    n = "sleeve-trends"
+    fr = figures["friction"]
+    a = _common(fr["mu = 0.1"], fr["mu = 0.5"])
+    lo, hi = _at(fr["mu = 0.1"], a), _at(fr["mu = 0.5"], a)
+    out.append(_check(n, f"{tag} T(mu=0.5)/T(mu=0.1) at {a:.1f} deg > 1", hi / lo if lo else np.inf, 1.0,
+                      hi > lo, wall))
+    fit = figures["fit"]
+    a = _common(fit["R = 0.06 m"], fit["R = 0.07 m"])
+    angles = fit["R = 0.06 m"][0]
+    above = angles[(angles > 20.0) & (angles <= a)]
+    if len(above):
+        ratios = [_at(fit["R = 0.07 m"], x) / _at(fit["R = 0.06 m"], x) for x in above]
+        out.append(_check(n, f"{tag} max T(R=0.07)/T(R=0.06) over 20-{a:.1f} deg < 1", max(ratios), 1.0,
+                          max(ratios) < 1.0, wall))
+    else:
+        t6, t7 = _at(fit["R = 0.06 m"], a), _at(fit["R = 0.07 m"], a)
+        out.append(_check(n, f"{tag} T(R=0.07)/T(R=0.06) at {a:.1f} deg (20 deg not reached: NOT the thesis "
+                          f"check) < 1", t7 / t6 if t6 else np.inf, 1.0, False, wall))
+    th = figures["thickness"]
+    a = _common(th["t = 1 mm"], th["t = 2 mm"])
+    r = _at(th["t = 2 mm"], a) / _at(th["t = 1 mm"], a)
+    out.append(_check(n, f"{tag} T(t=2mm)/T(t=1mm) at {a:.1f} deg in [1.6, 2.4]", r, 2.0, 1.6 <= r <= 2.4, wall))
+    fb = figures["fabrics"]
+    for k in ("II", "III"):
+        a = _common(fb["fabric I"], fb[f"fabric {k}"])
+        r = _at(fb[f"fabric {k}"], a) / _at(fb["fabric I"], a)
+        out.append(_check(n, f"{tag} T(fabric {k})/T(fabric I) at {a:.1f} deg >= 10", r, 10.0, r >= 10.0, wall))
+    ms = figures["mesh_mu0.5"]
+    labels = list(ms)
+    if len(labels) >= 2:
+        c1, c2 = ms[labels[-2]], ms[labels[-1]]
+        a = _common(c1, c2)
+        t1, t2 = _at(c1, a), _at(c2, a)
+        change = abs(t2 - t1) / abs(t2) if t2 else np.inf
+        out.append(_check(n, f"{tag} |T({labels[-1]}) - T({labels[-2]})| / T at {a:.1f} deg < 10%", change, 0.0,
+                          change < 0.1, wall))
+    else:
+        out.append(_check(n, f"{tag} mesh series mu=0.5: only one mesh in the reduced study (not checked)",
+                          np.nan, 0.0, False, wall))
+    return out
+
+
+@case("sleeve-trends", known_failure="the quasi-static flexion stalls at 12-20 degrees on mesh I (contact active-set cycling), so the large-angle trends cannot be evaluated yet")
+def sleeve_trends() -> list[CaseResult]:
+    """Sleeve-study trends of thesis sec. 5.3 (friction, fit, thickness, fabrics, mesh) on study outputs."""
+    with Timer() as timer:
+        if (STUDY_DIR / "friction.csv").exists():
+            figures, tag = _curves(STUDY_DIR), "[full study]"
+        else:
+            import tempfile
+            from mpi4py import MPI
+            from fabricfem.study import run_study
+            with tempfile.TemporaryDirectory() as tmp:
+                run_study(tmp, quick=True, comm=MPI.COMM_SELF)
+                figures = _curves(Path(tmp))
+            tag = "[reduced]"
+    return trends(figures, tag, timer.elapsed)
