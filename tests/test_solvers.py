@@ -79,3 +79,17 @@ def test_arc_length_follows_elastica():
         assert w == pytest.approx(references.elastica_tip_load(lam)["w"], rel=1e-2), lam
     lengths = [h.arc_length for h in history]
     assert len(set(np.round(lengths, 12))) > 1  # the arc length adapts (eq. 20)
+
+
+def test_many_solvers_do_not_fill_the_petsc_options_table():
+    """Each solver has its own options prefix; the options are removed once applied, so creating
+    hundreds of solvers in one process (a study, the test suite) never exhausts PETSc's table
+    (PETSc error 55). The options still take effect: snes_max_it = 3 is what SNES reports."""
+    from petsc4py import PETSc
+    model, _ = seed_cantilever(4)
+    before = len(PETSc.Options().getAll())
+    for _ in range(600):
+        NewtonSolver(model, {"snes_max_it": 3}).destroy()
+    solver = NewtonSolver(model, {"snes_max_it": 3})
+    assert solver.snes.getTolerances()[3] == 3
+    assert len(PETSc.Options().getAll()) == before

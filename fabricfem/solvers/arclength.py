@@ -23,7 +23,7 @@ from typing import Callable
 import numpy as np
 from petsc4py import PETSc
 
-from fabricfem.solvers.newton import SolverError
+from fabricfem.solvers.newton import SolverError, prefixed_options
 
 
 @dataclass
@@ -67,11 +67,9 @@ def arc_length(model, ds: float, max_steps: int, lambda_max: float | None = None
     ksp = PETSc.KSP().create(model.comm)
     ksp.setOperators(K)
     ksp.setOptionsPrefix("fabricfem_arclength_")
-    opts = PETSc.Options()
-    for k, v in {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps",
-                 **(petsc_options or {})}.items():
-        opts["fabricfem_arclength_" + k] = v
-    ksp.setFromOptions()
+    with prefixed_options("fabricfem_arclength_", {"ksp_type": "preonly", "pc_type": "lu",
+                                                   "pc_factor_mat_solver_type": "mumps", **(petsc_options or {})}):
+        ksp.setFromOptions()
     F_ref = model.F_ref
     fscale = max(F_ref.norm(), 1e-300)
 

@@ -22,7 +22,7 @@ import numpy as np
 import ufl
 from petsc4py import PETSc
 
-from fabricfem.solvers.newton import NewtonResult
+from fabricfem.solvers.newton import NewtonResult, prefixed_options
 
 DEFAULT_KSP_OPTIONS = {
     "ksp_type": "preonly",
@@ -47,12 +47,18 @@ class MPCNewtonSolver:
         max_it: at most this many Newton iterations
         ksp_options: PETSc options of the linear solver (default MUMPS LU)
         form_compiler_params: FFCx parameters of both forms
+        contact: optional extra nodal forces (e.g. fabricfem.contact.yarn.YarnContact): an object with
+            add_residual(b) (subtracts its forces from the owned rows of the assembled residual, before
+            the Dirichlet rows are set) and add_jacobian(A) (adds its stiffness to the owned rows of the
+            assembled Jacobian); it must drop the rows/columns of `constrained_dofs()`
+        line_search: halve the Newton step until the residual norm decreases (at most 5 times)
     """
 
     def __init__(self, residual: ufl.Form, u: fem.Function, mpc: dolfinx_mpc.MultiPointConstraint,
                  bcs: Sequence[fem.DirichletBCMetaClass] = (), jacobian: ufl.Form | None = None,
                  rtol: float = 1e-10, stol: float = 1e-13, max_it: int = 25,
-                 ksp_options: dict | None = None, form_compiler_params: dict | None = None):
+                 ksp_options: dict | None = None, form_compiler_params: dict | None = None,
+                 contact=None, line_search: bool = False):
         if not mpc.finalized:
             raise ValueError("mpc must be finalized before building the Newton solver")
         if u.function_space is not mpc.function_space:
@@ -63,6 +69,8 @@ class MPCNewtonSolver:
         if int(max_it) < 1:
             raise ValueError(f"max_it must be >= 1, got {max_it!r}")
         self.u, self.mpc, self.bcs = u, mpc, list(bcs)
+        self.contact = contact
+        self.line_search = bool(line_search)
         self.rtol, self.stol, self.max_it = float(rtol), float(stol), int(max_it)
         if jacobian is None:
             trial = ufl.TrialFunction(residual.arguments()[0].ufl_function_space())
@@ -78,11 +86,9 @@ class MPCNewtonSolver:
         ksp = PETSc.KSP().create(self.comm)
         prefix = f"fabricfem_mpc_newton_{next(_prefix_counter)}_"
         ksp.setOptionsPrefix(prefix)
-        opts = PETSc.Options()
-        for k, v in {**DEFAULT_KSP_OPTIONS, **(ksp_options or {})}.items():
-            opts[prefix + k] = v
         ksp.setOperators(self.A)
-        ksp.setFromOptions()
+        with prefixed_options(prefix, {**DEFAULT_KSP_OPTIONS, **(ksp_options or {})}):
+            ksp.setFromOptions()
         self.ksp = ksp
 
     @property
@@ -99,6 +105,8 @@ class MPCNewtonSolver:
         dolfinx_mpc.assemble_vector(self.L, self.mpc, b=self.b)
         dolfinx_mpc.apply_lifting(self.b, [self.a], [self.bcs], self.mpc, x0=[x], scale=-1.0)
         self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        if self.contact is not None:
+            self.contact.add_residual(self.b)
         fem_petsc.set_bc(self.b, self.bcs, x, -1.0)
         return self.b
 
@@ -106,6 +114,21 @@ class MPCNewtonSolver:
         self.A.zeroEntries()
         dolfinx_mpc.assemble_matrix(self.a, self.mpc, bcs=self.bcs, A=self.A)
         self.A.assemble()
+        if self.contact is not None:
+            self.contact.add_jacobian(self.A)
+
+    def constrained_dofs(self) -> np.ndarray:
+        """Global scalar indices of the Dirichlet and MPC-slave dofs held by this rank (owned or ghost):
+        rows and columns that extra contributions such as contact must leave alone."""
+        V = self.mpc.function_space
+        imap, bs = V.dofmap.index_map, V.dofmap.index_map_bs
+        local = [np.asarray(self.mpc.slaves, dtype=np.int64)]
+        for bc in self.bcs:
+            dofs, _ = bc.dof_indices()
+            local.append(np.asarray(dofs, dtype=np.int64))  # unrolled (block * bs + component)
+        local = np.unique(np.concatenate(local))
+        blocks = imap.local_to_global((local // bs).astype(np.int32))
+        return np.asarray(blocks, dtype=np.int64) * bs + local % bs
 
     def solve(self, force_scale: float, length_scale: float) -> NewtonResult:
         """Iterate from the current u until converged; u keeps the last iterate either way.
@@ -133,11 +156,10 @@ class MPCNewtonSolver:
             self.ksp.solve(self.b, self.du)
             if self.ksp.getConvergedReason() < 0:
                 return NewtonResult(False, it, "DIVERGED_LINEAR_SOLVE", norms)
-            x.axpy(-1.0, self.du)  # Newton update u <- u - J^{-1} R
-            x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
-            # backsubstitution ADDS the master combination to the slave entries: zero them first
-            self.mpc.homogenize(x)
-            self.mpc.backsubstitution(x)
+            if self.line_search:
+                self._backtrack(rnorm)
+            else:
+                self._update(1.0)
             dnorm = self.du.norm()
             if not np.isfinite(dnorm):
                 return NewtonResult(False, it + 1, "NAN_IN_SOLUTION", norms)
@@ -145,6 +167,31 @@ class MPCNewtonSolver:
                 norms.append(float(self.assemble_residual().norm()))
                 return NewtonResult(True, it + 1, "CONVERGED_SNORM", norms)
         return NewtonResult(False, self.max_it, "DIVERGED_MAX_IT", norms)
+
+    def _update(self, step: float) -> None:
+        """u <- u - step J^{-1} R, then the MPC slaves refilled from their masters."""
+        x = self.u.vector
+        x.axpy(-step, self.du)
+        x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        # backsubstitution ADDS the master combination to the slave entries: zero them first
+        self.mpc.homogenize(x)
+        self.mpc.backsubstitution(x)
+
+    def _backtrack(self, rnorm: float) -> None:
+        """Halve the step (at most 5 times) until |R| decreases: breaks the two-cycles that Newton
+        falls into on the kinks of a contact / friction law (stick-slip switches)."""
+        x0 = self.u.vector.copy()
+        step = 1.0
+        for _ in range(5):
+            self._update(step)
+            if self.assemble_residual().norm() < rnorm:
+                break
+            x0.copy(self.u.vector)
+            self.u.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+            step *= 0.5
+        else:
+            self._update(step)
+        x0.destroy()
 
     def destroy(self) -> None:
         for obj in (self.ksp, self.A, self.b, self.du):

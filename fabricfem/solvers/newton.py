@@ -1,6 +1,7 @@
 """Newton's method by PETSc SNES with the exact UFL Jacobian (MUMPS LU by default)."""
 from __future__ import annotations
 
+import contextlib
 import itertools
 from dataclasses import dataclass, field
 
@@ -20,6 +21,21 @@ DEFAULT_OPTIONS = {
 }
 
 _prefix_counter = itertools.count()
+
+
+@contextlib.contextmanager
+def prefixed_options(prefix: str, options: dict):
+    """Put `options` into the PETSc options database under `prefix` for the duration of a
+    setFromOptions call, then remove them: the database holds a limited number of entries
+    (PETSc error 55 'Out of memory' once full), and every solver uses its own prefix."""
+    database = PETSc.Options()
+    for key, value in options.items():
+        database[prefix + key] = value
+    try:
+        yield
+    finally:
+        for key in options:
+            database.delValue(prefix + key)
 
 
 class SolverError(RuntimeError):
@@ -60,9 +76,6 @@ class NewtonSolver:
         opts["snes_atol"] = 1e-10 * fref if fref > 0 else 1e-12
         opts.update(options or {})
         self.options = opts
-        petsc_opts = PETSc.Options()
-        for k, v in opts.items():
-            petsc_opts[self.prefix + k] = v
         self.b = model.create_vector()
         self.A = model.create_matrix()
         self.x = model.create_vector()
@@ -70,9 +83,10 @@ class NewtonSolver:
         snes.setOptionsPrefix(self.prefix)
         snes.setFunction(lambda s, x, b: model.residual(x, b), self.b)
         snes.setJacobian(lambda s, x, A, P: model.jacobian(x, A), self.A)
-        snes.setFromOptions()
-        snes.getKSP().setFromOptions()
-        snes.getKSP().getPC().setFromOptions()
+        with prefixed_options(self.prefix, opts):
+            snes.setFromOptions()
+            snes.getKSP().setFromOptions()
+            snes.getKSP().getPC().setFromOptions()
         self._norms: list[float] = []
         snes.setMonitor(lambda s, it, norm: self._norms.append(float(norm)))
         self.snes = snes
