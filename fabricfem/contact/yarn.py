@@ -1,0 +1,622 @@
+"""Yarn-yarn frictional contact between hexahedral yarn meshes (thesis 000, sec. 3.2 and 3.4, Box 7).
+
+Node-to-surface contact: the slave nodes are the vertices of one yarn's lateral surface facets, the
+master surface is the other yarn's lateral facets (quadrilaterals of the hex mesh, each split into the
+two triangles (v0, v1, v3), (v0, v3, v2) of dolfinx' tensor-product vertex order). Units: m, N, Pa.
+
+Kinematics (sec. 3.2): every slave node x_s is projected onto the master surface (closest point on
+the triangles, exact, vectorized); the projection x_p = sum_i N_i x_i (N_i: barycentric weights of
+the master triangle = linear shape functions of the triangulated surface), the outward master
+normal n = sum_i N_i n_i / |.| interpolated from the nodal normals n_i (area-weighted averages of the
+adjacent facet normals: a continuous normal field, so that the force direction does not jump when
+the foot point crosses a facet edge, which made Newton stall at 1e-3 of the force with facet normals)
+and the signed normal gap
+
+    g = n . (x_s - x_p)          (eq. 3.25, positive = separated; the thesis uses the opposite sign)
+
+The tangential slip since the last converged step is the relative motion of x_s with respect to the
+master material point x_ref = sum_i N_i(xi_n) x_i it was projected onto at that step (the convected
+coordinate xi_n of eq. 3.74), taken in the current tangent plane: P (x_s - x_ref), P = 1 - n n^T.
+
+Contact law: symmetrized augmented Lagrangian of Laursen (Box 7, eqs. 3.69, 3.74, 3.75, 3.79) with
+multipliers lambda_N [Pa] and lambda_T [Pa, a tangential vector] per slave node, held fixed in the
+Newton solve of one augmentation:
+
+    p   = < lambda_N - eps_N g >                                    (eq. 3.69, contact pressure)
+    t*  = P lambda_T - eps_T P (x_s - x_ref)                          (eq. 3.74, trial traction)
+    t_T = t*                       if |t*| <= mu lambda_N  (stick)    (eq. 3.75 with Box 7's Phi~:
+    t_T = mu lambda_N t* / |t*|    otherwise (slip)                    the limit uses lambda_N, fixed)
+
+The slave node gets the force f_s = A_s (p n + t_T) [N] (A_s: its lumped reference area), the master
+nodes get -N_i A_s p n at the current projection and -N_i(xi_n) A_s t_T at the reference point.
+Uzawa augmentation between Newton solves (Box 7 step 3): lambda_N <- p, lambda_T <- t_T returned onto
+the new cone |lambda_T| <= mu lambda_N (eq. 3.79), until the largest penetration and the largest
+stick-slip violation are below `tolerance`. With `augmented=False` the law is the plain penalty one
+(lambda = 0, friction limit mu p). After a converged load step (`commit`), the reference points move
+to the current projections and lambda_T is kept as the history of the tangential traction.
+
+Tangent (assembled into the Jacobian as dR/dx, R = internal - contact forces): with G = [1, -N_i] the
+stencil weights at the projection and H = [1, -N_i(xi_n)] those of the reference point,
+
+    K_jk = A eps_N G_j G_k n n^T - A H_j H_k D,     D = -eps_T P (stick)
+                                                   D = -(mu lambda_N eps_T / |t*|)(P - tau tau^T) (slip)
+
+It neglects the variation of n and of the projection xi (terms of relative size |g| / h and of the
+curvature), so it is approximately consistent; it is symmetric because lambda_N is fixed (Box 7).
+
+Search (sec. 3.2 / 3.4: global once, local afterwards): a global search pairs every slave node with
+the master facets whose centroid lies within (the facet circumradius + margin) (scipy cKDTree);
+these candidates are reused (a Verlet list) until some surface node has moved more than margin / 2
+since that search, when the global search is repeated. margin defaults to the median facet edge.
+
+Parallel: the surface node coordinates, displacements and facet connectivity of all yarns are
+gathered on every rank (allgather; surfaces are small), every rank computes the same contact state,
+and each rank adds only the rows it owns to the PETSc residual vector and Jacobian. Rows and columns
+of constrained dofs (Dirichlet, or multi-point-constraint slaves) are dropped (their increment is zero
+or given by other dofs); `dropped_active` counts active contact nodes that touch one.
+"""
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import dolfinx.fem as fem
+import numpy as np
+import scipy.sparse as sp
+from mpi4py import MPI
+from petsc4py import PETSc
+from scipy.spatial import cKDTree
+
+__all__ = ["ContactParameters", "ContactReport", "YarnContact", "closest_point_on_triangles",
+           "project_onto_quads", "symmetric_return_map"]
+
+
+def _positive(name: str, value) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a positive number, got {value!r}") from None
+    if not (np.isfinite(v) and v > 0.0):
+        raise ValueError(f"{name} must be positive and finite, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class ContactParameters:
+    """Parameters of the yarn contact law.
+
+    Attributes:
+        penalty: eps_N [Pa/m], normal penalty (eq. 3.69), > 0
+        friction: Coulomb coefficient mu >= 0
+        tangential_penalty: eps_T [Pa/m] (eq. 3.74), > 0; None = penalty
+        tolerance: [m] augmentation stops when max penetration and max stick slip are below it, > 0
+        max_augmentations: Uzawa updates per load step (>= 1)
+        augmented: False = pure penalty law (no multipliers, one Newton solve per step)
+        margin: [m] Verlet margin of the contact search; None = median master facet edge length
+    """
+
+    penalty: float
+    friction: float = 0.0
+    tangential_penalty: float | None = None
+    tolerance: float = 1e-9
+    max_augmentations: int = 30
+    augmented: bool = True
+    margin: float | None = None
+
+    def __post_init__(self) -> None:
+        _positive("penalty", self.penalty)
+        try:
+            mu = float(self.friction)
+        except (TypeError, ValueError):
+            raise ValueError(f"friction (Coulomb coefficient) must be a number >= 0, got {self.friction!r}") from None
+        if not (np.isfinite(mu) and mu >= 0.0):
+            raise ValueError(f"friction (Coulomb coefficient) must be finite and >= 0, got {self.friction!r}")
+        if self.tangential_penalty is not None:
+            _positive("tangential_penalty", self.tangential_penalty)
+        _positive("tolerance", self.tolerance)
+        if isinstance(self.max_augmentations, bool) or int(self.max_augmentations) != self.max_augmentations \
+                or self.max_augmentations < 1:
+            raise ValueError(f"max_augmentations must be an integer >= 1, got {self.max_augmentations!r}")
+        if self.margin is not None:
+            _positive("margin", self.margin)
+
+    @property
+    def eps_T(self) -> float:
+        return float(self.penalty if self.tangential_penalty is None else self.tangential_penalty)
+
+
+@dataclass
+class ContactReport:
+    """Contact summary of one load step (forces in N on the slave bodies, lengths in m)."""
+
+    augmentations: int
+    max_penetration: float
+    max_stick_slip: float
+    force: np.ndarray  # total contact force on the slave yarns (3,) [N]
+    normal_force: float  # sum of A_s p_s [N]
+    tangential_force: float  # |sum of A_s t_T| [N]
+    active: int
+    slipping: int
+    newton_iterations: list[int] = field(default_factory=list)
+    dropped_active: int = 0
+
+
+# ---------------------------------------------------------------------------------------------
+# pure geometry and friction helpers
+
+
+def closest_point_on_triangles(x: np.ndarray, a: np.ndarray, b: np.ndarray, c: np.ndarray
+                               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Closest points on triangles (a, b, c) to points x, all (n, 3) [m], vectorized.
+
+    Returns (point (n, 3), barycentric weights (n, 3) of (a, b, c), distance (n,)). Exact: the
+    projection onto the plane if it falls inside, otherwise the closest of the three edge points."""
+    ab, ac, ax = b - a, c - a, x - a
+    d00, d01, d11 = (ab * ab).sum(1), (ab * ac).sum(1), (ac * ac).sum(1)
+    d20, d21 = (ax * ab).sum(1), (ax * ac).sum(1)
+    den = d00 * d11 - d01 * d01
+    if np.any(den <= 0.0):
+        raise ValueError("master surface: degenerate (zero-area) triangle")
+    v = (d11 * d20 - d01 * d21) / den
+    w = (d00 * d21 - d01 * d20) / den
+    bary = np.column_stack([1.0 - v - w, v, w])
+    inside = np.all(bary >= 0.0, axis=1)
+    best_bary = np.where(inside[:, None], bary, 0.0)
+    best_dist = np.where(inside, np.linalg.norm(x - (bary[:, :1] * a + v[:, None] * b + w[:, None] * c), axis=1),
+                         np.inf)
+    for i, j in ((0, 1), (1, 2), (2, 0)):  # three edges, vectorized over points
+        p, q = (a, b, c)[i], (a, b, c)[j]
+        e = q - p
+        t = np.clip(((x - p) * e).sum(1) / (e * e).sum(1), 0.0, 1.0)
+        dist = np.linalg.norm(x - (p + t[:, None] * e), axis=1)
+        better = dist < best_dist
+        edge_bary = np.zeros_like(bary)
+        edge_bary[:, i], edge_bary[:, j] = 1.0 - t, t
+        best_bary = np.where(better[:, None], edge_bary, best_bary)
+        best_dist = np.where(better, dist, best_dist)
+    point = best_bary[:, :1] * a + best_bary[:, 1:2] * b + best_bary[:, 2:] * c
+    return point, best_bary, best_dist
+
+
+# the two triangles of a tensor-ordered quad (v0, v1, v2, v3) = (0,0), (1,0), (0,1), (1,1)
+_QUAD_TRIANGLES = np.array([[0, 1, 3], [0, 3, 2]])
+
+
+def project_onto_quads(x: np.ndarray, quads_x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Closest point of x (n, 3) on quadrilateral facets quads_x (n, 4, 3) (tensor vertex order, both
+    as two triangles), pairwise. Returns (point (n, 3), weights (n, 4) of the quad's vertices,
+    outward unit normal (n, 3) (of the chosen triangle, (v1 - v0) x (v2 - v0) orientation, or along
+    x - point when the foot point lies on an edge or vertex), distance (n,))."""
+    best = None
+    for tri in _QUAD_TRIANGLES:
+        a, b, c = (quads_x[:, k] for k in tri)
+        point, bary, dist = closest_point_on_triangles(x, a, b, c)
+        normal = np.cross(b - a, c - a)
+        normal /= np.linalg.norm(normal, axis=1)[:, None]
+        weights = np.zeros((len(x), 4))
+        np.put_along_axis(weights, np.broadcast_to(tri, (len(x), 3)), bary, axis=1)
+        if best is None:
+            best = [point, weights, normal, dist]
+        else:
+            better = dist < best[3]
+            best = [np.where(better[:, None], point, best[0]), np.where(better[:, None], weights, best[1]),
+                    np.where(better[:, None], normal, best[2]), np.where(better, dist, best[3])]
+    point, weights, normal, dist = best
+    # foot point on an edge or a vertex: the normal is the direction of the distance vector (signed by
+    # the facet normal), which keeps the gap continuous when the closest facet changes
+    on_edge = np.count_nonzero(weights > 0.0, axis=1) < 3
+    diff = x - point
+    sign = np.where((diff * normal).sum(1) < 0.0, -1.0, 1.0)
+    use = on_edge & (dist > 0.0)
+    safe = np.where(use, dist, 1.0)
+    normal = np.where(use[:, None], sign[:, None] * diff / safe[:, None], normal)
+    return point, weights, normal, dist
+
+
+def symmetric_return_map(trial: np.ndarray, limit: np.ndarray, eps_T: float, projector: np.ndarray
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Coulomb return mapping with a fixed friction limit (Box 7, eq. 3.75), n nodes, vectorized.
+
+    trial: (n, 3) tangential trial tractions t* [Pa]; limit: (n,) mu lambda_N [Pa] >= 0;
+    eps_T [Pa/m]; projector: (n, 3, 3) P = 1 - n n^T.
+    Returns (t_T (n, 3), D = dt_T/d(slip displacement) (n, 3, 3) [Pa/m], slip (n,) bool)."""
+    norm = np.linalg.norm(trial, axis=1)
+    slip = norm > limit
+    safe = np.where(norm > 0.0, norm, 1.0)
+    tau = trial / safe[:, None]
+    traction = np.where(slip[:, None], limit[:, None] * tau, trial)                       # eq. 3.75
+    stick_D = -eps_T * projector
+    slip_D = -(limit * eps_T / safe)[:, None, None] * (projector - tau[:, :, None] * tau[:, None, :])
+    return traction, np.where(slip[:, None, None], slip_D, stick_D), slip
+
+
+def _nodal_normals(x: np.ndarray, quads: np.ndarray) -> np.ndarray:
+    """Unit outward normals at the nodes x (n, 3) of the quads (m, 4): area-weighted average of the
+    adjacent facet normals (the quad's diagonals' cross product is twice its area vector)."""
+    qx = x[quads]
+    facet = np.cross(qx[:, 3] - qx[:, 0], qx[:, 2] - qx[:, 1])
+    out = np.zeros_like(x)
+    np.add.at(out, quads.ravel(), np.repeat(facet, 4, axis=0))
+    norm = np.linalg.norm(out, axis=1)
+    return out / np.where(norm > 0.0, norm, 1.0)[:, None]
+
+
+# ---------------------------------------------------------------------------------------------
+# the distributed contact operator
+
+
+def _vertex_to_dof_block(V: fem.FunctionSpace) -> np.ndarray:
+    """Local vertex -> local dof block of a P1 (vector) space; -1 for vertices without dofs."""
+    mesh = V.mesh
+    tdim = mesh.topology.dim
+    mesh.topology.create_connectivity(tdim, 0)
+    c2v = mesh.topology.connectivity(tdim, 0)
+    nv = mesh.topology.index_map(0).size_local + mesh.topology.index_map(0).num_ghosts
+    per_cell = c2v.offsets[1] - c2v.offsets[0]
+    dofs = V.dofmap.list.array.reshape(-1, per_cell)
+    if dofs.shape[1] != per_cell:
+        raise ValueError("u must be a first-order Lagrange vector Function (one dof block per vertex)")
+    out = np.full(nv, -1, dtype=np.int64)
+    out[c2v.array.reshape(-1, per_cell)] = dofs
+    return out
+
+
+class YarnContact:
+    """Frictional node-to-surface contact between yarns of one dolfinx mesh.
+
+    Parameters:
+        u: displacement (or fluctuation) Function, first-order Lagrange vector space [m]; the placement
+            of a node is x = Phi X + u with X its reference position and Phi (attribute, default 1)
+            the macroscopic deformation gradient of a unit cell
+        facet_tags: MeshTags of facets holding the yarns' lateral surface facets
+        pairs: (slave tag, master tag) pairs; the slave yarn's vertices are pushed out of the master
+            yarn's facets
+        parameters: ContactParameters
+        constrained_dofs: global scalar dof indices (any rank may give any) whose rows and columns are
+            dropped from the contact contributions (Dirichlet / MPC slaves)
+    """
+
+    def __init__(self, u: fem.Function, facet_tags, pairs: Sequence[tuple[int, int]], parameters: ContactParameters,
+                 constrained_dofs: np.ndarray | None = None):
+        if not isinstance(parameters, ContactParameters):
+            raise ValueError("parameters must be a ContactParameters")
+        if not pairs:
+            raise ValueError("pairs must contain at least one (slave tag, master tag) pair")
+        V = u.function_space
+        mesh = V.mesh
+        self.u, self.params, self.comm = u, parameters, mesh.comm
+        self.bs = V.dofmap.index_map_bs
+        if self.bs != 3 or mesh.geometry.dim != 3:
+            raise ValueError("u must be a 3-component vector Function on a 3D mesh")
+        self.Phi = np.eye(3)
+        imap = V.dofmap.index_map
+        self.owned_range = np.array(imap.local_range, dtype=np.int64) * self.bs
+        self.n_global = imap.size_global * self.bs
+
+        tdim = mesh.topology.dim
+        mesh.topology.create_connectivity(tdim - 1, 0)
+        mesh.topology.create_connectivity(tdim - 1, tdim)
+        mesh.topology.create_connectivity(tdim, 0)
+        f2v, f2c, c2v = (mesh.topology.connectivity(tdim - 1, 0), mesh.topology.connectivity(tdim - 1, tdim),
+                         mesh.topology.connectivity(tdim, 0))
+        vertex_block = _vertex_to_dof_block(V)
+        block_global = np.asarray(imap.local_to_global(np.arange(imap.size_local + imap.num_ghosts,
+                                                                  dtype=np.int32)), dtype=np.int64)
+        # vertex -> geometry node (P1 geometry: same reference order as the topology)
+        gdofs = mesh.geometry.dofmap.array.reshape(-1, c2v.offsets[1] - c2v.offsets[0])
+        vertex_node = np.zeros(len(vertex_block), dtype=np.int64)
+        vertex_node[c2v.array.reshape(-1, gdofs.shape[1])] = gdofs
+        X_all = mesh.geometry.x
+
+        tags = sorted({int(t) for pair in pairs for t in pair})
+        present = set(np.unique(np.concatenate(self.comm.allgather(facet_tags.values))).tolist())
+        for t in tags:
+            if t not in present:
+                raise ValueError(f"pairs: facet tag {t} marks no facet of the mesh")
+        for s, m in pairs:
+            if s == m:
+                raise ValueError(f"pairs: slave and master tag must differ, got ({s}, {m})")
+
+        # local quads (global dof blocks, outward orientation) of every tag, gathered everywhere
+        per_facet = f2v.offsets[1] - f2v.offsets[0]
+        if per_facet != 4:
+            raise ValueError("the contact surfaces must be quadrilateral facets (hexahedral mesh)")
+        fv = f2v.array.reshape(-1, 4)
+        cell_vertices = c2v.array.reshape(-1, c2v.offsets[1] - c2v.offsets[0])
+        quads_by_tag = {}
+        owned_blocks, owned_X = [], []
+        for t in tags:
+            facets = facet_tags.indices[facet_tags.values == t]
+            verts = fv[facets]
+            x = X_all[vertex_node[verts]]
+            cells = f2c.array[f2c.offsets[facets]]
+            centre = X_all[vertex_node[cell_vertices[cells]]].mean(axis=1)
+            normal = np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0])
+            inward = (normal * (x.mean(axis=1) - centre)).sum(1) < 0.0
+            verts = np.where(inward[:, None], verts[:, [0, 2, 1, 3]], verts)
+            blocks = block_global[vertex_block[verts]]
+            quads_by_tag[t] = np.concatenate(self.comm.allgather(blocks)).reshape(-1, 4)
+            local_blocks = vertex_block[np.unique(verts)]
+            mine = local_blocks < imap.size_local
+            owned_blocks.append(block_global[local_blocks[mine]])
+            owned_X.append(X_all[vertex_node[np.unique(verts)[mine]]])
+        owned_blocks = np.concatenate(owned_blocks)
+        owned_X = np.concatenate(owned_X)
+        owned_blocks, first = np.unique(owned_blocks, return_index=True)
+        owned_X = owned_X[first]
+        self._local_owned = (owned_blocks - imap.local_range[0]).astype(np.int64)  # local blocks to send
+        all_blocks = self.comm.allgather(owned_blocks)
+        self._recv_order = np.argsort(np.concatenate(all_blocks), kind="stable")
+        self.nodes = np.concatenate(all_blocks)[self._recv_order]  # global dof blocks, sorted
+        self.X = np.concatenate(self.comm.allgather(owned_X))[self._recv_order]  # reference positions [m]
+
+        def local(blocks: np.ndarray) -> np.ndarray:
+            idx = np.searchsorted(self.nodes, blocks)
+            return idx
+
+        # one facet once (a facet shared by ranks appears several times)
+        for t in tags:
+            q = local(quads_by_tag[t])
+            key = np.sort(q, axis=1)
+            _, keep = np.unique(key, axis=0, return_index=True)
+            quads_by_tag[t] = q[np.sort(keep)]
+
+        # slave nodes of every pair with lumped reference areas (area / 4 per quad vertex)
+        slaves, areas, masters, pair_of_slave = [], [], [], []
+        node_area = {}
+        for t in tags:
+            q = quads_by_tag[t]
+            x = self.X[q]
+            area = 0.5 * (np.linalg.norm(np.cross(x[:, 1] - x[:, 0], x[:, 3] - x[:, 0]), axis=1)
+                          + np.linalg.norm(np.cross(x[:, 3] - x[:, 0], x[:, 2] - x[:, 0]), axis=1))
+            a = np.zeros(len(self.nodes))
+            np.add.at(a, q.ravel(), np.repeat(area / 4.0, 4))
+            node_area[t] = a
+        for k, (s, m) in enumerate(pairs):
+            nodes = np.unique(quads_by_tag[s])
+            slaves.append(nodes)
+            areas.append(node_area[s][nodes])
+            pair_of_slave.append(np.full(len(nodes), k))
+            masters.append(quads_by_tag[m])
+        self.pairs = [(int(s), int(m)) for s, m in pairs]
+        self.slave = np.concatenate(slaves)
+        self.area = np.concatenate(areas)  # [m^2]
+        self.pair_of_slave = np.concatenate(pair_of_slave)
+        self.master_quads = masters  # per pair (m_k, 4) indices into self.nodes
+        edges = np.concatenate([np.linalg.norm(self.X[q] - self.X[np.roll(q, 1, axis=1)], axis=2).ravel()
+                                for q in masters])
+        self.margin = float(np.median(edges)) if parameters.margin is None else float(parameters.margin)
+
+        constrained = np.zeros(0, dtype=np.int64) if constrained_dofs is None else np.asarray(constrained_dofs,
+                                                                                             dtype=np.int64)
+        self.constrained = np.unique(np.concatenate(self.comm.allgather(constrained)))
+
+        n = len(self.slave)
+        self.lam_N = np.zeros(n)  # [Pa]
+        self.lam_T = np.zeros((n, 3))  # [Pa]
+        self.ref_quad = np.full(n, -1, dtype=np.int64)  # reference master facet (index into its pair's list)
+        self.ref_weights = np.zeros((n, 4))
+        self._candidates: list[np.ndarray] | None = None
+        self._search_x: np.ndarray | None = None
+        self.state: dict | None = None
+        self.dropped_active = 0
+
+    # ----------------------------------------------------------------- state
+    def positions(self) -> np.ndarray:
+        """Current positions x = Phi X + u (n_nodes, 3) of all surface nodes (same on every rank) [m]."""
+        values = self.u.x.array.reshape(-1, 3)[self._local_owned]
+        u = np.concatenate(self.comm.allgather(values))[self._recv_order]
+        x = self.X @ self.Phi.T + u
+        if not np.all(np.isfinite(x)):
+            raise ValueError("u: the surface positions are not finite (the solve diverged)")
+        return x
+
+    def _search(self, x: np.ndarray) -> list[np.ndarray]:
+        """Candidate (slave, facet) pairs per contact pair: slave within the facet's circumradius + margin
+        of its centroid."""
+        out = []
+        for k, quads in enumerate(self.master_quads):
+            qx = x[quads]
+            centroid = qx.mean(axis=1)
+            radius = np.linalg.norm(qx - centroid[:, None], axis=2).max(axis=1)
+            slaves = np.flatnonzero(self.pair_of_slave == k)
+            hits = cKDTree(x[self.slave[slaves]]).query_ball_point(centroid, radius + self.margin)
+            counts = np.fromiter(map(len, hits), dtype=np.int64, count=len(hits))
+            found = np.fromiter(itertools.chain.from_iterable(hits), dtype=np.int64, count=int(counts.sum()))
+            out.append(np.column_stack([slaves[found], np.repeat(np.arange(len(quads)), counts)]))
+        return out
+
+    def _candidate_pairs(self, x: np.ndarray) -> list[np.ndarray]:
+        if self._candidates is None or np.linalg.norm(x - self._search_x, axis=1).max() > 0.5 * self.margin:
+            self._candidates = self._search(x)
+            self._search_x = x.copy()
+        return self._candidates
+
+    def evaluate(self) -> dict:
+        """Contact state at the current u: projections, gaps, tractions and tangents of all slaves."""
+        p_ = self.params
+        x = self.positions()
+        n = len(self.slave)
+        facet = np.full(n, -1, dtype=np.int64)
+        weights, normal = np.zeros((n, 4)), np.zeros((n, 3))
+        point = x[self.slave].copy()
+        dist = np.full(n, np.inf)
+        for k, cand in enumerate(self._candidate_pairs(x)):
+            if len(cand) == 0:
+                continue
+            s, f = cand[:, 0], cand[:, 1]
+            pt, w, _, d = project_onto_quads(x[self.slave[s]], x[self.master_quads[k][f]])
+            nodal = _nodal_normals(x, self.master_quads[k])
+            nrm = (w[:, :, None] * nodal[self.master_quads[k][f]]).sum(1)  # interpolated nodal normal
+            nrm /= np.linalg.norm(nrm, axis=1)[:, None]
+            order = np.lexsort((d, s))
+            first = order[np.unique(s[order], return_index=True)[1]]
+            sel = s[first]
+            facet[sel], weights[sel], normal[sel], point[sel], dist[sel] = f[first], w[first], nrm[first], \
+                pt[first], d[first]
+        found = facet >= 0
+        gap = np.where(found, ((x[self.slave] - point) * normal).sum(1), np.inf)  # eq. 3.25
+        lam_N = self.lam_N if p_.augmented else np.zeros(n)
+        pressure = np.where(found, np.maximum(lam_N - p_.penalty * np.where(found, gap, 0.0), 0.0), 0.0)  # eq. 3.69
+        active = pressure > 0.0
+        # first touch: the reference point is the current projection
+        new = active & (self.ref_quad < 0)
+        self.ref_quad[new], self.ref_weights[new] = facet[new], weights[new]
+        ref_pair_quads = np.zeros((n, 4), dtype=np.int64)
+        has_ref = self.ref_quad >= 0
+        for k, quads in enumerate(self.master_quads):
+            sel = has_ref & (self.pair_of_slave == k)
+            ref_pair_quads[sel] = quads[self.ref_quad[sel]]
+        x_ref = (self.ref_weights[:, :, None] * x[ref_pair_quads]).sum(1)
+        P = np.eye(3)[None] - normal[:, :, None] * normal[:, None, :]
+        lam_T = self.lam_T if p_.augmented else np.zeros((n, 3))
+        trial = np.einsum("nij,nj->ni", P, lam_T - p_.eps_T * (x[self.slave] - x_ref))       # eq. 3.74
+        limit = p_.friction * (self.lam_N if p_.augmented else pressure)                      # Box 7: mu lambda_N
+        traction, D, slip = symmetric_return_map(trial, limit, p_.eps_T, P)                   # eq. 3.75
+        traction[~active], D[~active], slip[~active] = 0.0, 0.0, False
+        cur_quads = np.zeros((n, 4), dtype=np.int64)
+        for k, quads in enumerate(self.master_quads):
+            sel = found & (self.pair_of_slave == k)
+            cur_quads[sel] = quads[facet[sel]]
+        self.state = dict(x=x, facet=facet, weights=weights, normal=normal, gap=gap, pressure=pressure,
+                          active=active, traction=traction, D=D, slip=slip, trial=trial, cur_quads=cur_quads,
+                          ref_quads=ref_pair_quads, has_ref=has_ref)
+        return self.state
+
+    # ----------------------------------------------------------------- assembly
+    def _stencil(self, st: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Active slaves' stencil nodes (m, 9) (slave, 4 current master, 4 reference master) and the
+        weights G (normal) and H (tangential) (m, 9)."""
+        act = np.flatnonzero(st["active"])
+        m = len(act)
+        nodes = np.column_stack([self.slave[act], st["cur_quads"][act], st["ref_quads"][act]])
+        G = np.zeros((m, 9))
+        H = np.zeros((m, 9))
+        G[:, 0], G[:, 1:5] = 1.0, -st["weights"][act]
+        H[:, 0], H[:, 5:9] = 1.0, -self.ref_weights[act]
+        return act, nodes, G, H
+
+    def _dofs(self, nodes: np.ndarray) -> np.ndarray:
+        """Global scalar dofs (..., 3) of stencil nodes; -1 where constrained."""
+        dofs = self.nodes[nodes][..., None] * 3 + np.arange(3)
+        return np.where(np.isin(dofs, self.constrained), -1, dofs)
+
+    def nodal_forces(self, st: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """(stencil global dofs (m, 27), contact forces on those dofs (m, 27) [N])."""
+        st = self.evaluate() if st is None else st
+        act, nodes, G, H = self._stencil(st)
+        A = self.area[act]
+        fN = (A * st["pressure"][act])[:, None] * st["normal"][act]
+        fT = A[:, None] * st["traction"][act]
+        force = G[:, :, None] * fN[:, None, :] + H[:, :, None] * fT[:, None, :]
+        return self._dofs(nodes).reshape(len(act), 27), force.reshape(len(act), 27)
+
+    def add_residual(self, b: PETSc.Vec) -> None:
+        """b -= contact forces on the owned rows (call after the ghost reverse update)."""
+        st = self.evaluate()
+        dofs, force = self.nodal_forces(st)
+        self.dropped_active = int(np.any(dofs < 0, axis=1).sum())
+        lo, hi = self.owned_range
+        dofs, force = dofs.ravel(), force.ravel()
+        mine = (dofs >= lo) & (dofs < hi)
+        local = np.zeros(hi - lo)
+        np.add.at(local, dofs[mine] - lo, force[mine])
+        arr = b.getArray()
+        arr[:] -= local
+        b.setArray(arr)  # ensures write-back on every vector type
+
+    def add_jacobian(self, A: PETSc.Mat) -> None:
+        """A += contact stiffness on the owned rows (A must be assembled; assembled again here)."""
+        st = self.state if self.state is not None else self.evaluate()
+        act, nodes, G, H = self._stencil(st)
+        area = self.area[act]
+        n = st["normal"][act]
+        KN = (area * self.params.penalty)[:, None, None] * n[:, :, None] * n[:, None, :]
+        KT = -area[:, None, None] * st["D"][act]
+        K = (np.einsum("mj,mk,mab->mjakb", G, G, KN) + np.einsum("mj,mk,mab->mjakb", H, H, KT))
+        K = K.reshape(len(act), 27, 27)
+        dofs = self._dofs(nodes).reshape(len(act), 27)
+        rows = np.broadcast_to(dofs[:, :, None], K.shape).ravel()
+        cols = np.broadcast_to(dofs[:, None, :], K.shape).ravel()
+        vals = K.ravel()
+        lo, hi = self.owned_range
+        keep = (rows >= lo) & (rows < hi) & (cols >= 0) & (vals != 0.0)
+        csr = sp.coo_matrix((vals[keep], (rows[keep] - lo, cols[keep])), shape=(hi - lo, self.n_global)).tocsr()
+        csr.sum_duplicates()
+        csr.sort_indices()
+        A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, False)
+        A.setValuesCSR(csr.indptr.astype(PETSc.IntType), csr.indices.astype(PETSc.IntType), csr.data,
+                       addv=PETSc.InsertMode.ADD_VALUES)
+        A.assemble()
+
+    # ----------------------------------------------------------------- augmentation
+    def violation(self) -> tuple[float, float]:
+        """(max penetration -g over active slaves [m], max stick slip |t* - lambda_T| / eps_T of stick slaves [m])."""
+        st = self.evaluate()
+        act = st["active"]
+        pen = float(np.max(-st["gap"][act], initial=0.0))
+        stick = act & ~st["slip"]
+        slip = np.linalg.norm(st["traction"][stick] - self.lam_T[stick], axis=1) / self.params.eps_T
+        if not self.params.augmented or self.params.friction == 0.0:
+            slip = np.zeros(0)
+        return max(pen, 0.0), float(np.max(slip, initial=0.0))
+
+    def augment(self) -> None:
+        """Uzawa update of the multipliers (Box 7 step 3, eq. 3.79)."""
+        st = self.evaluate()
+        self.lam_N = st["pressure"].copy()
+        limit = self.params.friction * self.lam_N
+        t = st["traction"]
+        norm = np.linalg.norm(t, axis=1)
+        scale = np.where(norm > limit, limit / np.where(norm > 0.0, norm, 1.0), 1.0)
+        self.lam_T = t * scale[:, None]                                                      # eq. 3.79
+
+    def commit(self) -> None:
+        """After a converged load step: reference points <- current projections, history kept."""
+        st = self.evaluate()
+        act = st["active"]
+        self.ref_quad = np.where(act, st["facet"], -1)
+        self.ref_weights = np.where(act[:, None], st["weights"], 0.0)
+        self.lam_T = np.where(act[:, None], st["traction"], 0.0) if self.params.augmented else self.lam_T
+        self.lam_N = np.where(act, self.lam_N, 0.0)
+
+    def totals(self) -> tuple[np.ndarray, float, float, int, int]:
+        """(total force on the slaves (3,) [N], sum A p [N], |sum A t_T| [N], active count, slipping count)."""
+        st = self.evaluate()
+        act = st["active"]
+        fN = (self.area * st["pressure"])[:, None] * st["normal"]
+        fT = self.area[:, None] * st["traction"]
+        total = (fN + fT)[act].sum(0)
+        return (total, float((self.area * st["pressure"]).sum()), float(np.linalg.norm(fT[act].sum(0))),
+                int(act.sum()), int((st["slip"] & act).sum()))
+
+
+def solve_with_contact(solve_newton, contact: YarnContact, step: int = 0) -> ContactReport:
+    """Box 7 outer loop for one load step: Newton solve with fixed multipliers (`solve_newton()` returns a
+    NewtonResult), then Uzawa augmentation until the penetration and stick slip are below the tolerance.
+    Raises SolverError if Newton fails or the augmentations do not converge."""
+    from fabricfem.solvers.newton import SolverError
+    p_ = contact.params
+    iterations = []
+    for k in range(p_.max_augmentations + 1):
+        result = solve_newton()
+        iterations.append(result.iterations)
+        if not result.converged:
+            raise SolverError(f"yarn contact: Newton {result.reason} after {result.iterations} iterations in "
+                              f"augmentation {k} of load step {step}; residual norms "
+                              f"{[f'{r:.3g}' for r in result.residual_norms]}", reason=result.reason)
+        pen, slip = contact.violation()
+        if not p_.augmented or (pen <= p_.tolerance and slip <= p_.tolerance):
+            break
+        if k == p_.max_augmentations:
+            raise SolverError(f"yarn contact: penetration {pen:.3g} m / stick slip {slip:.3g} m still above the "
+                              f"tolerance {p_.tolerance:.3g} m after {k} augmentations at load step {step}",
+                              reason="DIVERGED_AUGMENTATION")
+        contact.augment()
+    total, fN, fT, active, slipping = contact.totals()
+    report = ContactReport(augmentations=k, max_penetration=pen, max_stick_slip=slip, force=total,
+                           normal_force=fN, tangential_force=fT, active=active, slipping=slipping,
+                           newton_iterations=iterations, dropped_active=contact.dropped_active)
+    contact.commit()
+    return report
