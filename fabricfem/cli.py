@@ -14,7 +14,28 @@ def _print(*args, **kw):
         print(*args, **kw, flush=True)
 
 
-def verify(names: list[str], as_json: bool) -> int:
+def write_markdown(path: str, results) -> None:
+    """The verification table as Markdown (rank 0), e.g. docs/verification.md."""
+    if MPI.COMM_WORLD.rank != 0:
+        return
+    import datetime
+    import platform
+    lines = [f"# Verification results\n",
+             f"Produced by `fabricfem verify --markdown {path}` on {datetime.date.today()} "
+             f"({platform.node()}, {MPI.COMM_WORLD.size} rank(s)). A tolerance of inf marks a reported-only row.\n",
+             "| case | quantity | value | reference | rel. error | tolerance | result | dofs | wall [s] |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in results:
+        quantity = r.quantity.replace("|", "\\|")
+        lines.append(f"| {r.case} | {quantity} | {r.value:.6g} | {r.reference:.6g} | {r.rel_error:.2e} | "
+                     f"{r.tolerance:.1e} | {'pass' if r.passed else 'FAIL'} | {r.ndofs} | {r.wall_s:.1f} |")
+    n_fail = sum(not r.passed for r in results)
+    lines.append(f"\n{len(results) - n_fail} passed, {n_fail} failed\n")
+    with open(path, "w") as f:
+        f.write("\n".join(lines))
+
+
+def verify(names: list[str], as_json: bool, markdown: str | None = None) -> int:
     from fabricfem.verify import load_cases
     cases = load_cases()
     unknown = [n for n in names if n not in cases]
@@ -32,6 +53,8 @@ def verify(names: list[str], as_json: bool) -> int:
             _print(f"  {name} raised {type(exc).__name__}: {exc}", file=sys.stderr)
             results.append(CaseResult(name, f"error: {type(exc).__name__}: {exc}", float("nan"), float("nan"),
                                       float("nan"), 0.0, False, 0, 0.0))
+    if markdown:
+        write_markdown(markdown, results)
     if as_json:
         _print(json.dumps([r.as_dict() for r in results], indent=1))
     else:
@@ -54,15 +77,18 @@ def main(argv: list[str] | None = None) -> int:
     p_verify.add_argument("cases", nargs="*", help="case names (default: all)")
     p_verify.add_argument("--json", action="store_true", help="print a JSON list of results")
     p_verify.add_argument("--list", action="store_true", help="list the cases and exit")
+    p_verify.add_argument("--markdown", metavar="PATH", help="also write the table as Markdown to PATH")
     p_run = sub.add_parser("run", help="run a scene file (TOML), e.g. scenes/rollup.toml")
     p_run.add_argument("scene", help="path of the scene file")
     p_demo = sub.add_parser("demo", help="the default demo: a fabric strip rolled up by an end moment")
     p_demo.add_argument("--out", default="results/demo", help="output folder (XDMF, PNG, CSV)")
     p_bench = sub.add_parser("bench", help="benchmarks (results/ CSV and PNG)")
-    p_bench.add_argument("name", choices=["rollup-profile", "stability-map"], help="benchmark to run")
+    p_bench.add_argument("name", choices=["rollup-profile", "stability-map", "speed-accuracy"],
+                         help="benchmark to run")
     p_bench.add_argument("--out", default="results/bench")
     p_bench.add_argument("--quick", action="store_true",
-                         help="stability-map only: one k/rho, the smallest mesh, short runs (smoke test)")
+                         help="reduced smoke-test runs (stability-map: one k/rho, the smallest mesh, short runs; "
+                              "speed-accuracy: t = 0.3 s, two levels per method, one timing)")
     p_study = sub.add_parser("study", help="parameter studies (CSV + PNG per figure)")
     p_study.add_argument("name", choices=["sleeve"], help="study to run (sleeve: thesis sec. 5.3)")
     p_study.add_argument("--quick", action="store_true", help="coarse mesh and few angle steps (reduced)")
@@ -75,7 +101,7 @@ def main(argv: list[str] | None = None) -> int:
             for name, fn in load_cases().items():
                 _print(f"{name:<26} {(fn.__doc__ or '').strip().splitlines()[0]}")
             return 0
-        return verify(args.cases, args.json)
+        return verify(args.cases, args.json, args.markdown)
     if args.command == "run":
         from fabricfem import scene as scene_module
         from fabricfem.run import run_scene
@@ -98,6 +124,10 @@ def main(argv: list[str] | None = None) -> int:
         if args.name == "stability-map":
             from fabricfem.benchmarks import stability_map
             stability_map(args.out, quick=args.quick)
+            return 0
+        if args.name == "speed-accuracy":
+            from fabricfem.benchmarks.speed_accuracy import speed_accuracy
+            speed_accuracy(args.out, quick=args.quick)
             return 0
         from fabricfem.bench import rollup_profile
         rollup_profile(args.out)
