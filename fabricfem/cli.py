@@ -20,7 +20,7 @@ def write_markdown(path: str, results) -> None:
         return
     import datetime
     import platform
-    lines = [f"# Verification results\n",
+    lines = ["# Verification results\n",
              f"Produced by `fabricfem verify --markdown {path}` on {datetime.date.today()} "
              f"({platform.node()}, {MPI.COMM_WORLD.size} rank(s)). A tolerance of inf marks a reported-only row.\n",
              "| case | quantity | value | reference | rel. error | tolerance | result | dofs | wall [s] |",

@@ -136,17 +136,8 @@ def particle_cloth(k_over_rho: float, n: int):
 # -------------------------------------------------------------------------- stability of one run
 def shell_run_is_stable(sheet, dt: float, n_steps: int) -> bool:
     """n_steps central-difference steps from rest; False if stopped by the blow-up check (DynamicsError)."""
-    from fabricfem.dynamics import CentralDifference, DynamicsError
-    sheet.w.x.array[:] = 0.0
-    integrator = CentralDifference(sheet, dt, force=True)  # energy_bound "auto": 10 x the loads' work
-    try:
-        integrator.run(n_steps, output_every=n_steps)
-        return True
-    except DynamicsError:
-        return False
-    finally:
-        integrator.destroy()
-        sheet.w.x.array[:] = 0.0
+    from fabricfem.dynamics.explicit import runs_stably
+    return runs_stably(sheet, dt, n_steps)
 
 
 def particle_run_is_stable(problem, dt: float, n_steps: int) -> bool:

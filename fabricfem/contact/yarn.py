@@ -63,8 +63,9 @@ from typing import Sequence
 
 import dolfinx.fem as fem
 import numpy as np
+
+from fabricfem.meshes._validate import positive
 import scipy.sparse as sp
-from mpi4py import MPI
 from petsc4py import PETSc
 from scipy.spatial import cKDTree
 
@@ -72,14 +73,7 @@ __all__ = ["ContactParameters", "ContactReport", "YarnContact", "closest_point_o
            "project_onto_quads", "symmetric_return_map"]
 
 
-def _positive(name: str, value) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a positive number, got {value!r}") from None
-    if not (np.isfinite(v) and v > 0.0):
-        raise ValueError(f"{name} must be positive and finite, got {value!r}")
-    return v
+_positive = positive
 
 
 @dataclass(frozen=True)

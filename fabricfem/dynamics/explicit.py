@@ -100,3 +100,20 @@ class CentralDifference(TimeIntegrator):
         if self._denominator is not None:
             self._denominator.destroy()
         super().destroy()
+
+
+def runs_stably(model, dt: float, n_steps: int, reset: bool = True) -> bool:
+    """Run n_steps central-difference steps from rest (forced past the critical-step check); False if
+    the blow-up check (DynamicsError) stopped the run. Used to measure stability limits by bisection."""
+    from fabricfem.dynamics.newmark import DynamicsError
+    model.w.x.array[:] = 0.0
+    integrator = CentralDifference(model, dt, force=True)  # energy_bound "auto": 10 x the loads' work
+    try:
+        integrator.run(n_steps, output_every=n_steps)
+        return True
+    except DynamicsError:
+        return False
+    finally:
+        integrator.destroy()
+        if reset:
+            model.w.x.array[:] = 0.0

@@ -141,7 +141,6 @@ class MPCNewtonSolver:
             raise ValueError(f"force_scale must be a positive finite number, got {force_scale!r}")
         if not (np.isfinite(length_scale) and length_scale > 0):
             raise ValueError(f"length_scale must be a positive finite number, got {length_scale!r}")
-        x = self.u.vector
         norms: list[float] = []
         for it in range(self.max_it + 1):
             rnorm = self.assemble_residual().norm()
