@@ -17,6 +17,17 @@ equilibrium; the friction history (stick points) is committed after each converg
 (`ContactProblem.after_converged_step`). A step whose Newton solve fails is undone and split in two
 (down to `min_angle_step`), otherwise `SleeveError` names the angle.
 
+Newton at one angle (issue 4: the plain solve stalled at 20.2 deg, mu = 0.1, and 12.6 deg, mu = 0.5, on
+mesh I) uses two devices, neither of which changes the converged solution:
+* the active-set strategy of ContactProblem (`active_set`, default on): contact set, slip set and body
+  segment of every node are fixed during one Newton solve and updated from the converged state until
+  they no longer change, which removes the leave / re-enter cycling of the non-smooth contact law;
+* a damped Newton step (`StepLimiter`): the linearised step of the nearly free director rotations is
+  radians long from an out-of-balance start and the iterates ran away (residual 1e1 -> 1e10 N) even on a
+  fixed contact set; each update is scaled so that no director angle changes by more than
+  `max_rotation_step` and no displacement by more than `max_displacement_step` per iteration.
+The viscous drag of `Stabilized` remains the fallback of a failed solve.
+
 Gravity is off by default (the thesis gives no orientation of the arm; with it on, g = 9.81 m/s^2
 along -y, opposite to the flexion, the sleeve's own weight is rho t g = 4.3 Pa for fabric I).
 
@@ -129,6 +140,52 @@ class Stabilized:
         self.commit()
 
 
+class StepLimiter:
+    """Damped Newton for the sleeve: every Newton update dw is scaled by one factor s <= 1 so that no
+    director-angle increment exceeds `max_rotation` [rad] and no displacement increment `max_displacement` [m]
+    (s = min(1, max_rotation / |dtheta|_inf, max_displacement / |du|_inf), all ranks).
+
+    Why: the sleeve's rotation dofs are nearly free (bending stiffness E t^3 / 12 = 1e-4 N m, transverse
+    shear G t), so from an out-of-balance start the linearised step turns directors by radians (measured on
+    mesh I at 6 -> 9 deg: 0.95 rad, then 4.4, 11 rad, ...) where the two-angle director map is far from
+    linear, and the iterates run away (residual 1e1 -> 1e10 N) whatever the contact set does. A limited step
+    changes only the path of the iterates, not the solution, and near convergence s = 1 (full Newton,
+    quadratic rate). Installed as the SNES line-search pre-check.
+    """
+
+    def __init__(self, model: ShellModel, max_rotation: float, max_displacement: float):
+        self.max_rotation = float(max_rotation)
+        self.max_displacement = float(max_displacement)
+        n_owned = model.W.dofmap.index_map.size_local * model.W.dofmap.index_map_bs
+        u_dofs = np.asarray(model.W.sub(0).collapse()[1])
+        theta_dofs = np.asarray(model.W.sub(1).collapse()[1])
+        self._u = u_dofs[u_dofs < n_owned]
+        self._theta = theta_dofs[theta_dofs < n_owned]
+        self.comm = model.comm
+        self.scalings = 0   # limited steps since construction (diagnostics)
+
+    def factor(self, step: np.ndarray) -> float:
+        """s for the owned part `step` of a Newton update (same on all ranks)."""
+        local = np.array([np.max(np.abs(step[self._theta]), initial=0.0), np.max(np.abs(step[self._u]), initial=0.0)])
+        largest = np.empty(2)
+        self.comm.Allreduce(local, largest, op=MPI.MAX)
+        theta, u = largest
+        s = 1.0
+        if theta > self.max_rotation:
+            s = self.max_rotation / theta
+        if u > self.max_displacement:
+            s = min(s, self.max_displacement / u)
+        return s
+
+    def __call__(self, x: PETSc.Vec, y: PETSc.Vec) -> bool:
+        s = self.factor(y.array)
+        if s < 1.0:
+            y.scale(s)
+            self.scalings += 1
+            return True
+        return False
+
+
 class SleeveError(SolverError):
     """The quasi-static flexion could not proceed (Newton failed below the minimum angle step)."""
 
@@ -154,9 +211,14 @@ class SleeveConfig:
     method: str = "penalty"              # penalty | augmented
     penalty: float | None = None         # k_N [Pa/m]; default 10 E t / h^2
     augmentation_tolerance: float = 1e-5  # m, largest penetration after Uzawa updates (augmented)
+    active_set: bool = True              # fixed contact set per Newton solve, updated until stable (ContactProblem)
+    max_rotation_step: float = 0.3       # rad, largest director-angle change per Newton iteration (StepLimiter)
+    max_displacement_step: float = 5e-3  # m, largest displacement change per Newton iteration (StepLimiter)
+    newton_max_iterations: int = 60      # per Newton solve (damped steps need more than full ones)
     gravity: bool = False                # g along -y
     final_angle: float = 57.0            # deg
-    angle_steps: int = 19                # equal steps to the final angle
+    angle_steps: int = 57                # equal steps to the final angle (1 deg: larger steps need many more
+                                         # damped Newton iterations and step halvings on mesh I)
     angular_velocity: float = 45.0       # deg/s (sets the body time t = alpha / omega only)
     min_angle_step: float = 0.05         # deg
     hold_rotations: bool = False         # also clamp the director rotations at the shoulder
@@ -168,7 +230,7 @@ class SleeveConfig:
 
     def __post_init__(self):
         for key in ("length", "radius", "thickness", "E", "G", "final_angle", "angular_velocity",
-                    "min_angle_step", "augmentation_tolerance"):
+                    "min_angle_step", "augmentation_tolerance", "max_rotation_step", "max_displacement_step"):
             v = getattr(self, key)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
                 raise ValueError(f"{key} must be a positive number, got {v!r}")
@@ -180,7 +242,7 @@ class SleeveConfig:
             raise ValueError(f"method must be 'penalty' or 'augmented', got {self.method!r}")
         if self.penalty is not None and not (math.isfinite(self.penalty) and self.penalty > 0.0):
             raise ValueError(f"penalty must be positive [Pa/m], got {self.penalty!r}")
-        for key in ("n_around", "n_along", "angle_steps"):
+        for key in ("n_around", "n_along", "angle_steps", "newton_max_iterations"):
             v = getattr(self, key)
             if not (isinstance(v, int) and v >= 1):
                 raise ValueError(f"{key} must be a positive integer, got {v!r}")
@@ -260,11 +322,12 @@ def build_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                             final_angle=math.radians(config.final_angle))
     body = default_arm(flexion)
     contact = ContactProblem(model, body, method=config.method, penalty=config.penalty, friction=config.friction,
-                             time=flexion.t_start)
+                             time=flexion.t_start, active_set=config.active_set)
     system = Stabilized(contact, 0.0)
-    options = {"snes_max_it": 30}
+    options = {"snes_max_it": config.newton_max_iterations}
     options.update(petsc_options or {})
     solver = NewtonSolver(system, options)
+    solver.snes.setLineSearchPreCheck(StepLimiter(model, config.max_rotation_step, config.max_displacement_step))
     if not config.gravity:
         # no dead load: F_ref = 0, the absolute tolerance would be 1e-12 N; use the scale of the contact
         # forces instead (1e-10 of E t L, a force unit of the sleeve)
@@ -327,7 +390,10 @@ def _solve_once(problem: SleeveProblem) -> tuple[bool, int, str]:
         except SolverError as exc:
             return False, 0, str(exc)
         return True, sum(report.newton_iterations), "augmented"
-    result = problem.solver.solve()
+    try:
+        result = contact.solve(problem.solver)
+    except SolverError as exc:
+        return False, 0, str(exc)
     return result.converged, result.iterations, result.reason
 
 
@@ -524,7 +590,7 @@ def config_from_scene(scene) -> SleeveConfig:
               friction=float(contact.get("friction", 0.1)), method=contact.get("method", "penalty"),
               penalty=None if "penalty" not in contact else float(contact["penalty"]),
               gravity=bool(contact.get("gravity", False)), final_angle=float(motion.get("final_angle", 57.0)),
-              angle_steps=int(motion.get("steps", 19)), angular_velocity=float(motion.get("angular_velocity", 45.0)),
+              angle_steps=int(motion.get("steps", 57)), angular_velocity=float(motion.get("angular_velocity", 45.0)),
               name=scene.get("scene", {}).get("name", "sleeve"))
     if "stabilization" in contact:
         kw["stabilization"] = float(contact["stabilization"])

@@ -5,7 +5,9 @@ each figure gets <out>/<figure>.csv (variant, angle_deg, torque_Nm, ...) and <ou
 that stop before the final angle (Newton failure, see fabricfem.sleeve) keep their partial curve and the
 reason is written to <out>/failures.csv. Independent variants are shared over the MPI ranks (each rank
 runs its variants on COMM_SELF). `quick` runs mesh I only, to 6 degrees in 2 steps (for the test suite):
-its numbers are a reduced study, not the thesis's.
+its numbers are a reduced study, not the thesis's. `fine` / `meshes` choose the mesh of the parameter
+figures (default III, as the thesis's "well-refined" sleeve) and of the mesh series (default I-IV); a
+coarser choice is a reduced-resolution study and README.txt says so.
 """
 from __future__ import annotations
 
@@ -27,11 +29,15 @@ FIGURE_TITLES = {"mesh_mu0.1": "mesh convergence, mu = 0.1 (Fig. 37)",
                  "thickness": "thickness 1 vs 2 mm, mu = 0.5 (Fig. 45)", "fabrics": "fabrics I-III, mu = 0.1 (Fig. 46)"}
 
 
-def variants(quick: bool = False) -> dict[str, dict[str, SleeveConfig]]:
+def variants(quick: bool = False, fine: str = "III",
+             meshes: tuple[str, ...] = ("I", "II", "III", "IV")) -> dict[str, dict[str, SleeveConfig]]:
     """figure -> {label: config}. Identical configurations appear in several figures (run once)."""
+    for name in (fine, *meshes):
+        if name not in MESHES:
+            raise ValueError(f"fine / meshes: unknown mesh {name!r}, expected one of {sorted(MESHES)}")
     base = SleeveConfig()
-    meshes = {"I": MESHES["I"]} if quick else MESHES
-    fine = MESHES["I"] if quick else MESHES["III"]
+    meshes = {"I": MESHES["I"]} if quick else {k: MESHES[k] for k in meshes}
+    fine = MESHES["I"] if quick else MESHES[fine]
     if quick:
         base = base.with_(final_angle=6.0, angle_steps=2)
     at = lambda mesh, **kw: base.with_(n_around=mesh[0], n_along=mesh[1], **kw)  # noqa: E731
@@ -47,10 +53,11 @@ def variants(quick: bool = False) -> dict[str, dict[str, SleeveConfig]]:
 
 
 def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
-              comm: MPI.Comm = MPI.COMM_WORLD) -> dict[str, dict[str, SleeveHistory]]:
+              comm: MPI.Comm = MPI.COMM_WORLD, fine: str = "III",
+              meshes: tuple[str, ...] = ("I", "II", "III", "IV")) -> dict[str, dict[str, SleeveHistory]]:
     """Run every distinct variant once (round-robin over the ranks), write CSV + PNG per figure."""
     out = Path(out)
-    figures = variants(quick)
+    figures = variants(quick, fine, meshes)
     unique: list[SleeveConfig] = []
     for fig in figures.values():
         for cfg in fig.values():
@@ -92,7 +99,9 @@ def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
             w.writerow(["figure", "variant", "reason"])
             w.writerows(failures)
         (out / "README.txt").write_text(
-            ("QUICK (reduced) study: mesh I only, 6 degrees in 2 steps\n" if quick else "full study\n")
+            ("QUICK (reduced) study: mesh I only, 6 degrees in 2 steps\n" if quick else
+             "full study\n" if (fine, tuple(meshes)) == ("III", tuple(MESHES)) else
+             f"REDUCED-RESOLUTION study: parameter figures on mesh {fine}, mesh series {', '.join(meshes)}\n")
             + f"wall time {time.perf_counter() - t0:.0f} s on {comm.size} rank(s)\n")
     say(f"wrote {out}/<figure>.csv and .png for {sorted(results)} ({time.perf_counter() - t0:.0f} s)")
     return results

@@ -130,3 +130,109 @@ def test_torque_history_same_on_one_and_two_ranks():
     serial = run_sleeve(QUICK, MPI.COMM_SELF)
     assert np.max(np.abs(parallel.torques)) > 0
     np.testing.assert_allclose(parallel.torques, serial.torques, rtol=1e-6, atol=1e-12)
+
+
+# ------------------------------------------------------------------ active-set strategy and damped Newton
+TIGHT = {"snes_rtol": 1e-14, "snes_stol": 1e-15, "snes_max_it": 60}
+
+
+def test_active_set_gives_the_plain_penalty_solution_on_the_signorini_plate():
+    """Plate on a sphere under its weight (fabricfem.verify.contact), plain penalty Newton vs the active-set
+    strategy (contact set fixed per Newton solve, updated until stable): where the plain law converges both
+    solve the same equations, so the states agree to the Newton tolerance. Both are driven to round-off
+    (rtol 1e-14), so 1e-10 relative to the largest state component is the task's bound and leaves four
+    decades for the conditioning of the contact Jacobian (k_N / (E t / h^2) = 10)."""
+    from fabricfem.solvers.newton import NewtonSolver
+    from fabricfem.verify import contact as cases
+    states = []
+    for active_set in (False, True):
+        problem = cases.signorini_problem(n=6, comm=MPI.COMM_SELF)
+        problem.active_set = active_set
+        solver = NewtonSolver(problem, TIGHT)
+        for lam in (0.5, 1.0):
+            problem.set_load_factor(lam)
+            result = problem.solve(solver)
+            assert result.converged, result.reason
+            problem.after_converged_step()
+        states.append(problem.model.w.x.array.copy())
+        contacts = int(np.sum(problem.evaluate().pressure > 0))
+        solver.destroy()
+    assert contacts >= 1
+    scale = np.max(np.abs(states[0]))
+    assert np.max(np.abs(states[1] - states[0])) <= 1e-10 * scale
+
+
+def test_active_set_with_friction_gives_the_return_map_solution():
+    """Capstan strip (fabricfem.verify.contact, mu = 0.3, theta = pi/2) pulled at one end into partial slip:
+    the return-map Newton solve and the active-set solve (contact set, slip set and segments fixed per
+    Newton solve) from the same state and friction history agree to 1e-10 of the largest state component
+    (both converged to round-off; see the frictionless test). The pull is chosen so that some but not all
+    contact nodes slide, so the fixed slip set is exercised on both branches (measured: 2e-13; a larger
+    pull, 1e-4 m, makes the plain return-map Newton cycle between two iterates, which the active-set solve
+    does not)."""
+    from fabricfem.solvers.loadstep import solve_load_path
+    from fabricfem.solvers.newton import NewtonSolver
+    from fabricfem.verify import contact as cases
+    problem, pull, _ = cases.capstan_model(0.3, 0.5 * math.pi, nx=24, comm=MPI.COMM_SELF)
+    solver = NewtonSolver(problem, TIGHT)
+    solve_load_path(problem, 1.0, solver=solver, initial_step=0.5)
+    problem.after_converged_step()
+    start = problem.model.w.x.array.copy()
+    for g, c in pull:
+        g.x.array[:] = PULL * c
+    states, slips = [], []
+    for active_set in (False, True):
+        problem.model.w.x.array[:] = start
+        problem.active_set = active_set
+        result = problem.solve(solver)
+        assert result.converged, result.reason
+        states.append(problem.model.w.x.array.copy())
+        s = problem.evaluate()
+        slips.append((int(np.sum(s.slip)), int(np.sum(s.pressure > 0))))
+    solver.destroy()
+    sliding, touching = slips[0]
+    assert 0 < sliding < touching, slips
+    scale = np.max(np.abs(states[0]))
+    assert np.max(np.abs(states[1] - states[0])) <= 1e-10 * scale
+
+
+PULL = 2e-5   # m: partial slip of the capstan strip at mu = 0.3 (measured: 108 of 147 contact nodes slide)
+
+
+def test_frozen_segment_gap_is_that_segments_gap():
+    """nearest_gap with a frozen segment assignment returns that segment's own gap and normal."""
+    from fabricfem.body.ellipsoid import Ellipsoid
+    from fabricfem.contact.nodal import nearest_gap
+    a = Ellipsoid(np.zeros(3), np.eye(3), np.array([0.1, 0.05, 0.05]))
+    b = Ellipsoid(np.array([0.2, 0.0, 0.0]), np.eye(3), np.array([0.1, 0.04, 0.04]))
+    x = np.array([[0.1, 0.0, 0.06], [0.05, 0.0, 0.07], [0.25, 0.03, 0.03]])
+    frozen = np.array([1, 1, 0])
+    g, n, seg = nearest_gap(x, [a, b], frozen)
+    for k, e in enumerate((a, b)):
+        ge, ne = e.gap(x[frozen == k])
+        np.testing.assert_array_equal(g[frozen == k], ge)
+        np.testing.assert_array_equal(n[frozen == k], ne)
+    np.testing.assert_array_equal(seg, frozen)
+
+
+def test_step_limiter_scales_by_the_largest_increment():
+    """s = min(1, max_rotation / |dtheta|_inf, max_displacement / |du|_inf) (closed form)."""
+    from fabricfem.sleeve import StepLimiter
+    problem = build_sleeve(QUICK, MPI.COMM_SELF)
+    limiter = StepLimiter(problem.model, max_rotation=0.1, max_displacement=5e-3)
+    step = np.zeros(problem.model.w.vector.getLocalSize())
+    assert limiter.factor(step) == 1.0
+    step[limiter._theta[3]] = -0.6
+    step[limiter._u[7]] = 1e-3
+    assert limiter.factor(step) == pytest.approx(0.1 / 0.6, rel=1e-15)
+    step[limiter._u[7]] = 0.05
+    assert limiter.factor(step) == pytest.approx(0.1, rel=1e-15)
+
+
+def test_bad_active_set_cap_names_the_parameter():
+    from fabricfem.verify import contact as cases
+    problem = cases.signorini_problem(n=2, comm=MPI.COMM_SELF)
+    with pytest.raises(ValueError, match="max_active_set_updates"):
+        type(problem)(problem.model, [cases.sphere()], max_active_set_updates=0)
+    with pytest.raises(ValueError, match="max_rotation_step"):
+        SleeveConfig(max_rotation_step=0.0)

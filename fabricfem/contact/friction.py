@@ -54,33 +54,41 @@ class FrictionState:
 
 
 def return_map(x: np.ndarray, stick_point: np.ndarray, normal: np.ndarray, pressure: np.ndarray,
-               mu: float, tangential_penalty: float, normal_penalty: float) -> FrictionState:
+               mu: float, tangential_penalty: float, normal_penalty: float,
+               active: np.ndarray | None = None, slip: np.ndarray | None = None) -> FrictionState:
     """Coulomb return mapping at N nodes (eqs. 3.51-3.52), vectorised.
 
     Args:
         x: (N, 3) current node positions [m].
         stick_point: (N, 3) stick points a at the current body pose [m].
         normal: (N, 3) unit outward body normals.
-        pressure: (N,) contact pressure p >= 0 [Pa].
+        pressure: (N,) contact pressure p [Pa] (>= 0, or of either sign on a fixed active set).
         mu: Coulomb coefficient.
         tangential_penalty: eps_T [Pa/m].
         normal_penalty: k_N [Pa/m] (for dp/dx in the slip tangent).
+        active: (N,) bool nodes in contact (default p > 0). On a fixed active set (ContactProblem's
+            active-set strategy) an active node may carry p <= 0 during the iterations; its slip limit is
+            then mu <p> = 0 (no friction force, no dp/dx term), so friction never pushes along the slip.
+        slip: (N,) bool fixed slip set (ContactProblem's active-set strategy): these active nodes take the
+            slip branch t = mu <p> t* / |t*| and the other active nodes the stick branch t = t*, whatever
+            Phi*; default (None): the return map's choice Phi* > 0.
     """
     N = len(x)
     eye = np.broadcast_to(np.eye(3), (N, 3, 3))
     P = eye - normal[:, :, None] * normal[:, None, :]
     trial = -tangential_penalty * np.einsum("nij,nj->ni", P, x - stick_point)          # eq. 3.51
     norm = np.linalg.norm(trial, axis=1)
-    limit = mu * pressure
-    active = pressure > 0.0
-    slip = active & (norm > limit)                                                      # Phi* > 0
+    limit = mu * np.maximum(pressure, 0.0)
+    active = (pressure > 0.0) if active is None else np.asarray(active, dtype=bool)
+    slip = active & ((norm > limit) if slip is None else np.asarray(slip, dtype=bool))  # Phi* > 0
     safe = np.where(norm > 0.0, norm, 1.0)
     tau = trial / safe[:, None]
     traction = np.where(slip[:, None], limit[:, None] * tau, trial)                     # eq. 3.52
     traction[~active] = 0.0
     tangent = -tangential_penalty * P
+    compressed = (pressure > 0.0).astype(float)                                           # dp/dx = 0 where p <= 0
     slip_tangent = (-(limit * tangential_penalty / safe)[:, None, None] * (P - tau[:, :, None] * tau[:, None, :])
-                    - mu * normal_penalty * tau[:, :, None] * normal[:, None, :])
+                    - (mu * normal_penalty * compressed)[:, None, None] * tau[:, :, None] * normal[:, None, :])
     tangent = np.where(slip[:, None, None], slip_tangent, tangent)
     tangent[~active] = 0.0
     return FrictionState(traction, tangent, slip)

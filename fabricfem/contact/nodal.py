@@ -134,10 +134,13 @@ def default_penalty(model, element_size: float, factor: float = DEFAULT_PENALTY_
     return factor * max(fabric.E1, fabric.E2) * fabric.thickness / element_size ** 2
 
 
-def nearest_gap(x: np.ndarray, ellipsoids: Sequence[Ellipsoid]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def nearest_gap(x: np.ndarray, ellipsoids: Sequence[Ellipsoid],
+                segment: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Smallest signed gap [m] over the ellipsoids, the unit outward normal there and the segment index.
 
-    Loops over the (few) segments, vectorised over the N points (see `Ellipsoid.gap`).
+    With `segment` (N,) given, the gap and normal of that segment instead of the nearest one (a frozen
+    assignment, ContactProblem's active-set strategy). Loops over the (few) segments, vectorised over the
+    N points (see `Ellipsoid.gap`).
     """
     if len(x) == 0:
         return np.zeros(0), np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
@@ -145,7 +148,7 @@ def nearest_gap(x: np.ndarray, ellipsoids: Sequence[Ellipsoid]) -> tuple[np.ndar
     normals = np.empty((len(ellipsoids), len(x), 3))
     for k, e in enumerate(ellipsoids):
         gaps[k], normals[k] = e.gap(x)
-    nearest = np.argmin(gaps, axis=0)
+    nearest = np.argmin(gaps, axis=0) if segment is None else np.asarray(segment, dtype=np.int64)
     cols = np.arange(len(x))
     g, n = gaps[nearest, cols], normals[nearest, cols]
     if not (np.all(np.isfinite(g)) and np.all(np.isfinite(n))):
@@ -153,16 +156,26 @@ def nearest_gap(x: np.ndarray, ellipsoids: Sequence[Ellipsoid]) -> tuple[np.ndar
     return g, n, nearest
 
 
-def normal_pressure(gap: np.ndarray, multiplier: np.ndarray, penalty: float) -> np.ndarray:
-    """p = < lambda - k_N g > [Pa] (eq. 3.69 with g positive outside; lambda = 0 is the penalty law)."""
-    return np.maximum(multiplier - penalty * gap, 0.0)
+def normal_pressure(gap: np.ndarray, multiplier: np.ndarray, penalty: float,
+                    active: np.ndarray | None = None) -> np.ndarray:
+    """p = < lambda - k_N g > [Pa] (eq. 3.69 with g positive outside; lambda = 0 is the penalty law).
+
+    With a fixed active set `active` (N,) bool (the active-set strategy of ContactProblem), the law is
+    p = lambda - k_N g on the active nodes -- a bilateral spring, p may turn slightly negative during
+    the Newton iterations -- and p = 0 elsewhere. Where the set agrees with the sign of lambda - k_N g
+    both laws give the same p.
+    """
+    trial = multiplier - penalty * gap
+    if active is None:
+        return np.maximum(trial, 0.0)
+    return np.where(active, trial, 0.0)
 
 
 def normal_force_and_tangent(area: np.ndarray, pressure: np.ndarray, normal: np.ndarray,
-                             penalty: float) -> tuple[np.ndarray, np.ndarray]:
+                             penalty: float, active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Nodal normal force f = w p n [N] (N, 3) and its stiffness K = -df/dx = w k_N n n^T [N/m] (N, 3, 3)
-    (curvature term neglected, module docstring)."""
+    (curvature term neglected, module docstring) on the `active` nodes (default: p > 0)."""
     force = (area * pressure)[:, None] * normal
-    active = (pressure > 0.0).astype(float)
-    stiffness = (area * penalty * active)[:, None, None] * normal[:, :, None] * normal[:, None, :]
+    active = (pressure > 0.0) if active is None else np.asarray(active, dtype=bool)
+    stiffness = (area * penalty * active.astype(float))[:, None, None] * normal[:, :, None] * normal[:, None, :]
     return force, stiffness

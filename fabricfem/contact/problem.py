@@ -11,6 +11,19 @@ Normal methods: "penalty" (Box 3: p = k_N <-g>) and "augmented" (eq. 3.69: p = <
 update lambda <- p between Newton solves, `solve_augmented`). Friction: Coulomb with coefficient
 `friction` and tangential penalty eps_T (fabricfem.contact.friction); history committed in
 `after_converged_step`. Units: SI (m, N, Pa, Pa/m).
+
+Active-set strategy (`active_set=True`, used through `solve`): the unilateral law p = <lambda - k_N g>
+has a tangent that jumps at lambda - k_N g = 0, and Newton can cycle for ever when a few nodes leave
+and re-enter contact from one iterate to the next. `solve` therefore fixes the set A of contact nodes
+during one Newton solve (nodes in A carry the bilateral spring p = lambda - k_N g, the others p = 0: a
+smooth problem; with friction the set S of sliding nodes is fixed as well: a node of S takes the slip
+branch, the others the stick branch of the return map, because the switch between the two branches
+cycles the same way; and each node keeps its body segment, because where two segments meet the
+nearest one -- hence the normal and the stick point -- switches discontinuously), then recomputes A
+from the sign of lambda - k_N g, S from Phi* > 0 and the nearest segments at the converged state and
+repeats until none changes (at most `max_active_set_updates` updates, else SolverError naming the nodes
+that flip). When A is stable the converged state satisfies the unilateral law exactly, so the solution
+is the plain penalty / augmented solution (tests/test_contact.py checks this to 1e-10).
 """
 from __future__ import annotations
 
@@ -27,7 +40,7 @@ from fabricfem.body.pose import Body
 from fabricfem.contact import friction as friction_law
 from fabricfem.contact import nodal
 from fabricfem.contact.torque import adjacent_segments, contact_torque
-from fabricfem.solvers.newton import NewtonSolver, SolverError
+from fabricfem.solvers.newton import NewtonResult, NewtonSolver, SolverError
 
 METHODS = ("penalty", "augmented")
 
@@ -66,13 +79,25 @@ class ContactProblem:
         friction: Coulomb coefficient mu >= 0.
         tangential_penalty: eps_T [Pa/m] (default k_N).
         time: body time t [s] when `obstacles` is a Body.
+        active_set: solve with the active-set strategy (module docstring) in `solve` / `solve_augmented`.
+        max_active_set_updates: cap on the active-set updates of one `solve`.
     """
 
     def __init__(self, model, obstacles: Sequence[Ellipsoid] | Body, method: str = "penalty",
                  penalty: float | None = None, friction: float = 0.0, tangential_penalty: float | None = None,
-                 time: float = 0.0):
+                 time: float = 0.0, active_set: bool = False, max_active_set_updates: int = 30):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+        if not (isinstance(max_active_set_updates, int) and max_active_set_updates >= 1):
+            raise ValueError(f"max_active_set_updates must be a positive integer, got {max_active_set_updates!r}")
+        self.active_set = bool(active_set)
+        self.max_active_set_updates = max_active_set_updates
+        # the fixed contact and slip sets during a solve with the active-set strategy (None: unilateral law
+        # and return map)
+        self.active: np.ndarray | None = None
+        self.sliding: np.ndarray | None = None
+        self.segment: np.ndarray | None = None
+        self.active_set_updates: list[int] = []   # set changes per update in the last `solve`
         self.model = model
         self.method = method
         self.mu = friction_law.friction_coefficient(friction)
@@ -162,14 +187,16 @@ class ContactProblem:
         """Contact state at the owned nodes for the local state array of model.w (owned + ghosts)."""
         arr = self.model.w.x.array if state_array is None else state_array
         x = self.nodes.reference + arr[self.nodes.dofs]
-        g, n, seg = nodal.nearest_gap(x, self.ellipsoids)
-        p = nodal.normal_pressure(g, self.multiplier, self.penalty)
-        force, stiffness = nodal.normal_force_and_tangent(self.nodes.area, p, n, self.penalty)
+        g, n, seg = nodal.nearest_gap(x, self.ellipsoids, self.segment)
+        active = self.active
+        p = nodal.normal_pressure(g, self.multiplier, self.penalty, active)
+        force, stiffness = nodal.normal_force_and_tangent(self.nodes.area, p, n, self.penalty, active)
         traction = np.zeros_like(x)
         slip = np.zeros(len(x), dtype=bool)
         if self.mu > 0.0:
             stick, known = self._stick_points(x, seg)
-            fr = friction_law.return_map(x, stick, n, p, self.mu, self.tangential_penalty, self.penalty)
+            fr = friction_law.return_map(x, stick, n, p, self.mu, self.tangential_penalty, self.penalty, active,
+                                         self.sliding)
             fr.tangent[~known] = 0.0   # stick point = x: no traction and no stiffness this step
             traction, slip = fr.traction, fr.slip
             w = self.nodes.area
@@ -207,6 +234,71 @@ class ContactProblem:
             self._store_stick_points(s.position, s.traction)
         self.model.after_converged_step()
 
+    # ------------------------------------------------------------------ active-set strategy
+    def contact_set(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(contact, sliding, segment): (N,) masks of the owned nodes that the unilateral law puts in contact
+        and that the return map lets slide, and their nearest segments, at the current state."""
+        fixed = self.active, self.sliding, self.segment
+        self.active = self.sliding = self.segment = None
+        try:
+            s = self.evaluate()
+        finally:
+            self.active, self.sliding, self.segment = fixed
+        return s.pressure > 0.0, s.slip, s.segment
+
+    def solve(self, solver: NewtonSolver) -> NewtonResult:
+        """Equilibrium at the current pose and multipliers from the current state: one Newton solve, or,
+        with the active-set strategy, Newton solves on fixed contact / slip sets and segments repeated
+        until they are stable (module docstring). Returns the NewtonResult with the iterations of all
+        solves; a failed Newton solve returns an unconverged result (state left as SNES left it), sets that
+        keep changing after `max_active_set_updates` updates raise SolverError.
+
+        The first slip-set guess is the return map's at the start state; if that sequence fails, it is
+        retried from the start state with every contact node sticking (the "elastic predictor": a slip set
+        taken over from the start state can keep a node on the slip branch while its trial traction
+        reverses, where that branch has no solution; measured on the capstan strip)."""
+        if not self.active_set:
+            return solver.solve()
+        start = self.model.w.x.array.copy()
+        total, norms, reason = 0, [], ""
+        for sticking in (False, True):
+            self.model.w.x.array[:] = start
+            result = self._solve_fixed_sets(solver, sticking)
+            total += result.iterations
+            norms += result.residual_norms
+            if result.converged:
+                return NewtonResult(True, total, result.reason, norms)
+            reason = result.reason
+        return NewtonResult(False, total, reason, norms)
+
+    def _solve_fixed_sets(self, solver: NewtonSolver, sticking: bool) -> NewtonResult:
+        self.active, self.sliding, self.segment = self.contact_set()
+        if sticking:
+            self.sliding = np.zeros_like(self.sliding)
+        self.active_set_updates = []
+        total, norms = 0, []
+        try:
+            for _ in range(self.max_active_set_updates + 1):
+                result = solver.solve()
+                total += result.iterations
+                norms += result.residual_norms
+                if not result.converged:
+                    return NewtonResult(False, total, result.reason, norms)
+                active, sliding, segment = self.contact_set()
+                # a segment change matters only where a contact force acts (before or after)
+                moved = (segment != self.segment) & (active | self.active)
+                changed = self.comm.allreduce(int(np.count_nonzero((active != self.active) | (sliding != self.sliding)
+                                                                   | moved)), op=MPI.SUM)
+                if changed == 0:
+                    return NewtonResult(True, total, result.reason, norms)
+                self.active_set_updates.append(changed)
+                self.active, self.sliding, self.segment = active, sliding, segment
+        finally:
+            self.active = self.sliding = self.segment = None
+        raise SolverError(f"active set: the contact set still changed ({self.active_set_updates[-1]} nodes) after "
+                          f"{self.max_active_set_updates} updates (changes per update: {self.active_set_updates})",
+                          reason="ACTIVE_SET_NOT_STABLE")
+
     # ------------------------------------------------------------------ augmented Lagrangian
     def max_penetration(self) -> float:
         """max(0, -min g) over all nodes [m], same on all ranks."""
@@ -230,7 +322,7 @@ class ContactProblem:
         solver = solver or NewtonSolver(self)
         iterations = []
         for k in range(int(max_augmentations) + 1):
-            result = solver.solve()
+            result = self.solve(solver)
             iterations.append(result.iterations)
             if not result.converged:
                 raise SolverError(f"augmented Lagrangian: Newton {result.reason} after {result.iterations} "
