@@ -6,11 +6,11 @@ reached by the swing (damped free fall of a point: z = -(g / c)(t - (1 - e^{-ct}
 side of 1 m), the sheet around it is still nearly horizontal, and the in-plane tension pulls it only
 horizontally; so its vertical displacement is the damped free fall of a point mass, c = eta / rho.
 """
-import csv
 import math
 
 import numpy as np
 import pytest
+from csv_checks import assert_positive_table
 from mpi4py import MPI
 
 from fabricfem.benchmarks.speed_accuracy import (AIR_DRAG, AREAL_DENSITY, CSV_COLUMNS, GRAVITY, METHODS, QUICK,
@@ -51,13 +51,8 @@ def test_quick_speed_accuracy(tmp_path):
     assert baseline.wall_vs_baseline == 1.0
     assert len(out["conclusions"]) == 2
     if MPI.COMM_WORLD.rank == 0:
-        with open(tmp_path / "speed_accuracy.csv") as f:
-            table = list(csv.reader(f))
-        assert tuple(table[0]) == CSV_COLUMNS and len(table) == 1 + len(rows)
-        for line in table[1:]:
-            record = dict(zip(table[0], line))
-            for name in ("dt", "ndofs", "wall_s", "error"):
-                assert np.isfinite(float(record[name])) and float(record[name]) > 0, (name, record)
+        assert_positive_table(tmp_path / "speed_accuracy.csv", CSV_COLUMNS, len(rows),
+                              ("dt", "ndofs", "wall_s", "error"))
         assert (tmp_path / "speed_accuracy.png").stat().st_size > 0
         assert (tmp_path / "speed_accuracy_reference.csv").stat().st_size > 0
 

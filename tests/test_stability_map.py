@@ -7,8 +7,8 @@ time stepping), and the predicted steps of the methods' own estimates.
 import csv
 import math
 
-import numpy as np
 import pytest
+from csv_checks import assert_positive_table
 from mpi4py import MPI
 
 from fabricfem.benchmarks import stability_map
@@ -59,13 +59,8 @@ def test_quick_stability_map(tmp_path):
     assert shell.dt_predicted < shell.dt_membrane_estimate
     assert next(r for r in rows if r.method == "particles").cost_vs_particles == 1.0
     if MPI.COMM_WORLD.rank == 0:
-        with open(tmp_path / "stability_map.csv") as f:
-            table = list(csv.reader(f))
-        assert tuple(table[0]) == CSV_COLUMNS and len(table) == 1 + len(rows)
-        for line in table[1:]:
-            record = dict(zip(table[0], line))
-            for name in ("k_over_rho", "dt_predicted", "dt_measured", "ratio"):
-                assert np.isfinite(float(record[name])) and float(record[name]) > 0
+        assert_positive_table(tmp_path / "stability_map.csv", CSV_COLUMNS, len(rows),
+                              ("k_over_rho", "dt_predicted", "dt_measured", "ratio"))
         assert (tmp_path / "stability_map.png").stat().st_size > 0
         memory = list(csv.reader(open(tmp_path / "stability_map_memory.csv")))
         assert memory[0] == ["stage", "rss_hwm_MiB"] and float(memory[-1][1]) >= float(memory[1][1]) > 0
