@@ -17,8 +17,11 @@ two independent directions, so they are excluded too. With pairs along one direc
 cell of disconnected bodies (yarns without contact), rigid rotations remain and the tangent is
 singular: MUMPS then returns one of the equivalent states (seen with a box periodic in x only) or
 the solve fails with SolverError; no further rigid modes are removed here.
-Pairs are pure translations (full cell, thesis option A); the anti-symmetric quarter cell
-(option B, z -> -z with u_z flipped) is not supported yet.
+Pairs are translations (full cell, thesis option A) or general point maps `relation` with a
+sign per displacement component, u*_i(x) = s_i u*_i(relation(x)): the anti-symmetric quarter cell
+(option B, thesis sec. 4.3.3, Fig. 19) maps its end face by a half-period translation and z -> -z
+with s = (1, 1, -1) (UnitCellMesh.periodic_relation gives the map). Non-unit signs are imposed
+per component (one geometrical dolfinx_mpc constraint per component and sign).
 
 Material: `psi` is a strain-energy density [J/m^3] given as a UFL callable psi(C) of the right
 Cauchy-Green tensor C, or a mapping {cell tag: psi} used with `cell_tags`. Extra fields (a yarn
@@ -50,18 +53,25 @@ GEOMETRIC_TOLERANCE = 1e-8  # relative to the cell diagonal: points closer than 
 
 @dataclass(frozen=True)
 class PeriodicPair:
-    """Two opposite faces with u*(slave point) = u*(slave point - translation).
+    """Two opposite faces with u*_i(x) = s_i u*_i(m(x)) for x on the slave face, where the master
+    point is m(x) = x - translation or m(x) = relation(x), and s = component_scale.
 
     `slave` and `master` are facet-tag values (with `facet_tags` given to the problem) or,
-    for geometric pairs, `slave` is a locator x (3, n) -> bool (n,) and `translation` is required.
-    `translation` [m] is the vector from the master face to the slave face; with tags it
-    defaults to the difference of the faces' vertex centroids (exact for meshes whose opposite
-    faces match, which dolfinx_mpc does not otherwise require).
+    for geometric pairs, `slave` is a locator x (3, n) -> bool (n,) and `translation` or
+    `relation` is required. `translation` [m] is the vector from the master face to the slave face;
+    with tags it defaults to the difference of the faces' vertex centroids (exact for meshes whose
+    opposite faces match, which dolfinx_mpc does not otherwise require). `relation` x (3, n) ->
+    (3, n) [m] is a general point map from the slave face onto the master face (e.g.
+    UnitCellMesh.periodic_relation(name) of the quarter cell: half-period shift and z -> -z);
+    give either `relation` or `translation`. `component_scale` (s_x, s_y, s_z), non-zero and
+    dimensionless, is (1, 1, -1) for the anti-symmetric quarter cell (thesis sec. 4.3.3).
     """
 
     slave: int | Locator
     master: int | None = None
     translation: Sequence[float] | None = None
+    relation: Callable[[np.ndarray], np.ndarray] | None = None
+    component_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
 
 
 @dataclass
@@ -245,7 +255,7 @@ class UnitCellProblem:
         self.dx = ufl.Measure("dx", domain=mesh, subdomain_data=cell_tags, metadata={"quadrature_degree": q})
 
         V = fem.VectorFunctionSpace(mesh, ("Lagrange", degree))
-        slave_faces, translations = self._pairs(periodic_pairs, facet_tags, tol)
+        slave_faces, maps, scales = self._pairs(periodic_pairs, facet_tags, tol)
 
         def on_slave_face(x: np.ndarray) -> np.ndarray:
             hit = np.zeros(x.shape[1], dtype=bool)
@@ -253,26 +263,54 @@ class UnitCellProblem:
                 hit |= face(x)
             return hit
 
-        def to_master(x: np.ndarray) -> np.ndarray:
-            # a point on several slave faces (edge, corner) is moved by each translation, so that
-            # every slave's master lies on no slave face (no chained constraints)
-            out = x.copy()
-            for face, t in zip(slave_faces, translations):
-                out[:, face(x)] -= t[:, None]
-            return out
+        def chain(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            # A point on several slave faces (edge, corner) is mapped by each pair in turn, until it
+            # lies on no slave face (no chained constraints); its sign is the product of the pairs'.
+            out, sign = np.array(x, dtype=np.float64, copy=True), np.ones((3, x.shape[1]))
+            for _ in range(2 * len(slave_faces) + 1):
+                moved = False
+                for face, point_map, s in zip(slave_faces, maps, scales):
+                    hit = face(out)
+                    if np.any(hit):
+                        out[:, hit] = point_map(out[:, hit])
+                        sign[:, hit] *= s[:, None]
+                        moved = True
+                if not moved:
+                    return out, sign
+            raise ValueError("periodic_pairs: the maps send slave points back onto slave faces (cycle); "
+                             "each pair must map its slave face onto a master face")
 
         self.pin = _pin_point(mesh, on_slave_face, 0.5 * (lower + upper))
         pinned = fem.locate_dofs_geometrical(V, lambda x: np.linalg.norm(x - self.pin[:, None], axis=0) <= tol)
         self.bcs = [fem.dirichletbc(np.zeros(3, dtype=np.float64), pinned, V)]
 
         mpc = dolfinx_mpc.MultiPointConstraint(V)
-        if isinstance(periodic_pairs[0].slave, (int, np.integer)):
-            slave_facets = np.unique(np.concatenate(
-                [facet_tags.indices[facet_tags.values == p.slave] for p in periodic_pairs]))
-            all_slaves = dmesh.meshtags(mesh, mesh.topology.dim - 1, slave_facets.astype(np.int32), 1)
-            mpc.create_periodic_constraint_topological(V, all_slaves, 1, to_master, self.bcs)
+        if all(np.all(s == 1.0) for s in scales):
+            def to_master(x: np.ndarray) -> np.ndarray:
+                return chain(x)[0]
+            if isinstance(periodic_pairs[0].slave, (int, np.integer)):
+                slave_facets = np.unique(np.concatenate(
+                    [facet_tags.indices[facet_tags.values == p.slave] for p in periodic_pairs]))
+                all_slaves = dmesh.meshtags(mesh, mesh.topology.dim - 1, slave_facets.astype(np.int32), 1)
+                mpc.create_periodic_constraint_topological(V, all_slaves, 1, to_master, self.bcs)
+            else:
+                mpc.create_periodic_constraint_geometrical(V, on_slave_face, to_master, self.bcs)
         else:
-            mpc.create_periodic_constraint_geometrical(V, on_slave_face, to_master, self.bcs)
+            # one constraint u*_c(x) = s u*_c(m(x)) per component c and per sign s occurring at the
+            # slave points (products over the pairs meeting at an edge or corner)
+            signs = {1.0}
+            for s in scales:
+                signs |= {round(float(a * b), 12) for a in signs for b in s}
+            for c in range(3):
+                for value in sorted(signs):
+                    def indicator(x: np.ndarray, c: int = c, value: float = value) -> np.ndarray:
+                        hit = on_slave_face(x)
+                        sign = np.zeros(x.shape[1])
+                        if np.any(hit):
+                            sign[hit] = chain(x[:, hit])[1][c]
+                        return hit & np.isclose(sign, value, rtol=0, atol=1e-12)
+                    mpc.create_periodic_constraint_geometrical(V.sub(c), indicator, lambda x: chain(x)[0],
+                                                               self.bcs, scale=value)
         mpc.finalize()
         self.mpc = mpc
         self.u = fem.Function(mpc.function_space, name="fluctuation")  # u* [m]
@@ -341,36 +379,50 @@ class UnitCellProblem:
                              "energy there); mesh only the solid and give every cell a material")
         return list(psi.items())
 
-    def _pairs(self, pairs, facet_tags, tol) -> tuple[list[Locator], list[np.ndarray]]:
+    def _pairs(self, pairs, facet_tags, tol) -> tuple[list[Locator], list[Callable], list[np.ndarray]]:
+        """Slave-face locators, slave -> master point maps and component signs of the pairs."""
         if not pairs:
             raise ValueError("periodic_pairs must contain at least one PeriodicPair")
         by_tag = [isinstance(p.slave, (int, np.integer)) for p in pairs]
         if any(by_tag) and not all(by_tag):
             raise ValueError("periodic_pairs must be all by facet tag or all by locator, not mixed")
-        faces, translations = [], []
+        faces, maps, scales = [], [], []
         for p in pairs:
+            if p.relation is not None and p.translation is not None:
+                raise ValueError("periodic_pairs: give either a relation or a translation, not both")
+            if p.relation is not None and not callable(p.relation):
+                raise ValueError(f"periodic_pairs: relation must be a callable x (3, n) -> (3, n), got {p.relation!r}")
+            scale = np.asarray(p.component_scale, dtype=float)
+            if scale.shape != (3,) or not np.all(np.isfinite(scale)) or np.any(scale == 0.0):
+                raise ValueError(f"periodic_pairs: component_scale must be three finite non-zero numbers, "
+                                 f"got {p.component_scale!r}")
             if by_tag[0]:
                 if facet_tags is None:
                     raise ValueError("facet_tags are required for periodic_pairs given by tag")
                 slave = _tagged_face(self.mesh, facet_tags, int(p.slave), tol)
-                if p.translation is None:
+                if p.translation is None and p.relation is None:
                     if p.master is None:
-                        raise ValueError(f"periodic_pairs: pair with slave tag {p.slave} needs a master tag "
-                                         "or a translation")
+                        raise ValueError(f"periodic_pairs: pair with slave tag {p.slave} needs a master tag, "
+                                         "a translation or a relation")
                     master = _tagged_face(self.mesh, facet_tags, int(p.master), tol)
                     t = slave.centroid - master.centroid
                 else:
-                    t = np.asarray(p.translation, dtype=float)
+                    t = None if p.translation is None else np.asarray(p.translation, dtype=float)
                 faces.append(slave.contains)
             else:
-                if not callable(p.slave) or p.translation is None:
-                    raise ValueError("periodic_pairs: a pair given by locator needs a callable slave and a translation")
+                if not callable(p.slave) or (p.translation is None and p.relation is None):
+                    raise ValueError("periodic_pairs: a pair given by locator needs a callable slave and a "
+                                     "translation or a relation")
                 faces.append(p.slave)
-                t = np.asarray(p.translation, dtype=float)
-            if t.shape != (3,) or not np.all(np.isfinite(t)) or np.linalg.norm(t) <= tol:
-                raise ValueError(f"periodic_pairs: translation must be a non-zero finite 3-vector, got {t!r}")
-            translations.append(t)
-        return faces, translations
+                t = None if p.translation is None else np.asarray(p.translation, dtype=float)
+            if p.relation is not None:
+                maps.append(lambda x, r=p.relation: np.asarray(r(x), dtype=np.float64).reshape(3, -1))
+            else:
+                if t.shape != (3,) or not np.all(np.isfinite(t)) or np.linalg.norm(t) <= tol:
+                    raise ValueError(f"periodic_pairs: translation must be a non-zero finite 3-vector, got {t!r}")
+                maps.append(lambda x, t=t: x - t[:, None])
+            scales.append(scale)
+        return faces, maps, scales
 
     @property
     def ndofs(self) -> int:
