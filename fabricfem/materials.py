@@ -13,8 +13,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 
-def _positive(name: str, value: float) -> float:
-    if not (isinstance(value, (int, float, np.floating)) and math.isfinite(value) and value > 0):
+def positive_number(name: str, value: float) -> float:
+    """A positive finite real (Python or numpy scalar) as float, else ValueError naming `name`."""
+    if not (isinstance(value, (int, float, np.integer, np.floating)) and math.isfinite(value) and value > 0):
         raise ValueError(f"{name} must be a positive finite number, got {value!r}")
     return float(value)
 
@@ -35,7 +36,7 @@ class KawabataBending:
             raise ValueError("KawabataBending.coefficients must not be empty")
         if not all(math.isfinite(a) for a in self.coefficients):
             raise ValueError("KawabataBending.coefficients must be finite")
-        _positive("KawabataBending.coefficients[0] (initial bending rigidity alpha_1)", self.coefficients[0])
+        positive_number("KawabataBending.coefficients[0] (initial bending rigidity alpha_1)", self.coefficients[0])
 
     def moment(self, kappa):
         """Moment per unit width [N] at curvature kappa [1/m] (numpy)."""
@@ -55,8 +56,8 @@ class SquareRootBending:
     kappa0: float
 
     def __post_init__(self):
-        _positive("SquareRootBending.B0", self.B0)
-        _positive("SquareRootBending.kappa0", self.kappa0)
+        positive_number("SquareRootBending.B0", self.B0)
+        positive_number("SquareRootBending.kappa0", self.kappa0)
 
     def moment(self, kappa):
         k = np.abs(np.asarray(kappa, dtype=float))
@@ -98,12 +99,12 @@ class Fabric:
     membrane_law: object | None = None
 
     def __post_init__(self):
-        _positive("E1", self.E1)
-        _positive("E2", self.E2)
-        _positive("G12", self.G12)
-        _positive("thickness", self.thickness)
+        positive_number("E1", self.E1)
+        positive_number("E2", self.E2)
+        positive_number("G12", self.G12)
+        positive_number("thickness", self.thickness)
         if self.G13 is not None:
-            _positive("G13", self.G13)
+            positive_number("G13", self.G13)
         if not (math.isfinite(self.density) and self.density >= 0):
             raise ValueError(f"density must be >= 0, got {self.density!r}")
         # Plane-stress stability: 1 - nu12 nu21 > 0, i.e. nu12^2 < E1/E2
@@ -114,8 +115,8 @@ class Fabric:
         if self.bending_rigidity is not None:
             if len(self.bending_rigidity) != 2:
                 raise ValueError("bending_rigidity must be a pair (B1, B2) in N m")
-            _positive("bending_rigidity[0]", self.bending_rigidity[0])
-            _positive("bending_rigidity[1]", self.bending_rigidity[1])
+            positive_number("bending_rigidity[0]", self.bending_rigidity[0])
+            positive_number("bending_rigidity[1]", self.bending_rigidity[1])
         if self.membrane_law is not None and not (hasattr(self.membrane_law, "exponents")
                                                   and hasattr(self.membrane_law, "coefficients")):
             raise ValueError("membrane_law must be a fabricfem.fitted_law.FittedMembraneLaw (exponents and "
@@ -124,7 +125,7 @@ class Fabric:
     @classmethod
     def isotropic(cls, E: float, nu: float, thickness: float, density: float = 0.0, **kw) -> "Fabric":
         """Isotropic sheet: E1 = E2 = E, G12 = E / (2 (1 + nu))."""
-        _positive("E", E)
+        positive_number("E", E)
         if not (-1.0 < nu < 0.5 + 1e-15) or not math.isfinite(nu):
             raise ValueError(f"Poisson ratio nu = {nu!r} must lie in (-1, 0.5]")
         return cls(E1=E, E2=E, G12=E / (2.0 * (1.0 + nu)), nu12=nu, thickness=thickness, density=density, **kw)

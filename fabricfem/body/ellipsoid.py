@@ -277,3 +277,20 @@ class Ellipsoid:
     def volume(self) -> float:
         """4/3 pi r1 r2 r3 [m^3]."""
         return 4.0 / 3.0 * math.pi * float(np.prod(self.radii))
+
+
+def nearest_gap(x: np.ndarray, obstacles, segment: np.ndarray | None = None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Smallest signed gap [m] of the points x (N, 3) over `obstacles` (anything with gap(x) -> (g, n)),
+    the unit outward normal there and the obstacle index; with `segment` (N,), that obstacle's gap
+    instead of the nearest one. Loops over the (few) obstacles, vectorised over the points."""
+    x = np.asarray(x, dtype=float).reshape(-1, 3)
+    if len(x) == 0:
+        return np.zeros(0), np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
+    gaps = np.empty((len(obstacles), len(x)))
+    normals = np.empty((len(obstacles), len(x), 3))
+    for k, obstacle in enumerate(obstacles):
+        gaps[k], normals[k] = obstacle.gap(x)
+    nearest = np.argmin(gaps, axis=0) if segment is None else np.asarray(segment, dtype=np.int64)
+    cols = np.arange(len(x))
+    return gaps[nearest, cols], normals[nearest, cols], nearest

@@ -19,7 +19,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from fabricfem.body.ellipsoid import Ellipsoid, _as_points
+from fabricfem.body.ellipsoid import Ellipsoid, _as_points, nearest_gap
 from fabricfem.body.motion import KinematicsSource
 
 MIN_SEGMENT_LENGTH = 1e-9    # m: J1 and J2 closer than this are treated as coincident
@@ -181,11 +181,4 @@ class Body:
             (g [m] (N,), unit outward normal (N, 3), index (N,) into `list(self.segments)`).
         """
         pts, _ = _as_points(x)
-        posed = list(self.pose(t).values())
-        gaps = np.empty((len(posed), len(pts)))
-        normals = np.empty((len(posed), len(pts), 3))
-        for k, e in enumerate(posed):  # loop over the few segments, vectorised over the points
-            gaps[k], normals[k] = e.gap(pts)
-        nearest = np.argmin(gaps, axis=0)
-        cols = np.arange(len(pts))
-        return gaps[nearest, cols], normals[nearest, cols], nearest
+        return nearest_gap(pts, list(self.pose(t).values()))

@@ -37,6 +37,7 @@ from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from fabricfem.body import ellipsoid as ellipsoid_module
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.meshes._validate import positive
 
@@ -142,15 +143,7 @@ def nearest_gap(x: np.ndarray, ellipsoids: Sequence[Ellipsoid],
     assignment, ContactProblem's active-set strategy). Loops over the (few) segments, vectorised over the
     N points (see `Ellipsoid.gap`).
     """
-    if len(x) == 0:
-        return np.zeros(0), np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
-    gaps = np.empty((len(ellipsoids), len(x)))
-    normals = np.empty((len(ellipsoids), len(x), 3))
-    for k, e in enumerate(ellipsoids):
-        gaps[k], normals[k] = e.gap(x)
-    nearest = np.argmin(gaps, axis=0) if segment is None else np.asarray(segment, dtype=np.int64)
-    cols = np.arange(len(x))
-    g, n = gaps[nearest, cols], normals[nearest, cols]
+    g, n, nearest = ellipsoid_module.nearest_gap(x, ellipsoids, segment)
     if not (np.all(np.isfinite(g)) and np.all(np.isfinite(n))):
         raise ValueError("x: the contact gap is not finite (positions contain NaN/inf: the solve diverged)")
     return g, n, nearest

@@ -21,11 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
-
-def _positive(name: str, value: float) -> float:
-    if not (isinstance(value, (int, float, np.integer, np.floating)) and math.isfinite(value) and value > 0):
-        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
-    return float(value)
+from fabricfem.materials import positive_number
 
 
 @dataclass(frozen=True)
@@ -118,14 +114,14 @@ def rectangular_grid(nx: int, ny: int, dx: float, dy: float, E: float, nu: float
         raise ValueError(f"nx must be an integer >= 2, got {nx!r}")
     if not (isinstance(ny, (int, np.integer)) and ny >= 2):
         raise ValueError(f"ny must be an integer >= 2, got {ny!r}")
-    dx, dy = _positive("dx", dx), _positive("dy", dy)
-    E, h = _positive("E", E), _positive("thickness", thickness)
+    dx, dy = positive_number("dx", dx), positive_number("dy", dy)
+    E, h = positive_number("E", E), positive_number("thickness", thickness)
     if not (math.isfinite(nu) and -1.0 < nu < 0.5 + 1e-15):
         raise ValueError(f"nu must lie in (-1, 0.5], got {nu!r}")
     if not (math.isfinite(areal_density) and areal_density >= 0):
         raise ValueError(f"areal_density must be >= 0, got {areal_density!r}")
-    _positive("compression_factor", compression_factor)
-    _positive("shear_factor", shear_factor)
+    positive_number("compression_factor", compression_factor)
+    positive_number("shear_factor", shear_factor)
 
     ix, iy = np.meshgrid(np.arange(nx), np.arange(ny))  # shape (ny, nx)
     ids = iy * nx + ix
@@ -178,7 +174,7 @@ def beam_strip(n_elements: int, length: float, EA: float, EI: float, line_densit
     """
     if not (isinstance(n_elements, (int, np.integer)) and n_elements >= 2):
         raise ValueError(f"n_elements must be an integer >= 2, got {n_elements!r}")
-    length, EA, EI = _positive("length", length), _positive("EA", EA), _positive("EI", EI)
+    length, EA, EI = positive_number("length", length), positive_number("EA", EA), positive_number("EI", EI)
     if not (math.isfinite(line_density) and line_density >= 0):
         raise ValueError(f"line_density must be >= 0, got {line_density!r}")
     dx = length / n_elements
@@ -192,7 +188,7 @@ def chain(n_springs: int, rest_length: float, stiffness: float, particle_mass: f
     """A straight chain of n_springs + 1 particles (particle 0 at origin), equal springs and masses."""
     if not (isinstance(n_springs, (int, np.integer)) and n_springs >= 1):
         raise ValueError(f"n_springs must be an integer >= 1, got {n_springs!r}")
-    L0, k, m = _positive("rest_length", rest_length), _positive("stiffness", stiffness), _positive(
+    L0, k, m = positive_number("rest_length", rest_length), positive_number("stiffness", stiffness), positive_number(
         "particle_mass", particle_mass)
     e = np.asarray(direction, dtype=float)
     if e.shape != (3,) or not np.linalg.norm(e) > 0:
