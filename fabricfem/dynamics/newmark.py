@@ -15,6 +15,11 @@ Rotations: the director base is NOT re-based during a dynamic run (model.rebase 
 velocities/accelerations are then always measured about the same frame. This limits a run to angles below
 pi/2 about the initial director base (the two-angle singularity).
 
+Step halving (`StepHalving`, shared with fabricfem.dynamics.ts): when the Newton solve of a step fails, the
+state is restored and the step halved and retried down to min_dt (default dt/64), then doubled again after
+`grow_after` converged sub-steps (never above dt); outputs stay at multiples of dt. Below min_dt the run stops
+with DynamicsError (time, dt, Newton reason) and the last converged state in the integrator and model.w.
+
 The common run loop (energy bookkeeping, blow-up check, outputs, progress) lives in `TimeIntegrator`,
 which the explicit central-difference scheme (Newmark with beta = 0) shares.
 """
@@ -39,12 +44,21 @@ LoadFactor = Callable[[float], float] | float
 
 
 class DynamicsError(RuntimeError):
-    """A time integration that diverged or blew up; names the step and the time."""
+    """A time integration that diverged or blew up; names the step and the time.
 
-    def __init__(self, message: str, step: int, time: float):
+    Attributes: step (user step number), time [s] of the failure; for a failed Newton solve also dt [s] (the
+    smallest step tried), reason (SNES converged reason) and last_converged_time [s] (the state the integrator
+    and model.w were restored to).
+    """
+
+    def __init__(self, message: str, step: int, time: float, dt: float | None = None, reason: str | None = None,
+                 last_converged_time: float | None = None):
         super().__init__(message)
         self.step = step
         self.time = time
+        self.dt = dt
+        self.reason = reason
+        self.last_converged_time = last_converged_time
 
 
 @dataclass
@@ -146,10 +160,12 @@ class TimeIntegrator:
         self.bc_rows = rows[rows < n_local].astype(np.int32)
         self._energy_form = fem.form(model.energy)
         self.t = 0.0
+        self.t0 = 0.0
         self.step_count = 0
         self.external_work = 0.0
         self.dissipated = 0.0
         self._initialized = False
+        self.accounts_substeps = False  # True: step() books work and dissipation per sub-step itself
 
     # ------------------------------------------------------------- helpers
     def zero_bc_rows(self, vec: PETSc.Vec):
@@ -195,6 +211,7 @@ class TimeIntegrator:
         else:
             self.v.set(0.0)
         self.t = float(t0)
+        self.t0 = self.t
         self.step_count = 0
         self.external_work = self.dissipated = 0.0
         self.model.set_load_factor(self.load(self.t))
@@ -276,7 +293,8 @@ class TimeIntegrator:
                 lam_old = float(self.model.load_factor.value)
                 iterations = self.step()
                 self.step_count += 1
-                self._account(d_old, lam_old, cv_old)
+                if not self.accounts_substeps:
+                    self._account(d_old, lam_old, cv_old)
                 self._check(energy0, max_work := max(max_work, abs(self.external_work)))
                 if k % output_every == 0 or k == n_steps:
                     record(iterations)
@@ -381,19 +399,116 @@ class _EffectiveSystem:
             A.setDiagonal(self._diag, addv=PETSc.InsertMode.ADD_VALUES)
 
 
-class NewmarkIntegrator(TimeIntegrator):
+@dataclass
+class SubStep:
+    """Outcome of one attempted sub-step: converged, the step size used [s], Newton iterations, SNES reason."""
+    converged: bool
+    dt: float
+    iterations: int
+    reason: str
+
+
+class StepHalving:
+    """Sub-stepping of an implicit integrator with step halving on Newton failure (mixed into TimeIntegrator).
+
+    A user step advances the state from t0 + k dt to t0 + (k+1) dt (the output grid stays on multiples of dt).
+    When the Newton solve of a sub-step fails, the state is restored, the sub-step is halved and retried, down
+    to min_dt; after `grow_after` consecutive converged sub-steps it is doubled again (never above dt). Below
+    min_dt the run stops with DynamicsError naming the time, the step and the Newton reason, with the last
+    converged state restored in the integrator and in model.w. Work and dissipation are booked per sub-step.
+
+    Subclasses implement `_substep(h) -> SubStep`, which advances (t, d, v, a) by h on success and leaves them
+    (and model.w) untouched otherwise; `_substep` may itself halve (then SubStep.dt < h).
+    """
+
+    def _init_step_halving(self, min_dt: float | None, grow_after: int):
+        min_dt = self.dt / 64.0 if min_dt is None else min_dt
+        if not (isinstance(min_dt, (int, float, np.floating)) and math.isfinite(min_dt) and 0 < min_dt <= self.dt):
+            raise ValueError(f"min_dt must be a time step [s] in (0, dt = {self.dt:.6g}], got {min_dt!r}")
+        if not (isinstance(grow_after, (int, np.integer)) and grow_after >= 1):
+            raise ValueError(f"grow_after must be a positive integer, got {grow_after!r}")
+        self.min_dt = float(min_dt)
+        self.grow_after = int(grow_after)
+        self.current_dt = self.dt  # the sub-step size the next step starts with [s]
+        self.substeps = 0  # converged sub-steps so far
+        self.halvings = 0  # failed Newton solves that led to a smaller sub-step
+        self.doublings = 0  # sub-step growths back towards dt
+        self._successes = 0
+        self.accounts_substeps = True
+        self._sub_d_old = self.model.create_vector()
+        self._sub_cv_old = self.model.create_vector()
+
+    def _restore_last_converged(self):
+        self.model.set_load_factor(self.load(self.t))
+        self._sync_model()
+
+    def _fail(self, name: str, t_fail: float, h: float, reason: str, iterations: int):
+        self._restore_last_converged()
+        raise DynamicsError(
+            f"{name} step {self.step_count + 1}: Newton {reason} after {iterations} iterations at t = {t_fail:.6g} s "
+            f"with dt = {h:.3g} s (min_dt = {self.min_dt:.3g} s); state restored to the last converged time "
+            f"t = {self.t:.6g} s", self.step_count + 1, t_fail, dt=h, reason=reason, last_converged_time=self.t)
+
+    def step(self) -> int:
+        """Advance to the next output time t0 + (k+1) dt; returns the Newton iterations of all sub-steps."""
+        t_target = self.t0 + (self.step_count + 1) * self.dt
+        resolution = 1e-9 * self.dt
+        iterations = 0
+        while t_target - self.t > resolution:
+            h = min(self.current_dt, t_target - self.t)
+            if t_target - self.t - h <= resolution:
+                h = t_target - self.t  # land on the grid, no sliver step
+            self.d.copy(self._sub_d_old)
+            self._cv.copy(self._sub_cv_old)
+            lam_old = float(self.model.load_factor.value)
+            outcome = self._substep(h)
+            iterations += outcome.iterations
+            if not outcome.converged:
+                if outcome.dt / 2.0 < self.min_dt * (1.0 - 1e-12):
+                    self._fail(type(self).__name__, self.t + outcome.dt, outcome.dt, outcome.reason, outcome.iterations)
+                self.current_dt = outcome.dt / 2.0
+                self.halvings += 1
+                self._successes = 0
+                continue
+            if outcome.dt < h * (1.0 - 1e-12):  # halved inside _substep
+                self.halvings += int(round(math.log2(h / outcome.dt)))
+                self.current_dt = outcome.dt
+                self._successes = 0
+            self.substeps += 1
+            self._account(self._sub_d_old, lam_old, self._sub_cv_old)
+            self._successes += 1
+            if self.current_dt < self.dt and self._successes >= self.grow_after:
+                self.current_dt = min(2.0 * self.current_dt, self.dt)
+                self.doublings += 1
+                self._successes = 0
+        self.t = t_target
+        return iterations
+
+    def _substep(self, h: float) -> SubStep:
+        raise NotImplementedError
+
+    def _destroy_step_halving(self):
+        self._sub_d_old.destroy()
+        self._sub_cv_old.destroy()
+
+
+class NewmarkIntegrator(StepHalving, TimeIntegrator):
     """Implicit Newmark (beta, gamma) with SNES Newton per step (thesis Box 2, eqs. 2.76, 2.84-2.85).
 
     Args:
         beta, gamma: Newmark parameters; unconditionally stable for gamma >= 1/2 and beta >= (gamma + 1/2)^2 / 4
             (Hughes, The Finite Element Method, sec. 9.1); other values raise ValueError. Default: trapezoidal.
         newton_options: PETSc options for the SNES (see fabricfem.solvers.newton.DEFAULT_OPTIONS).
+        min_dt: smallest sub-step [s] of the step halving on Newton failure (default dt / 64; min_dt = dt
+            disables halving); grow_after: converged sub-steps before the sub-step is doubled again (see
+            StepHalving). Outputs stay at multiples of dt.
         Other arguments: see TimeIntegrator (consistent mass unless lumped=True).
     """
 
     def __init__(self, model, dt: float, beta: float = 0.25, gamma: float = 0.5, load_factor: LoadFactor = 1.0,
                  rayleigh: tuple[float, float] = (0.0, 0.0), air_drag: float = 0.0, lumped: bool = False,
-                 newton_options: dict | None = None, energy_bound: float | str | None = "auto"):
+                 newton_options: dict | None = None, energy_bound: float | str | None = "auto",
+                 min_dt: float | None = None, grow_after: int = 4):
         for name, value in (("beta", beta), ("gamma", gamma)):
             if not (isinstance(value, (int, float, np.floating)) and math.isfinite(value)):
                 raise ValueError(f"{name} must be a finite number, got {value!r}")
@@ -403,10 +518,12 @@ class NewmarkIntegrator(TimeIntegrator):
             raise ValueError(f"beta = {beta} < (gamma + 1/2)^2 / 4 = {(gamma + 0.5) ** 2 / 4:.6g}: the implicit "
                              f"Newmark scheme would be only conditionally stable (use CentralDifference for beta = 0)")
         super().__init__(model, dt, load_factor, rayleigh, air_drag, lumped, energy_bound)
+        self._init_step_halving(min_dt, grow_after)
         self.beta, self.gamma = float(beta), float(gamma)
         self.d_pred = model.create_vector()
         self.v_pred = model.create_vector()
         self.system = _EffectiveSystem(self)
+        self._coefficient_dt = self.dt
         self.system.set_coefficients(self.dt, self.beta, self.gamma)
         # stol 1e-8: near round-off the residual of thin shells stagnates (ill-conditioned K) while the Newton
         # update is ~1e-9 of the solution; the full-step Newton only takes steps that small when converged.
@@ -414,36 +531,40 @@ class NewmarkIntegrator(TimeIntegrator):
         options.update(newton_options or {})
         self.solver = NewtonSolver(self.system, options)
 
-    def step(self) -> int:
-        dt, beta, gamma = self.dt, self.beta, self.gamma
-        t_new = self.t + dt
+    def _substep(self, h: float) -> SubStep:
+        """One Newmark step of size h from (t, d, v, a); on Newton failure nothing but model.w is changed."""
+        beta, gamma = self.beta, self.gamma
+        if h != self._coefficient_dt:
+            self.system.set_coefficients(h, beta, gamma)
+            self._coefficient_dt = h
+        t_new = self.t + h
         # predictors d~, v~ (eq. 2.76 with a* = 0)
         self.d.copy(self.d_pred)
-        self.d_pred.axpy(dt, self.v)
-        self.d_pred.axpy((0.5 - beta) * dt ** 2, self.a)
+        self.d_pred.axpy(h, self.v)
+        self.d_pred.axpy((0.5 - beta) * h ** 2, self.a)
         self.v.copy(self.v_pred)
-        self.v_pred.axpy((1.0 - gamma) * dt, self.a)
+        self.v_pred.axpy((1.0 - gamma) * h, self.a)
         self.ops.freeze(self.d)  # C = a M + b K_M(d^n) (eq. 2.85)
         self.model.set_load_factor(self.load(t_new))
         self.d_pred.copy(self.model.w.vector)
         self.model.w.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         result = self.solver.solve()
         if not result.converged:
-            self._sync_model()
-            raise DynamicsError(f"Newmark step {self.step_count + 1} (t = {t_new:.6g} s, dt = {dt:.3g} s): Newton "
-                                f"{result.reason} after {result.iterations} iterations", self.step_count + 1, t_new)
+            self._restore_last_converged()
+            return SubStep(False, h, result.iterations, result.reason)
         self.model.w.vector.copy(self.d)
         # a^{n+1} = (d - d~) / (beta dt^2), v^{n+1} = v~ + gamma dt a^{n+1}
         self.d.copy(self.a)
         self.a.axpy(-1.0, self.d_pred)
-        self.a.scale(1.0 / (beta * dt ** 2))
+        self.a.scale(1.0 / (beta * h ** 2))
         self.v_pred.copy(self.v)
-        self.v.axpy(gamma * dt, self.a)
+        self.v.axpy(gamma * h, self.a)
         self.t = t_new
-        return result.iterations
+        return SubStep(True, h, result.iterations, result.reason)
 
     def destroy(self):
         self.solver.destroy()
         for vec in (self.d_pred, self.v_pred):
             vec.destroy()
+        self._destroy_step_halving()
         super().destroy()
