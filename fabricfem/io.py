@@ -92,3 +92,49 @@ def render_surfaces(path: str | Path, surfaces: list[tuple[np.ndarray, np.ndarra
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     plotter.screenshot(str(path))
     plotter.close()
+
+
+def peak_memory_mib(comm=MPI.COMM_WORLD) -> dict[str, float | list[float]]:
+    """Peak resident memory of the processes: ru_maxrss (Linux: KiB) of each rank in MiB, gathered on all
+    ranks: {"max_mib": max over ranks, "total_mib": sum, "per_rank_mib": [...]}. It includes what the
+    process held before the run (interpreter, libraries, JIT-compiled forms)."""
+    import resource
+    kib = float(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
+    per_rank = comm.allgather(kib / 1024.0)
+    return {"max_mib": max(per_rank), "total_mib": sum(per_rank), "per_rank_mib": per_rank}
+
+
+def write_json(path: str | Path, data: dict, comm=MPI.COMM_WORLD):
+    """JSON file written by rank 0 (numbers and strings; paths converted to str)."""
+    import json
+    if comm.rank != 0:
+        return
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w") as f:
+        json.dump(data, f, indent=1, default=str)
+
+
+def plot_time_series(path: str | Path, time: Sequence[float], panels: dict[str, dict[str, Sequence[float]]],
+                     title: str = "", comm=MPI.COMM_WORLD):
+    """PNG of curves over time (rank 0): one panel per key of `panels` ({panel label: {curve: values}})."""
+    if comm.rank != 0:
+        return
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    n = max(1, len(panels))
+    fig, axes = plt.subplots(n, 1, figsize=(8, 2.4 * n), sharex=True, squeeze=False)
+    for ax, (label, curves) in zip(axes[:, 0], panels.items()):
+        for curve, values in curves.items():
+            ax.plot(time, values, label=curve)
+        ax.set_ylabel(label)
+        ax.grid(True, alpha=0.3)
+        if len(curves) > 1:
+            ax.legend(fontsize=8)
+    axes[-1, 0].set_xlabel("time [s]")
+    if title:
+        axes[0, 0].set_title(title)
+    fig.tight_layout()
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

@@ -1,16 +1,23 @@
 """`fabricfem run SCENE`: build the model a scene describes, solve it, write the outputs.
 
-Static scenes (load stepping to the solver targets) are run here; progress is shown on rank 0
-and the run ends with a summary. Outputs: <dir>/solution.xdmf (ParaView), <dir>/history.csv
-(load factor, Newton iterations, probe displacement) and <dir>/final.png.
+Static scenes (load stepping to the solver targets) and dynamic scenes ([dynamics]: time integration
+from rest) are run here; progress is shown on rank 0 with an estimated time left and the run ends with a
+summary that includes the peak resident memory (max over ranks). Outputs of a static scene:
+<dir>/solution.xdmf (ParaView), <dir>/history.csv (load factor, Newton iterations, probe displacement),
+<dir>/final.png and <dir>/summary.json. Outputs of a dynamic scene <name>: <dir>/<name>.xdmf (displacement
+time series), <dir>/<name>.csv (time [s], energies [J], monitors, max vertex Green strain [-], Newton
+iterations), <dir>/<name>.png (monitors and energies over time) and <dir>/<name>_summary.json.
 """
 from __future__ import annotations
 
+import math
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from mpi4py import MPI
+from petsc4py import PETSc
 
 from fabricfem import io
 from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
@@ -69,17 +76,38 @@ def _components(values, n: int, where: str):
     return out
 
 
-def build_model(scene: Scene, comm=MPI.COMM_WORLD) -> ShellModel:
+def _node_locator(model: ShellModel, point, where: str):
+    """Geometric locator of the mesh node at `point` (SceneError naming `where` if there is none)."""
+    try:
+        model.owned_node_dof(point, "u", 0)
+    except ValueError as exc:
+        raise SceneError(f"{where}: {exc}") from None
+    p = np.asarray(point, dtype=float)
+    return lambda x: np.linalg.norm(x.T - p, axis=1) < 1e-8 * max(1.0, float(np.abs(p).max()))
+
+
+def build_model(scene: Scene, comm=MPI.COMM_WORLD, model_class: type = ShellModel) -> ShellModel:
     fabric = build_fabric(scene["fabric"])
     model_spec = scene.get("model", {})
     kind = model_spec.get("kind", "naghdi")
     fmesh = build_mesh(scene["mesh"], comm)
-    model = ShellModel(fmesh, fabric, model=kind, rebase=model_spec.get("rebase", True))
+    model = model_class(fmesh, fabric, model=kind, rebase=model_spec.get("rebase", True))
     for i, support in enumerate(scene.get("support", [])):
-        if support["edge"] not in fmesh.tags:
+        if "point" in support:
+            where = _node_locator(model, support["point"], f"support[{i}].point")
+        elif support["edge"] not in fmesh.tags:
             raise SceneError(f"support[{i}].edge: unknown edge {support['edge']!r}; available: {sorted(fmesh.tags)}")
-        model.constrain(support["edge"], u=_components(support.get("u"), 3, f"support[{i}].u"),
-                        theta=_components(support.get("theta"), 2, f"support[{i}].theta"))
+        else:
+            where = support["edge"]
+        try:
+            model.constrain(where, u=_components(support.get("u"), 3, f"support[{i}].u"),
+                            theta=_components(support.get("theta"), 2, f"support[{i}].theta"))
+        except ValueError as exc:
+            if isinstance(exc, SceneError):
+                raise
+            raise SceneError(f"support[{i}]: {exc}") from None
+    if "gravity" in scene.get("dynamics", {}):
+        model.add_gravity(scene["dynamics"]["gravity"])
     for i, load in enumerate(scene.get("load", [])):
         where = f"load[{i}]"
         kind, value = load["type"], load.get("value")
@@ -109,12 +137,14 @@ def run_scene(scene: Scene, comm=MPI.COMM_WORLD):
     if "body" in scene.data:
         from fabricfem.sleeve import run_sleeve_scene
         return run_sleeve_scene(scene, comm)
+    if "dynamics" in scene.data:
+        return run_dynamic_scene(scene, comm)
     return run_static_scene(scene, comm)
 
 
 def run_static_scene(scene: Scene, comm=MPI.COMM_WORLD) -> list[LoadStep]:
     say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
-    out = Path(scene.get("output", {}).get("dir", f"results/{scene.get('scene', {}).get('name', 'scene')}"))
+    out = Path(scene.get("output", {}).get("dir", f"results/{scene_name(scene)}"))
     probe = scene.get("output", {}).get("probe")
     solver_spec = scene["solver"]
     targets = list(np.atleast_1d(solver_spec["targets"]).astype(float))
@@ -146,9 +176,273 @@ def run_static_scene(scene: Scene, comm=MPI.COMM_WORLD) -> list[LoadStep]:
         io.render_surfaces(out / "final.png", surfaces, title=scene.get("scene", {}).get("name", ""),
                            colors=["lightgray", "steelblue"], camera="iso")
     wall = time.perf_counter() - t0
-    say(f"done: {len(history)} load steps, {sum(h.iterations for h in history)} Newton iterations, {wall:.1f} s")
+    memory = io.peak_memory_mib(comm)
+    say(f"done: {len(history)} load steps, {sum(h.iterations for h in history)} Newton iterations, {wall:.1f} s, "
+        f"peak memory {memory['max_mib']:.0f} MiB (max over {comm.size} rank(s))")
+    summary = {"scene": scene_name(scene), "kind": "static", "ranks": comm.size, "ndofs": model.ndofs,
+               "load_steps": len(history), "newton_iterations": sum(h.iterations for h in history),
+               "wall_s": wall, "peak_memory_mib": memory["max_mib"], "peak_memory_per_rank_mib": memory["per_rank_mib"]}
     if probe is not None:
-        say(f"probe {tuple(probe)}: displacement {model.node_value(probe)} m")
-    say(f"wrote {out}/solution.xdmf, history.csv" + (", final.png" if scene.get("output", {}).get("render", True)
-                                                    else ""))
+        value = model.node_value(probe)
+        summary["probe_displacement_m"] = list(value)
+        say(f"probe {tuple(probe)}: displacement {value} m")
+    io.write_json(out / "summary.json", summary, comm)
+    say(f"wrote {out}/solution.xdmf, history.csv, summary.json" +
+        (", final.png" if scene.get("output", {}).get("render", True) else ""))
     return history
+
+
+def scene_name(scene: Scene) -> str:
+    """[scene] name, else the file's stem, else "scene"."""
+    return scene.get("scene", {}).get("name") or (scene.path.stem if scene.path is not None else "scene")
+
+
+# ---------------------------------------------------------------------------------------- dynamic scenes
+class ObstacleShell(ShellModel):
+    """ShellModel with penalty contact against fixed rigid obstacles (fabricfem.contact.obstacles) in its
+    internal force, residual and tangent, for the time integrators (which call internal_force / residual
+    and assemble the shell's jacobian_form themselves: `add_contact_tangent` adds the nodal 3x3 blocks).
+    Nodal contact as in fabricfem.contact.problem (owned nodes only, Dirichlet components excluded)."""
+
+    contact = None
+
+    def set_obstacles(self, obstacles: list, penalty: float | None = None):
+        from fabricfem.contact.problem import ContactProblem
+        self.compile()
+        self.contact = ContactProblem(self, obstacles, penalty=penalty)
+
+    def _subtract_contact_force(self, b: PETSc.Vec):
+        if self.contact is None:
+            return
+        state = self.contact.evaluate()  # at self.w, which the shell's assembly has just set
+        free = self.contact._free
+        b.getArray()[self.contact.nodes.dofs[free]] -= state.force[free]
+
+    def internal_force(self, x: PETSc.Vec, b: PETSc.Vec):
+        """b = R_int(x) - f_contact(x)."""
+        super().internal_force(x, b)
+        self._subtract_contact_force(b)
+
+    def residual(self, x: PETSc.Vec, b: PETSc.Vec):
+        super().residual(x, b)
+        self._subtract_contact_force(b)
+
+    def add_contact_tangent(self, A: PETSc.Mat):
+        """A += the contact stiffness blocks at the current state self.w (free displacement rows)."""
+        if self.contact is None:
+            return
+        state = self.contact.evaluate()
+        free = self.contact._free.astype(float)
+        rows = self.contact.nodes.dofs.astype(PETSc.IntType)
+        A.setValuesLocalRCV(rows, rows, state.stiffness * free[:, :, None] * free[:, None, :],
+                            addv=PETSc.InsertMode.ADD_VALUES)
+        A.assemble()
+
+    def jacobian(self, x: PETSc.Vec, A: PETSc.Mat):
+        super().jacobian(x, A)
+        self.add_contact_tangent(A)
+
+
+def build_obstacles(spec: list[dict]) -> list:
+    """Plane / RoundedBox obstacles of [[dynamics.obstacles]] (validated by fabricfem.scene), SI units."""
+    from fabricfem.contact.obstacles import Plane, RoundedBox, table_top
+    out = []
+    for i, o in enumerate(spec):
+        try:
+            if o["type"] == "plane":
+                out.append(Plane(o["point"], o["normal"]))
+            elif o["type"] == "box":
+                out.append(RoundedBox(o["lower"], o["upper"], float(o["radius"])))
+            else:
+                out.append(table_top(o["center"], float(o["half_x"]), float(o["half_y"]), float(o["height"]),
+                                     float(o["fillet_radius"])))
+        except ValueError as exc:
+            raise SceneError(f"dynamics.obstacles[{i}]: {exc}") from None
+    return out
+
+
+@dataclass
+class DynamicRun:
+    """Result of `run_dynamic_scene`: the recorded history, step data, wall time [s], peak memory [MiB]."""
+    history: object
+    steps: int
+    dt: float
+    dt_crit: float | None
+    wall_s: float
+    peak_memory_mib: float
+    summary: dict = field(default_factory=dict)
+    outputs: dict[str, Path] = field(default_factory=dict)
+
+
+def _load_function(ramp_time: float):
+    """lambda(t) = min(t / ramp_time, 1) (1 at once when ramp_time = 0)."""
+    if ramp_time > 0.0:
+        return lambda t: min(t / ramp_time, 1.0)
+    return 1.0
+
+
+def build_integrator(spec: dict, model: ShellModel):
+    """(integrator, n_steps, dt [s], dt_crit [s] or None) for a [dynamics] section; dt is end_time / n_steps."""
+    from fabricfem.dynamics import CentralDifference, NewmarkIntegrator, critical_time_step
+    kind = spec["integrator"]
+    end_time = float(spec["end_time"])
+    rayleigh = tuple(float(c) for c in spec.get("rayleigh", (0.0, 0.0)))
+    common = dict(load_factor=_load_function(float(spec.get("ramp_time", 0.0))), rayleigh=rayleigh,
+                  air_drag=float(spec.get("air_drag", 0.0)))
+    dt_crit = critical_time_step(model, rayleigh) if kind == "explicit" else None
+    dt = float(spec.get("dt_fraction", 0.9)) * dt_crit if spec["dt"] == "auto" else float(spec["dt"])
+    n_steps = max(1, math.ceil(end_time / dt * (1.0 - 1e-12)))
+    dt = end_time / n_steps
+    if kind == "explicit":
+        force = bool(spec.get("force", False))
+        if dt > dt_crit and not force:
+            raise SceneError(f"dynamics.dt: {dt:.6g} s exceeds the critical time step {dt_crit:.6g} s of this mesh "
+                             f"(ratio {dt / dt_crit:.3g}, thesis eqs. 2.86-2.87); use a smaller dt or force = true")
+        integrator = CentralDifference(model, dt, force=force, dt_crit=dt_crit, **common)
+    elif kind == "newmark":
+        integrator = NewmarkIntegrator(model, dt, beta=float(spec.get("beta", 0.25)),
+                                       gamma=float(spec.get("gamma", 0.5)), lumped=bool(spec.get("lumped", False)),
+                                       **common)
+    else:
+        from fabricfem.dynamics.ts import GeneralizedAlphaIntegrator  # lazily: written separately
+        # (its tangent adds model.add_contact_tangent itself)
+        integrator = GeneralizedAlphaIntegrator(model, dt, rho_inf=float(spec.get("rho_inf", 1.0)),
+                                                lumped=bool(spec.get("lumped", False)), **common)
+    if getattr(model, "contact", None) is not None and hasattr(integrator, "system"):
+        # implicit step: the effective tangent is assembled from the shell's jacobian_form; add the contact blocks
+        system = integrator.system
+        shell_tangent = system.jacobian
+
+        def jacobian(x, A):
+            shell_tangent(x, A)
+            model.add_contact_tangent(A)
+        system.jacobian = jacobian
+    return integrator, n_steps, dt, dt_crit
+
+
+class _StrainMeter:
+    """Vertex Green strains (patch averages of fabricfem.dynamics.strain_limit) once per recorded step."""
+
+    def __init__(self, projection, integrator):
+        self.projection, self.integrator = projection, integrator
+        self._step, self._summary = None, None
+
+    def summary(self) -> dict[str, float]:
+        if self._step != self.integrator.step_count:
+            self._summary = self.projection.strain_summary()
+            self._step = self.integrator.step_count
+        return self._summary
+
+    def max_strain(self) -> float:
+        s = self.summary()
+        return max(s["max_warp"], s["max_weft"])
+
+
+def _max_displacement(model: ShellModel) -> float:
+    """max over nodes of |u| [m], all ranks."""
+    u = model.displacement().x.array.reshape(-1, 3)
+    local = float(np.linalg.norm(u, axis=1).max(initial=0.0))
+    return model.comm.allreduce(local, op=MPI.MAX)
+
+
+def build_monitors(spec: list[dict], model: ShellModel, meter: _StrainMeter) -> dict:
+    """{name: callable} of [[dynamics.monitors]] (point values on all ranks, global quantities)."""
+    from fabricfem.dynamics import node_monitor
+    quantities = {"max_warp_strain": lambda: meter.summary()["max_warp"],
+                  "max_weft_strain": lambda: meter.summary()["max_weft"],
+                  "mean_warp_strain": lambda: meter.summary()["mean_warp"],
+                  "mean_weft_strain": lambda: meter.summary()["mean_weft"],
+                  "max_displacement": lambda: _max_displacement(model)}
+    monitors = {}
+    for i, m in enumerate(spec):
+        if "quantity" in m:
+            monitors[m["name"]] = quantities[m["quantity"]]
+            continue
+        field_name = m.get("field", "u")
+        try:
+            monitors[m["name"]] = node_monitor(model, m["point"], field_name,
+                                               m.get("component", 2 if field_name == "u" else 0))
+        except ValueError as exc:
+            raise SceneError(f"dynamics.monitors[{i}].point: {exc}") from None
+    return monitors
+
+
+def _progress(comm, n_steps: int, say):
+    """Progress callback of TimeIntegrator.run: about 10 lines with the estimated time left (rank 0)."""
+    every = max(1, math.ceil(n_steps / 10))
+
+    def report(step: int, total: int, t: float, elapsed: float):
+        if step % every and step != total:
+            return
+        left = elapsed / step * (total - step)
+        say(f"  step {step:6d}/{total}  t = {t:.5g} s  [{step / total:5.1%}, {elapsed:7.1f} s, "
+            f"about {left:6.1f} s left]")
+    return report
+
+
+def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD) -> DynamicRun:
+    """Integrate a [dynamics] scene from rest to end_time; write <name>.xdmf/.csv/.png/_summary.json."""
+    from fabricfem.dynamics.strain_limit import FastProjection, attach
+    say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
+    spec = scene["dynamics"]
+    name = scene_name(scene)
+    out = Path(scene.get("output", {}).get("dir", f"results/{name}"))
+    t0 = time.perf_counter()
+    obstacles = build_obstacles(spec.get("obstacles", []))
+    model = build_model(scene, comm, ObstacleShell if obstacles else ShellModel)
+    if obstacles:
+        model.set_obstacles(obstacles, spec.get("contact_penalty"))
+    integrator, n_steps, dt, dt_crit = build_integrator(spec, model)
+    limit = spec.get("strain_limit")
+    # the projection's strain form also measures the strains (limit 1 when nothing is limited, as in
+    # fabricfem.verify.strain_limit)
+    projection = FastProjection(model, float(limit) if limit else 1.0, tol=float(spec.get("strain_limit_tol", 1e-4)))
+    log = attach(projection, integrator) if limit else []
+    meter = _StrainMeter(projection, integrator)
+    monitors = build_monitors(spec.get("monitors", []), model, meter)
+    monitors["max_strain"] = meter.max_strain
+    output_every = int(spec.get("output_every", max(1, n_steps // 100)))
+    say(f"{name}: {model.model} model, {model.ndofs} dofs, {comm.size} rank(s); {spec['integrator']} "
+        f"dt = {dt:.4g} s" + (f" (critical {dt_crit:.4g} s)" if dt_crit else "") +
+        f", {n_steps} steps to t = {float(spec['end_time']):g} s" + (f", strain limit {limit:g}" if limit else "")
+        + (f", {len(obstacles)} obstacle(s)" if obstacles else ""))
+    xdmf = out / f"{name}.xdmf"
+    start = time.perf_counter()
+    history = integrator.run(n_steps, monitors=monitors, xdmf=xdmf, output_every=output_every,
+                             progress=_progress(comm, n_steps, say))
+    run_wall = time.perf_counter() - start
+    header, rows = history.columns()
+    header.append("newton_iterations")
+    rows = [row + [its] for row, its in zip(rows, history.newton_iterations)]
+    io.write_csv(out / f"{name}.csv", header, rows, comm)
+    user = [m["name"] for m in spec.get("monitors", [])]
+    panels = {m: {m: history.monitors[m]} for m in user}
+    panels["energy [J]"] = {"kinetic": history.kinetic, "strain": history.strain, "total": list(history.total)}
+    panels["max strain [-]"] = {"max vertex Green strain": history.monitors["max_strain"]}
+    io.plot_time_series(out / f"{name}.png", history.time, panels, title=name, comm=comm)
+    wall = time.perf_counter() - t0
+    memory = io.peak_memory_mib(comm)
+    iterations = [r.iterations for r in log]
+    summary = {"scene": name, "kind": "dynamic", "integrator": spec["integrator"], "ranks": comm.size,
+               "ndofs": model.ndofs, "steps": n_steps, "dt_s": dt, "dt_crit_s": dt_crit,
+               "end_time_s": history.time[-1], "wall_s": wall, "time_integration_wall_s": run_wall,
+               "kinetic_J": history.kinetic[-1], "strain_J": history.strain[-1],
+               "external_work_J": history.external_work[-1], "dissipated_J": history.dissipated[-1],
+               "max_strain_final": history.monitors["max_strain"][-1],
+               "max_strain_recorded": max(history.monitors["max_strain"]),
+               "newton_iterations": int(sum(history.newton_iterations)),
+               "projection_iterations": int(sum(iterations)), "max_projection_iterations": max(iterations, default=0),
+               "peak_memory_mib": memory["max_mib"], "peak_memory_total_mib": memory["total_mib"],
+               "peak_memory_per_rank_mib": memory["per_rank_mib"]}
+    outputs = {"xdmf": xdmf, "csv": out / f"{name}.csv", "png": out / f"{name}.png",
+               "summary": out / f"{name}_summary.json"}
+    io.write_json(outputs["summary"], summary, comm)
+    say(f"done: {n_steps} steps in {run_wall:.1f} s (total {wall:.1f} s); final kinetic {summary['kinetic_J']:.4g} J, "
+        f"strain {summary['strain_J']:.4g} J, external work {summary['external_work_J']:.4g} J, dissipated "
+        f"{summary['dissipated_J']:.4g} J; max strain {summary['max_strain_final']:.4g}"
+        + (f"; projection iterations {sum(iterations)} (max {max(iterations, default=0)} per step)" if limit else "")
+        + f"; peak memory {memory['max_mib']:.0f} MiB (max over {comm.size} rank(s))")
+    say(f"wrote {', '.join(str(p) for p in outputs.values())}")
+    integrator.destroy()
+    projection.destroy()
+    return DynamicRun(history, n_steps, dt, dt_crit, wall, memory["max_mib"], summary, outputs)

@@ -49,15 +49,63 @@ A sleeve scene (scenes/sleeve.toml, run by fabricfem.sleeve) has a tube [mesh], 
     type = "elbow_flexion"
     final_angle = 57.0            # deg, in (0, 180)
     angular_velocity = 45.0       # deg/s
-    steps = 19                    # quasi-static angle steps
+    solver = "explicit"           # explicit (central differences, default) | quasistatic (Newton per angle)
+    mass_damping = 10.0           # 1/s, explicit: Rayleigh alpha of C = alpha M (optional)
+    rotary_inertia_scale = 100.0  # explicit: factor >= 1 on the rotational lumped masses (optional)
+    output_angle_step = 1.0       # deg, explicit: torque averaged and recorded per interval (optional)
+    steps = 19                    # quasistatic: angle steps
     [contact]
-    method = "penalty"            # penalty | augmented
+    method = "lagrange"           # explicit: lagrange (Box 5, default) | penalty; quasistatic: penalty | augmented
     friction = 0.1                # Coulomb mu >= 0
     penalty = 1e7                 # Pa/m, optional (default 10 E t / h^2)
     stabilization = 0.01          # viscous regularisation c / (E t / R^2), optional
     gravity = false               # sleeve weight along -y
 
 [output] may add render_angles = [19.0, 38.0, 57.0] (deg) and body_samples (points per ellipsoid ring).
+
+A support may name a mesh node instead of an edge: point = [x, y, z] (m, a node within 1e-8 m).
+
+A dynamic scene (scenes/cantilever_vibration.toml, scenes/corner_pinned.toml) has a [dynamics] section
+instead of [solver]; it starts from rest in the reference configuration with the loads applied at once
+(or ramped linearly over ramp_time) and needs fabric.density > 0:
+
+    [dynamics]
+    integrator = "newmark"        # newmark | explicit | generalized-alpha (fabricfem.dynamics.ts)
+    dt = 1e-3                     # s, or "auto" (explicit only): dt_fraction x the critical step
+    end_time = 0.5                # s; the step is shortened to end_time / ceil(end_time / dt)
+    dt_fraction = 0.9             # optional, for dt = "auto", in (0, 1]
+    force = false                 # explicit: allow dt above the critical step (refused otherwise)
+    beta = 0.25                   # newmark only (default trapezoidal); gamma = 0.5
+    rho_inf = 1.0                 # generalized-alpha only: spectral radius at infinite step, in [0, 1]
+    lumped = false                # lumped mass (newmark / generalized-alpha; explicit is always lumped)
+    rayleigh = [0.0, 0.0]         # C = a M + b K: a [1/s], b [s]
+    air_drag = 0.0                # eta [kg/(m^2 s)], drag force -eta v per unit area
+    strain_limit = 0.01           # optional: max warp/weft Green strain (fast projection, seed 002 sec. 3)
+    strain_limit_tol = 1e-4       # optional: projection tolerance [-]
+    gravity = [0.0, 0.0, -9.81]   # optional, m/s^2 (same as a [[load]] of type "gravity": give one)
+    ramp_time = 0.0               # optional, s: load factor min(t / ramp_time, 1)
+    output_every = 10             # record CSV / XDMF every N steps (and at 0 and the end)
+    contact_penalty = 1e5         # optional, Pa/m, for the obstacles (default 10 E t / h^2)
+
+    [[dynamics.obstacles]]        # rigid, fixed; penalty contact (fabricfem.contact.obstacles)
+    type = "plane"                # plane: point, normal | box: lower, upper, radius (bounds may be
+    point = [0.0, 0.0, -0.1]      #   inf) | table: center = [cx, cy], half_x, half_y, height, fillet_radius
+    normal = [0.0, 0.0, 1.0]
+
+    [[dynamics.monitors]]         # columns of the CSV (and panels of the PNG)
+    name = "tip_w"
+    point = [0.2, 0.0, 0.0]       # a mesh node; field = "u" (m) | "theta" (rad), component 0, 1, 2
+    field = "u"
+    component = 2
+    [[dynamics.monitors]]
+    name = "warp"
+    quantity = "max_warp_strain"  # max_warp_strain | max_weft_strain | mean_warp_strain | mean_weft_strain
+                                  # | max_displacement (m)
+
+Besides the user's monitors the CSV has the energies (kinetic, strain, external work, dissipated [J]) and
+the max vertex Green strain. For the explicit integrator a numeric dt above the critical time step
+(fabricfem.dynamics.stability: estimated from the mesh spacing before meshing, structured meshes) is refused
+with both numbers unless force = true.
 """
 from __future__ import annotations
 
@@ -81,7 +129,7 @@ SCHEMA: dict[str, dict[str, tuple[type | tuple, bool]]] = {
                "kawabata_coefficients": (list, False), "B0": ((int, float), False),
                "kappa0": ((int, float), False)},
     "model": {"kind": (str, False), "rebase": (bool, False)},
-    "support": {"edge": (str, True), "u": (list, False), "theta": (list, False)},
+    "support": {"edge": (str, False), "point": (list, False), "u": (list, False), "theta": (list, False)},
     "load": {"type": (str, True), "edge": (str, False), "value": ((list, int, float), False),
              "point": (list, False)},
     "solver": {"targets": ((list, int, float), True), "initial_step": ((int, float), False),
@@ -92,16 +140,42 @@ SCHEMA: dict[str, dict[str, tuple[type | tuple, bool]]] = {
     "body": {"type": (str, True), "upper_arm_length": ((int, float), False), "forearm_length": ((int, float), False),
              "upper_arm_girth": ((int, float), False), "forearm_girth": ((int, float), False)},
     "motion": {"type": (str, True), "final_angle": ((int, float), False), "angular_velocity": ((int, float), False),
-               "steps": (int, False)},
+               "steps": (int, False), "solver": (str, False), "mass_damping": ((int, float), False),
+               "rotary_inertia_scale": ((int, float), False), "output_angle_step": ((int, float), False)},
     "contact": {"method": (str, False), "friction": ((int, float), False), "penalty": ((int, float), False),
                 "stabilization": ((int, float), False), "gravity": (bool, False)},
+    # dynamic scenes (fabricfem.run.run_dynamic_scene)
+    "dynamics": {"integrator": (str, True), "dt": ((int, float, str), True), "end_time": ((int, float), True),
+                 "dt_fraction": ((int, float), False), "force": (bool, False), "beta": ((int, float), False),
+                 "gamma": ((int, float), False), "lumped": (bool, False), "rayleigh": (list, False),
+                 "air_drag": ((int, float), False), "strain_limit": ((int, float), False),
+                 "strain_limit_tol": ((int, float), False), "gravity": (list, False),
+                 "ramp_time": ((int, float), False), "output_every": (int, False), "obstacles": (list, False),
+                 "monitors": (list, False), "contact_penalty": ((int, float), False),
+                 "rho_inf": ((int, float), False)},
 }
+# arrays of tables inside [dynamics]
+SUB_SCHEMA: dict[str, dict[str, tuple[type | tuple, bool]]] = {
+    "dynamics.obstacles": {"type": (str, True), "point": (list, False), "normal": (list, False),
+                           "lower": (list, False), "upper": (list, False), "radius": ((int, float), False),
+                           "center": (list, False), "half_x": ((int, float), False), "half_y": ((int, float), False),
+                           "height": ((int, float), False), "fillet_radius": ((int, float), False)},
+    "dynamics.monitors": {"name": (str, True), "point": (list, False), "field": (str, False),
+                          "component": (int, False), "quantity": (str, False)},
+}
+INTEGRATORS = {"newmark", "explicit", "generalized-alpha"}
+OBSTACLE_KEYS = {"plane": {"point", "normal"}, "box": {"lower", "upper", "radius"},
+                 "table": {"center", "half_x", "half_y", "height", "fillet_radius"}}
+MONITOR_QUANTITIES = {"max_warp_strain", "max_weft_strain", "mean_warp_strain", "mean_weft_strain",
+                      "max_displacement"}
+STANDARD_COLUMNS = {"time", "kinetic", "strain", "external_work", "dissipated", "total", "max_strain",
+                    "newton_iterations"}
 LIST_SECTIONS = {"support", "load"}
 REQUIRED_SECTIONS = {"mesh", "fabric", "solver"}
 SLEEVE_SECTIONS = {"body", "motion", "contact"}     # a scene with any of them is a sleeve scene
 BODY_TYPES = {"default_arm"}
 MOTION_TYPES = {"elbow_flexion"}
-CONTACT_METHODS = {"penalty", "augmented"}
+CONTACT_METHODS = {"explicit": {"lagrange", "penalty"}, "quasistatic": {"penalty", "augmented"}}
 MESH_KEYS = {"plate": {"lx", "ly", "nx", "ny"}, "tube": {"length", "radius", "n_around", "n_along"}}
 LOAD_TYPES = {"gravity", "body_force", "edge_traction", "pressure", "edge_moment", "point"}
 
@@ -116,7 +190,7 @@ def _suggest(name: str, options) -> str:
 
 
 def _check_table(section: str, table: dict, where: str):
-    schema = SCHEMA[section]
+    schema = SCHEMA[section] if section in SCHEMA else SUB_SCHEMA[section]
     for key, value in table.items():
         if key not in schema:
             raise SceneError(f"{where}: unknown key {key!r}{_suggest(key, schema)}; allowed: {sorted(schema)}")
@@ -149,7 +223,17 @@ def validate(data: dict, source: str = "scene") -> Scene:
             raise SceneError(f"{source}: unknown section [{section}]{_suggest(section, SCHEMA)}; "
                              f"allowed: {sorted(SCHEMA)}")
     sleeve = bool(SLEEVE_SECTIONS & set(data))
-    required = (REQUIRED_SECTIONS - {"solver"}) | SLEEVE_SECTIONS if sleeve else REQUIRED_SECTIONS
+    dynamic = "dynamics" in data
+    if dynamic and (sleeve or "solver" in data):
+        other = "[solver]" if "solver" in data else "[body]/[motion]/[contact]"
+        raise SceneError(f"{source}: [dynamics] and {other} given: a scene is either dynamic (time integration "
+                         f"from rest) or static/sleeve, not both")
+    if sleeve:
+        required = (REQUIRED_SECTIONS - {"solver"}) | SLEEVE_SECTIONS
+    elif dynamic:
+        required = (REQUIRED_SECTIONS - {"solver"}) | {"dynamics"}
+    else:
+        required = REQUIRED_SECTIONS
     for section in sorted(required):
         if section not in data:
             raise SceneError(f"{source}: missing section [{section}]")
@@ -173,8 +257,15 @@ def validate(data: dict, source: str = "scene") -> Scene:
     for i, load in enumerate(data.get("load", [])):
         if load["type"] not in LOAD_TYPES:
             raise SceneError(f"load[{i}].type: unknown load {load['type']!r}{_suggest(load['type'], LOAD_TYPES)}")
+    for i, support in enumerate(data.get("support", [])):
+        if ("edge" in support) == ("point" in support):
+            raise SceneError(f"support[{i}]: give exactly one of 'edge' (an edge name) or 'point' = [x, y, z]")
+        if "point" in support:
+            _numbers(f"support[{i}].point", support["point"], 3)
     if sleeve:
         _check_sleeve(data)
+    if dynamic:
+        _check_dynamics(data)
     return Scene(data)
 
 
@@ -196,10 +287,22 @@ def _check_sleeve(data: dict) -> None:
     if motion["type"] not in MOTION_TYPES:
         raise SceneError(f"motion.type: unknown motion {motion['type']!r}{_suggest(motion['type'], MOTION_TYPES)}; "
                          f"allowed: {sorted(MOTION_TYPES)}")
-    method = contact.get("method", "penalty")
-    if method not in CONTACT_METHODS:
-        raise SceneError(f"contact.method: unknown method {method!r}{_suggest(method, CONTACT_METHODS)}; "
+    solver = motion.get("solver", "explicit")
+    if solver not in CONTACT_METHODS:
+        raise SceneError(f"motion.solver: unknown solver {solver!r}{_suggest(solver, CONTACT_METHODS)}; "
                          f"allowed: {sorted(CONTACT_METHODS)}")
+    methods = CONTACT_METHODS[solver]
+    method = contact.get("method", sorted(methods)[0])
+    if method not in methods:
+        raise SceneError(f"contact.method: unknown method {method!r} for the {solver} solver"
+                         f"{_suggest(method, methods)}; allowed: {sorted(methods)}")
+    for key in ("output_angle_step",):
+        if key in motion:
+            _positive(f"motion.{key}", motion[key])
+    if "mass_damping" in motion and not motion["mass_damping"] >= 0:
+        raise SceneError(f"motion.mass_damping: must be >= 0 [1/s], got {motion['mass_damping']!r}")
+    if "rotary_inertia_scale" in motion and not motion["rotary_inertia_scale"] >= 1:
+        raise SceneError(f"motion.rotary_inertia_scale: must be >= 1, got {motion['rotary_inertia_scale']!r}")
     friction = contact.get("friction", 0.1)
     if not (math.isfinite(friction) and friction >= 0.0):
         raise SceneError(f"contact.friction: the Coulomb coefficient must be >= 0, got {friction!r}")
@@ -223,6 +326,203 @@ def _check_sleeve(data: dict) -> None:
             raise SceneError(f"body.{key}: an arm of girth {girth} m (radius {girth / (2 * math.pi):.4f} m) does not "
                              f"fit inside a sleeve of mesh.radius {mesh['radius']} m; the arm must start inside "
                              f"the sleeve without penetration")
+
+
+def _numbers(where: str, values, n: int | None = None, allow_inf: bool = False) -> list[float]:
+    """A list of (n) real numbers (finite unless allow_inf), or SceneError naming `where`."""
+    import math
+    if not isinstance(values, list) or (n is not None and len(values) != n):
+        raise SceneError(f"{where}: expected a list of {n if n is not None else ''} numbers, got {values!r}")
+    for v in values:
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v) or \
+                (not allow_inf and not math.isfinite(v)):
+            raise SceneError(f"{where}: expected {'' if allow_inf else 'finite '}numbers, got {values!r}")
+    return [float(v) for v in values]
+
+
+def _finite(where: str, value, minimum: float | None = None, strict: bool = True) -> float:
+    import math
+    if not math.isfinite(value):
+        raise SceneError(f"{where}: must be finite, got {value!r}")
+    if minimum is not None and (value <= minimum if strict else value < minimum):
+        raise SceneError(f"{where}: must be {'>' if strict else '>='} {minimum:g}, got {value!r}")
+    return float(value)
+
+
+def mesh_spacing(mesh: dict) -> float | None:
+    """Smallest edge length h_min [m] of a structured mesh from its spec (None when unknown before meshing):
+    plate min(lx / nx, ly / ny) (triangle diagonals are longer), tube min(chord 2 R sin(pi / n_around),
+    length / n_along)."""
+    import math
+    if mesh["type"] == "plate":
+        if not mesh.get("structured", True):
+            return None
+        return min(mesh["lx"] / mesh["nx"], mesh["ly"] / mesh["ny"])
+    return min(2.0 * mesh["radius"] * math.sin(math.pi / mesh["n_around"]), mesh["length"] / mesh["n_along"])
+
+
+def critical_time_step_estimate(data: dict) -> float | None:
+    """dt_crit [s] of central differences before meshing: fabricfem.dynamics.stability's estimate (thesis
+    eqs. 2.86-2.87 extended) with h_min from the mesh spec; None when h_min is unknown (unstructured)."""
+    import numpy as np
+
+    from fabricfem.dynamics import stability
+    from fabricfem.run import build_fabric
+    h_min = mesh_spacing(data["mesh"])
+    if h_min is None:
+        return None
+    fabric = build_fabric(data["fabric"])
+    cell = data["mesh"].get("cell", "quadrilateral")
+    omega = stability.MEMBRANE_KAPPA[cell] * stability.plane_stress_wave_speed(fabric) / h_min  # eq. 2.87
+    if data.get("model", {}).get("kind", "naghdi") == "naghdi":
+        omega_s = (stability.THICKNESS_SHEAR_CHI[cell] * np.sqrt(12.0 * fabric.shear_correction *
+                   fabric.transverse_shear_modulus / fabric.density) / fabric.thickness)
+        omega = float(np.hypot(omega, omega_s))
+    rayleigh = data["dynamics"].get("rayleigh", [0.0, 0.0])
+    return stability.critical_time_step(None, tuple(rayleigh), omega_max=omega)  # eq. 2.86
+
+
+def _check_dynamics(data: dict) -> None:
+    """[dynamics]: integrator, positive times, damping >= 0, obstacles and monitors complete, and for the
+    explicit integrator a numeric dt at most the critical time step unless force = true."""
+    import importlib.util
+    dyn = data["dynamics"]
+    integrator = dyn["integrator"]
+    if integrator not in INTEGRATORS:
+        raise SceneError(f"dynamics.integrator: unknown integrator {integrator!r}{_suggest(integrator, INTEGRATORS)}; "
+                         f"allowed: {sorted(INTEGRATORS)}")
+    if integrator == "generalized-alpha" and importlib.util.find_spec("fabricfem.dynamics.ts") is None:
+        raise SceneError("dynamics.integrator: 'generalized-alpha' needs fabricfem.dynamics.ts "
+                         "(GeneralizedAlphaIntegrator), which is not installed yet; use 'newmark'")
+    explicit = integrator == "explicit"
+    density = data["fabric"].get("density", 0.0)
+    if not (isinstance(density, (int, float)) and density > 0):
+        raise SceneError(f"fabric.density: a dynamic scene needs a positive density [kg/m^3], got {density!r}")
+    end_time = _finite("dynamics.end_time", dyn["end_time"], 0.0)
+    dt = dyn["dt"]
+    if isinstance(dt, str):
+        if dt != "auto":
+            raise SceneError(f"dynamics.dt: a time step in seconds or \"auto\", got {dt!r}")
+        if not explicit:
+            raise SceneError(f"dynamics.dt: \"auto\" (a fraction of the critical step) is for the explicit "
+                             f"integrator; give {integrator!r} a time step in seconds")
+    else:
+        dt = _finite("dynamics.dt", dt, 0.0)
+        if dt > end_time:
+            raise SceneError(f"dynamics.dt: the time step {dt:g} s exceeds dynamics.end_time = {end_time:g} s")
+    if "dt_fraction" in dyn:
+        fraction = _finite("dynamics.dt_fraction", dyn["dt_fraction"], 0.0)
+        if fraction > 1.0 or dyn["dt"] != "auto":
+            raise SceneError(f"dynamics.dt_fraction: in (0, 1] and only with dt = \"auto\", got {fraction!r} "
+                             f"(dt = {dyn['dt']!r})")
+    for key, allowed in (("force", explicit), ("beta", integrator == "newmark"), ("gamma", integrator == "newmark"),
+                         ("lumped", not explicit), ("rho_inf", integrator == "generalized-alpha")):
+        if key in dyn and not allowed:
+            raise SceneError(f"dynamics.{key}: not a parameter of the {integrator!r} integrator"
+                             + (" (it always uses the lumped mass)" if key == "lumped" else ""))
+    for key in ("beta", "gamma"):
+        if key in dyn:
+            _finite(f"dynamics.{key}", dyn[key], 0.0)
+    if "rho_inf" in dyn and not 0.0 <= dyn["rho_inf"] <= 1.0:
+        raise SceneError(f"dynamics.rho_inf: the spectral radius at infinite step must lie in [0, 1], got "
+                         f"{dyn['rho_inf']!r}")
+    if "rayleigh" in dyn:
+        for i, c in enumerate(_numbers("dynamics.rayleigh", dyn["rayleigh"], 2)):
+            _finite(f"dynamics.rayleigh[{i}]", c, 0.0, strict=False)
+    for key in ("air_drag", "ramp_time"):
+        if key in dyn:
+            _finite(f"dynamics.{key}", dyn[key], 0.0, strict=False)
+    for key in ("strain_limit", "strain_limit_tol", "contact_penalty"):
+        if key in dyn:
+            _finite(f"dynamics.{key}", dyn[key], 0.0)
+    if "strain_limit_tol" in dyn and "strain_limit" not in dyn:
+        raise SceneError("dynamics.strain_limit_tol: given without dynamics.strain_limit")
+    if "output_every" in dyn and dyn["output_every"] < 1:
+        raise SceneError(f"dynamics.output_every: must be a positive number of steps, got {dyn['output_every']!r}")
+    if "gravity" in dyn:
+        _numbers("dynamics.gravity", dyn["gravity"], 3)
+        if any(load["type"] == "gravity" for load in data.get("load", [])):
+            raise SceneError("dynamics.gravity: gravity is also a [[load]] of type 'gravity'; give it once")
+    _check_obstacles(dyn)
+    _check_monitors(data)
+    if explicit and not isinstance(dt, str) and not dyn.get("force", False):
+        dt_crit = critical_time_step_estimate(data)
+        if dt_crit is not None and dt > dt_crit:
+            raise SceneError(f"dynamics.dt: {dt:.6g} s exceeds the critical time step {dt_crit:.6g} s of the explicit "
+                             f"integrator (ratio {dt / dt_crit:.3g}, thesis eqs. 2.86-2.87); use a smaller dt, "
+                             f"dt = \"auto\", or force = true")
+
+
+def _check_obstacles(dyn: dict) -> None:
+    obstacles = dyn.get("obstacles", [])
+    if not isinstance(obstacles, list):
+        raise SceneError("dynamics.obstacles: must be an array of tables: write [[dynamics.obstacles]]")
+    for i, obstacle in enumerate(obstacles):
+        where = f"dynamics.obstacles[{i}]"
+        if not isinstance(obstacle, dict):
+            raise SceneError(f"{where}: must be a table: write [[dynamics.obstacles]]")
+        _check_table("dynamics.obstacles", obstacle, where)
+        kind = obstacle["type"]
+        if kind not in OBSTACLE_KEYS:
+            raise SceneError(f"{where}.type: unknown obstacle {kind!r}{_suggest(kind, OBSTACLE_KEYS)}; "
+                             f"allowed: {sorted(OBSTACLE_KEYS)}")
+        keys = set(obstacle) - {"type"}
+        if keys != OBSTACLE_KEYS[kind]:
+            missing, extra = OBSTACLE_KEYS[kind] - keys, keys - OBSTACLE_KEYS[kind]
+            raise SceneError(f"{where}: a {kind} needs {sorted(OBSTACLE_KEYS[kind])}"
+                             + (f"; missing {sorted(missing)}" if missing else "")
+                             + (f"; {sorted(extra)} do not apply" if extra else ""))
+        for key in ("point", "normal"):
+            if key in obstacle:
+                _numbers(f"{where}.{key}", obstacle[key], 3)
+        for key in ("lower", "upper"):
+            if key in obstacle:
+                _numbers(f"{where}.{key}", obstacle[key], 3, allow_inf=True)
+        if "center" in obstacle:
+            _numbers(f"{where}.center", obstacle["center"], 2)
+        for key in ("radius", "half_x", "half_y", "fillet_radius"):
+            if key in obstacle:
+                _finite(f"{where}.{key}", obstacle[key], 0.0)
+        if "height" in obstacle:
+            _finite(f"{where}.height", obstacle["height"])
+
+
+def _check_monitors(data: dict) -> None:
+    monitors = data["dynamics"].get("monitors", [])
+    if not isinstance(monitors, list):
+        raise SceneError("dynamics.monitors: must be an array of tables: write [[dynamics.monitors]]")
+    names = set()
+    naghdi = data.get("model", {}).get("kind", "naghdi") == "naghdi"
+    for i, monitor in enumerate(monitors):
+        where = f"dynamics.monitors[{i}]"
+        if not isinstance(monitor, dict):
+            raise SceneError(f"{where}: must be a table: write [[dynamics.monitors]]")
+        _check_table("dynamics.monitors", monitor, where)
+        name = monitor["name"]
+        if name in names or name in STANDARD_COLUMNS:
+            raise SceneError(f"{where}.name: {name!r} is already a column of the CSV")
+        names.add(name)
+        if ("point" in monitor) == ("quantity" in monitor):
+            raise SceneError(f"{where}: give exactly one of 'point' = [x, y, z] or 'quantity'")
+        if "quantity" in monitor:
+            quantity = monitor["quantity"]
+            if quantity not in MONITOR_QUANTITIES:
+                raise SceneError(f"{where}.quantity: unknown quantity {quantity!r}"
+                                 f"{_suggest(quantity, MONITOR_QUANTITIES)}; allowed: {sorted(MONITOR_QUANTITIES)}")
+            for key in ("field", "component"):
+                if key in monitor:
+                    raise SceneError(f"{where}.{key}: only for point monitors")
+            continue
+        _numbers(f"{where}.point", monitor["point"], 3)
+        field = monitor.get("field", "u")
+        if field not in ("u", "theta"):
+            raise SceneError(f"{where}.field: 'u' (displacement, m) or 'theta' (rotation, rad), got {field!r}")
+        if field == "theta" and not naghdi:
+            raise SceneError(f"{where}.field: 'theta' needs the naghdi model (the membrane has no rotations)")
+        n = 3 if field == "u" else 2
+        component = monitor.get("component", 2 if field == "u" else 0)
+        if not 0 <= component < n:
+            raise SceneError(f"{where}.component: {field} has components 0..{n - 1}, got {component!r}")
 
 
 def load(path: str | Path) -> Scene:
