@@ -305,18 +305,8 @@ def build_integrator(spec: dict, model: ShellModel):
                                        **common)
     else:
         from fabricfem.dynamics.ts import GeneralizedAlphaIntegrator  # lazily: written separately
-        # (its tangent adds model.add_contact_tangent itself)
         integrator = GeneralizedAlphaIntegrator(model, dt, rho_inf=float(spec.get("rho_inf", 1.0)),
                                                 lumped=bool(spec.get("lumped", False)), **common)
-    if getattr(model, "contact", None) is not None and hasattr(integrator, "system"):
-        # implicit step: the effective tangent is assembled from the shell's jacobian_form; add the contact blocks
-        system = integrator.system
-        shell_tangent = system.jacobian
-
-        def jacobian(x, A):
-            shell_tangent(x, A)
-            model.add_contact_tangent(A)
-        system.jacobian = jacobian
     return integrator, n_steps, dt, dt_crit
 
 

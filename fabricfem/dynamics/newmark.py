@@ -397,6 +397,9 @@ class _EffectiveSystem:
         A.assemble()
         if self._diag is not None:
             A.setDiagonal(self._diag, addv=PETSc.InsertMode.ADD_VALUES)
+        extra_tangent = getattr(self.model, "add_contact_tangent", None)  # models with terms outside jacobian_form
+        if extra_tangent is not None:  # (fabricfem.run.ObstacleShell); they see the state x set above
+            extra_tangent(A)
 
 
 @dataclass
