@@ -8,14 +8,26 @@ forearm flexing about the elbow (+z axis through x = 0.335 m) at constant angula
 57 degrees. Contact: `fabricfem.contact.ContactProblem` (nodal penalty or augmented Lagrangian,
 Coulomb friction with stick points that move with the segments).
 
-Solution route: quasi-static. The explicit central-difference integrator needs time steps below the
-thickness-shear limit (about 1e-7 s for t = 1 mm), i.e. ~1e7 steps for the 1.27 s flexion, which is
-out of reach here; the implicit Newmark integrator works but the inertia of a 436 kg/m^3 sleeve at
-45 deg/s is negligible against its elastic forces. So the flexion is a sequence of Newton solves at
-increasing angle alpha_k with the body posed at t_k = alpha_k / omega, each starting from the previous
-equilibrium; the friction history (stick points) is committed after each converged step
-(`ContactProblem.after_converged_step`). A step whose Newton solve fails is undone and split in two
-(down to `min_angle_step`), otherwise `SleeveError` names the angle.
+Solution routes (SleeveConfig.solver, scene key motion.solver):
+
+* "explicit" (default, as the thesis did, ch. 5): central differences with the sleeve's own mass
+  (`build_explicit`, `run_explicit`; fabricfem.dynamics.CentralDifference, lumped mass eq. 2.82 with the
+  rotational masses scaled by `rotary_inertia_scale`, so that the thickness-shear modes do not set the
+  step: on mesh I the estimated critical step grows from 4.1e-5 s to 2.0e-4 s at s = 100), mass-proportional
+  damping C = alpha M (alpha = `mass_damping` = 10 1/s) for a quasi-static flexion, and the explicit
+  forward-increment Lagrange-multiplier contact of Box 5 against the moving arm with Coulomb friction
+  (fabricfem.contact.explicit.ExplicitBodyContact; penalty as an option). The torque of a record is the
+  contact torque averaged over the record interval (`output_angle_step`). The drag alpha rho t v of the
+  damping on the sleeve moving with the forearm (v <= 0.13 m/s at 45 deg/s) is about 2e-3 N m of elbow
+  torque: a few per cent of the torque at 57 degrees, but comparable with the torque in the first degrees
+  of contact (measured on mesh I at 8 deg: explicit 1.1e-2 N m at 45 deg/s, 5.4e-3 N m at 15 deg/s,
+  quasi-static 4.5e-3 N m).
+* "quasistatic": a sequence of Newton solves at increasing angle alpha_k with the body posed at
+  t_k = alpha_k / omega, each starting from the previous equilibrium; the friction history (stick points)
+  is committed after each converged step (`ContactProblem.after_converged_step`). A step whose Newton solve
+  fails is undone and split in two (down to `min_angle_step`), otherwise `SleeveError` names the angle. It
+  stalls where the tube buckles (20.25 deg at mu = 0.1, 17 deg at mu = 0.5 on mesh I) and is kept as the
+  static reference of the explicit route at small angles and for the moment-balance test.
 
 Newton at one angle (issue 4: the plain solve stalled at 20.2 deg, mu = 0.1, and 12.6 deg, mu = 0.5, on
 mesh I) uses two devices, neither of which changes the converged solution:
@@ -52,6 +64,8 @@ from petsc4py import PETSc
 from fabricfem.body.arm import DEFAULT_ARM, default_arm, elbow_flexion
 from fabricfem.body.motion import ElbowFlexion
 from fabricfem.body.pose import Body
+from fabricfem.dynamics.explicit import CentralDifference
+from fabricfem.contact.explicit import ExplicitBodyContact
 from fabricfem.contact.problem import ContactProblem
 from fabricfem.contact.torque import contact_torque
 from fabricfem.materials import Fabric
@@ -208,7 +222,13 @@ class SleeveConfig:
     nu12: float = 0.0
     density: float = 436.0               # kg/m^3
     friction: float = 0.1                # Coulomb mu
-    method: str = "penalty"              # penalty | augmented
+    solver: str = "explicit"             # explicit (central differences, default) | quasistatic (Newton)
+    method: str | None = None            # contact: explicit lagrange (default) | penalty; quasistatic penalty
+                                         # (default) | augmented
+    mass_damping: float = 10.0           # 1/s, explicit: Rayleigh alpha of C = alpha M (see run_explicit)
+    rotary_inertia_scale: float = 100.0  # explicit: factor on the rotational lumped masses (dynamics.mass)
+    time_step_safety: float = 0.8        # explicit: dt = safety x estimated critical step
+    output_angle_step: float = 1.0       # deg, explicit: torque averaged and recorded every this many degrees
     penalty: float | None = None         # k_N [Pa/m]; default 10 E t / h^2
     augmentation_tolerance: float = 1e-5  # m, largest penetration after Uzawa updates (augmented)
     active_set: bool = True              # fixed contact set per Newton solve, updated until stable (ContactProblem)
@@ -238,8 +258,25 @@ class SleeveConfig:
             raise ValueError(f"density must be >= 0 [kg/m^3], got {self.density!r}")
         if not (isinstance(self.friction, (int, float)) and math.isfinite(self.friction) and self.friction >= 0.0):
             raise ValueError(f"friction must be a number >= 0, got {self.friction!r}")
-        if self.method not in ("penalty", "augmented"):
-            raise ValueError(f"method must be 'penalty' or 'augmented', got {self.method!r}")
+        methods = {"explicit": ("lagrange", "penalty"), "quasistatic": ("penalty", "augmented")}
+        if self.solver not in methods:
+            raise ValueError(f"solver must be 'explicit' or 'quasistatic', got {self.solver!r}")
+        if self.method is None:
+            object.__setattr__(self, "method", methods[self.solver][0])
+        if self.method not in methods[self.solver]:
+            raise ValueError(f"method must be one of {methods[self.solver]} for solver {self.solver!r}, "
+                             f"got {self.method!r}")
+        for key in ("time_step_safety", "output_angle_step"):
+            v = getattr(self, key)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
+                raise ValueError(f"{key} must be a positive number, got {v!r}")
+        if self.time_step_safety >= 1.0:
+            raise ValueError(f"time_step_safety must lie in (0, 1), got {self.time_step_safety!r}")
+        if not (isinstance(self.mass_damping, (int, float)) and math.isfinite(self.mass_damping)
+                and self.mass_damping >= 0.0):
+            raise ValueError(f"mass_damping must be a number >= 0 [1/s], got {self.mass_damping!r}")
+        if not (isinstance(self.rotary_inertia_scale, (int, float)) and self.rotary_inertia_scale >= 1.0):
+            raise ValueError(f"rotary_inertia_scale must be a number >= 1, got {self.rotary_inertia_scale!r}")
         if self.penalty is not None and not (math.isfinite(self.penalty) and self.penalty > 0.0):
             raise ValueError(f"penalty must be positive [Pa/m], got {self.penalty!r}")
         for key in ("n_around", "n_along", "angle_steps", "newton_max_iterations"):
@@ -345,6 +382,9 @@ class SleeveStep:
     contact_force: float    # N, |sum of contact forces on the cloth|
     wall: float             # s since the start of the flexion
     drag_ratio: float = 0.0  # fictitious drag / contact force left in an accepted relaxed state (0: exact)
+    time_steps: int = 0      # explicit: central-difference steps since the previous record
+    kinetic_energy: float = 0.0   # J, explicit: 1/2 v.M v (with the scaled rotary inertia)
+    strain_energy: float = 0.0    # J, explicit
 
 
 @dataclass
@@ -374,11 +414,16 @@ class SleeveHistory:
         return float(np.interp(angle, self.angles, self.torques))
 
     HEADER = ("angle_deg", "torque_Nm", "torque_both_segments_Nm", "newton_iterations", "max_penetration_m",
-              "contact_force_N", "wall_s", "drag_ratio")
+              "contact_force_N", "wall_s", "drag_ratio", "time_steps", "kinetic_energy_J", "strain_energy_J")
 
     def rows(self) -> list[list[float]]:
-        return [[s.angle, s.torque, s.torque_all, s.newton_iterations, s.max_penetration, s.contact_force, s.wall, s.drag_ratio]
-                for s in self.steps]
+        return [[s.angle, s.torque, s.torque_all, s.newton_iterations, s.max_penetration, s.contact_force, s.wall,
+                 s.drag_ratio, s.time_steps, s.kinetic_energy, s.strain_energy] for s in self.steps]
+
+    def kinetic_ratio(self) -> float:
+        """Largest kinetic / strain energy over the records with strain energy (explicit runs; 0 otherwise)."""
+        ratios = [s.kinetic_energy / s.strain_energy for s in self.steps if s.strain_energy > 0.0]
+        return max(ratios, default=0.0)
 
 
 def _solve_once(problem: SleeveProblem) -> tuple[bool, int, str]:
@@ -560,12 +605,146 @@ def run_quasistatic(problem: SleeveProblem, angles: np.ndarray | None = None,
 
 def run_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                on_step: Callable[[SleeveStep], None] | None = None, stop_on_failure: bool = True) -> SleeveHistory:
-    """Build and flex one sleeve configuration; returns its torque history."""
+    """Build and flex one sleeve configuration (config.solver: explicit or quasistatic); returns its torque
+    history."""
     t0 = time.perf_counter()
-    problem = build_sleeve(config, comm)
-    history = run_quasistatic(problem, on_step=on_step, stop_on_failure=stop_on_failure)
+    if config.solver == "explicit":
+        problem = build_explicit(config, comm)
+        history = run_explicit(problem, on_step=on_step, stop_on_failure=stop_on_failure)
+        problem.integrator.destroy()
+    else:
+        problem = build_sleeve(config, comm)
+        history = run_quasistatic(problem, on_step=on_step, stop_on_failure=stop_on_failure)
+        problem.solver.destroy()
     history.wall = time.perf_counter() - t0
-    problem.solver.destroy()
+    return history
+
+
+# ---------------------------------------------------------------------------------------- explicit route
+@dataclass
+class ExplicitSleeve:
+    """The sleeve set up for explicit central differences (`build_explicit`)."""
+
+    config: SleeveConfig
+    model: ShellModel
+    contact: ExplicitBodyContact
+    body: Body
+    flexion: ElbowFlexion
+    integrator: CentralDifference
+    dt: float                  # s, the time step used
+    dt_estimate: float         # s, estimated critical step with the rotary scaling (and penalty, if any)
+    dt_estimate_unscaled: float  # s, the same without rotary scaling (s = 1)
+    steps_per_record: int
+
+    @property
+    def comm(self):
+        return self.model.comm
+
+
+def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> ExplicitSleeve:
+    """Sleeve, arm and explicit contact for `run_explicit`; the time step is
+
+        dt = safety x 2 / omega_max,   omega_max^2 = omega_shell^2(s) + omega_p^2      (thesis eq. 2.86)
+
+    with omega_shell from fabricfem.dynamics.stability for rotary-inertia scale s and omega_p the penalty
+    spring's frequency (0 for Lagrange multipliers), reduced for the mass damping, then shortened so that
+    every record interval (output_angle_step degrees) holds a whole number of steps."""
+    from fabricfem.dynamics import stability
+    if config.density <= 0.0:
+        raise ValueError("density: the explicit sleeve needs a positive fabric density [kg/m^3]")
+    fmesh = tube(config.length, config.radius, config.n_around, config.n_along, cell="quadrilateral", order=2,
+                 comm=comm)
+    model = ShellModel(fmesh, config.fabric, rebase=False)
+    model.constrain("end0", u=(0.0, 0.0, 0.0), theta=(0.0, 0.0) if config.hold_rotations else None)
+    if config.gravity:
+        model.add_gravity((0.0, -GRAVITY, 0.0))
+    model.compile()
+    flexion = elbow_flexion(angular_velocity=math.radians(config.angular_velocity),
+                            final_angle=math.radians(config.final_angle))
+    body = default_arm(flexion)
+    contact = ExplicitBodyContact(model, body, friction=config.friction, method=config.method,
+                                  penalty=config.penalty)
+    contact.track_torque("forearm", "elbow", ELBOW_AXIS, ["forearm"])
+    contact.track_torque("both", "elbow", ELBOW_AXIS, list(body.segments))
+    rayleigh = (config.mass_damping, 0.0)
+    omega_p = contact.penalty_frequency()
+    omega = math.hypot(stability.max_frequency_estimate(model, config.rotary_inertia_scale), omega_p)
+    omega_1 = math.hypot(stability.max_frequency_estimate(model, 1.0), omega_p)
+    dt_estimate = stability.critical_time_step(model, rayleigh, omega_max=omega)
+    dt_unscaled = stability.critical_time_step(model, rayleigh, omega_max=omega_1)
+    record_time = math.radians(config.output_angle_step) / math.radians(config.angular_velocity)
+    steps_per_record = math.ceil(record_time / (config.time_step_safety * dt_estimate))
+    dt = record_time / steps_per_record
+    integrator = CentralDifference(model, dt, rayleigh=rayleigh, dt_crit=dt_estimate, energy_bound=None,
+                                   rotary_inertia_scale=config.rotary_inertia_scale, contact=contact)
+    return ExplicitSleeve(config, model, contact, body, flexion, integrator, dt, dt_estimate, dt_unscaled,
+                          steps_per_record)
+
+
+def run_explicit(problem: ExplicitSleeve, on_step: Callable[[SleeveStep], None] | None = None,
+                 stop_on_failure: bool = True) -> SleeveHistory:
+    """Flex the elbow at constant angular velocity by explicit central differences (thesis ch. 5: the
+    sleeve's own mass, explicit Lagrange-multiplier contact, Box 5).
+
+    Damping: mass-proportional C = alpha M (alpha = config.mass_damping [1/s]; on the translations a drag
+    alpha rho t v per unit area, like air drag) so that the flexion is quasi-static; each record reports the
+    kinetic and strain energies (SleeveStep) so that this can be checked. The torque of a record is the
+    time average of the contact torque over the record interval (ExplicitBodyContact: the impulse of the
+    contact forces over the interval divided by its length). A non-finite state raises SleeveError naming
+    the angle (or, with stop_on_failure=False, ends the history there with `failure` set).
+    """
+    cfg, contact, integ, flexion = problem.config, problem.contact, problem.integrator, problem.flexion
+    comm = problem.comm
+    t0 = time.perf_counter()
+    history = SleeveHistory(cfg, ndofs=problem.model.ndofs)
+    integ.initialize(t0=flexion.t_start)
+    gap0 = contact.min_gap(integ.d.getArray(readonly=True), flexion.t_start)
+    if gap0 <= 0.0:
+        raise ValueError(f"radius: the arm penetrates the undeformed sleeve (min gap {gap0:.3e} m)")
+    history.initial_gap = gap0
+    history.timings = {"dt": problem.dt, "dt_estimate": problem.dt_estimate,
+                       "dt_estimate_unscaled": problem.dt_estimate_unscaled}
+
+    def record(steps: int, angle: float) -> SleeveStep:
+        # the nominal angle of the record (the body angle at this time up to the rounding of t = n dt)
+        torques = contact.mean_torques()
+        d = integ.d.getArray(readonly=True)
+        step = SleeveStep(angle=angle, torque=-torques["forearm"], torque_all=-torques["both"], newton_iterations=0,
+                          max_penetration=contact.max_penetration(d, integ.t),
+                          contact_force=float(np.linalg.norm(contact.total_force())),
+                          wall=time.perf_counter() - t0, time_steps=steps,
+                          kinetic_energy=integ.kinetic_energy(), strain_energy=integ.strain_energy())
+        contact.reset_means()
+        return step
+
+    start = record(0, 0.0)
+    history.steps.append(start)
+    if on_step:
+        on_step(start)
+    n_records = round(cfg.final_angle / cfg.output_angle_step)
+    if not math.isclose(n_records * cfg.output_angle_step, cfg.final_angle, rel_tol=1e-9):
+        n_records = math.ceil(cfg.final_angle / cfg.output_angle_step)
+    for k in range(n_records):
+        try:
+            for _ in range(problem.steps_per_record):
+                integ.step()
+                integ.step_count += 1
+            finite = math.isfinite(integ.d.norm()) and math.isfinite(integ.v.norm())
+            if not finite:
+                raise ValueError("non-finite displacement or velocity")
+        except ValueError as exc:
+            message = (f"sleeve: the explicit flexion blew up before {math.degrees(flexion.angle(integ.t)):.3g} deg "
+                       f"(step {integ.step_count}, dt = {problem.dt:.3g} s): {exc}")
+            if stop_on_failure:
+                raise SleeveError(message, last_converged_load_factor=history.steps[-1].angle,
+                                  reason="EXPLICIT_BLOW_UP") from exc
+            history.failure = message
+            break
+        step = record(problem.steps_per_record, min((k + 1) * cfg.output_angle_step, cfg.final_angle))
+        history.steps.append(step)
+        if on_step:
+            on_step(step)
+    history.wall = time.perf_counter() - t0
     return history
 
 
@@ -587,13 +766,17 @@ def config_from_scene(scene) -> SleeveConfig:
     kw = dict(length=float(mesh["length"]), radius=float(mesh["radius"]), n_around=mesh["n_around"],
               n_along=mesh["n_along"], thickness=float(fabric["thickness"]), E=float(fabric["E1"]),
               G=float(fabric["G12"]), nu12=float(fabric["nu12"]), density=float(fabric.get("density", 0.0)),
-              friction=float(contact.get("friction", 0.1)), method=contact.get("method", "penalty"),
+              friction=float(contact.get("friction", 0.1)), solver=motion.get("solver", "explicit"),
+              method=contact.get("method"),
               penalty=None if "penalty" not in contact else float(contact["penalty"]),
               gravity=bool(contact.get("gravity", False)), final_angle=float(motion.get("final_angle", 57.0)),
               angle_steps=int(motion.get("steps", 57)), angular_velocity=float(motion.get("angular_velocity", 45.0)),
               name=scene.get("scene", {}).get("name", "sleeve"))
     if "stabilization" in contact:
         kw["stabilization"] = float(contact["stabilization"])
+    for key in ("mass_damping", "rotary_inertia_scale", "output_angle_step"):
+        if key in motion:
+            kw[key] = float(motion[key])
     return SleeveConfig(**kw)
 
 
@@ -637,7 +820,13 @@ def plot_torque(path, curves: dict[str, tuple[np.ndarray, np.ndarray]], title: s
     plt.close(fig)
 
 
-def _render_pressure(path, problem: SleeveProblem, title: str):
+def _posed(problem, angle: float) -> list:
+    """The arm's ellipsoids at elbow angle `angle` [deg]."""
+    t = problem.flexion.t_start + math.radians(angle) / problem.flexion.angular_velocity
+    return list(problem.body.pose(t).values())
+
+
+def _render_pressure(path, problem, title: str, angle: float):
     """Deformed sleeve coloured by contact pressure [Pa] with the posed arm (pyvista, off-screen)."""
     from fabricfem import io as fio
     from dolfinx import fem as dfem
@@ -658,7 +847,7 @@ def _render_pressure(path, problem: SleeveProblem, title: str):
     points, cells = surface
     cloth = pv.PolyData(points, np.hstack([np.full((len(cells), 1), 4), cells]).ravel())
     cloth.point_data["contact pressure [Pa]"] = np.concatenate(values)
-    bp, bc = body_surface(problem.contact.ellipsoids)
+    bp, bc = body_surface(_posed(problem, angle))
     arm = pv.PolyData(bp, np.hstack([np.full((len(bc), 1), 3), bc]).ravel())
     plotter = pv.Plotter(off_screen=True, window_size=(1200, 800))
     plotter.add_mesh(arm, color="wheat", opacity=0.35)
@@ -691,10 +880,15 @@ def run_sleeve_scene(scene, comm: MPI.Comm = MPI.COMM_WORLD) -> SleeveHistory:
                                                                     config.final_angle])]
     samples = int(output.get("body_samples", 24))
     t0 = time.perf_counter()
-    problem = build_sleeve(config, comm)
+    explicit = config.solver == "explicit"
+    problem = build_explicit(config, comm) if explicit else build_sleeve(config, comm)
+    route = (f"explicit central differences, dt = {problem.dt:.3g} s (estimated critical step {problem.dt_estimate:.3g} s "
+             f"with rotary-inertia scale {config.rotary_inertia_scale:g}, {problem.dt_estimate_unscaled:.3g} s without), "
+             f"mass damping {config.mass_damping:g} 1/s, records every {config.output_angle_step:g} deg"
+             if explicit else f"{config.angle_steps} quasi-static steps")
     say(f"sleeve: {config.n_around} x {config.n_along} Q2 tube, {problem.model.ndofs} dofs, {comm.size} rank(s); "
         f"mu = {config.friction}, {config.method} contact, gravity {'on' if config.gravity else 'off'}; "
-        f"flexion to {config.final_angle} deg in {config.angle_steps} quasi-static steps")
+        f"flexion to {config.final_angle} deg by {route}")
     if comm.rank == 0:
         out.mkdir(parents=True, exist_ok=True)
     comm.barrier()
@@ -709,26 +903,29 @@ def run_sleeve_scene(scene, comm: MPI.Comm = MPI.COMM_WORLD) -> SleeveHistory:
 
     def on_step(step: SleeveStep):
         u_out.interpolate(problem.model.displacement())
-        p_out.interpolate(problem.contact.pressure_field())
+        p_out.interpolate(problem.contact.pressure_field())   # explicit: time-averaged over the record
         xdmf.write_function(u_out, step.angle)
         xdmf.write_function(p_out, step.angle)
         if comm.rank == 0:
             import pyvista as pv
-            bp, bc = body_surface(problem.contact.ellipsoids, samples)
+            bp, bc = body_surface(_posed(problem, step.angle), samples)
             name = f"body_{len(frames):04d}.vtp"
             pv.PolyData(bp, np.hstack([np.full((len(bc), 1), 3), bc]).ravel()).save(str(out / name))
             frames.append((step.angle, name))
         while render and pending and step.angle >= pending[0] - 1e-9:
             angle = pending.pop(0)
             _render_pressure(out / f"pressure_{angle:04.1f}deg.png", problem,
-                             f"{config.name}: elbow {step.angle:.1f} deg, contact pressure [Pa]")
+                             f"{config.name}: elbow {step.angle:.1f} deg, contact pressure [Pa]", step.angle)
         done = step.angle / config.final_angle
         elapsed = time.perf_counter() - t0
         eta = elapsed * (1 - done) / max(done, 1e-12) if done > 0 else float("nan")
-        say(f"  angle {step.angle:6.2f} deg  torque {step.torque:+.4e} N m  Newton {step.newton_iterations:3d}  "
+        work = (f"steps {step.time_steps:5d}  KE/SE {step.kinetic_energy / step.strain_energy if step.strain_energy else 0:.1e}"
+                if explicit else f"Newton {step.newton_iterations:3d}")
+        say(f"  angle {step.angle:6.2f} deg  torque {step.torque:+.4e} N m  {work}  "
             f"penetration {step.max_penetration:.1e} m  [{done:5.1%}, {elapsed:6.1f} s, about {eta:6.1f} s left]")
 
-    history = run_quasistatic(problem, on_step=on_step, stop_on_failure=False)
+    runner = run_explicit if explicit else run_quasistatic
+    history = runner(problem, on_step=on_step, stop_on_failure=False)
     xdmf.close()
     history.wall = time.perf_counter() - t0
     fio.write_csv(out / "torque.csv", SleeveHistory.HEADER, history.rows(), comm)
@@ -740,10 +937,14 @@ def run_sleeve_scene(scene, comm: MPI.Comm = MPI.COMM_WORLD) -> SleeveHistory:
             f.write("</Collection>\n</VTKFile>\n")
     plot_torque(out / "torque.png", {f"mu = {config.friction}": (history.angles, history.torques)},
                 f"{config.name}: elbow resisting torque")
-    problem.solver.destroy()
+    if explicit:
+        problem.integrator.destroy()
+    else:
+        problem.solver.destroy()
     last = history.steps[-1]
-    say(f"done: {len(history.steps) - 1} angle steps to {last.angle:.2f} deg, "
-        f"{sum(s.newton_iterations for s in history.steps)} Newton iterations, {history.wall:.1f} s; "
+    work = (f"{sum(s.time_steps for s in history.steps)} explicit steps, largest KE/SE {history.kinetic_ratio():.2e}"
+            if explicit else f"{sum(s.newton_iterations for s in history.steps)} Newton iterations")
+    say(f"done: {len(history.steps) - 1} records to {last.angle:.2f} deg, {work}, {history.wall:.1f} s; "
         f"torque at {last.angle:.2f} deg: {last.torque:.4e} N m; largest penetration "
         f"{max(s.max_penetration for s in history.steps):.2e} m; start clearance {history.initial_gap * 1e3:.2f} mm")
     if history.failure:

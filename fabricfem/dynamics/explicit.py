@@ -11,12 +11,23 @@ Dirichlet rows: d = lambda(t) g, a = 0, v = (d^{n+1} - d^n) / dt there.
 
 The step must not exceed the critical time step (fabricfem.dynamics.stability, thesis eqs. 2.86-2.87);
 a larger one is refused (ValueError) unless force=True. Units: SI.
+
+Rotary-inertia mass scaling (`rotary_inertia_scale` s >= 1, default 1): the rotational lumped masses
+are multiplied by s (fabricfem.dynamics.mass), which lowers the thickness-shear frequency by sqrt(s)
+(fabricfem.dynamics.stability) and leaves static answers unchanged; the critical step is estimated
+with s.
+
+Contact (`contact`, optional): an object with `forces(integrator, t, rhs)` (penalty: adds nodal contact
+forces at d^{n+1} to the right-hand side before the division by the diagonal) and
+`correct(integrator, t)` (forward-increment Lagrange multipliers, thesis Box 5: modifies a^{n+1} after
+the division so that the next predictor lands on the body), see fabricfem.contact.explicit.
 """
 from __future__ import annotations
 
 from dolfinx.fem import petsc as fem_petsc
 
 from fabricfem.dynamics import stability
+from fabricfem.dynamics.mass import InertiaDamping, rotary_scale
 from fabricfem.dynamics.newmark import LoadFactor, TimeIntegrator
 
 
@@ -28,13 +39,17 @@ class CentralDifference(TimeIntegrator):
         force: allow dt above the critical time step (for stability studies; a blow-up still stops the run).
         dt_crit: critical time step [s] to check against (default: stability.critical_time_step(model, rayleigh)).
         damping_update_every: re-evaluate K_M(d^n) of the stiffness-proportional damping every this many steps.
+        rotary_inertia_scale: s >= 1 multiplying the rotational lumped masses (module docstring).
+        contact: explicit contact layer (module docstring), e.g. fabricfem.contact.explicit.ExplicitBodyContact.
     """
 
     def __init__(self, model, dt: float, load_factor: LoadFactor = 1.0, rayleigh: tuple[float, float] = (0.0, 0.0),
                  air_drag: float = 0.0, force: bool = False, dt_crit: float | None = None,
-                 energy_bound: float | str | None = "auto", damping_update_every: int = 1):
+                 energy_bound: float | str | None = "auto", damping_update_every: int = 1,
+                 rotary_inertia_scale: float = 1.0, contact=None):
+        scale = rotary_scale(rotary_inertia_scale)
         if dt_crit is None:
-            dt_crit = stability.critical_time_step(model, rayleigh)
+            dt_crit = stability.critical_time_step(model, rayleigh, rotary_inertia_scale=scale)
         if not (dt_crit > 0):
             raise ValueError(f"dt_crit must be positive, got {dt_crit!r}")
         if isinstance(dt, (int, float)) and dt > dt_crit and not force:
@@ -44,6 +59,11 @@ class CentralDifference(TimeIntegrator):
         if int(damping_update_every) < 1:
             raise ValueError(f"damping_update_every must be >= 1, got {damping_update_every!r}")
         super().__init__(model, dt, load_factor, rayleigh, air_drag, lumped=True, energy_bound=energy_bound)
+        if scale != 1.0:
+            self.ops = InertiaDamping(model, lumped=True, rayleigh=rayleigh, air_drag=air_drag,
+                                      rotary_inertia_scale=scale)
+        self.rotary_inertia_scale = scale
+        self.contact = contact
         self.dt_crit = float(dt_crit)
         self.damping_update_every = int(damping_update_every)
         m = self.ops.mass_diag.getArray(readonly=True)
@@ -54,6 +74,18 @@ class CentralDifference(TimeIntegrator):
         self._v_pred = model.create_vector()
         self._rhs = model.create_vector()
         self._denominator = None
+
+    @property
+    def velocity_predictor(self):
+        """v~ = v^n + dt/2 a^n of the current step (PETSc Vec) [m/s, rad/s]."""
+        return self._v_pred
+
+    @property
+    def denominator(self):
+        """M_L + dt/2 C_L (diagonal PETSc Vec, 1 on Dirichlet rows) [kg, kg m^2]."""
+        if self._denominator is None:
+            self._set_denominator()
+        return self._denominator
 
     def _set_denominator(self):
         """M_L + dt/2 C_L (diagonal), 1 on Dirichlet rows."""
@@ -85,8 +117,12 @@ class CentralDifference(TimeIntegrator):
         if self.ops.has_damping:
             self.ops.damping_action(self._v_pred, self._cv)
             rhs.axpy(-1.0, self._cv)
+        if self.contact is not None:
+            self.contact.forces(self, t_new, rhs)        # penalty contact: nodal forces at d^{n+1}
         self.zero_bc_rows(rhs)
         self.a.pointwiseDivide(rhs, self._denominator)
+        if self.contact is not None:
+            self.contact.correct(self, t_new)            # Box 5: a^{n+1} += a^c
         self._v_pred.copy(self.v)
         self.v.axpy(0.5 * dt, self.a)
         d_new_bc = self.d.getArray(readonly=True)[self.bc_rows]
@@ -102,12 +138,13 @@ class CentralDifference(TimeIntegrator):
         super().destroy()
 
 
-def runs_stably(model, dt: float, n_steps: int, reset: bool = True) -> bool:
+def runs_stably(model, dt: float, n_steps: int, reset: bool = True, rotary_inertia_scale: float = 1.0) -> bool:
     """Run n_steps central-difference steps from rest (forced past the critical-step check); False if
     the blow-up check (DynamicsError) stopped the run. Used to measure stability limits by bisection."""
     from fabricfem.dynamics.newmark import DynamicsError
     model.w.x.array[:] = 0.0
-    integrator = CentralDifference(model, dt, force=True)  # energy_bound "auto": 10 x the loads' work
+    # energy_bound "auto": 10 x the loads' work
+    integrator = CentralDifference(model, dt, force=True, rotary_inertia_scale=rotary_inertia_scale)
     try:
         integrator.run(n_steps, output_every=n_steps)
         return True

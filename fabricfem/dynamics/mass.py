@@ -14,6 +14,13 @@ which gives a constant mass matrix (thesis eq. 2.67 without the deformation depe
 metric of the angles is diag(1, cos^2 th1), so the rotational inertia is exact at theta = 0 and off by
 O(th1^2) relative for finite angles; translational inertia is exact. The director base must therefore
 stay fixed during a dynamic run (ShellModel.rebase = False; the integrators switch it off).
+
+Rotary-inertia mass scaling (`rotary_inertia_scale` s >= 1, default 1 = physical): the rotational entries
+rho t^3/12 are multiplied by s. In explicit shell codes this is the standard cure for a critical time
+step governed by the thickness-shear / rotational modes (omega_s ~ sqrt(12 k G13 / rho) / t scales as
+1 / sqrt(s), fabricfem.dynamics.stability); the translational mass, hence the loads' inertia and every
+static answer, is unchanged (the rotational kinetic energy is t^2 s / 12 |theta'|^2 / |u'|^2 of the
+translational one, negligible for s t^2 << L^2). Used by CentralDifference(rotary_inertia_scale=...).
 """
 from __future__ import annotations
 
@@ -41,13 +48,26 @@ def rotational_inertia_factor(model) -> float:
     return float(model.fabric.thickness) ** 2 / 12.0
 
 
-def mass_form(model):
-    """Consistent mass bilinear form [kg]: rho t u.v + rho t^3/12 theta.eta (thesis eq. 2.67, linearised director)."""
+def rotary_scale(value) -> float:
+    """The rotary-inertia scale factor s >= 1 (finite) or ValueError naming `rotary_inertia_scale`."""
+    try:
+        s = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"rotary_inertia_scale must be a number >= 1, got {value!r}") from None
+    if not (np.isfinite(s) and s >= 1.0):
+        raise ValueError(f"rotary_inertia_scale must be a finite number >= 1 (1: physical rotary inertia), got {value!r}")
+    return s
+
+
+def mass_form(model, rotary_inertia_scale: float = 1.0):
+    """Consistent mass bilinear form [kg]: rho t u.v + s rho t^3/12 theta.eta (thesis eq. 2.67, linearised
+    director; s the rotary-inertia scale, module docstring)."""
+    scale = rotary_scale(rotary_inertia_scale)
     rho_t = fem.Constant(model.mesh, PETSc.ScalarType(_check_density(model)))
     trial = ufl.split(model.w_trial) if model.model == "naghdi" else (model.w_trial,)
     form = rho_t * ufl.dot(trial[0], model.v) * model.dx
     if model.model == "naghdi":
-        j = fem.Constant(model.mesh, PETSc.ScalarType(rotational_inertia_factor(model)))
+        j = fem.Constant(model.mesh, PETSc.ScalarType(scale * rotational_inertia_factor(model)))
         form += rho_t * j * ufl.dot(trial[1], model.eta) * model.dx
     return form
 
@@ -127,15 +147,18 @@ def _hrz_nodal_factors(model, scalar_element) -> tuple[np.ndarray, int]:
     return area[:, None] * diag / diag.sum(axis=1, keepdims=True), n_cells
 
 
-def lumped_mass(model, translational: bool = True, rotational: bool = True) -> PETSc.Vec:
+def lumped_mass(model, translational: bool = True, rotational: bool = True,
+                rotary_inertia_scale: float = 1.0) -> PETSc.Vec:
     """Diagonal (lumped) mass of thesis eq. 2.82 [kg, kg m^2] as a ghosted PETSc Vec on W.
 
-    M_AA = lambda_e rho t int_e N_A^2 for the displacements and t^2/12 of that for the rotations,
+    M_AA = lambda_e rho t int_e N_A^2 for the displacements and s t^2/12 of that for the rotations
+    (s = rotary_inertia_scale >= 1, module docstring; 1 is eq. 2.82),
     lambda_e = int_e rho t / sum_B int_e rho t N_B^2 (the element's mass is preserved; all entries are
     positive for P2, Q2 and P2 + bubble, unlike row-sum lumping). Dirichlet rows are not modified.
     `translational` / `rotational` select which fields get their entries (the others are 0).
     """
     rho_t = _check_density(model)
+    scale_rotary = rotary_scale(rotary_inertia_scale)
     m = model.create_vector()
     with m.localForm() as local:
         local.set(0.0)
@@ -150,7 +173,7 @@ def lumped_mass(model, translational: bool = True, rotational: bool = True) -> P
             factors = cache[field]
             cell_dofs = V.dofmap.list.array.reshape(-1, V.dofmap.dof_layout.num_dofs)[:factors.shape[0]]
             parent = np.asarray(to_parent)[cell_dofs]
-            scale = rho_t * (rotational_inertia_factor(model) if field == "theta" else 1.0)
+            scale = rho_t * (scale_rotary * rotational_inertia_factor(model) if field == "theta" else 1.0)
             np.add.at(array, parent.ravel(), scale * factors.ravel())
     m.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
     m.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
@@ -179,12 +202,14 @@ class InertiaDamping:
         rayleigh: (a [1/s], b [s]) of C = a M + b K_M; K_M is the material stiffness at the last converged
             state, frozen during a step (thesis eq. 2.85).
         air_drag: eta [kg/(m^2 s)] of the drag force per unit area f_d = -eta v (translations only).
+        rotary_inertia_scale: s >= 1 multiplying the rotational inertia (module docstring; 1: physical).
 
     Products act on all rows; the callers zero the Dirichlet rows. `jacobian_form(c_mass, c_damp)` gives the
     consistent (non-diagonal) parts c_mass M + c_damp C as a UFL form, `diagonal` the lumped ones.
     """
 
-    def __init__(self, model, lumped: bool = False, rayleigh: tuple[float, float] = (0.0, 0.0), air_drag: float = 0.0):
+    def __init__(self, model, lumped: bool = False, rayleigh: tuple[float, float] = (0.0, 0.0), air_drag: float = 0.0,
+                 rotary_inertia_scale: float = 1.0):
         if len(rayleigh) != 2:
             raise ValueError(f"rayleigh must be a pair (a [1/s], b [s]), got {rayleigh!r}")
         a, b = (float(c) for c in rayleigh)
@@ -196,11 +221,12 @@ class InertiaDamping:
         self.model = model
         self.lumped = bool(lumped)
         self.a, self.b, self.eta = a, b, float(air_drag)
+        self.rotary_inertia_scale = rotary_scale(rotary_inertia_scale)
         self.w_frozen = fem.Function(model.W, name="damping_state")
-        self.mass_ufl = mass_form(model)
+        self.mass_ufl = mass_form(model, self.rotary_inertia_scale)
         self.stiffness_ufl = material_stiffness_form(model, self.w_frozen) if b > 0 else None
         if self.lumped:
-            self.mass_diag = lumped_mass(model)
+            self.mass_diag = lumped_mass(model, rotary_inertia_scale=self.rotary_inertia_scale)
             diag = self.mass_diag.copy()
             diag.scale(a)
             if self.eta > 0:

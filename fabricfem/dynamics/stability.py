@@ -13,7 +13,11 @@ code with dense eigenvalue solves of K vs M_L, see tests/test_dynamics.py and th
   omega_s = chi sqrt(12 k G13 / rho) / t, far above omega_m for thin shells (h / t > ~ 5). chi = 1.01 for
   Q2 and 1.1 for P2 + bubble triangles (measured 1.0046 and 1.09 at h / t = 20).
 
-omega_max = sqrt(omega_m^2 + omega_s^2) (Naghdi) or omega_m (membrane). With Rayleigh damping
+omega_max = sqrt(omega_m^2 + omega_s^2) (Naghdi) or omega_m (membrane).
+
+Rotary-inertia scaling (fabricfem.dynamics.mass, factor s >= 1 on the rotational lumped masses): the
+thickness-shear frequency is rotational inertia against shear stiffness, so omega_s -> omega_s / sqrt(s),
+and omega_max = sqrt(omega_m^2 + omega_s^2 / s). For s >= (omega_s / omega_m)^2 the membrane limit governs. With Rayleigh damping
 xi = a / (2 omega) + b omega / 2 the limit shrinks to dt = 2 / omega (sqrt(1 + xi^2) - xi)
 (Belytschko, Liu, Moran, Nonlinear Finite Elements, eq. 6.2.x). `discrete_max_frequency` computes the
 true omega_max of the assembled system (power iteration with SLEPc) and `measured_critical_time_step`
@@ -49,8 +53,11 @@ def min_edge_length(mesh) -> float:
     return mesh.comm.allreduce(local, op=MPI.MIN)
 
 
-def max_frequency_estimate(model) -> float:
-    """omega_max^h [rad/s] from mesh size and material (eq. 2.87 extended, see the module docstring)."""
+def max_frequency_estimate(model, rotary_inertia_scale: float = 1.0) -> float:
+    """omega_max^h [rad/s] from mesh size and material (eq. 2.87 extended, see the module docstring), for
+    rotational lumped masses scaled by `rotary_inertia_scale` (>= 1)."""
+    from fabricfem.dynamics.mass import rotary_scale
+    scale = rotary_scale(rotary_inertia_scale)
     cell = model.mesh.ufl_cell().cellname()
     c = plane_stress_wave_speed(model.fabric)
     omega_m = MEMBRANE_KAPPA[cell] * c / min_edge_length(model.mesh)  # eq. 2.87 with the element's kappa
@@ -58,27 +65,30 @@ def max_frequency_estimate(model) -> float:
         return omega_m
     fabric = model.fabric
     omega_s = (THICKNESS_SHEAR_CHI[cell] * np.sqrt(12.0 * fabric.shear_correction * fabric.transverse_shear_modulus
-                                                   / fabric.density) / fabric.thickness)
+                                                   / fabric.density) / fabric.thickness) / np.sqrt(scale)
     return float(np.hypot(omega_m, omega_s))
 
 
-def critical_time_step(model, rayleigh: tuple[float, float] = (0.0, 0.0), omega_max: float | None = None) -> float:
-    """dt_crit = 2 / omega_max (thesis eq. 2.86), reduced for Rayleigh damping (a [1/s], b [s])."""
-    omega = max_frequency_estimate(model) if omega_max is None else float(omega_max)
+def critical_time_step(model, rayleigh: tuple[float, float] = (0.0, 0.0), omega_max: float | None = None,
+                       rotary_inertia_scale: float = 1.0) -> float:
+    """dt_crit = 2 / omega_max (thesis eq. 2.86), reduced for Rayleigh damping (a [1/s], b [s]); omega_max
+    from `max_frequency_estimate(model, rotary_inertia_scale)` unless given."""
+    omega = max_frequency_estimate(model, rotary_inertia_scale) if omega_max is None else float(omega_max)
     a, b = rayleigh
     xi = a / (2.0 * omega) + b * omega / 2.0
     return float(2.0 / omega * (np.sqrt(1.0 + xi ** 2) - xi))
 
 
-def discrete_max_frequency(model, iterations: int = 200, rtol: float = 1e-6) -> float:
-    """Largest omega of K(d) phi = omega^2 M_L phi on the free dofs (current state, lumped mass), by SLEPc."""
+def discrete_max_frequency(model, iterations: int = 200, rtol: float = 1e-6, rotary_inertia_scale: float = 1.0) -> float:
+    """Largest omega of K(d) phi = omega^2 M_L phi on the free dofs (current state, lumped mass with the
+    rotational entries scaled by `rotary_inertia_scale`), by SLEPc."""
     from slepc4py import SLEPc
 
     from fabricfem.dynamics.mass import lumped_mass
     model.compile()
     K = model.create_matrix()
     model.jacobian(model.w.vector, K)  # Dirichlet rows: identity
-    m = lumped_mass(model)
+    m = lumped_mass(model, rotary_inertia_scale=rotary_inertia_scale)
     # Dirichlet rows get a huge mass so their eigenvalue (1 / m) is ~0 and never the largest
     for bc in model.bcs:
         dofs, n_owned = bc.dof_indices()

@@ -1,7 +1,7 @@
 """sleeve-trends: the trends of the thesis's sleeve study (sec. 5.3) checked on our study outputs.
 
 Reads results/sleeve_study/<figure>.csv when a full study (`fabricfem study sleeve`) has been run;
-otherwise runs the reduced quick study (mesh I, 6 degrees in 2 steps) and says so in every quantity
+otherwise runs the reduced quick study (mesh I, explicit flexion to 6 degrees) and says so in every quantity
 ("[reduced]"). The thesis's statements are the references (they are trends, not numbers):
 
 * torque at the final angle higher for mu = 0.5 than for mu = 0.1 (sec. 5.3.1-5.3.2);
@@ -79,6 +79,10 @@ def trends(figures, tag: str, wall: float) -> list[CaseResult]:
     out.append(_check(n, f"{tag} T(t=2mm)/T(t=1mm) at {a:.1f} deg in [1.6, 2.4]", r, 2.0, 1.6 <= r <= 2.4, wall))
     fb = figures["fabrics"]
     for k in ("II", "III"):
+        if f"fabric {k}" not in fb:
+            out.append(_check(n, f"{tag} T(fabric {k})/T(fabric I) >= 10: fabric {k} not in the study (not checked)",
+                              np.nan, 10.0, False, wall))
+            continue
         a = _common(fb["fabric I"], fb[f"fabric {k}"])
         r = _at(fb[f"fabric {k}"], a) / _at(fb["fabric I"], a)
         out.append(_check(n, f"{tag} T(fabric {k})/T(fabric I) at {a:.1f} deg >= 10", r, 10.0, r >= 10.0, wall))
@@ -98,15 +102,17 @@ def trends(figures, tag: str, wall: float) -> list[CaseResult]:
 
 
 @case("sleeve-trends", known_failure=(
-    "the quasi-static flexion still stalls on mesh I: with the active-set strategy and damped Newton steps "
-    "(issue 4) it stops at 20.25 deg (mu = 0.1) and 17.0 deg (mu = 0.5), 1-degree steps halved to 0.05 deg; "
-    "the fixed-set Newton solves there cycle between two iterates (friction slip-branch reversal suspected) "
-    "or fall on a limit point, so no large-angle study data exist and the trends are not evaluated"))
+    "evaluated on real 57-degree explicit data (reduced study, mesh I only, `run_study(fine='I', meshes=('I',), "
+    "fabrics=('I',))`, 585 s on 2 ranks): T(t=2mm)/T(t=1mm) = 1.66 passes; T(mu=0.5)/T(mu=0.1) at 57 deg = 0.97 "
+    "(0.0593 vs 0.0610 N m) and max T(R=0.07)/T(R=0.06) over 20-57 deg = 1.56 fail; fabrics II/III (17x and 60x "
+    "the explicit steps of fabric I) and the mesh series II-IV were not run, so those checks are not evaluated"))
 def sleeve_trends() -> list[CaseResult]:
     """Sleeve-study trends of thesis sec. 5.3 (friction, fit, thickness, fabrics, mesh) on study outputs."""
     with Timer() as timer:
         if (STUDY_DIR / "friction.csv").exists():
-            figures, tag = _curves(STUDY_DIR), "[full study]"
+            readme = STUDY_DIR / "README.txt"
+            first = readme.read_text().splitlines()[0] if readme.exists() else "study"
+            figures, tag = _curves(STUDY_DIR), "[full study]" if first == "full study" else f"[{first}]"
         else:
             import tempfile
             from mpi4py import MPI
