@@ -128,6 +128,7 @@ class ShellModel:
             eps = bending_eps
             if isinstance(law, SquareRootBending) and eps is None:
                 eps = 1e-3 * law.kappa0
+            self.bending_eps = eps
             self.energy = shell_forms.naghdi_energy(
                 self.u, self.theta, self.phi0, self.n0, (self.a3, self.a1, self.a2), (self.t1, self.t2),
                 self.A, self.D, self.shear_stiffness, self.thickness, law=law, law_eps=eps,

@@ -13,7 +13,16 @@ code with dense eigenvalue solves of K vs M_L, see tests/test_dynamics.py and th
   omega_s = chi sqrt(12 k G13 / rho) / t, far above omega_m for thin shells (h / t > ~ 5). chi = 1.01 for
   Q2 and 1.1 for P2 + bubble triangles (measured 1.0046 and 1.09 at h / t = 20).
 
-omega_max = sqrt(omega_m^2 + omega_s^2) (Naghdi) or omega_m (membrane).
+* bending: the rotational inertia against the bending tangent at zero curvature D0 (the largest of D11,
+  D22 for the linear law; a0 for Kawabata's M = sum a_i K^i; 2 B0 sqrt(kappa0 / eps) for the regularised
+  square-root law of seed 002, whose exact tangent is infinite at K = 0) gives
+  omega_b = chi_b sqrt(12 D0 / (rho t^3)) / h_min; chi_b = 4.9 for Q2 (measured 4.899-4.920 on 6x6 and
+  12x12 bending-dominated cloths, the 1D quadratic-element value 2 sqrt 6 = 4.899) and 5.5 for P2 + bubble
+  triangles. For linear laws and thin shells omega_b << omega_s; for the square-root law it sets the step
+  (seed 002 cloth: 7x above the shear-and-membrane estimate).
+
+omega_max = sqrt(omega_m^2 + omega_s^2 + omega_b^2) (Naghdi; shear and bending stiffness act on the same
+rotational inertia) or omega_m (membrane).
 
 Rotary-inertia scaling (fabricfem.dynamics.mass, factor s >= 1 on the rotational lumped masses): the
 thickness-shear frequency is rotational inertia against shear stiffness, so omega_s -> omega_s / sqrt(s),
@@ -32,6 +41,7 @@ from mpi4py import MPI
 
 MEMBRANE_KAPPA = {"quadrilateral": 6.1, "triangle": 7.4}
 THICKNESS_SHEAR_CHI = {"quadrilateral": 1.01, "triangle": 1.1}
+BENDING_CHI = {"quadrilateral": 4.95, "triangle": 5.5}
 
 
 def plane_stress_wave_speed(fabric) -> float:
@@ -66,7 +76,20 @@ def max_frequency_estimate(model, rotary_inertia_scale: float = 1.0) -> float:
     fabric = model.fabric
     omega_s = (THICKNESS_SHEAR_CHI[cell] * np.sqrt(12.0 * fabric.shear_correction * fabric.transverse_shear_modulus
                                                    / fabric.density) / fabric.thickness) / np.sqrt(scale)
-    return float(np.hypot(omega_m, omega_s))
+    omega_b = (BENDING_CHI[cell] * np.sqrt(12.0 * initial_bending_stiffness(model) / fabric.density)
+               / fabric.thickness ** 1.5 / min_edge_length(model.mesh)) / np.sqrt(scale)
+    return float(np.sqrt(omega_m ** 2 + omega_s ** 2 + omega_b ** 2))
+
+
+def initial_bending_stiffness(model) -> float:
+    """Bending tangent dm/dK at K = 0 [N m] of the model's law (module docstring): D0."""
+    law = model.fabric.bending_law
+    if law is None:
+        D = model.fabric.bending_matrix
+        return float(max(D[0, 0], D[1, 1]))
+    if hasattr(law, "coefficients"):
+        return float(law.coefficients[0])
+    return float(2.0 * law.B0 * np.sqrt(law.kappa0 / model.bending_eps))
 
 
 def critical_time_step(model, rayleigh: tuple[float, float] = (0.0, 0.0), omega_max: float | None = None,
