@@ -179,19 +179,19 @@ def test_overhanging_beam_vs_seed_table():
 
 
 def test_tablecloth_drape_vs_seed_table():
-    """Seed 001 sec. 4.4, 20 x 20 elements, static equilibrium by Newton from the flat sheet. Reported against
-    the experiment row; required: within the seed's own particle-model error + 10 percentage points (the
-    experiment is read to two digits, 0.01 / 0.18 = 5.6% on the smallest entry, and the drape has several
-    equilibria). See particles_cases.particle_tablecloth for the reading of x/L, y/L, z/L."""
+    """Seed 001 sec. 4.4, 20 x 20 elements, static equilibrium by Newton from the flat sheet (mirror planes).
+    Required: the table (and floor) carry the weight within 1e-6 (vertical equilibrium of the whole cloth:
+    the mirror supports only fix horizontal coordinates; the residual is 1e-9 of a particle's weight).
+    Reported against the experiment row (floor reading, fabricfem.verify.drape.reading_admissibility): the
+    issue's acceptance is 10% per entry; xfail with the numbers when the static branch misses it (the
+    drape has several equilibria, see the cases tablecloth-drape / tablecloth-drop)."""
     r = particle_tablecloth(20)
     assert r["residual"] <= 1e-6
-    lines = []
-    ok = True
-    for q, ref in r["experiment"].items():
-        allowed = r["seed_particle_error_%"][q] + 10.0
-        lines.append(f"{q}: {r['values'][q]:.3f} (height reading {r['values_floor'][q]:.3f}) vs experiment {ref}"
-                     f" -> {r['error_%'][q]:.1f}% / {r['error_floor_%'][q]:.1f}% (allowed {allowed:.1f}%)")
-        ok &= r["error_%"][q] <= allowed
-    print("\n".join(lines), f"\n{r['iterations']} Newton iterations, {r['wall_s']:.1f} s")
-    if not ok:
-        pytest.xfail("particle drape does not reproduce the seed's table:\n" + "\n".join(lines))
+    assert r["reaction_over_weight"] == pytest.approx(1.0, abs=1e-6)
+    lines = [f"{q}: {r['values'][q]:.3f} vs experiment {ref} -> {r['error_%'][q]:.1f}%"
+             for q, ref in r["experiment"].items()]
+    print("\n".join(lines), f"\n{r['iterations']} Newton iterations, {r['wall_s']:.1f} s, lowest eigenvalue "
+          f"{r['lowest_eigenvalue']:.3g} N/m, {r['folds']} folds")
+    if max(r["error_%"].values()) > 10.0:
+        pytest.xfail("static particle drape (symmetric branch) is not within 10% of the experiment:\n"
+                     + "\n".join(lines))

@@ -13,8 +13,10 @@ import pytest
 from csv_checks import assert_positive_table
 from mpi4py import MPI
 
-from fabricfem.benchmarks.speed_accuracy import (AIR_DRAG, AREAL_DENSITY, CSV_COLUMNS, GRAVITY, METHODS, QUICK,
-                                                 SpeedRow, cheapest_meeting, speed_accuracy)
+from fabricfem.benchmarks.speed_accuracy import (AIR_DRAG, AREAL_DENSITY, CSV_COLUMNS, DRAPE_CSV_COLUMNS,
+                                                 DRAPE_METHODS, GRAVITY, METHODS, QUICK, DrapePlan,
+                                                 DrapeRow, SpeedRow, cheapest_meeting, same_branch, speed_accuracy,
+                                                 tablecloth_benchmark)
 
 
 def damped_free_fall(t: float) -> float:
@@ -25,7 +27,7 @@ def damped_free_fall(t: float) -> float:
 
 @pytest.mark.mpi
 def test_quick_speed_accuracy(tmp_path):
-    out = speed_accuracy(tmp_path, quick=True, verbose=False)
+    out = speed_accuracy(tmp_path, quick=True, verbose=False, problems=("corner-pinned",))
     rows, reference = out["rows"], out["reference"]
     assert {r.method for r in rows} == set(METHODS)
     for r in rows:
@@ -79,3 +81,54 @@ def test_bad_input(tmp_path):
         speed_accuracy(tmp_path, plan=QUICK.__class__(**{**QUICK.__dict__, "particles": (1,)}), verbose=False)
     with pytest.raises(ValueError, match="t_end"):
         speed_accuracy(tmp_path, plan=QUICK.__class__(**{**QUICK.__dict__, "t_end": -0.1}), verbose=False)
+
+
+@pytest.mark.mpi
+def test_quick_tablecloth(tmp_path):
+    """Tablecloth part, quick plan (particles 10 x 10, shell quarter 5 x 5, reference shell quarter 10 x 10).
+
+    Independent check of every solved position: a nearly inextensible cloth cannot place its corner / midside
+    farther from the centre (held at the table centre by the mirror planes) than its material distance,
+    measured along the shortest path over the table (fabricfem.verify.drape.shortest_path_over_table, itself
+    checked against closed forms in tests/test_tablecloth.py). Allowed mean strain 1%: the shell strains
+    ~q L / (E h) = 1e-4 under its weight; the particle grid's diagonal is carried by the shear springs
+    (G h instead of E h along the diagonal, and the grid can trellis), so more than 1e-4 but far below 1%."""
+    from fabricfem.verify.drape import CLOTH_L, shortest_path_over_table
+    out = tablecloth_benchmark(tmp_path, quick=True, verbose=False)
+    rows, reference = out["rows"], out["reference"]
+    assert {r.method for r in rows} == set(DRAPE_METHODS)
+    for r in rows + [reference]:
+        for name in ("wall_s", "ndofs", "iterations"):
+            assert math.isfinite(getattr(r, name)) and getattr(r, name) > 0, (r.resolution, name)
+        corner = shortest_path_over_table(r.corner / CLOTH_L) / math.sqrt(0.5) - 1.0
+        midside = shortest_path_over_table(r.midside / CLOTH_L) / 0.5 - 1.0
+        assert corner <= 0.01 and midside <= 0.01, (r.method, r.resolution, corner, midside)
+    for r in rows:
+        assert math.isfinite(r.error) and r.error >= 0 and r.wall_vs_baseline > 0
+    assert min(r.wall_vs_baseline for r in rows if r.method == "particles static") == 1.0
+    if MPI.COMM_WORLD.rank == 0:
+        assert_positive_table(tmp_path / "speed_accuracy_tablecloth.csv", DRAPE_CSV_COLUMNS, len(rows) + 1,
+                              ("ndofs", "wall_s"))
+        assert (tmp_path / "speed_accuracy_tablecloth.png").stat().st_size > 0
+
+
+def _drape_row(folds: int, asymmetry: float) -> DrapeRow:
+    return DrapeRow("t", "m", "r", 10, 1, 1, 1.0, None, None, np.zeros(3), np.zeros(3), folds, asymmetry)
+
+
+def test_same_branch():
+    ref = _drape_row(4, 0.0)
+    assert same_branch(_drape_row(4, 0.001), ref)
+    assert not same_branch(_drape_row(4, 0.05), ref)   # left the diagonal
+    assert not same_branch(_drape_row(6, 0.0), ref)    # other fold count
+
+
+def test_tablecloth_bad_plan(tmp_path):
+    with pytest.raises(ValueError, match="plan.particles"):
+        tablecloth_benchmark(tmp_path, plan=DrapePlan(particles=(15,), shell=(5,), reference=10, repeats=1),
+                             verbose=False)
+    with pytest.raises(ValueError, match="plan.shell"):
+        tablecloth_benchmark(tmp_path, plan=DrapePlan(particles=(10,), shell=(4,), reference=10, repeats=1),
+                             verbose=False)
+    with pytest.raises(ValueError, match="problems"):
+        speed_accuracy(tmp_path, problems=("sphere",), verbose=False)

@@ -7,12 +7,12 @@
 """
 from fabricfem.particles.integrate import (STANDARD_GRAVITY, DivergenceError, Problem, StaticResult, Trajectory,
                                            critical_time_step, provot_correction, relax_newton, relax_seed,
-                                           simulate, strains)
+                                           simulate, strains, tangent_stiffness)
 from fabricfem.particles.obstacles import TableTop, penalty_stiffness, table_edge, table_top
 from fabricfem.particles.springs import (BendingSet, ParticleSystem, SpringSet, beam_strip, chain, elastic_energy,
                                          internal_forces, rectangular_grid, stiffness_matrix)
 
 __all__ = ["STANDARD_GRAVITY", "DivergenceError", "Problem", "StaticResult", "Trajectory", "critical_time_step",
-           "provot_correction", "relax_newton", "relax_seed", "simulate", "strains", "TableTop",
+           "provot_correction", "relax_newton", "relax_seed", "simulate", "strains", "tangent_stiffness", "TableTop",
            "penalty_stiffness", "table_edge", "table_top", "BendingSet", "ParticleSystem", "SpringSet",
            "beam_strip", "chain", "elastic_energy", "internal_forces", "rectangular_grid", "stiffness_matrix"]

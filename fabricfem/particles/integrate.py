@@ -289,6 +289,12 @@ class StaticResult:
     history: list = field(default_factory=list)  # (load factor, iterations) per load step
 
 
+def tangent_stiffness(problem: Problem, x: np.ndarray, definite: bool = True) -> sp.csr_matrix:
+    """Tangent stiffness [N/m] (3n x 3n, dof 3 k + c) of springs, flexion and penalty contact at x;
+    definite=True clips the compressive geometric stiffness of the springs (stiffness_matrix)."""
+    return _tangent(problem, x, definite)
+
+
 def _tangent(problem: Problem, x: np.ndarray, definite: bool = True) -> sp.csr_matrix:
     K = stiffness_matrix(problem.system, x, definite)
     if problem.obstacles:

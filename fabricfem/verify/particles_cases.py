@@ -6,12 +6,15 @@ percentage errors, and the wall time.
 """
 from __future__ import annotations
 
+import math
 import time
 
 import numpy as np
+import scipy.sparse.linalg as spla
 
-from fabricfem.particles import (STANDARD_GRAVITY, Problem, beam_strip, penalty_stiffness, rectangular_grid,
-                                 relax_newton, table_edge, table_top)
+from fabricfem.particles import (STANDARD_GRAVITY, Problem, TableTop, beam_strip, critical_time_step,
+                                 penalty_stiffness, rectangular_grid, relax_newton, simulate, table_edge, table_top)
+from fabricfem.particles.integrate import tangent_stiffness
 from fabricfem.verify.references import elastica_tip_load
 
 GF = STANDARD_GRAVITY * 1e-3  # one gram-force [N]
@@ -27,6 +30,8 @@ TABLECLOTH_EXPERIMENT = {"corner x/L": 0.39, "corner y/L": 0.38, "corner z/L": 0
                          "midside z/L": 0.40}
 TABLECLOTH_SEED_PARTICLE = {"corner x/L": 0.39, "corner y/L": 0.39, "corner z/L": 0.38, "midside y/L": 0.16,
                             "midside z/L": 0.37}
+TABLECLOTH_SEED_FE = {"corner x/L": 0.41, "corner y/L": 0.41, "corner z/L": 0.36, "midside y/L": 0.19,
+                      "midside z/L": 0.38}
 TABLECLOTH_SEED_PARTICLE_ERROR = {"corner x/L": 0.45, "corner y/L": 3.12, "corner z/L": 1.79, "midside y/L": 7.90,
                                   "midside z/L": 5.34}  # percent
 
@@ -102,51 +107,201 @@ def particle_overhanging_beam(n: int = 24) -> dict:
     return out
 
 
-def particle_tablecloth(n: int = 20, load_steps: int = 5) -> dict:
-    """Seed 001 sec. 4.4: 20 cm square cloth centred on an 8 cm square frictionless table, E = 118.1176 gf/mm^2,
-    weight 0.2384e-3 gf/mm^2, h = 0.54229 mm, nu = 0.3, n x n elements, solved to static equilibrium.
+# ---------------------------------------------------------------------------- tablecloth (sec. 4.4)
+# Seed 001 sec. 4.4 set-up (SI): cloth side, isotropic cotton, weight per area, 8 cm cube (top at z = 0)
+CLOTH_SIDE = 20.0 * CM                                                   # L [m]
+CLOTH_E, CLOTH_H, CLOTH_NU = 118.1176 * GF / MM ** 2, 0.54229 * MM, 0.3  # Pa, m, -
+CLOTH_WEIGHT = 0.2384e-3 * GF / MM ** 2                                  # q [N/m^2]
+TABLE_HALF, TABLE_HEIGHT = 4.0 * CM, 8.0 * CM                            # m
+# Air drag of a cloth, seed 002 eq. 17d (eta = 0.351 kg/(m^2 s)): force -eta v per area = -(eta / rho) m v.
+AIR_DRAG = 0.351                                                         # eta [kg/(m^2 s)]
+# Flatness imperfection of the cloth laid on the table before the drop (the same for every run and model):
+# a smooth random waviness of 8 plane waves, wavelengths uniform in [2 cm, 20 cm] (grid scale to cloth
+# scale), random directions and phases from numpy's default_rng(IMPERFECTION_SEED), shifted and scaled to
+# heights in [0, h / 2] above the table top (a cloth laid out by hand is not flatter than half its
+# thickness; upward only, so that no point starts inside the table). Chosen before any run was looked at.
+IMPERFECTION_SEED, IMPERFECTION_WAVES = 2000, 8
+IMPERFECTION_AMPLITUDE = 0.5 * CLOTH_H                                   # m
 
-    Reading of the seed's table: its Fig. 23 shows the hem "projected on the xz plane", so y is vertical and
-    x, z are horizontal, measured from the table centre (the corner has x/L ~ z/L by symmetry; the midside
-    node, middle of an edge, is reported by its vertical y/L and its horizontal distance z/L). The seed does
-    not say where y is measured from, so two readings are returned: "values" with y the drop below the table
-    top, and "values_floor" with y the height above the floor on which the 8 cm cube of the experiment
-    stands (table top at y/L = 0.4). (With the experimental corner, the first reading puts the corner
-    9.3 cm from the table corner although only 8.49 cm of cloth lie between them; the second is feasible.)
-    All lengths are normalized by L = 20 cm. The mirror planes x = 0 and
-    y = 0 of the problem are imposed (x fixed on x = 0, y fixed on y = 0), which also removes the free in-plane
-    sliding on the frictionless table. The table edge is rounded to b / 10. Newton's method from the flat
-    sheet in load_steps equal gravity increments; the drape has several equilibria and this is the one
-    reached on that path.
-    """
-    t0 = time.perf_counter()
-    Lc = 20.0 * CM
-    E, h, nu = 118.1176 * GF / MM ** 2, 0.54229 * MM, 0.3
-    rho_a = 0.2384e-3 * GF / MM ** 2 / STANDARD_GRAVITY  # areal mass [kg/m^2]
-    table_half, table_height = 4.0 * CM, 8.0 * CM
-    b = Lc / n
-    system = rectangular_grid(n + 1, n + 1, b, b, E, nu, h, rho_a, origin=(-Lc / 2, -Lc / 2, 0.0))
-    if n % 2:
-        raise ValueError(f"n must be even (a particle row on each mirror plane), got {n}")
+
+def flatness_imperfection(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Initial height [m] in [0, h / 2] of the cloth point with reference coordinates (x, y) [m] measured from
+    the table centre (module constants IMPERFECTION_*): the same field for the particle and shell models."""
+    rng = np.random.default_rng(IMPERFECTION_SEED)
+    k = rng.uniform(2.0 * np.pi / (10 * CM), 2.0 * np.pi / (1 * CM), IMPERFECTION_WAVES) / 2.0  # 2 pi / lambda
+    angle = rng.uniform(0.0, 2.0 * np.pi, IMPERFECTION_WAVES)
+    phase = rng.uniform(0.0, 2.0 * np.pi, IMPERFECTION_WAVES)
+
+    def waves(X, Y):
+        X, Y = np.asarray(X, dtype=float)[..., None], np.asarray(Y, dtype=float)[..., None]
+        return np.sum(np.cos(k * (np.cos(angle) * X + np.sin(angle) * Y) + phase), axis=-1)
+
+    # range of the field over the cloth on a fine grid (0.1 mm): fixes the shift and scale once
+    g = np.linspace(-0.5 * CLOTH_SIDE, 0.5 * CLOTH_SIDE, 401)
+    ref = waves(*np.meshgrid(g, g))
+    lo, hi = float(ref.min()), float(ref.max())
+    return IMPERFECTION_AMPLITUDE * np.clip((waves(x, y) - lo) / (hi - lo), 0.0, 1.0)
+
+
+def tablecloth_reading(corner: np.ndarray, midside: np.ndarray) -> dict:
+    """The seed's table entries from the corner and midside positions [m] (table centre at the origin, top at
+    z = 0, midside = middle of the edge y = +L/2): the admissible "floor" reading (see
+    fabricfem.verify.drape.reading_admissibility), x/L and z/L horizontal from the table centre (corner x,
+    y; midside y), y/L the height above the floor on which the 8 cm cube stands."""
+    return {"corner x/L": corner[0] / CLOTH_SIDE, "corner y/L": (TABLE_HEIGHT + corner[2]) / CLOTH_SIDE,
+            "corner z/L": corner[1] / CLOTH_SIDE, "midside y/L": (TABLE_HEIGHT + midside[2]) / CLOTH_SIDE,
+            "midside z/L": midside[1] / CLOTH_SIDE}
+
+
+def hem_folds(height: np.ndarray, tolerance: float) -> int:
+    """Number of folds of a draped hem: local minima of the hem height along the closed hem (periodic
+    sequence, heights [m]) deeper than `tolerance` [m] below the highest point on either side before the
+    next lower point (a prominence test, so that node-level noise does not count)."""
+    z = np.asarray(height, dtype=float)
+    n = len(z)
+    if n < 3 or not np.all(np.isfinite(z)):
+        raise ValueError("height must be a finite periodic sequence of at least 3 hem points")
+    count = 0
+    for i in np.flatnonzero((z <= np.roll(z, 1)) & (z < np.roll(z, -1))):  # candidate minima only (a few)
+        order = np.roll(z, -i)
+        left, right = order[::-1][:-1], order[1:]     # walk away from i both ways around the hem
+        ok = True
+        for side in (left, right):
+            lower = np.flatnonzero(side < z[i])
+            span = side[:lower[0]] if len(lower) else side
+            ok &= (span.max() if len(span) else z[i]) - z[i] > tolerance
+        count += bool(ok)
+    return count
+
+
+def _tablecloth_system(n: int):
+    if not (isinstance(n, (int, np.integer)) and n >= 2 and n % 2 == 0
+            and abs(n * TABLE_HALF / CLOTH_SIDE - round(n * TABLE_HALF / CLOTH_SIDE)) < 1e-9):
+        raise ValueError(f"n must be even with a particle row on the table edges (n = 10, 20, 30, ...), got {n!r}")
+    b = CLOTH_SIDE / n
+    rho_a = CLOTH_WEIGHT / STANDARD_GRAVITY  # areal mass [kg/m^2]
+    return rectangular_grid(n + 1, n + 1, b, b, CLOTH_E, CLOTH_NU, CLOTH_H, rho_a,
+                            origin=(-CLOTH_SIDE / 2, -CLOTH_SIDE / 2, 0.0)), b
+
+
+def _table(system, b: float, factor: float = 100.0) -> tuple:
+    """The table (top z = 0, edges rounded to b / 10) and the floor z = -8 cm on which the cube of the
+    experiment stands (part of the experiment in the floor reading of the seed's table: a corner of the
+    cloth can reach it, the diagonal overhang being 8.49 cm), penalty factor x the stiffest spring."""
+    k = penalty_stiffness(system, factor)
+    return (table_top(0.0, 0.0, TABLE_HALF, TABLE_HALF, 0.0, k, edge_radius=b / 10.0),
+            TableTop(-TABLE_HEIGHT, k, b / 10.0))
+
+
+def _hem(system) -> np.ndarray:
+    """Indices of the boundary particles in order around the grid."""
+    nx, ny = system.shape
+    ix, iy = np.arange(nx), np.arange(ny)
+    return np.concatenate([system.index(ix[:-1], 0), system.index(nx - 1, iy[:-1]),
+                           system.index(ix[::-1][:-1], ny - 1), system.index(0, iy[::-1][:-1])])
+
+
+def lowest_particle_eigenvalues(problem: Problem, x: np.ndarray, count: int = 3) -> np.ndarray:
+    """The `count` lowest eigenvalues [N/m] of the exact tangent (compressive geometric stiffness kept) on
+    the free coordinates at x, by shift-invert Lanczos below zero: all positive = stable equilibrium."""
+    free = problem.free.ravel()
+    K = tangent_stiffness(problem, x, definite=False)[free][:, free]
+    shift = -1e-3 * float(np.abs(K.diagonal()).max())
+    return np.sort(spla.eigsh(K, k=count, sigma=shift, which="LM", return_eigenvectors=False))
+
+
+def _static_tablecloth_problem(n: int) -> Problem:
+    system, b = _tablecloth_system(n)
     fixed = np.zeros((system.n, 3), dtype=bool)
     line = np.arange(n + 1)
     fixed[system.index(n // 2, line), 0] = True
     fixed[system.index(line, n // 2), 1] = True
-    problem = Problem(system, fixed=fixed, obstacles=(
-        table_top(0.0, 0.0, table_half, table_half, 0.0, penalty_stiffness(system), edge_radius=b / 10.0),))
+    return Problem(system, fixed=fixed, obstacles=_table(system, b))
+
+
+def particle_tablecloth_nodes(n: int = 20, load_steps: int = 5) -> dict:
+    """particle_tablecloth without the stability check (for the speed-accuracy benchmark): corner (L/2, L/2)
+    and midside (0, L/2) positions [m] (table top at z = 0), hem folds, diagonal asymmetry |x_c - y_c| / L,
+    free coordinates, Newton iterations."""
+    problem = _static_tablecloth_problem(n)
     res = relax_newton(problem, load_steps=load_steps, max_iterations=400)
+    system = problem.system
+    corner = res.x[system.index(-1, -1)].copy()
+    return {"corner": corner, "midside": res.x[system.index(n // 2, -1)].copy(),
+            "folds": hem_folds(res.x[_hem(system), 2], 1e-3 * CLOTH_SIDE),
+            "diagonal_asymmetry": abs(corner[0] - corner[1]) / CLOTH_SIDE,
+            "ndofs": int(problem.free.sum()), "iterations": res.iterations}
+
+
+def particle_tablecloth(n: int = 20, load_steps: int = 5) -> dict:
+    """Seed 001 sec. 4.4 by static relaxation: 20 cm square cloth centred on an 8 cm square frictionless
+    table, E = 118.1176 gf/mm^2, weight 0.2384e-3 gf/mm^2, h = 0.54229 mm, nu = 0.3, n x n elements.
+
+    Newton's method from the flat sheet in load_steps equal gravity increments (the drape has several
+    equilibria: this is the one reached on that path, the diagonal-symmetric one). The mirror planes x = 0
+    and y = 0 are imposed (x fixed on x = 0, y fixed on y = 0), which also removes the free in-plane sliding
+    on the frictionless table. The table edge is rounded to b / 10; the floor is 8 cm below the top.
+    Values in the seed's floor reading (tablecloth_reading); all lengths / L.
+    """
+    t0 = time.perf_counter()
+    problem = _static_tablecloth_problem(n)
+    res = relax_newton(problem, load_steps=load_steps, max_iterations=400)
+    return _tablecloth_result(problem, res, t0)
+
+
+def _tablecloth_result(problem: Problem, res, t0: float, **extra) -> dict:
+    system = problem.system
+    n = system.shape[0] - 1
     x = res.x
-    corner = x[system.index(-1, -1)]
-    midside = x[system.index(n // 2, -1)]  # middle of the edge y = +L/2
-    values = {"corner x/L": corner[0] / Lc, "corner y/L": -corner[2] / Lc, "corner z/L": corner[1] / Lc,
-              "midside y/L": -midside[2] / Lc, "midside z/L": midside[1] / Lc}
-    values_floor = dict(values)
-    values_floor["corner y/L"] = (table_height + corner[2]) / Lc
-    values_floor["midside y/L"] = (table_height + midside[2]) / Lc
-    return {"values": values, "values_floor": values_floor, "experiment": dict(TABLECLOTH_EXPERIMENT),
-            "error_floor_%": {k: _percent(values_floor[k], TABLECLOTH_EXPERIMENT[k]) for k in values},
-            "seed_particle": dict(TABLECLOTH_SEED_PARTICLE),
-            "seed_particle_error_%": dict(TABLECLOTH_SEED_PARTICLE_ERROR),
-            "error_%": {k: _percent(values[k], TABLECLOTH_EXPERIMENT[k]) for k in values},
-            "iterations": res.iterations, "residual": res.residual, "ndofs": 3 * system.n, "positions": x,
-            "wall_s": time.perf_counter() - t0}
+    values = tablecloth_reading(x[system.index(-1, -1)], x[system.index(n // 2, -1)])
+    eig = lowest_particle_eigenvalues(problem, x)
+    hem = x[_hem(system), 2]
+    corners = x[system.index([0, 0, -1, -1], [0, -1, 0, -1]), 2]
+    weight = float(-problem.external_forces()[:, 2].sum())
+    return dict(extra, reaction_over_weight=float(problem.contact_forces(x)[:, 2].sum()) / weight, values=values,
+                experiment=dict(TABLECLOTH_EXPERIMENT),
+                seed_particle=dict(TABLECLOTH_SEED_PARTICLE), **{
+                    "seed_particle_error_%": dict(TABLECLOTH_SEED_PARTICLE_ERROR),
+                    "error_%": {k: _percent(values[k], TABLECLOTH_EXPERIMENT[k]) for k in values}},
+                folds=hem_folds(hem, 1e-3 * CLOTH_SIDE), corner_height_spread=float(np.ptp(corners)) / CLOTH_SIDE,
+                lowest_eigenvalue=float(eig[0]), iterations=res.iterations, residual=res.residual,
+                ndofs=int(problem.free.sum()), positions=x, wall_s=time.perf_counter() - t0)
+
+
+def particle_tablecloth_drop(n: int = 20, t_end: float = 2.0, penalty_factor_drop: float = 4.0) -> dict:
+    """Seed 001 sec. 4.4 the way the seed computed it: the cloth FALLS from the (imperfect) flat state and
+    settles, then a static Newton polish and a stability check.
+
+    Full n x n grid on the table and the floor (_table), no mirror planes (any fold pattern can form); the
+    centre particle keeps x and y and its +x neighbour y (removes the free sliding and spinning on the
+    frictionless table; these supports carry no load in equilibrium). Start: flatness_imperfection, at
+    rest. Drop: velocity Verlet with the air drag c = eta / rho (seed 002 eq. 17d) to t_end [s] (default
+    2 s: > 3 periods of the slowest pendulum mode of the overhang, 2 pi sqrt(l / g) = 0.5-0.6 s for
+    l = 6-8.5 cm, and 1.4 air-drag decay times 1 / c), at 0.9 x the critical step; during the drop the
+    contact penalty is penalty_factor_drop x the stiffest spring (4: the step is then set by the springs,
+    not by the contact; the equilibrium does not depend on it since the polish uses the standard factor
+    100). Polish: relax_newton from the settled state. Stability: the lowest eigenvalues of the exact
+    tangent. Returns the values (floor reading), the number of hem folds and
+    the corner height spread (0 = the four corners alike), eigenvalue [N/m], wall time [s].
+    """
+    t0 = time.perf_counter()
+    if not (math.isfinite(t_end) and t_end > 0):
+        raise ValueError(f"t_end must be a positive time [s], got {t_end!r}")
+    if not (math.isfinite(penalty_factor_drop) and penalty_factor_drop > 0):
+        raise ValueError(f"penalty_factor_drop must be positive, got {penalty_factor_drop!r}")
+    system, b = _tablecloth_system(n)
+    x0 = system.positions.copy()
+    x0[:, 2] += flatness_imperfection(x0[:, 0], x0[:, 1])
+    fixed = np.zeros((system.n, 3), dtype=bool)
+    fixed[system.index(n // 2, n // 2), :2] = True
+    fixed[system.index(n // 2 + 1, n // 2), 1] = True
+    rho_a = CLOTH_WEIGHT / STANDARD_GRAVITY
+    drop = Problem(system, fixed=fixed, obstacles=_table(system, b, penalty_factor_drop),
+                   damping=AIR_DRAG / rho_a)
+    dt = 0.9 * critical_time_step(drop)
+    steps = int(math.ceil(t_end / dt))
+    trajectory = simulate(drop, t_end / steps, steps, x0=x0, record_every=steps)
+    static = Problem(system, fixed=fixed, obstacles=_table(system, b))
+    res = relax_newton(static, x0=trajectory.x, max_iterations=400)
+    return _tablecloth_result(static, res, t0, drop_steps=steps, drop_dt=t_end / steps,
+                              kinetic_energy_end=static.kinetic_energy(trajectory.v))
