@@ -233,12 +233,18 @@ class UnitCellProblem:
         degree: Lagrange degree of u* (1 or 2)
         quadrature_degree: default 2 * degree
         rtol, stol, max_it: Newton tolerances (see MPCNewtonSolver)
+        pins: optional [(point (3,) [m], components), ...]: u*_c = 0 at the mesh vertex `point` for each
+            component c in `components` (0, 1, 2), instead of the single fully pinned vertex nearest the
+            cell centre. Needed for cells of several bodies (yarns without bonded contact): each body's
+            rigid modes left free by the periodicity must be removed (fabricfem.unit_cell_contact pins
+            them at points where the weave's symmetry makes that component of u* vanish anyway).
     """
 
     def __init__(self, mesh: dmesh.Mesh, psi: Union[StrainEnergy, Mapping[int, StrainEnergy]],
                  periodic_pairs: Sequence[PeriodicPair], facet_tags=None, cell_tags=None,
                  volume_fraction: float | None = None, degree: int = 1, quadrature_degree: int | None = None,
-                 rtol: float = 1e-10, stol: float = 1e-13, max_it: int = 25):
+                 rtol: float = 1e-10, stol: float = 1e-13, max_it: int = 25,
+                 pins: Sequence[tuple[Sequence[float], Sequence[int]]] | None = None):
         if mesh.topology.dim != 3 or mesh.geometry.dim != 3:
             raise ValueError("mesh must be a 3D volume mesh")
         if degree not in (1, 2):
@@ -280,9 +286,13 @@ class UnitCellProblem:
             raise ValueError("periodic_pairs: the maps send slave points back onto slave faces (cycle); "
                              "each pair must map its slave face onto a master face")
 
-        self.pin = _pin_point(mesh, on_slave_face, 0.5 * (lower + upper))
-        pinned = fem.locate_dofs_geometrical(V, lambda x: np.linalg.norm(x - self.pin[:, None], axis=0) <= tol)
-        self.bcs = [fem.dirichletbc(np.zeros(3, dtype=np.float64), pinned, V)]
+        if pins is None:
+            self.pin = _pin_point(mesh, on_slave_face, 0.5 * (lower + upper))
+            pinned = fem.locate_dofs_geometrical(V, lambda x: np.linalg.norm(x - self.pin[:, None], axis=0) <= tol)
+            self.bcs = [fem.dirichletbc(np.zeros(3, dtype=np.float64), pinned, V)]
+        else:
+            self.pin = None
+            self.bcs = self._component_pins(V, pins, on_slave_face, tol)
 
         mpc = dolfinx_mpc.MultiPointConstraint(V)
         if all(np.all(s == 1.0) for s in scales):
@@ -350,6 +360,30 @@ class UnitCellProblem:
         if not (0.0 < self.volume_fraction <= 1.0 + 1e-12):
             raise ValueError(f"volume_fraction computed from the mesh is {self.volume_fraction:.6g}, outside (0, 1]")
         self.cell_volume = self.solid_volume / self.volume_fraction
+
+    def _component_pins(self, V: fem.FunctionSpace, pins, on_slave_face: Locator, tol: float) -> list:
+        """One zero Dirichlet condition per (point, component) of `pins`; ValueError if a point is not a
+        mesh vertex, lies on a slave face or a component is not 0, 1 or 2."""
+        if len(pins) == 0:
+            raise ValueError("pins must hold at least one (point, components) pair, or be None")
+        bcs = []
+        for point, components in pins:
+            point = np.asarray(point, dtype=float)
+            if point.shape != (3,) or not np.all(np.isfinite(point)):
+                raise ValueError(f"pins: point must be a finite 3-vector, got {point!r}")
+            if on_slave_face(point[:, None])[0]:
+                raise ValueError(f"pins: point {point.tolist()} lies on a slave face (its dofs are constrained)")
+            for c in components:
+                if c not in (0, 1, 2):
+                    raise ValueError(f"pins: components must be 0, 1 or 2, got {components!r}")
+                Vc, _ = V.sub(c).collapse()
+                dofs = fem.locate_dofs_geometrical(
+                    (V.sub(c), Vc), lambda x, p=point: np.linalg.norm(x - p[:, None], axis=0) <= tol)[0]
+                owned = V.dofmap.index_map.size_local * V.dofmap.index_map_bs
+                if self.comm.allreduce(int(np.count_nonzero(dofs < owned)), op=MPI.SUM) != 1:
+                    raise ValueError(f"pins: point {point.tolist()} is not (exactly one) mesh vertex")
+                bcs.append(fem.dirichletbc(PETSc.ScalarType(0.0), dofs, V.sub(c)))
+        return bcs
 
     def _dx(self, tag: int | None) -> ufl.Measure:
         return self.dx if tag is None else self.dx(tag)

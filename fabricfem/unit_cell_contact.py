@@ -1,0 +1,347 @@
+"""Woven unit cell with yarn-yarn frictional contact (thesis 000, sec. 4.3.2-4.3.5 with sec. 3.4, Box 7).
+
+A UnitCellMesh (meshes.unit_cell: quarter cell = option B, full cell = option A) of separate yarn
+bodies is loaded by the macroscopic deformation gradient Phi (y = Phi Y + u*, eq. 4.52) through the
+periodic UnitCellProblem (fabricfem.homogenize); the yarns interact by node-to-surface frictional
+contact (fabricfem.contact.yarn.YarnContact, symmetrized augmented Lagrangian of Box 7, Coulomb
+friction), whose forces and stiffness are added to the MPC-condensed residual and Jacobian. In each
+load step Newton solves with fixed multipliers, then Uzawa augmentations follow until the
+penetration is below the tolerance (solve_with_contact). Homogenized S by eq. 4.64, E by eq. 4.59.
+Units: m, N, Pa.
+
+Rigid modes (thesis sec. 4.3.5: "rigid body motions are precluded by applying appropriate essential
+boundary conditions"; sec. 4.3.2-4.3.3 pins per yarn one translation and the rotation about its own
+axis). Each yarn is its own body, so every rigid mode that its periodicity leaves free must be
+removed. Here they are removed at points where the weave's symmetry makes the pinned component of
+the exact fluctuation vanish, so the pins carry no reaction at the symmetric solution and can stay
+for the whole load path (no release when contact takes over):
+  * crossing point of the centreline (s = 0, on the vertical C2 axis of the crossing, which maps
+    u*(x, y, z) to (-u*_x, -u*_y, u*_z) and is a symmetry of every in-plane Phi): u*_x = u*_y = 0;
+  * full cell only (its yarn ends repeat by pure translation, so a yarn can also translate along z
+    and rotate about its axis): the top or bottom point of the same section (also on the C2 axis),
+    transverse in-plane component = 0 (rotation about the yarn axis), and the centreline point at
+    the inflection s = p/2, u*_z = 0 (the glide symmetry (x + p, y, -z) with u*_z -> -u*_z combined
+    with the C2 axis makes u*_z vanish there).
+In the quarter cell the anti-symmetric repetition (half-period shift with z -> -z and u*_z flipped)
+already excludes the z translation and all rotations of each yarn.
+The residual at the pins (`pin_reactions`) is reported as a check that they carry no load.
+
+Materials: the yarns follow the Neo-Hookean + Bonet-Burton law (eqs. 4.66-4.68, forms.yarn) with
+the axis A = the centreline tangent (UnitCellMesh.yarn_axis, DG0).
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+
+import dolfinx_mpc
+import numpy as np
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fabricfem.contact.yarn import ContactParameters, ContactReport, YarnContact, solve_with_contact
+from fabricfem.forms.yarn import yarn_energy
+from fabricfem.homogenize import PeriodicPair, UnitCellProblem, green_lagrange
+from fabricfem.materials_yarn import YarnMaterial
+from fabricfem.meshes.unit_cell import UnitCellMesh
+from fabricfem.solvers.newton import SolverError
+
+__all__ = ["ContactUnitCell", "ContactUnitCellStep", "default_contact_parameters", "symmetry_pins",
+           "DEFAULT_VOLUME_FRACTION", "DEFAULT_FRICTION"]
+
+DEFAULT_VOLUME_FRACTION = 0.4  # phi of eq. 4.65 (thesis sec. 4.3.5)
+DEFAULT_FRICTION = 0.2
+MAX_BISECTIONS = 2  # a failed load increment is halved at most this many times
+PRESSURE_RATIO = 1.0  # eps_N h / p_max kept above this (ContactUnitCell._adapt_penalty)  # Coulomb coefficient yarn on yarn (assumed; the thesis does not give one for ch. 4)
+
+
+@dataclass
+class ContactUnitCellStep:
+    """One converged load step: Phi, E (eq. 4.59) dimensionless, S and P (eq. 4.64) in Pa, contact report
+    (None without contact), wall time [s] and the part spent in the contact search/evaluation [s]."""
+
+    Phi: np.ndarray
+    E: np.ndarray
+    S: np.ndarray
+    P: np.ndarray
+    newton_iterations: list[int]
+    contact: ContactReport | None
+    wall_s: float
+    contact_s: float
+    pin_reaction: float  # largest |residual| at a pin over the force scale (0 = the pin carries no load)
+
+    @property
+    def augmentations(self) -> int:
+        return 0 if self.contact is None else self.contact.augmentations
+
+
+def symmetry_pins(cell: UnitCellMesh) -> list[tuple[np.ndarray, tuple[int, ...]]]:
+    """Pins (point [m], components) removing each yarn's free rigid modes at symmetry points (module
+    docstring); all points are mesh vertices of the O-grid sweep (section centre and the rim points
+    on the principal normal exist for every MeshResolution; stations s = 0 and s = p/2 are mesh
+    stations when `along` is even)."""
+    if cell.resolution.along % 2:
+        raise ValueError(f"cell.resolution.along must be even (a mesh station at the yarn inflection s = p/2), "
+                         f"got {cell.resolution.along}")
+    pins = []
+    for y in cell.yarns:
+        centre = y.centre(np.array(0.0))
+        pins.append((centre, (0, 1)))
+        if cell.option == "full":
+            b = y.family.semi_height
+            normal = y.normal(np.array(0.0))
+            outer = max((centre + b * normal, centre - b * normal), key=lambda p: abs(p[2]))  # away from contact
+            pins.append((outer, (1 - y.axis,)))
+            pins.append((y.centre(np.array(0.5 * y.family.half_period)), (2,)))
+    return pins
+
+
+def default_contact_parameters(material: YarnMaterial, cell: UnitCellMesh, penalty_factor: float = 1.0,
+                               friction: float = DEFAULT_FRICTION, tolerance_factor: float = 1e-3,
+                               max_augmentations: int = 20, smoothing_factor: float = 1.0) -> ContactParameters:
+    """eps_N = penalty_factor x E_T / h (E_T transverse Young's modulus of the yarn [Pa], h the
+    circumferential facet size of the section [m]); augmentations until the penetration is below
+    tolerance_factor x the smaller yarn semi-height (the brief's 1e-3 of the yarn radius); the pressure
+    bracket is rounded over smoothing_factor x that tolerance (ContactParameters.smoothing)."""
+    E_T = material.engineering_constants().E_T
+    families = (cell.weave.warp, cell.weave.weft)
+    # ellipse perimeter ~ pi (a + b) over the polygon_vertices facets of the section
+    h = min(np.pi * (f.semi_width + f.semi_height) / cell.resolution.polygon_vertices for f in families)
+    b = min(f.semi_height for f in families)
+    return ContactParameters(penalty=penalty_factor * E_T / h, friction=friction,
+                             tolerance=tolerance_factor * b, max_augmentations=max_augmentations,
+                             smoothing=smoothing_factor * tolerance_factor * b, consistent_tangent=True)
+
+
+class _TimedContact:
+    """YarnContact wrapper accumulating the wall time of its residual/Jacobian evaluations (search,
+    projection, return map, assembly into PETSc)."""
+
+    def __init__(self, contact: YarnContact):
+        self.contact = contact
+        self.elapsed = 0.0
+
+    def add_residual(self, b) -> None:
+        t0 = time.perf_counter()
+        self.contact.add_residual(b)
+        self.elapsed += time.perf_counter() - t0
+
+    def add_jacobian(self, A) -> None:
+        t0 = time.perf_counter()
+        self.contact.add_jacobian(A)
+        self.elapsed += time.perf_counter() - t0
+
+
+class ContactUnitCell:
+    """Periodic woven unit cell of Bonet-Burton yarns with (optional) yarn-yarn frictional contact.
+
+    Parameters:
+        cell: UnitCellMesh (meshes.unit_cell.unit_cell), quarter or full, any resolution with even `along`
+        material: YarnMaterial (all yarns), e.g. materials_yarn.THESIS_TRANSVERSELY_ISOTROPIC
+        contact: ContactParameters, True (default_contact_parameters) or None/False (no contact: the
+            yarns pass through each other)
+        volume_fraction: phi of eq. 4.65 in (0, 1] (thesis: 0.4)
+        rtol: Newton residual tolerance relative to the step's force scale (the norm of the unbalanced
+            nodal forces of the step's initial state, tens of N here). Contact on faceted surfaces makes
+            the residual only piecewise smooth (active set, foot points changing facets): measured on the
+            TI quarter cell, Newton cycles at 2e-6 to 5e-5 of the force scale (1e-6 to 1e-5 of the total
+            contact force) beyond E11 = 0.06, so 1e-5 is the tightest tolerance that it reaches; the
+            homogenized S is then converged to ~1e-5 relative
+        max_it: Newton iterations per solve
+        two_pass: contact pairs in both directions (warp nodes on weft facets and weft nodes on warp
+            facets): keeps the warp/weft symmetry of a balanced weave and catches the master nodes that
+            a one-pass search lets through (thesis Fig. 31's undetected penetrations). Off by default:
+            with the augmented Lagrangian it over-constrains faceted surfaces (both node sets cannot
+            reach zero gap on the other's chords; measured: the Uzawa updates stall at a fixed
+            penetration of ~1e-2 of the facet sag)
+    """
+
+    def __init__(self, cell: UnitCellMesh, material: YarnMaterial, contact: ContactParameters | bool | None = True,
+                 volume_fraction: float = DEFAULT_VOLUME_FRACTION, rtol: float = 1e-5, max_it: int = 25,
+                 two_pass: bool = False):
+        if not isinstance(cell, UnitCellMesh):
+            raise ValueError(f"cell must be a UnitCellMesh, got {type(cell).__name__}")
+        if not isinstance(material, YarnMaterial):
+            raise ValueError(f"material must be a YarnMaterial, got {type(material).__name__}")
+        if not (np.isfinite(volume_fraction) and 0.0 < volume_fraction <= 1.0):
+            raise ValueError(f"volume_fraction must lie in (0, 1], got {volume_fraction!r}")
+        self.cell, self.material, self.comm = cell, material, cell.mesh.comm
+        A = cell.yarn_axis
+
+        def psi(C):
+            return yarn_energy(C, A, material)  # eqs. 4.66-4.68
+        pairs = [PeriodicPair(slave=cell.tag(f"{y.name}_end"), master=cell.tag(f"{y.name}_start"),
+                              relation=cell.periodic_relation(y.name),
+                              component_scale=(1.0, 1.0, -1.0) if cell.option == "quarter" else (1.0, 1.0, 1.0))
+                 for y in cell.yarns]
+        self.problem = UnitCellProblem(cell.mesh, psi, pairs,  # one material: one integral, one JIT form
+                                       facet_tags=cell.facet_tags, cell_tags=cell.cell_tags,
+                                       volume_fraction=volume_fraction, rtol=rtol, max_it=max_it,
+                                       pins=symmetry_pins(cell))
+        newton = self.problem.newton
+        newton.line_search = True
+        self.contact: YarnContact | None = None
+        self._timed: _TimedContact | None = None
+        if contact is True:
+            contact = default_contact_parameters(material, cell)
+        if contact:
+            if not isinstance(contact, ContactParameters):
+                raise ValueError("contact must be ContactParameters, True or None")
+            warps = [y.name for y in cell.yarns if y.axis == 0]
+            wefts = [y.name for y in cell.yarns if y.axis == 1]
+            pairs_c = [(cell.tag(f"{w}_surface"), cell.tag(f"{f}_surface")) for w in warps for f in wefts]
+            if two_pass:  # weft nodes against warp facets too: no master node can poke through a slave facet
+                pairs_c += [(m, s) for s, m in pairs_c]
+            self.contact = YarnContact(self.problem.u, cell.facet_tags, pairs_c, contact,
+                                       constrained_dofs=newton.constrained_dofs())
+            self._timed = _TimedContact(self.contact)
+            self._base_penalty = contact.penalty
+            self._base_tangential = contact.tangential_penalty
+            newton.contact = self._timed
+        self.Phi = np.eye(3)
+        self.steps: list[ContactUnitCellStep] = []
+
+    @property
+    def ndofs(self) -> int:
+        return self.problem.ndofs
+
+    def pin_reactions(self, force_scale: float) -> float:
+        """Largest |nodal force| [N] that the pins have to supply at the current state (the MPC-condensed
+        residual, contact included, at the pinned dofs), over force_scale [N]: ~0 when the symmetry
+        argument of the module docstring holds (the pins then only remove the rigid modes)."""
+        newton = self.problem.newton
+        b = newton.b
+        with b.localForm() as b_local:
+            b_local.set(0.0)
+        dolfinx_mpc.assemble_vector(newton.L, newton.mpc, b=b)
+        b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        if self._timed is not None:
+            self.contact.add_residual(b)
+        owned = newton.mpc.function_space.dofmap.index_map.size_local * 3
+        local = 0.0
+        for bc in self.problem.bcs:
+            dofs = bc.dof_indices()[0]
+            dofs = dofs[dofs < owned]
+            if len(dofs):
+                local = max(local, float(np.abs(b.array_r[dofs]).max()))
+        return self.comm.allreduce(local, op=MPI.MAX) / force_scale
+
+    def _adapt_penalty(self, boost: float = 1.0) -> None:
+        """eps_N = max(eps_N0, PRESSURE_RATIO x p_max / h) x boost (p_max: largest multiplier or pressure
+        so far [Pa], h: median master facet edge [m]). The tangent of YarnContact omits the rotation of
+        the master facets (a geometric stiffness ~ A p / h per node against the penalty stiffness
+        A eps_N); keeping eps_N h / p_max >= PRESSURE_RATIO keeps that omission a small part of the
+        tangent, so Newton converges fast (measured: with eps_N h / p ~ 1 the residual decays only
+        linearly at a rate ~0.7). Changing eps_N between augmentations is allowed in Box 7 (the
+        multipliers, not eps_N, carry the converged pressure)."""
+        c = self.contact
+        p_max = float(np.max(c.lam_N, initial=0.0))
+        if c.state is not None:
+            p_max = max(p_max, float(np.max(c.state["pressure"], initial=0.0)))
+        penalty = max(self._base_penalty, PRESSURE_RATIO * p_max / c.margin) * boost
+        c.params = dataclasses.replace(c.params, penalty=penalty,
+                                       tangential_penalty=None if self._base_tangential is None else
+                                       self._base_tangential * penalty / self._base_penalty)
+
+    def _contact_step(self, force_scale: float, n: int, Phi_n: np.ndarray) -> ContactReport:
+        """Box 7 loop of one load step (Newton with fixed multipliers, Uzawa updates) with the adapted
+        penalty; the state is restored on failure so that the caller can bisect the increment."""
+        c, newton, problem = self.contact, self.problem.newton, self.problem
+        saved = (problem.u.x.array.copy(), c.lam_N.copy(), c.lam_T.copy(), c.ref_quad.copy(), c.ref_weights.copy())
+        self._adapt_penalty()
+        try:
+            return solve_with_contact(lambda: newton.solve(force_scale, problem.length_scale), c, n)
+        except SolverError:
+            problem.u.x.array[:] = saved[0]
+            c.lam_N, c.lam_T, c.ref_quad, c.ref_weights = (a.copy() for a in saved[1:])
+            c.state = None
+            raise
+
+    def _increment(self, Phi_n: np.ndarray, n: int, depth: int = 0) -> tuple[ContactReport | None, list[int]]:
+        """Reach Phi_n from self.Phi; on a failed solve the increment is bisected (at most
+        MAX_BISECTIONS times); the reports of the sub-increments are merged (summed augmentations
+        and iterations, the last one's forces)."""
+        problem, newton = self.problem, self.problem.newton
+        problem.Phi.value[:] = Phi_n
+        force_scale = problem._force_scale()
+        self.last_force_scale = force_scale
+        try:
+            if self.contact is None:
+                result = newton.solve(force_scale, problem.length_scale)
+                if not result.converged:
+                    raise SolverError(f"unit cell: Newton {result.reason} after {result.iterations} iterations",
+                                      reason=result.reason)
+                return None, [result.iterations]
+            self.contact.Phi = Phi_n
+            report = self._contact_step(force_scale, n, Phi_n)
+            return report, list(report.newton_iterations)
+        except SolverError as exc:
+            if depth >= MAX_BISECTIONS:
+                raise SolverError(f"{str(exc).split(';')[0]} at Phi = {np.round(Phi_n, 6).tolist()} after "
+                                  f"{depth} bisections of the increment (last converged Phi = "
+                                  f"{np.round(self.Phi, 6).tolist()})", reason=exc.reason) from None
+            if self.contact is None:
+                problem.u.x.array[:] = self._u_converged
+            mid = 0.5 * (self.Phi + Phi_n)
+            first, its1 = self._increment(mid, n, depth + 1)
+            self.Phi = mid.copy()
+            self._u_converged = problem.u.x.array.copy()
+            second, its2 = self._increment(Phi_n, n, depth + 1)
+            if second is not None:
+                second.augmentations += first.augmentations
+                second.newton_iterations = its1 + its2
+            return second, its1 + its2
+
+    def solve(self, Phi, steps: int = 1) -> list[ContactUnitCellStep]:
+        """Go from the current Phi to `Phi` in `steps` equal increments (Phi_n = Phi_0 + n/steps (Phi -
+        Phi_0)); one ContactUnitCellStep per step (also appended to self.steps). A failed increment
+        is bisected up to MAX_BISECTIONS times; SolverError (with the last converged Phi in the
+        message) if it still fails."""
+        Phi = np.asarray(Phi, dtype=float)
+        if Phi.shape != (3, 3) or not np.all(np.isfinite(Phi)):
+            raise ValueError(f"Phi must be a finite 3 x 3 matrix, got {Phi!r}")
+        if isinstance(steps, bool) or int(steps) != steps or steps < 1:
+            raise ValueError(f"steps must be a positive integer, got {steps!r}")
+        Phi0 = self.Phi.copy()
+        out = []
+        problem = self.problem
+        for n in range(1, int(steps) + 1):
+            Phi_n = Phi0 + (n / steps) * (Phi - Phi0)
+            if np.linalg.det(Phi_n) <= 0:
+                raise ValueError(f"Phi: the path reaches det(Phi) <= 0 at step {n}")
+            t0 = time.perf_counter()
+            c0 = 0.0 if self._timed is None else self._timed.elapsed
+            self._u_converged = problem.u.x.array.copy()
+            report, iterations = self._increment(Phi_n, n)
+            force_scale = self.last_force_scale
+            S, P = problem.homogenized_stress()
+            if not (np.all(np.isfinite(S)) and np.all(np.isfinite(P))):
+                raise SolverError(f"unit cell: non-finite homogenized stress at Phi = {Phi_n.tolist()}")
+            reaction = self.pin_reactions(force_scale)
+            self.Phi = Phi_n.copy()
+            wall = time.perf_counter() - t0
+            c_s = 0.0 if self._timed is None else self._timed.elapsed - c0
+            step = ContactUnitCellStep(Phi_n.copy(), green_lagrange(Phi_n), S, P, iterations, report, wall, c_s,
+                                       reaction)
+            out.append(step)
+            self.steps.append(step)
+        return out
+
+
+def contact_table(steps: list[ContactUnitCellStep]) -> str:
+    """Per-step report: E11, E22, E12, S11, S22, S12 [Pa], Newton iterations, augmentations, final
+    penetration [m], normal and tangential contact force [N], active / slipping nodes."""
+    lines = [f"{'step':>4} {'E11':>8} {'E22':>8} {'E12':>8} {'S11 [Pa]':>11} {'S22 [Pa]':>11} {'S12 [Pa]':>11} "
+             f"{'Newton':>12} {'aug':>3} {'penetr. [m]':>11} {'F_N [N]':>10} {'F_T [N]':>10} {'act/slip':>9}"]
+    for k, s in enumerate(steps, start=1):
+        c = s.contact
+        its = ",".join(map(str, s.newton_iterations))
+        if c is None:
+            tail = f"{'-':>3} {'-':>11} {'-':>10} {'-':>10} {'-':>9}"
+        else:
+            tail = (f"{c.augmentations:>3d} {c.max_penetration:>11.3e} {c.normal_force:>10.3e} "
+                    f"{c.tangential_force:>10.3e} {f'{c.active}/{c.slipping}':>9}")
+        lines.append(f"{k:>4d} {s.E[0, 0]:>8.4f} {s.E[1, 1]:>8.4f} {s.E[0, 1]:>8.4f} {s.S[0, 0]:>11.4e} "
+                     f"{s.S[1, 1]:>11.4e} {s.S[0, 1]:>11.4e} {its[:12]:>12} " + tail)
+    return "\n".join(lines)

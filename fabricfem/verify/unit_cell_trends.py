@@ -1,0 +1,154 @@
+"""Trends of the woven unit cell with contact (thesis 000 sec. 4.3.5): case `unit-cell-trends`.
+
+Computed from the CSVs that `fabricfem study unit-cell` writes (results/unit_cell/fig*.csv, the full
+study: coarse and fine, quarter and full cells, 10 steps per load case, several minutes), not from
+a run inside the case: the contact runs cost 5-30 s per load step on this machine, far beyond the
+case budget. If those CSVs are missing (results/ is not versioned) the case runs the quick study
+(Figs. 21, 24, 25, 26 only, coarse quarter cell, 1/4 of the strains, ~40 s) into
+results/unit_cell_quick, and the full-versus-quarter trend, which needs the full cell, fails with
+value nan.
+
+The trends (the brief's acceptance list), each turned into one number and a bound:
+  1. isotropic yarns, biaxial and uniaxial extension: nearly linear S11(E11): the secant modulus
+     S11/E11 at every step within 25% of its mean ("almost linear", thesis Fig. 21; 25% is the
+     quantification chosen here of "nearly", not fitted to the result);
+  2. isotropic uniaxial: S22 / S11 < 0.05 at the last step (the brief's bound);
+  3. TI yarns with contact, biaxial: largest tangent modulus dS11/dE11 over the first (decrimping)
+     step's >= 5 (the brief's bound), with contact established (normal force > 0);
+  4. shear: the tangent dS12/dE12 of the last converged step / the first >= 1 (stiffening);
+  5. biaxial compression more compliant than extension: |S11| at the compression's last strain /
+     S11 of the extension at the same |E11| (linearly interpolated) < 1;
+  6. full cell more compliant than the quarter cell (biaxial): S11_full / S11_quarter at the full
+     cell's last common strain < 1.
+"""
+from __future__ import annotations
+
+import csv
+import math
+import os
+
+import numpy as np
+
+from fabricfem.verify import Timer, case, result
+
+NAME = "unit-cell-trends"
+STUDY_DIR = "results/unit_cell"
+QUICK_DIR = "results/unit_cell_quick"
+
+
+def read_curves(path: str) -> dict[str, list[dict]]:
+    """{curve label: rows (floats)} of one study CSV."""
+    curves: dict[str, list[dict]] = {}
+    with open(path) as f:
+        for row in csv.DictReader(f):
+            rec = {k: (float(v) if k not in ("curve", "material", "load", "option", "refinement", "stopped") else v)
+                   for k, v in row.items()}
+            curves.setdefault(row["curve"], []).append(rec)
+    return curves
+
+
+def _xy(rows: list[dict], x: str, y: str) -> tuple[np.ndarray, np.ndarray]:
+    """Curve with the origin prepended (the unloaded cell has S = 0 at E = 0)."""
+    return np.array([0.0] + [r[x] for r in rows]), np.array([0.0] + [r[y] for r in rows])
+
+
+def secant_spread(rows: list[dict]) -> float:
+    """max |S11/E11 / mean - 1| over the steps."""
+    E, S = _xy(rows, "E11", "S11")
+    sec = S[1:] / E[1:]
+    return float(np.max(np.abs(sec / sec.mean() - 1.0)))
+
+
+def tangent_ratio(rows: list[dict], x: str, y: str) -> tuple[float, float]:
+    """(largest / first tangent, last / first tangent) of y(x) over the steps."""
+    X, Y = _xy(rows, x, y)
+    t = np.diff(Y) / np.diff(X)
+    return float(t.max() / t[0]), float(t[-1] / t[0])
+
+
+def trends(study_dir: str) -> dict[str, float]:
+    """The six trend numbers (nan when a curve is missing) from the CSVs in `study_dir`."""
+    def curves(fig: str) -> dict[str, list[dict]]:
+        path = os.path.join(study_dir, f"{fig}.csv")
+        return read_curves(path) if os.path.exists(path) else {}
+    out = {k: math.nan for k in ("iso_biaxial_secant_spread", "iso_uniaxial_secant_spread", "iso_uniaxial_S22_S11",
+                                 "ti_biaxial_tangent_rise", "ti_biaxial_contact_force", "shear_tangent_last_first",
+                                 "compression_over_extension", "full_over_quarter")}
+    f21 = curves("fig21")
+    if "iso biaxial contact quarter coarse" in f21:
+        out["iso_biaxial_secant_spread"] = secant_spread(f21["iso biaxial contact quarter coarse"])
+    if "iso uniaxial contact quarter coarse" in f21:
+        rows = f21["iso uniaxial contact quarter coarse"]
+        out["iso_uniaxial_secant_spread"] = secant_spread(rows)
+        out["iso_uniaxial_S22_S11"] = rows[-1]["S22"] / rows[-1]["S11"]
+    f24 = curves("fig24")
+    if "ti biaxial contact quarter coarse" in f24:
+        rows = f24["ti biaxial contact quarter coarse"]
+        out["ti_biaxial_tangent_rise"] = tangent_ratio(rows, "E11", "S11")[0]
+        out["ti_biaxial_contact_force"] = max(r["normal_force"] for r in rows)
+    f26 = curves("fig26")
+    if "ti shear contact quarter coarse" in f26:
+        rows = [r for r in f26["ti shear contact quarter coarse"] if r["E12"] > 0]
+        if len(rows) >= 3:
+            X = np.array([r["E12"] for r in rows])
+            Y = np.array([r["S12"] for r in rows])
+            t = np.diff(Y) / np.diff(X)
+            out["shear_tangent_last_first"] = float(t[-1] / t[0])
+    f25 = curves("fig25")
+    ext, comp = f25.get("ti biaxial contact quarter coarse"), f25.get("ti compression contact quarter coarse")
+    if ext and comp:
+        E, S = _xy(ext, "E11", "S11")
+        e_c, s_c = abs(comp[-1]["E11"]), abs(comp[-1]["S11"])
+        if e_c <= E[-1]:
+            out["compression_over_extension"] = s_c / float(np.interp(e_c, E, S))
+    f27 = curves("fig27")
+    q, f = f27.get("ti biaxial contact quarter coarse"), f27.get("ti biaxial contact full coarse")
+    if q and f:
+        Eq, Sq = _xy(q, "E11", "S11")
+        e = min(f[-1]["E11"], Eq[-1])
+        Ef, Sf = _xy(f, "E11", "S11")
+        out["full_over_quarter"] = float(np.interp(e, Ef, Sf) / np.interp(e, Eq, Sq))
+    return out
+
+
+@case(NAME, mpi=False,
+      known_failure="measured (full study, coarse quarter cell, Coulomb 0.2): isotropic yarns of this weave "
+                    "(PlainWeave.balanced: crimp 0.08, phi 0.4) touch from E11 ~ 0.04 on, so biaxial S11 is not "
+                    "linear (secant 5.1 -> 8.4 GPa, spread 0.34 > 0.25) and uniaxial S22/S11 = 0.14 > 0.05 at "
+                    "E11 = 0.22 (the crossing yarn is bent and stretched); the full cell gives the quarter "
+                    "cell's S (ratio 1.0002), since the quarter cell here uses the exact anti-symmetric "
+                    "periodicity (u*_z flipped) instead of the thesis' u_z = 0 on the end faces, which is what "
+                    "over-stiffened its quarter cell. The TI stiffening (19.5x), shear locking (tangent x21.6) "
+                    "and compliant compression (|S11| ratio 0.03) hold. In a clean checkout (no "
+                    "results/unit_cell) the quick study cannot give the full-cell trend (nan).")
+def unit_cell_trends() -> list:
+    """Unit-cell trends of thesis sec. 4.3.5 from the study CSVs (results/unit_cell, else the quick study)."""
+    with Timer() as t:
+        study_dir = STUDY_DIR
+        if not os.path.exists(os.path.join(STUDY_DIR, "fig21.csv")):
+            from fabricfem.study_unit_cell import run_study
+            run_study(QUICK_DIR, quick=True)
+            study_dir = QUICK_DIR
+        v = trends(study_dir)
+    print(f"{NAME}: trends from {study_dir}: {v}")
+    w = t.elapsed
+    src = f" [{study_dir}]"
+    return [
+        result(NAME, "iso biaxial: max |secant S11/E11 / mean - 1| (< 0.25)" + src, v["iso_biaxial_secant_spread"],
+               0.0, 0.25, 0, w, scale=1.0),
+        result(NAME, "iso uniaxial: max |secant / mean - 1| (< 0.25)" + src, v["iso_uniaxial_secant_spread"], 0.0,
+               0.25, 0, w, scale=1.0),
+        result(NAME, "iso uniaxial: S22 / S11 (< 0.05)" + src, v["iso_uniaxial_S22_S11"], 0.0, 0.05, 0, w, scale=1.0),
+        # the rise must be >= 5: reported as 5 / rise, which must be <= 1
+        result(NAME, "TI biaxial contact: 5 / (max tangent / first tangent) (<= 1)" + src,
+               5.0 / v["ti_biaxial_tangent_rise"], 0.0, 1.0, 0, w, scale=1.0),
+        result(NAME, "TI biaxial: contact established, 1 / max normal force [1/N] (finite)" + src,
+               1.0 / v["ti_biaxial_contact_force"] if v["ti_biaxial_contact_force"] > 0 else math.inf, 0.0,
+               1e300, 0, w, scale=1.0),  # no contact (inf) or a missing curve (nan) fails
+        result(NAME, "TI shear: first tangent / last tangent (< 1: stiffening)" + src,
+               1.0 / v["shear_tangent_last_first"], 0.0, 1.0, 0, w, scale=1.0),
+        result(NAME, "TI |S11| compression / extension at equal |E11| (< 1)" + src, v["compression_over_extension"],
+               0.0, 1.0, 0, w, scale=1.0),
+        result(NAME, "TI biaxial S11 full / quarter cell (< 1)" + src, v["full_over_quarter"], 0.0, 1.0, 0, w,
+               scale=1.0),
+    ]

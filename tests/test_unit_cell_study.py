@@ -1,0 +1,132 @@
+"""Woven unit cell with yarn contact (fabricfem.unit_cell_contact), the study driver and the benchmark."""
+import csv
+import os
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from fabricfem.contact.yarn import YarnContact
+from fabricfem.materials_yarn import THESIS_ISOTROPIC, THESIS_TRANSVERSELY_ISOTROPIC
+from fabricfem.meshes.unit_cell import MeshResolution, unit_cell
+from fabricfem.meshes.yarn_geometry import PlainWeave
+from fabricfem.unit_cell_contact import ContactUnitCell, default_contact_parameters, symmetry_pins
+
+WEAVE = PlainWeave.balanced()
+BIAXIAL = np.diag([1.04, 1.04, 1.0])
+
+
+def _cell(comm=MPI.COMM_WORLD, option="quarter"):
+    return unit_cell(WEAVE, option, "coarse", comm)
+
+
+def _min_gap(cell, model: ContactUnitCell) -> float:
+    """Smallest signed gap [m] of the warp surface nodes against the weft surface at the current state,
+    measured by an independent YarnContact (geometry only, never assembled)."""
+    probe = YarnContact(model.problem.u, cell.facet_tags,
+                        [(cell.tag("warp0_surface"), cell.tag("weft0_surface"))],
+                        default_contact_parameters(model.material, cell))
+    probe.Phi = model.Phi
+    st = probe.evaluate()
+    return float(np.min(st["gap"]))
+
+
+@pytest.mark.mpi
+def test_biaxial_with_contact_two_ranks_equals_serial():
+    """Biaxial Phi11 = Phi22 = 1.04, isotropic yarns with contact: the distributed cell (all ranks)
+    gives the S of a serial copy (COMM_SELF) within 1e-6 relative (the brief's bound; both runs
+    stop Newton at |R| <= 1e-6 of the force scale, and MUMPS' pivoting differs between the
+    partitions, so agreement beyond the solver tolerance is not expected)."""
+    dist = ContactUnitCell(_cell(MPI.COMM_WORLD), THESIS_ISOTROPIC, contact=True)
+    S_dist = dist.solve(BIAXIAL, 1)[-1].S
+    if MPI.COMM_WORLD.rank == 0:
+        serial = ContactUnitCell(_cell(MPI.COMM_SELF), THESIS_ISOTROPIC, contact=True)
+        S_serial = serial.solve(BIAXIAL, 1)[-1].S
+    else:
+        S_serial = None
+    S_serial = MPI.COMM_WORLD.bcast(S_serial, root=0)
+    assert np.linalg.norm(S_dist - S_serial) <= 1e-6 * np.linalg.norm(S_serial)
+
+
+def test_contact_stops_interpenetration():
+    """TI yarns under biaxial extension: without contact the yarns pass through each other (negative
+    gap, measured independently of the solve); with contact the largest penetration is below the
+    augmentation tolerance (1e-3 of the yarn semi-height, the brief's bound), and contact stiffens
+    the cell (the crossing yarn resists the decrimping)."""
+    cell = _cell(MPI.COMM_SELF)
+    free = ContactUnitCell(cell, THESIS_TRANSVERSELY_ISOTROPIC, contact=None)
+    S_free = free.solve(BIAXIAL, 2)[-1].S
+    assert _min_gap(cell, free) < -0.05 * WEAVE.warp.semi_height  # overlap of several % of b (measured ~-30%)
+    cell_c = _cell(MPI.COMM_SELF)
+    touching = ContactUnitCell(cell_c, THESIS_TRANSVERSELY_ISOTROPIC, contact=True)
+    steps = touching.solve(BIAXIAL, 2)
+    report = steps[-1].contact
+    assert report.active > 0 and report.normal_force > 0
+    assert report.max_penetration <= 1e-3 * WEAVE.warp.semi_height
+    assert _min_gap(cell_c, touching) >= -1e-3 * WEAVE.warp.semi_height
+    assert steps[-1].S[0, 0] > S_free[0, 0]
+
+
+def test_balanced_weave_without_contact_is_symmetric_and_pins_are_free():
+    """Balanced weave, biaxial Phi: warp and weft are the same yarn turned by 90 degrees, so S11 = S22
+    (an exact symmetry of the discrete problem: the mesh sweeps the same section; 1e-8 relative is
+    Newton's tolerance 1e-6 of the force scale times the S/force ratio, well below), S12 = 0, and
+    the symmetry pins carry no reaction (their residual below 1e-8 of the force scale: zero at the
+    exact symmetric solution, round-off otherwise)."""
+    model = ContactUnitCell(_cell(MPI.COMM_SELF), THESIS_TRANSVERSELY_ISOTROPIC, contact=None)
+    step = model.solve(BIAXIAL, 1)[-1]
+    S = step.S
+    assert abs(S[0, 0] - S[1, 1]) <= 1e-8 * abs(S[0, 0])
+    assert abs(S[0, 1]) <= 1e-8 * abs(S[0, 0])
+    assert step.pin_reaction <= 1e-8
+
+
+def test_full_cell_pins_and_bad_input():
+    cell = _cell(MPI.COMM_SELF, "full")
+    pins = symmetry_pins(cell)
+    assert len(pins) == 3 * 4  # crossing (x, y), rotation, inflection z per yarn
+    with pytest.raises(ValueError, match="volume_fraction"):
+        ContactUnitCell(cell, THESIS_ISOTROPIC, volume_fraction=1.5)
+    with pytest.raises(ValueError, match="material"):
+        ContactUnitCell(cell, "kevlar")
+    odd = unit_cell(WEAVE, "quarter", MeshResolution(along=3, core=2, ring=1), MPI.COMM_SELF)
+    with pytest.raises(ValueError, match="along"):
+        symmetry_pins(odd)
+    model = ContactUnitCell(_cell(MPI.COMM_SELF), THESIS_ISOTROPIC, contact=None)
+    with pytest.raises(ValueError, match="steps"):
+        model.solve(BIAXIAL, 0)
+
+
+def test_quick_study_writes_figures(tmp_path):
+    """The --quick study writes one CSV + PNG per figure (21, 24, 25, 26) with converged rows."""
+    from fabricfem.study_unit_cell import run_study
+    runs = run_study(str(tmp_path), quick=True)
+    for fig in ("fig21", "fig24", "fig25", "fig26"):
+        assert os.path.getsize(tmp_path / f"{fig}.png") > 0
+        with open(tmp_path / f"{fig}.csv") as f:
+            rows = list(csv.DictReader(f))
+        assert rows and all(np.isfinite(float(r["S11"])) for r in rows)
+    assert all(len(r.rows) > 0 for r in runs.values())
+
+
+def test_fe2_paragraph_arithmetic():
+    from fabricfem.benchmarks.unit_cell_perf import GAUSS_POINTS, SLEEVE_CELLS, fe2_paragraph
+    text = fe2_paragraph(2.0, newton_shell=5, load_steps=20)
+    assert f"{SLEEVE_CELLS * GAUSS_POINTS}" in text
+    assert f"{SLEEVE_CELLS * GAUSS_POINTS * 5 * 20 * 2.0:.3g}" in text
+
+
+def test_full_cell_equals_quarter_cell_without_contact():
+    """Independent check of the anti-symmetric periodicity: for an in-plane Phi the infinite fabric's
+    solution has the glide symmetry (x + p, y, -z) with u*_z -> -u*_z, so the quarter cell (option B,
+    that relation on its end faces) and the full cell (option A, plain translations, four yarns) must
+    give the same homogenized S (same phi, same S per yarn volume). Tolerance 1e-8 relative: without
+    contact Newton converges quadratically and is run to |R| <= 1e-10 of the force scale; the two
+    meshes are the same sweep, so no discretisation difference enters."""
+    Phi = np.diag([1.02, 1.01, 1.0])
+    S = {}
+    for option in ("quarter", "full"):
+        model = ContactUnitCell(_cell(MPI.COMM_SELF, option), THESIS_TRANSVERSELY_ISOTROPIC, contact=None,
+                                rtol=1e-10)
+        S[option] = model.solve(Phi, 1)[-1].S
+    assert np.linalg.norm(S["full"] - S["quarter"]) <= 1e-8 * np.linalg.norm(S["quarter"])
