@@ -65,6 +65,9 @@ class PeriodicPair:
     UnitCellMesh.periodic_relation(name) of the quarter cell: half-period shift and z -> -z);
     give either `relation` or `translation`. `component_scale` (s_x, s_y, s_z), non-zero and
     dimensionless, is (1, 1, -1) for the anti-symmetric quarter cell (thesis sec. 4.3.3).
+    `components` lists the displacement components (0, 1, 2) that are coupled; the others are left
+    free by this pair (e.g. u*_z when it is prescribed on both faces by `fixed_facets`, the thesis'
+    end-face condition of sec. 4.3.5.3).
     """
 
     slave: int | Locator
@@ -72,6 +75,7 @@ class PeriodicPair:
     translation: Sequence[float] | None = None
     relation: Callable[[np.ndarray], np.ndarray] | None = None
     component_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    components: tuple[int, ...] = (0, 1, 2)
 
 
 @dataclass
@@ -238,13 +242,18 @@ class UnitCellProblem:
             cell centre. Needed for cells of several bodies (yarns without bonded contact): each body's
             rigid modes left free by the periodicity must be removed (fabricfem.unit_cell_contact pins
             them at points where the weave's symmetry makes that component of u* vanish anyway).
+        fixed_facets: optional [(facet tag, components), ...]: u*_c = 0 on every vertex of the tagged
+            facets for each c in `components` (e.g. u*_z = 0 on the yarn end faces, thesis sec. 4.3.5.3);
+            a component fixed on a slave face must not be coupled by its PeriodicPair (`components`).
+            These conditions are in `bcs` after the pins; `pin_bcs` holds the pins only.
     """
 
     def __init__(self, mesh: dmesh.Mesh, psi: Union[StrainEnergy, Mapping[int, StrainEnergy]],
                  periodic_pairs: Sequence[PeriodicPair], facet_tags=None, cell_tags=None,
                  volume_fraction: float | None = None, degree: int = 1, quadrature_degree: int | None = None,
                  rtol: float = 1e-10, stol: float = 1e-13, max_it: int = 25,
-                 pins: Sequence[tuple[Sequence[float], Sequence[int]]] | None = None):
+                 pins: Sequence[tuple[Sequence[float], Sequence[int]]] | None = None,
+                 fixed_facets: Sequence[tuple[int, Sequence[int]]] | None = None):
         if mesh.topology.dim != 3 or mesh.geometry.dim != 3:
             raise ValueError("mesh must be a 3D volume mesh")
         if degree not in (1, 2):
@@ -262,6 +271,10 @@ class UnitCellProblem:
 
         V = fem.VectorFunctionSpace(mesh, ("Lagrange", degree))
         slave_faces, maps, scales = self._pairs(periodic_pairs, facet_tags, tol)
+        coupled = [tuple(sorted(set(int(c) for c in p.components))) for p in periodic_pairs]
+        for comps in coupled:
+            if not comps or any(c not in (0, 1, 2) for c in comps):
+                raise ValueError(f"periodic_pairs: components must be a non-empty subset of (0, 1, 2), got {comps!r}")
 
         def on_slave_face(x: np.ndarray) -> np.ndarray:
             hit = np.zeros(x.shape[1], dtype=bool)
@@ -293,9 +306,12 @@ class UnitCellProblem:
         else:
             self.pin = None
             self.bcs = self._component_pins(V, pins, on_slave_face, tol)
+        self.pin_bcs = list(self.bcs)
+        if fixed_facets:
+            self.bcs += self._facet_conditions(V, fixed_facets, facet_tags, periodic_pairs, coupled)
 
         mpc = dolfinx_mpc.MultiPointConstraint(V)
-        if all(np.all(s == 1.0) for s in scales):
+        if all(np.all(s == 1.0) for s in scales) and all(c == (0, 1, 2) for c in coupled):
             def to_master(x: np.ndarray) -> np.ndarray:
                 return chain(x)[0]
             if isinstance(periodic_pairs[0].slave, (int, np.integer)):
@@ -312,9 +328,19 @@ class UnitCellProblem:
             for s in scales:
                 signs |= {round(float(a * b), 12) for a in signs for b in s}
             for c in range(3):
+                faces_c = [face for face, comps in zip(slave_faces, coupled) if c in comps]
+                if not faces_c:
+                    continue
+
+                def on_slave_face_c(x: np.ndarray, faces_c=faces_c) -> np.ndarray:
+                    hit = np.zeros(x.shape[1], dtype=bool)
+                    for face in faces_c:
+                        hit |= face(x)
+                    return hit
                 for value in sorted(signs):
-                    def indicator(x: np.ndarray, c: int = c, value: float = value) -> np.ndarray:
-                        hit = on_slave_face(x)
+                    def indicator(x: np.ndarray, c: int = c, value: float = value,
+                                  on_face: Locator = on_slave_face_c) -> np.ndarray:
+                        hit = on_face(x)
                         sign = np.zeros(x.shape[1])
                         if np.any(hit):
                             sign[hit] = chain(x[:, hit])[1][c]
@@ -382,6 +408,29 @@ class UnitCellProblem:
                 owned = V.dofmap.index_map.size_local * V.dofmap.index_map_bs
                 if self.comm.allreduce(int(np.count_nonzero(dofs < owned)), op=MPI.SUM) != 1:
                     raise ValueError(f"pins: point {point.tolist()} is not (exactly one) mesh vertex")
+                bcs.append(fem.dirichletbc(PETSc.ScalarType(0.0), dofs, V.sub(c)))
+        return bcs
+
+    def _facet_conditions(self, V: fem.FunctionSpace, fixed_facets, facet_tags, pairs, coupled) -> list:
+        """Zero Dirichlet conditions u*_c = 0 on tagged facets; ValueError for a missing tag, a bad
+        component or a component that a periodic pair also couples on that face."""
+        if facet_tags is None:
+            raise ValueError("fixed_facets needs facet_tags")
+        fdim = self.mesh.topology.dim - 1
+        bcs = []
+        for tag, components in fixed_facets:
+            facets = facet_tags.indices[facet_tags.values == int(tag)]
+            if self.comm.allreduce(len(facets), op=MPI.SUM) == 0:
+                raise ValueError(f"fixed_facets: no facet carries tag {tag!r}")
+            for c in components:
+                if c not in (0, 1, 2):
+                    raise ValueError(f"fixed_facets: components must be 0, 1 or 2, got {components!r}")
+                for p, comps in zip(pairs, coupled):
+                    if c in comps and int(tag) in (p.slave, p.master):
+                        raise ValueError(f"fixed_facets: component {c} on facet tag {tag} is also coupled by a "
+                                         "periodic pair; drop it from that pair's components")
+                Vc, _ = V.sub(c).collapse()
+                dofs = fem.locate_dofs_topological((V.sub(c), Vc), fdim, facets)[0]
                 bcs.append(fem.dirichletbc(PETSc.ScalarType(0.0), dofs, V.sub(c)))
         return bcs
 

@@ -6,7 +6,8 @@ Load cases (macroscopic Phi applied in equal increments, thesis sec. 4.3.5):
   shear        biaxial pre-stretch Phi11 = Phi22 = 1.02 (one step), then Phi12 = Phi21 -> 0.2
   compression  Phi11 = Phi22 -> 0.9
 Yarns: isotropic (lambda = 48.82, mu = 32.55 GPa) or transversely isotropic (thesis parameters),
-with or without yarn contact, quarter (option B) or full (option A) cell, coarse or fine mesh.
+with or without yarn contact, quarter (option B) or full (option A) cell, coarse or fine mesh, yarn
+end faces exactly periodic or with the thesis' u_z = 0 (ContactUnitCell end_faces; Fig. 27 shows both).
 Every figure gets a CSV (one row per converged step and curve) and a PNG under the output folder.
 A run that stops (Newton/augmentation failure) keeps its converged steps; the CSV column `stopped`
 holds the reason, so a curve shorter than its load case is visible, never silently extrapolated.
@@ -57,11 +58,12 @@ class RunKey:
     contact: bool = True
     option: str = "quarter"
     refinement: str = "coarse"
+    end_faces: str = "periodic"  # "periodic" | "uz_fixed" (thesis sec. 4.3.5.3), see ContactUnitCell
 
     @property
     def label(self) -> str:
         return (f"{self.material} {self.load} {'contact' if self.contact else 'no contact'} "
-                f"{self.option} {self.refinement}")
+                f"{self.option} {self.refinement}" + ("" if self.end_faces == "periodic" else f" {self.end_faces}"))
 
 
 @dataclass
@@ -82,7 +84,7 @@ def run_case(key: RunKey, steps: int, scale: float = 1.0, weave: PlainWeave | No
         raise ValueError(f"material must be one of {sorted(MATERIALS)}, got {key.material!r}")
     t0 = time.perf_counter()
     cell = unit_cell(PlainWeave.balanced() if weave is None else weave, key.option, key.refinement, comm)
-    model = ContactUnitCell(cell, MATERIALS[key.material], contact=key.contact)
+    model = ContactUnitCell(cell, MATERIALS[key.material], contact=key.contact, end_faces=key.end_faces)
     stopped = ""
     try:
         for target, share in load_targets(key.load, scale):
@@ -119,9 +121,11 @@ def figures(quick: bool) -> dict[str, tuple[str, str, list[str], list[RunKey]]]:
         "fig25": ("TI yarns: biaxial extension and compression", "E11", ["S11", "S22"],
                   [K("ti", "biaxial"), K("ti", "compression")]),
         "fig26": ("TI yarns: in-plane shear", "E12", ["S12"], [K("ti", "shear")]),
-        "fig27": ("quarter vs full cell: biaxial and uniaxial extension", "E11", ["S11"],
+        "fig27": ("quarter vs full cell: biaxial and uniaxial extension (end faces periodic / u_z = 0)", "E11",
+                  ["S11"],
                   [K("ti", "biaxial"), K("ti", "uniaxial"), K("ti", "biaxial", option="full"),
-                   K("ti", "uniaxial", option="full")]),
+                   K("ti", "uniaxial", option="full"), K("ti", "biaxial", end_faces="uz_fixed"),
+                   K("ti", "biaxial", option="full", end_faces="uz_fixed")]),
         "fig28": ("quarter vs full cell: in-plane shear", "E12", ["S12"],
                   [K("ti", "shear"), K("ti", "shear", option="full")]),
         "fig32": ("coarse vs fine mesh: biaxial and uniaxial extension", "E11", ["S11"],
@@ -139,7 +143,7 @@ def figures(quick: bool) -> dict[str, tuple[str, str, list[str], list[RunKey]]]:
 
 
 def _write_csv(path: str, runs: list[Run]) -> None:
-    fields = ["curve", "material", "load", "contact", "option", "refinement", "E11", "E22", "E12", "S11", "S22",
+    fields = ["curve", "material", "load", "contact", "option", "refinement", "end_faces", "E11", "E22", "E12", "S11", "S22",
               "S12", "newton", "augmentations", "penetration", "normal_force", "tangential_force", "active", "wall_s",
               "contact_s", "pin_reaction", "stopped"]
     with open(path, "w", newline="") as f:
@@ -148,7 +152,7 @@ def _write_csv(path: str, runs: list[Run]) -> None:
         for run in runs:
             k = run.key
             base = dict(curve=k.label, material=k.material, load=k.load, contact=int(k.contact), option=k.option,
-                        refinement=k.refinement, stopped=run.stopped)
+                        refinement=k.refinement, end_faces=k.end_faces, stopped=run.stopped)
             for row in run.rows:
                 w.writerow({**base, **{q: f"{v:.10g}" for q, v in row.items()}})
 
@@ -173,12 +177,48 @@ def _plot(path: str, title: str, x: str, ys: list[str], runs: list[Run]) -> None
     plt.close(fig)
 
 
+def previous_runs(folder: str) -> dict[str, Run]:
+    """{curve label: Run} read back from the fig*.csv and contact_reports.txt of an earlier run_study
+    output folder (rows, stopped reason, wall time, dofs and the report table as written then)."""
+    import glob
+    import re
+    runs: dict[str, Run] = {}
+    fields = ("E11", "E22", "E12", "S11", "S22", "S12", "newton", "augmentations", "penetration", "normal_force",
+              "tangential_force", "active", "wall_s", "contact_s", "pin_reaction")
+    for path in sorted(glob.glob(os.path.join(folder, "fig*.csv"))):
+        with open(path) as f:
+            rows_by_curve: dict[str, list[dict]] = {}
+            meta: dict[str, dict] = {}
+            for row in csv.DictReader(f):
+                rows_by_curve.setdefault(row["curve"], []).append({q: float(row[q]) for q in fields})
+                meta[row["curve"]] = row
+        for label, rows in rows_by_curve.items():
+            r = meta[label]
+            key = RunKey(r["material"], r["load"], bool(int(r["contact"])), r["option"], r["refinement"],
+                         r.get("end_faces") or "periodic")
+            runs.setdefault(label, Run(key, rows, r["stopped"], sum(x["wall_s"] for x in rows), 0, ""))
+    report = os.path.join(folder, "contact_reports.txt")
+    if os.path.exists(report):
+        for block in open(report).read().split("## ")[1:]:
+            head, _, table = block.partition("\n")
+            m = re.match(r"(.*) \((\d+) dofs, ([\d.]+) s\)", head)
+            if m and m.group(1) in runs:
+                run = runs[m.group(1)]
+                run.ndofs, run.wall_s, run.table = int(m.group(2)), float(m.group(3)), table.strip()
+    return runs
+
+
 def run_study(out: str = "results/unit_cell", quick: bool = False, steps: int | None = None,
-              comm: MPI.Comm = MPI.COMM_WORLD, time_budget: float | None = None) -> dict[RunKey, Run]:
+              comm: MPI.Comm = MPI.COMM_WORLD, time_budget: float | None = None,
+              recompute: set[RunKey] | None = None, previous: str | None = None) -> dict[RunKey, Run]:
     """Run the figures' load cases (each once, shared between figures), write fig*.csv / fig*.png and
     contact_reports.txt under `out`. quick: only Figs. 21, 24, 25, 26 on the coarse quarter cell, 3 steps
     to 1/4 of the thesis strains (a smoke test of the whole chain). time_budget [s] per load case
-    (default: none for quick, 240 s on the coarse quarter cell and 420 s on the full or fine cells)."""
+    (default: none for quick, 240 s on the coarse quarter cell and 420 s on the full or fine cells).
+    recompute + previous: only the load cases in `recompute` are solved; every other curve is read
+    back from the earlier output folder `previous` (previous_runs), so that a change touching a few
+    cases regenerates all figures without rerunning the rest (ValueError if a curve is missing there)."""
+    old = previous_runs(previous) if previous is not None else {}
     n_steps = (3 if quick else 10) if steps is None else int(steps)
     scale = 0.25 if quick else 1.0
     figs = figures(quick)
@@ -187,6 +227,10 @@ def run_study(out: str = "results/unit_cell", quick: bool = False, steps: int | 
         os.makedirs(out, exist_ok=True)
     for name, (title, x, ys, keys) in figs.items():
         for key in keys:
+            if key not in runs and recompute is not None and key not in recompute:
+                if key.label not in old:
+                    raise ValueError(f"previous: no curve {key.label!r} in {previous!r} to reuse")
+                runs[key] = old[key.label]
             if key not in runs:
                 budget = time_budget if time_budget is not None else (
                     math.inf if quick else 240.0 if (key.option, key.refinement) == ("quarter", "coarse") else 420.0)

@@ -26,6 +26,16 @@ In the quarter cell the anti-symmetric repetition (half-period shift with z -> -
 already excludes the z translation and all rotations of each yarn.
 The residual at the pins (`pin_reactions`) is reported as a check that they carry no load.
 
+End faces (`end_faces`): "periodic" (default) couples all three components of u* across each
+yarn's end faces (quarter cell: the exact anti-symmetric repetition, u*_z flipped). "uz_fixed" is
+the thesis' choice (sec. 4.3.5.3: "In both unit cell models, the local vertical displacements on the
+end faces of a yarn are restricted"): u*_x, u*_y stay periodic and u*_z = 0 on both end faces (the
+vertical displacement is u*_z, since Phi_3a = 0 for the in-plane loads). On the quarter cell this
+over-restricts the cross-section at the yarn inflection, which the full cell leaves free to move
+vertically ("the quarter model is over-restricted compared to the full model and thus exhibits
+stiffer responses"). On the full cell it also removes the z translation, so the pin u*_z = 0 at
+s = p/2 is dropped there (that section is free in the thesis' full model).
+
 Materials: the yarns follow the Neo-Hookean + Bonet-Burton law (eqs. 4.66-4.68, forms.yarn) with
 the axis A = the centreline tangent (UnitCellMesh.yarn_axis, DG0).
 """
@@ -52,6 +62,7 @@ __all__ = ["ContactUnitCell", "ContactUnitCellStep", "default_contact_parameters
 
 DEFAULT_VOLUME_FRACTION = 0.4  # phi of eq. 4.65 (thesis sec. 4.3.5)
 DEFAULT_FRICTION = 0.2
+END_FACES = ("periodic", "uz_fixed")
 MAX_BISECTIONS = 2  # a failed load increment is halved at most this many times
 PRESSURE_RATIO = 1.0  # eps_N h / p_max kept above this (ContactUnitCell._adapt_penalty)  # Coulomb coefficient yarn on yarn (assumed; the thesis does not give one for ch. 4)
 
@@ -76,11 +87,11 @@ class ContactUnitCellStep:
         return 0 if self.contact is None else self.contact.augmentations
 
 
-def symmetry_pins(cell: UnitCellMesh) -> list[tuple[np.ndarray, tuple[int, ...]]]:
+def symmetry_pins(cell: UnitCellMesh, end_faces: str = "periodic") -> list[tuple[np.ndarray, tuple[int, ...]]]:
     """Pins (point [m], components) removing each yarn's free rigid modes at symmetry points (module
-    docstring); all points are mesh vertices of the O-grid sweep (section centre and the rim points
-    on the principal normal exist for every MeshResolution; stations s = 0 and s = p/2 are mesh
-    stations when `along` is even)."""
+    docstring; with end_faces = "uz_fixed" the full cell needs no u*_z pin); all points are mesh
+    vertices of the O-grid sweep (section centre and the rim points on the principal normal exist
+    for every MeshResolution; stations s = 0 and s = p/2 are mesh stations when `along` is even)."""
     if cell.resolution.along % 2:
         raise ValueError(f"cell.resolution.along must be even (a mesh station at the yarn inflection s = p/2), "
                          f"got {cell.resolution.along}")
@@ -93,7 +104,8 @@ def symmetry_pins(cell: UnitCellMesh) -> list[tuple[np.ndarray, tuple[int, ...]]
             normal = y.normal(np.array(0.0))
             outer = max((centre + b * normal, centre - b * normal), key=lambda p: abs(p[2]))  # away from contact
             pins.append((outer, (1 - y.axis,)))
-            pins.append((y.centre(np.array(0.5 * y.family.half_period)), (2,)))
+            if end_faces == "periodic":
+                pins.append((y.centre(np.array(0.5 * y.family.half_period)), (2,)))
     return pins
 
 
@@ -155,30 +167,39 @@ class ContactUnitCell:
             with the augmented Lagrangian it over-constrains faceted surfaces (both node sets cannot
             reach zero gap on the other's chords; measured: the Uzawa updates stall at a fixed
             penetration of ~1e-2 of the facet sag)
+        end_faces: "periodic" (exact periodicity of u*) or "uz_fixed" (thesis sec. 4.3.5.3: u*_z = 0 on
+            every yarn end face, u*_x, u*_y periodic); see the module docstring
     """
 
     def __init__(self, cell: UnitCellMesh, material: YarnMaterial, contact: ContactParameters | bool | None = True,
                  volume_fraction: float = DEFAULT_VOLUME_FRACTION, rtol: float = 1e-5, max_it: int = 25,
-                 two_pass: bool = False):
+                 two_pass: bool = False, end_faces: str = "periodic"):
         if not isinstance(cell, UnitCellMesh):
             raise ValueError(f"cell must be a UnitCellMesh, got {type(cell).__name__}")
         if not isinstance(material, YarnMaterial):
             raise ValueError(f"material must be a YarnMaterial, got {type(material).__name__}")
         if not (np.isfinite(volume_fraction) and 0.0 < volume_fraction <= 1.0):
             raise ValueError(f"volume_fraction must lie in (0, 1], got {volume_fraction!r}")
+        if end_faces not in END_FACES:
+            raise ValueError(f"end_faces must be one of {END_FACES}, got {end_faces!r}")
+        self.end_faces = end_faces
         self.cell, self.material, self.comm = cell, material, cell.mesh.comm
         A = cell.yarn_axis
 
         def psi(C):
             return yarn_energy(C, A, material)  # eqs. 4.66-4.68
+        coupled = (0, 1, 2) if end_faces == "periodic" else (0, 1)
         pairs = [PeriodicPair(slave=cell.tag(f"{y.name}_end"), master=cell.tag(f"{y.name}_start"),
                               relation=cell.periodic_relation(y.name),
-                              component_scale=(1.0, 1.0, -1.0) if cell.option == "quarter" else (1.0, 1.0, 1.0))
+                              component_scale=(1.0, 1.0, -1.0) if cell.option == "quarter" else (1.0, 1.0, 1.0),
+                              components=coupled)
                  for y in cell.yarns]
+        fixed = None if end_faces == "periodic" else [
+            (cell.tag(f"{y.name}_{side}"), (2,)) for y in cell.yarns for side in ("start", "end")]
         self.problem = UnitCellProblem(cell.mesh, psi, pairs,  # one material: one integral, one JIT form
                                        facet_tags=cell.facet_tags, cell_tags=cell.cell_tags,
                                        volume_fraction=volume_fraction, rtol=rtol, max_it=max_it,
-                                       pins=symmetry_pins(cell))
+                                       pins=symmetry_pins(cell, end_faces), fixed_facets=fixed)
         newton = self.problem.newton
         newton.line_search = True
         self.contact: YarnContact | None = None
@@ -220,7 +241,7 @@ class ContactUnitCell:
             self.contact.add_residual(b)
         owned = newton.mpc.function_space.dofmap.index_map.size_local * 3
         local = 0.0
-        for bc in self.problem.bcs:
+        for bc in self.problem.pin_bcs:  # not the end-face conditions, which carry load by design
             dofs = bc.dof_indices()[0]
             dofs = dofs[dofs < owned]
             if len(dofs):

@@ -323,6 +323,13 @@ class PlainWeave:
                  aspect_ratio: float = 1.5, crimp_model: str = "sinusoid") -> "PlainWeave":
         """Balanced weave (warp = weft) as in thesis sec. 4.3.5.
 
+        From the thesis (seed 000, line ~2147-2149): sinusoidal half-wave centrelines, warp = weft,
+        elliptic section with radius ratio 1.5, volume fraction phi = 0.4. The thesis gives no
+        numbers for the yarn spacing (half period), the crimp ratio or the gap between the yarns
+        (it only says they follow from the yarn density and crimp ratio, Kawabata), so
+        half_period = 1 mm and crimp = 0.08 are this code's assumptions; the homogenized S does
+        not depend on half_period (no material length), only on crimp, aspect ratio and phi.
+
         The yarn width is solved so that the quarter-cell yarn volume over
         the bounding box is ``volume_fraction`` (thesis eq. 4.65, phi = 0.4),
         the box height being the fabric thickness 2 (A + b).

@@ -18,8 +18,13 @@ The trends (the brief's acceptance list), each turned into one number and a boun
   4. shear: the tangent dS12/dE12 of the last converged step / the first >= 1 (stiffening);
   5. biaxial compression more compliant than extension: |S11| at the compression's last strain /
      S11 of the extension at the same |E11| (linearly interpolated) < 1;
-  6. full cell more compliant than the quarter cell (biaxial): S11_full / S11_quarter at the full
-     cell's last common strain < 1.
+  6. full cell more compliant than the quarter cell (biaxial): S11_full / S11_quarter at the last
+     common strain < 1, both cells with the thesis' end-face condition u_z = 0 (sec. 4.3.5.3: "In both
+     unit cell models, the local vertical displacements on the end faces of a yarn are restricted"),
+     which is the comparison the thesis made. Reported separately, not a trend: the same ratio with
+     the exact periodicity on both cells (the quarter cell then is an exact reduction of the full one
+     under these loads, so the ratio is 1 up to the solver tolerance; tests/test_unit_cell_study.py
+     checks that equality without contact).
 """
 from __future__ import annotations
 
@@ -41,7 +46,7 @@ def read_curves(path: str) -> dict[str, list[dict]]:
     curves: dict[str, list[dict]] = {}
     with open(path) as f:
         for row in csv.DictReader(f):
-            rec = {k: (float(v) if k not in ("curve", "material", "load", "option", "refinement", "stopped") else v)
+            rec = {k: (float(v) if k not in ("curve", "material", "load", "option", "refinement", "end_faces", "stopped") else v)
                    for k, v in row.items()}
             curves.setdefault(row["curve"], []).append(rec)
     return curves
@@ -73,7 +78,8 @@ def trends(study_dir: str) -> dict[str, float]:
         return read_curves(path) if os.path.exists(path) else {}
     out = {k: math.nan for k in ("iso_biaxial_secant_spread", "iso_uniaxial_secant_spread", "iso_uniaxial_S22_S11",
                                  "ti_biaxial_tangent_rise", "ti_biaxial_contact_force", "shear_tangent_last_first",
-                                 "compression_over_extension", "full_over_quarter")}
+                                 "compression_over_extension", "full_over_quarter", "full_over_quarter_periodic",
+                                 "full_over_quarter_common_E11", "full_over_quarter_periodic_common_E11")}
     f21 = curves("fig21")
     if "iso biaxial contact quarter coarse" in f21:
         out["iso_biaxial_secant_spread"] = secant_spread(f21["iso biaxial contact quarter coarse"])
@@ -102,25 +108,26 @@ def trends(study_dir: str) -> dict[str, float]:
         if e_c <= E[-1]:
             out["compression_over_extension"] = s_c / float(np.interp(e_c, E, S))
     f27 = curves("fig27")
-    q, f = f27.get("ti biaxial contact quarter coarse"), f27.get("ti biaxial contact full coarse")
-    if q and f:
-        Eq, Sq = _xy(q, "E11", "S11")
-        e = min(f[-1]["E11"], Eq[-1])
-        Ef, Sf = _xy(f, "E11", "S11")
-        out["full_over_quarter"] = float(np.interp(e, Ef, Sf) / np.interp(e, Eq, Sq))
+    for name, suffix in (("full_over_quarter", " uz_fixed"), ("full_over_quarter_periodic", "")):
+        q, f = f27.get("ti biaxial contact quarter coarse" + suffix), f27.get("ti biaxial contact full coarse" + suffix)
+        if q and f:
+            Eq, Sq = _xy(q, "E11", "S11")
+            Ef, Sf = _xy(f, "E11", "S11")
+            e = min(Ef[-1], Eq[-1])
+            out[name] = float(np.interp(e, Ef, Sf) / np.interp(e, Eq, Sq))
+            out[name + "_common_E11"] = float(e)
     return out
 
 
 @case(NAME, mpi=False,
       known_failure="measured (full study, coarse quarter cell, Coulomb 0.2): isotropic yarns of this weave "
-                    "(PlainWeave.balanced: crimp 0.08, phi 0.4) touch from E11 ~ 0.04 on, so biaxial S11 is not "
-                    "linear (secant 5.1 -> 8.4 GPa, spread 0.34 > 0.25) and uniaxial S22/S11 = 0.14 > 0.05 at "
-                    "E11 = 0.22 (the crossing yarn is bent and stretched); the full cell gives the quarter "
-                    "cell's S (ratio 1.0002), since the quarter cell here uses the exact anti-symmetric "
-                    "periodicity (u*_z flipped) instead of the thesis' u_z = 0 on the end faces, which is what "
-                    "over-stiffened its quarter cell. The TI stiffening (19.5x), shear locking (tangent x21.6) "
-                    "and compliant compression (|S11| ratio 0.03) hold. In a clean checkout (no "
-                    "results/unit_cell) the quick study cannot give the full-cell trend (nan).")
+                    "(PlainWeave.balanced: crimp 0.08, phi 0.4; the thesis gives only phi = 0.4 and the section "
+                    "ratio 1.5, no spacing or crimp) touch from E11 ~ 0.04 on, so biaxial S11 is not linear "
+                    "(secant spread 0.34 > 0.25) and uniaxial S22/S11 = 0.14 > 0.05 at E11 = 0.22. The other "
+                    "trends hold: TI stiffening 19.5x, shear tangent x21.6, |S11| compression/extension 0.03, "
+                    "full/quarter S11 = 0.9974 at E11 = 0.127 with the thesis' end faces u_z = 0 (exact "
+                    "periodicity: 1.0002, reported). In a clean checkout (no results/unit_cell) the quick study "
+                    "cannot give the full-cell trend (nan).")
 def unit_cell_trends() -> list:
     """Unit-cell trends of thesis sec. 4.3.5 from the study CSVs (results/unit_cell, else the quick study)."""
     with Timer() as t:
@@ -149,6 +156,12 @@ def unit_cell_trends() -> list:
                1.0 / v["shear_tangent_last_first"], 0.0, 1.0, 0, w, scale=1.0),
         result(NAME, "TI |S11| compression / extension at equal |E11| (< 1)" + src, v["compression_over_extension"],
                0.0, 1.0, 0, w, scale=1.0),
-        result(NAME, "TI biaxial S11 full / quarter cell (< 1)" + src, v["full_over_quarter"], 0.0, 1.0, 0, w,
+        result(NAME, f"TI biaxial S11 full / quarter cell, thesis end faces u_z = 0, at E11 = "
+               f"{v['full_over_quarter_common_E11']:.4f} (< 1)" + src, v["full_over_quarter"], 0.0, 1.0, 0, w,
                scale=1.0),
+        # not a trend: exact periodicity on both cells; reported with the bound |ratio - 1| < 0.25 (always
+        # passes unless the cells disagree grossly), the number itself is what matters
+        result(NAME, f"(report) TI biaxial S11 full / quarter cell, exact periodicity, at E11 = "
+               f"{v['full_over_quarter_periodic_common_E11']:.4f}" + src, v["full_over_quarter_periodic"], 1.0, 0.25,
+               0, w, scale=1.0),
     ]
