@@ -1,5 +1,6 @@
 """Command line: `fabricfem run SCENE`, `fabricfem verify [CASE ...] [--json]`, `fabricfem demo`,
-`fabricfem bench ...`, `fabricfem study sleeve [--quick] [--out DIR]`."""
+`fabricfem bench ...`,
+`fabricfem study sleeve [--quick] [--out DIR] [--fine III] [--meshes I,II,III,IV] [--fabrics I,II,III]`."""
 from __future__ import annotations
 
 import argparse
@@ -83,16 +84,22 @@ def main(argv: list[str] | None = None) -> int:
     p_demo = sub.add_parser("demo", help="the default demo: a fabric strip rolled up by an end moment")
     p_demo.add_argument("--out", default="results/demo", help="output folder (XDMF, PNG, CSV)")
     p_bench = sub.add_parser("bench", help="benchmarks (results/ CSV and PNG)")
-    p_bench.add_argument("name", choices=["rollup-profile", "stability-map", "speed-accuracy"],
+    p_bench.add_argument("name", choices=["rollup-profile", "stability-map", "speed-accuracy", "unit-cell",
+                                          "sleeve-profile"],
                          help="benchmark to run")
     p_bench.add_argument("--out", default="results/bench")
     p_bench.add_argument("--quick", action="store_true",
                          help="reduced smoke-test runs (stability-map: one k/rho, the smallest mesh, short runs; "
                               "speed-accuracy: t = 0.3 s, two levels per method, one timing)")
     p_study = sub.add_parser("study", help="parameter studies (CSV + PNG per figure)")
-    p_study.add_argument("name", choices=["sleeve"], help="study to run (sleeve: thesis sec. 5.3)")
+    p_study.add_argument("name", choices=["sleeve", "unit-cell"],
+                         help="study to run (sleeve: thesis sec. 5.3; unit-cell: thesis sec. 4.3.5, Figs. 21-28, 32-33)")
     p_study.add_argument("--quick", action="store_true", help="coarse mesh and few angle steps (reduced)")
     p_study.add_argument("--out", default="results/sleeve_study")
+    p_study.add_argument("--fine", choices=["I", "II", "III", "IV"], default="III",
+                         help="sleeve: mesh of the parameter figures (friction, fit, thickness, fabrics)")
+    p_study.add_argument("--meshes", default="I,II,III,IV", help="sleeve: meshes of the mesh series, e.g. I,II")
+    p_study.add_argument("--fabrics", default="I,II,III", help="sleeve: fabric sets of the fabrics figure")
     args = parser.parse_args(argv)
 
     if args.command == "verify":
@@ -116,11 +123,27 @@ def main(argv: list[str] | None = None) -> int:
         from fabricfem.demo import rollup_demo
         rollup_demo(args.out)
         return 0
+    if args.command == "study" and args.name == "unit-cell":
+        from fabricfem.study_unit_cell import run_study as run_unit_cell_study
+        run_unit_cell_study("results/unit_cell" if args.out == "results/sleeve_study" else args.out, quick=args.quick)
+        return 0
     if args.command == "study":
-        from fabricfem.study import run_study
-        run_study(args.out, quick=args.quick)
+        from fabricfem.study import run_study, variants
+        options = dict(quick=args.quick, fine=args.fine,
+                       meshes=tuple(m.strip() for m in args.meshes.split(",") if m.strip()),
+                       fabrics=tuple(f.strip() for f in args.fabrics.split(",") if f.strip()))
+        try:
+            variants(**options)   # bad --fine / --meshes / --fabrics: a message, not a traceback
+        except ValueError as exc:
+            _print(f"fabricfem study sleeve: {exc}", file=sys.stderr)
+            return 2
+        run_study(args.out, **options)
         return 0
     if args.command == "bench":
+        if args.name == "unit-cell":
+            from fabricfem.benchmarks.unit_cell_perf import unit_cell_perf
+            unit_cell_perf("results/unit_cell_perf" if args.out == "results/bench" else args.out, quick=args.quick)
+            return 0
         if args.name == "stability-map":
             from fabricfem.benchmarks import stability_map
             stability_map(args.out, quick=args.quick)
@@ -128,6 +151,10 @@ def main(argv: list[str] | None = None) -> int:
         if args.name == "speed-accuracy":
             from fabricfem.benchmarks.speed_accuracy import speed_accuracy
             speed_accuracy(args.out, quick=args.quick)
+            return 0
+        if args.name == "sleeve-profile":
+            from fabricfem.benchmarks.sleeve_profile import sleeve_profile
+            sleeve_profile(args.out, quick=args.quick)
             return 0
         from fabricfem.bench import rollup_profile
         rollup_profile(args.out)

@@ -141,7 +141,8 @@ SCHEMA: dict[str, dict[str, tuple[type | tuple, bool]]] = {
              "upper_arm_girth": ((int, float), False), "forearm_girth": ((int, float), False)},
     "motion": {"type": (str, True), "final_angle": ((int, float), False), "angular_velocity": ((int, float), False),
                "steps": (int, False), "solver": (str, False), "mass_damping": ((int, float), False),
-               "rotary_inertia_scale": ((int, float), False), "output_angle_step": ((int, float), False)},
+               "rotary_inertia_scale": ((int, float), False), "output_angle_step": ((int, float), False),
+               "dynamic_similarity": (bool, False)},
     "contact": {"method": (str, False), "friction": ((int, float), False), "penalty": ((int, float), False),
                 "stabilization": ((int, float), False), "gravity": (bool, False)},
     # dynamic scenes (fabricfem.run.run_dynamic_scene)

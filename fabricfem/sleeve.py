@@ -22,6 +22,12 @@ Solution routes (SleeveConfig.solver, scene key motion.solver):
   torque: a few per cent of the torque at 57 degrees, but comparable with the torque in the first degrees
   of contact (measured on mesh I at 8 deg: explicit 1.1e-2 N m at 45 deg/s, 5.4e-3 N m at 15 deg/s,
   quasi-static 4.5e-3 N m).
+* dynamic similarity (SleeveConfig.dynamic_similarity, scene key motion.dynamic_similarity, explicit route):
+  stiff fabrics (II: E = 350 MPa, III: 7.2 GPa) would need c_k / c_I = 17 and 60 times the steps of fabric I
+  at the same flexion speed; with similarity the flexion runs at omega c_k / c_ref and the mass damping is
+  alpha c_k / c_ref (c = sqrt(E / rho), c_ref of fabric I), which keeps the steps per degree and the
+  dimensionless inertia and damping of fabric I and scales the torque with E exactly
+  (`SleeveConfig.flexion_speed` derives it).
 * "quasistatic": a sequence of Newton solves at increasing angle alpha_k with the body posed at
   t_k = alpha_k / omega, each starting from the previous equilibrium; the friction history (stick points)
   is committed after each converged step (`ContactProblem.after_converged_step`). A step whose Newton solve
@@ -246,6 +252,8 @@ class SleeveConfig:
     predictor: bool = True               # forearm contact nodes follow the forearm's rotation (_predict)
     relaxation_steps: int = 40           # pseudo-time relaxations at one angle after a stabilised solve
     drag_tolerance: float = 1e-3         # accept a relaxed state when sum|drag| < this * sum|contact force|
+    dynamic_similarity: bool = False     # explicit: flex at omega c / c_ref with damping alpha c / c_ref (below)
+    similarity_reference: tuple[float, float] = (1.2e6, 436.0)   # (E_ref [Pa], rho_ref [kg/m^3]): fabric I
     name: str = "sleeve"
 
     def __post_init__(self):
@@ -286,6 +294,51 @@ class SleeveConfig:
         if self.final_angle >= 180.0:
             raise ValueError(f"final_angle must be below 180 degrees, got {self.final_angle!r}")
         check_fit(self.radius)
+        E_ref, rho_ref = self.similarity_reference
+        if not (math.isfinite(E_ref) and E_ref > 0.0 and math.isfinite(rho_ref) and rho_ref > 0.0):
+            raise ValueError(f"similarity_reference must be (E_ref > 0 [Pa], rho_ref > 0 [kg/m^3]), "
+                             f"got {self.similarity_reference!r}")
+        if self.dynamic_similarity and self.density <= 0.0:
+            raise ValueError("dynamic_similarity needs a positive density (c = sqrt(E / rho))")
+
+    @property
+    def wave_speed(self) -> float:
+        """c = sqrt(E / rho) [m/s], the membrane wave speed of the fabric (nu12 = 0)."""
+        return math.sqrt(self.E / self.density) if self.density > 0.0 else math.inf
+
+    @property
+    def similarity_factor(self) -> float:
+        """c / c_ref with dynamic similarity, 1 without (see `flexion_speed`)."""
+        if not self.dynamic_similarity:
+            return 1.0
+        E_ref, rho_ref = self.similarity_reference
+        return self.wave_speed / math.sqrt(E_ref / rho_ref)
+
+    @property
+    def flexion_speed(self) -> float:
+        """Angular velocity [deg/s] of the flexion actually run: omega c / c_ref with dynamic similarity.
+
+        Dynamic similarity (explicit route; for stiff fabrics, whose explicit step shrinks like h / c): with
+        all moduli proportional to E (G = E / 200 in the study), the sleeve's equation of motion written in
+        the flexion angle a = omega t,
+
+            rho t omega^2 u'' + alpha rho t omega u' + E f(u) = f_c(u),   f(u) = f_int(u) / E,
+
+        divided by E reads (omega / c)^2 t u'' + (alpha omega / c^2) t u' + f(u) = f_c / E (c^2 = E / rho).
+        Running fabric k at omega_k = omega c_k / c_ref with damping alpha_k = alpha c_k / c_ref keeps both
+        coefficients those of the reference fabric at omega, so u(a) is the same and the contact forces and the
+        torque scale with E exactly (the Lagrange-multiplier contact is a kinematic projection, Coulomb friction
+        is rate independent and proportional to the normal force, the rigid arm's pose depends on a only). The
+        central-difference step dt ~ h / c shrinks by c_ref / c_k, the record time by the same factor: the
+        number of steps per degree, and the relative inertia and damping errors, stay those of fabric I. The
+        quasi-static answer being rate independent, this is the reference run's (fabric I at omega) distance
+        from quasi-static equilibrium carried over to fabric k (see fabricfem.verify.sleeve_similarity)."""
+        return self.angular_velocity * self.similarity_factor
+
+    @property
+    def damping(self) -> float:
+        """Mass damping alpha [1/s] actually used: alpha c / c_ref with dynamic similarity (`flexion_speed`)."""
+        return self.mass_damping * self.similarity_factor
 
     @property
     def fabric(self) -> Fabric:
@@ -293,6 +346,10 @@ class SleeveConfig:
                       density=self.density, name=self.name)
 
     def with_(self, **changes) -> "SleeveConfig":
+        """A copy with `changes`; changing the solver without naming a method takes that solver's default
+        contact method (the resolved method of the other solver would be refused)."""
+        if "solver" in changes and "method" not in changes and changes["solver"] != self.solver:
+            changes["method"] = None
         return replace(self, **changes)
 
 
@@ -530,13 +587,14 @@ def _record(problem: SleeveProblem, angle: float, iterations: int, t0: float, dr
 
 def run_quasistatic(problem: SleeveProblem, angles: np.ndarray | None = None,
                     on_step: Callable[[SleeveStep], None] | None = None,
-                    stop_on_failure: bool = True) -> SleeveHistory:
+                    stop_on_failure: bool = True, max_wall_time: float | None = None) -> SleeveHistory:
     """Flex the elbow through `angles` [deg] (default: `angle_steps` equal steps to `final_angle`) by
     Newton solves at the posed body; returns the torque history (the first entry is the start pose).
 
     `on_step(step)` is called after every requested angle (progress, output). Failed steps are halved
     down to `config.min_angle_step`; then SleeveError, or, with stop_on_failure=False, the history up to
     the last converged angle with `history.failure` set (the model stays in that last converged state).
+    `max_wall_time` [s]: stop the same way (SleeveError / failure) once the flexion has run that long.
     """
     cfg, contact, system = problem.config, problem.contact, problem.system
     if angles is None:
@@ -566,6 +624,16 @@ def run_quasistatic(problem: SleeveProblem, angles: np.ndarray | None = None,
         step = target - current
         iterations, worst_ratio = 0, 0.0
         while current < target - 1e-12:
+            if max_wall_time is not None and time.perf_counter() - t0 > max_wall_time:
+                message = (f"sleeve: wall-time budget of {max_wall_time:g} s used up at elbow angle {current:.4g} deg "
+                           f"(last converged)")
+                if stop_on_failure:
+                    raise SleeveError(message, last_converged_load_factor=current, reason="WALL_TIME")
+                if current > history.steps[-1].angle:
+                    history.steps.append(_record(problem, current, iterations, t0, worst_ratio))
+                history.failure = message
+                history.wall = time.perf_counter() - t0
+                return history
             trial = min(current + step, target)
             saved = system.w.x.array.copy()
             saved_multiplier = contact.multiplier.copy()
@@ -659,20 +727,20 @@ def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> Exp
     if config.gravity:
         model.add_gravity((0.0, -GRAVITY, 0.0))
     model.compile()
-    flexion = elbow_flexion(angular_velocity=math.radians(config.angular_velocity),
+    flexion = elbow_flexion(angular_velocity=math.radians(config.flexion_speed),
                             final_angle=math.radians(config.final_angle))
     body = default_arm(flexion)
     contact = ExplicitBodyContact(model, body, friction=config.friction, method=config.method,
                                   penalty=config.penalty)
     contact.track_torque("forearm", "elbow", ELBOW_AXIS, ["forearm"])
     contact.track_torque("both", "elbow", ELBOW_AXIS, list(body.segments))
-    rayleigh = (config.mass_damping, 0.0)
+    rayleigh = (config.damping, 0.0)
     omega_p = contact.penalty_frequency()
     omega = math.hypot(stability.max_frequency_estimate(model, config.rotary_inertia_scale), omega_p)
     omega_1 = math.hypot(stability.max_frequency_estimate(model, 1.0), omega_p)
     dt_estimate = stability.critical_time_step(model, rayleigh, omega_max=omega)
     dt_unscaled = stability.critical_time_step(model, rayleigh, omega_max=omega_1)
-    record_time = math.radians(config.output_angle_step) / math.radians(config.angular_velocity)
+    record_time = math.radians(config.output_angle_step) / math.radians(config.flexion_speed)
     steps_per_record = math.ceil(record_time / (config.time_step_safety * dt_estimate))
     dt = record_time / steps_per_record
     integrator = CentralDifference(model, dt, rayleigh=rayleigh, dt_crit=dt_estimate, energy_bound=None,
@@ -692,9 +760,10 @@ def run_explicit(problem: ExplicitSleeve, on_step: Callable[[SleeveStep], None] 
     time average of the contact torque over the record interval (ExplicitBodyContact: the impulse of the
     contact forces over the interval divided by its length). A non-finite state raises SleeveError naming
     the angle (or, with stop_on_failure=False, ends the history there with `failure` set).
+    `history.timings` gets the wall-time breakdown of the loop (`step_breakdown`: internal forces, contact,
+    pose/torque, output, other; and the process's CPU time per step).
     """
     cfg, contact, integ, flexion = problem.config, problem.contact, problem.integrator, problem.flexion
-    comm = problem.comm
     t0 = time.perf_counter()
     history = SleeveHistory(cfg, ndofs=problem.model.ndofs)
     integ.initialize(t0=flexion.t_start)
@@ -705,8 +774,11 @@ def run_explicit(problem: ExplicitSleeve, on_step: Callable[[SleeveStep], None] 
     history.timings = {"dt": problem.dt, "dt_estimate": problem.dt_estimate,
                        "dt_estimate_unscaled": problem.dt_estimate_unscaled}
 
+    output_time = [0.0]
+
     def record(steps: int, angle: float) -> SleeveStep:
         # the nominal angle of the record (the body angle at this time up to the rounding of t = n dt)
+        tic = time.perf_counter()
         torques = contact.mean_torques()
         d = integ.d.getArray(readonly=True)
         step = SleeveStep(angle=angle, torque=-torques["forearm"], torque_all=-torques["both"], newton_iterations=0,
@@ -715,6 +787,7 @@ def run_explicit(problem: ExplicitSleeve, on_step: Callable[[SleeveStep], None] 
                           wall=time.perf_counter() - t0, time_steps=steps,
                           kinetic_energy=integ.kinetic_energy(), strain_energy=integ.strain_energy())
         contact.reset_means()
+        output_time[0] += time.perf_counter() - tic
         return step
 
     start = record(0, 0.0)
@@ -724,6 +797,9 @@ def run_explicit(problem: ExplicitSleeve, on_step: Callable[[SleeveStep], None] 
     n_records = round(cfg.final_angle / cfg.output_angle_step)
     if not math.isclose(n_records * cfg.output_angle_step, cfg.final_angle, rel_tol=1e-9):
         n_records = math.ceil(cfg.final_angle / cfg.output_angle_step)
+    integrator_base = dict(integ.timings)
+    contact_base = dict(contact.timings)
+    loop_start, cpu_start = time.perf_counter(), time.process_time()
     for k in range(n_records):
         try:
             for _ in range(problem.steps_per_record):
@@ -743,9 +819,47 @@ def run_explicit(problem: ExplicitSleeve, on_step: Callable[[SleeveStep], None] 
         step = record(problem.steps_per_record, min((k + 1) * cfg.output_angle_step, cfg.final_angle))
         history.steps.append(step)
         if on_step:
+            tic = time.perf_counter()
             on_step(step)
+            output_time[0] += time.perf_counter() - tic
+    loop = time.perf_counter() - loop_start
+    history.timings.update(step_breakdown(
+        loop, integ.timings["internal_forces"] - integrator_base["internal_forces"],
+        integ.timings["contact"] - integrator_base["contact"],
+        contact.timings["pose_torque"] - contact_base["pose_torque"], output_time[0],
+        sum(s.time_steps for s in history.steps)))
+    # CPU time of this process: on a shared (oversubscribed) machine a steadier measure of the work than wall time
+    history.timings["cpu_s"] = time.process_time() - cpu_start
+    history.timings["cpu_ms_per_step"] = 1e3 * history.timings["cpu_s"] / max(history.timings["steps"], 1)
     history.wall = time.perf_counter() - t0
     return history
+
+
+TIMING_PARTS = ("internal_forces", "contact", "pose_torque", "output", "other")
+
+
+def step_breakdown(total: float, internal_forces: float, contact_hooks: float, pose_torque: float,
+                   output: float, steps: int) -> dict:
+    """Wall-time breakdown [s] of an explicit flexion loop of `total` seconds and `steps` steps:
+    internal_forces (FFCx assembly of f_int, with the copy of d into the model), contact (search, projection
+    and friction corrections: the contact hooks minus posing and torque sums), pose_torque (posing the arm,
+    torque and pressure impulses), output (records: energies, penetration, the on_step callback) and other
+    (the rest of the central-difference step in Python/PETSc: vector updates, boundary rows, checks);
+    `<part>_share` = part / total, `ms_per_step` = 1e3 total / steps."""
+    parts = {"internal_forces": internal_forces, "contact": contact_hooks - pose_torque, "pose_torque": pose_torque,
+             "output": output}
+    parts["other"] = total - sum(parts.values())
+    out = {"loop_s": total, "steps": steps, "ms_per_step": 1e3 * total / steps if steps else math.nan}
+    for name in TIMING_PARTS:
+        out[f"{name}_s"] = parts[name]
+        out[f"{name}_share"] = parts[name] / total if total > 0 else math.nan
+    return out
+
+
+def format_breakdown(timings: dict) -> str:
+    """One line: ms per step and the shares of the parts of `step_breakdown`."""
+    shares = ", ".join(f"{name.replace('_', ' ')} {timings[name + '_share']:.0%}" for name in TIMING_PARTS)
+    return f"{timings['ms_per_step']:.2f} ms/step over {timings['steps']} steps ({shares})"
 
 
 def config_dict(config: SleeveConfig) -> dict:
@@ -777,6 +891,8 @@ def config_from_scene(scene) -> SleeveConfig:
     for key in ("mass_damping", "rotary_inertia_scale", "output_angle_step"):
         if key in motion:
             kw[key] = float(motion[key])
+    if "dynamic_similarity" in motion:
+        kw["dynamic_similarity"] = bool(motion["dynamic_similarity"])
     return SleeveConfig(**kw)
 
 
@@ -884,7 +1000,9 @@ def run_sleeve_scene(scene, comm: MPI.Comm = MPI.COMM_WORLD) -> SleeveHistory:
     problem = build_explicit(config, comm) if explicit else build_sleeve(config, comm)
     route = (f"explicit central differences, dt = {problem.dt:.3g} s (estimated critical step {problem.dt_estimate:.3g} s "
              f"with rotary-inertia scale {config.rotary_inertia_scale:g}, {problem.dt_estimate_unscaled:.3g} s without), "
-             f"mass damping {config.mass_damping:g} 1/s, records every {config.output_angle_step:g} deg"
+             f"mass damping {config.damping:g} 1/s, records every {config.output_angle_step:g} deg"
+             + (f", dynamic similarity: flexion at {config.flexion_speed:.4g} deg/s (c / c_ref = "
+                f"{config.similarity_factor:.4g})" if config.dynamic_similarity else "")
              if explicit else f"{config.angle_steps} quasi-static steps")
     say(f"sleeve: {config.n_around} x {config.n_along} Q2 tube, {problem.model.ndofs} dofs, {comm.size} rank(s); "
         f"mu = {config.friction}, {config.method} contact, gravity {'on' if config.gravity else 'off'}; "
@@ -947,6 +1065,8 @@ def run_sleeve_scene(scene, comm: MPI.Comm = MPI.COMM_WORLD) -> SleeveHistory:
     say(f"done: {len(history.steps) - 1} records to {last.angle:.2f} deg, {work}, {history.wall:.1f} s; "
         f"torque at {last.angle:.2f} deg: {last.torque:.4e} N m; largest penetration "
         f"{max(s.max_penetration for s in history.steps):.2e} m; start clearance {history.initial_gap * 1e3:.2f} mm")
+    if explicit and "ms_per_step" in history.timings:
+        say(f"time per part: {format_breakdown(history.timings)}")
     if history.failure:
         say(f"STOPPED EARLY: {history.failure}")
     say(f"wrote {out}/cloth.xdmf, body.pvd (+ body_*.vtp), torque.csv, torque.png"

@@ -8,13 +8,22 @@ runs its variants on COMM_SELF). `quick` runs mesh I only, to 6 degrees (records
 its numbers are a reduced study, not the thesis's. `fine` / `meshes` choose the mesh of the parameter
 figures (default III, as the thesis's "well-refined" sleeve) and of the mesh series (default I-IV); a
 coarser choice is a reduced-resolution study and README.txt says so.
+
+Fabrics II and III (E = 350 MPa and 7.2 GPa) run with dynamic similarity (`SleeveConfig.dynamic_similarity`:
+flexion speed and mass damping times c_k / c_I, c = sqrt(E / rho)), so they cost the steps of fabric I and
+carry fabric I's relative inertia and damping; fabric I of that figure runs with the flag too (factor 1).
+
+Progress: rank 0 prints one line when each variant starts and ends, for its own variants and, relayed by
+point-to-point messages polled between its records, for the other ranks' variants.
 """
 from __future__ import annotations
 
 import csv
+import math
 import time
 from pathlib import Path
 
+import numpy as np
 from mpi4py import MPI
 
 from fabricfem.sleeve import SleeveConfig, SleeveHistory, plot_torque, run_sleeve
@@ -34,7 +43,8 @@ def variants(quick: bool = False, fine: str = "III", meshes: tuple[str, ...] = (
     """figure -> {label: config}. Identical configurations appear in several figures (run once).
 
     `fabrics` selects the fabric sets of the fabrics figure: the explicit step scales with
-    h / sqrt(E / rho), so fabrics II and III need 17 and 60 times the steps of fabric I."""
+    h / sqrt(E / rho), so fabrics II and III would need 17 and 60 times the steps of fabric I at the same
+    flexion speed; they run with dynamic similarity (module docstring) at fabric I's cost."""
     for name in (fine, *meshes):
         if name not in MESHES:
             raise ValueError(f"fine / meshes: unknown mesh {name!r}, expected one of {sorted(MESHES)}")
@@ -53,7 +63,7 @@ def variants(quick: bool = False, fine: str = "III", meshes: tuple[str, ...] = (
         "friction": {"mu = 0.1": at(fine, friction=0.1), "mu = 0.5": at(fine, friction=0.5)},
         "fit": {"R = 0.06 m": at(fine, friction=0.5), "R = 0.07 m": at(fine, friction=0.5, radius=0.07)},
         "thickness": {"t = 1 mm": at(fine, friction=0.5), "t = 2 mm": at(fine, friction=0.5, thickness=2e-3)},
-        "fabrics": {f"fabric {k}": at(fine, friction=0.1, **FABRICS[k]) for k in fabrics},
+        "fabrics": {f"fabric {k}": at(fine, friction=0.1, dynamic_similarity=True, **FABRICS[k]) for k in fabrics},
     }
     return figures
 
@@ -73,16 +83,18 @@ def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
     say = (lambda m: print(m, flush=True)) if comm.rank == 0 else (lambda m: None)
     say(f"sleeve study{' (quick, reduced)' if quick else ''}: {len(unique)} variants on {comm.size} rank(s)")
     t0 = time.perf_counter()
+    progress = _Progress(comm, t0, len(unique))
     mine = {}
     for i, cfg in enumerate(unique):
         if i % comm.size != comm.rank:
             continue
-        h = run_sleeve(cfg, MPI.COMM_SELF, stop_on_failure=False)
+        progress.report(f"variant {i + 1}/{len(unique)} started on rank {comm.rank}: {_describe(cfg)}")
+        h = run_sleeve(cfg, MPI.COMM_SELF, on_step=lambda step: progress.poll(), stop_on_failure=False)
         mine[i] = h
-        print(f"  [rank {comm.rank}] variant {i + 1}/{len(unique)}: {cfg.n_around}x{cfg.n_along} mu={cfg.friction} "
-              f"R={cfg.radius} t={cfg.thickness} E={cfg.E:.3g}: reached {h.angles[-1]:.1f} deg, torque "
-              f"{h.torques[-1]:.4e} N m, {h.wall:.0f} s ({time.perf_counter() - t0:.0f} s elapsed)"
-              + (f" STOPPED: {h.failure}" if h.failure else ""), flush=True)
+        progress.report(f"variant {i + 1}/{len(unique)} done on rank {comm.rank}: {_describe(cfg)}: reached "
+                        f"{h.angles[-1]:.1f} deg, torque {h.torques[-1]:.4e} N m, {h.wall:.0f} s"
+                        + (f" STOPPED: {h.failure}" if h.failure else ""))
+    progress.finish(sum(1 for i in range(len(unique)) if i % comm.size != 0))
     gathered = comm.allgather(mine)
     histories = {k: v for d in gathered for k, v in d.items()}
     results = {name: {label: histories[unique.index(cfg)] for label, cfg in fig.items()}
@@ -105,11 +117,184 @@ def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
             w = csv.writer(f)
             w.writerow(["figure", "variant", "reason"])
             w.writerows(failures)
+        similar = [label for label, cfg in figures["fabrics"].items() if cfg.similarity_factor != 1.0]
         (out / "README.txt").write_text(
             ("QUICK (reduced) study: mesh I only, 6 degrees\n" if quick else
              "full study\n" if (fine, tuple(meshes), tuple(fabrics)) == ("III", tuple(MESHES), tuple(FABRICS)) else
              f"REDUCED study: parameter figures on mesh {fine}, mesh series {', '.join(meshes)}, "
              f"fabrics {', '.join(fabrics)}\n")
-            + f"wall time {time.perf_counter() - t0:.0f} s on {comm.size} rank(s)\n")
+            + f"wall time {time.perf_counter() - t0:.0f} s on {comm.size} rank(s)\n"
+            + ("dynamic similarity (flexion speed and mass damping x c / c_fabric I): " + "; ".join(
+                f"{label} at {figures['fabrics'][label].flexion_speed:.4g} deg/s" for label in similar) + "\n"
+               if similar else ""))
     say(f"wrote {out}/<figure>.csv and .png for {sorted(results)} ({time.perf_counter() - t0:.0f} s)")
     return results
+
+
+PROGRESS_TAG = 4711
+
+
+def _describe(cfg: SleeveConfig) -> str:
+    return (f"{cfg.n_around}x{cfg.n_along} mu={cfg.friction} R={cfg.radius} t={cfg.thickness} E={cfg.E:.3g}"
+            + (f" (similarity: {cfg.flexion_speed:.4g} deg/s)" if cfg.dynamic_similarity and
+               cfg.similarity_factor != 1.0 else ""))
+
+
+class _Progress:
+    """Progress lines printed by rank 0 only: its own, and those the other ranks send (non-blocking sends,
+    polled by rank 0 after every record of its own flexions and collected at the end)."""
+
+    def __init__(self, comm: MPI.Comm, t0: float, total: int):
+        self.comm, self.t0, self.total = comm, t0, total
+        self.requests = []
+        self.received = 0
+
+    def _print(self, message: str):
+        print(f"  [{time.perf_counter() - self.t0:6.0f} s] {message}", flush=True)
+
+    def report(self, message: str):
+        if self.comm.rank == 0:
+            self._print(message)
+            self.poll()
+        else:
+            self.requests.append(self.comm.isend(message, dest=0, tag=PROGRESS_TAG))
+
+    def poll(self):
+        if self.comm.rank != 0 or self.comm.size == 1:
+            return
+        while self.comm.iprobe(source=MPI.ANY_SOURCE, tag=PROGRESS_TAG):
+            self._print(self.comm.recv(source=MPI.ANY_SOURCE, tag=PROGRESS_TAG))
+            self.received += 1
+
+    def finish(self, remote_variants: int):
+        """Rank 0: print the remaining messages (two per variant of the other ranks); others: complete sends."""
+        if self.comm.rank == 0:
+            while self.received < 2 * remote_variants:
+                self._print(self.comm.recv(source=MPI.ANY_SOURCE, tag=PROGRESS_TAG))
+                self.received += 1
+        else:
+            MPI.Request.waitall(self.requests)
+
+
+# ------------------------------------------------------------------------------------------------------------
+# The three contact methods on the sleeve (issue 4 acceptance table)
+# ------------------------------------------------------------------------------------------------------------
+METHODS = {"lagrange": "explicit, forward-increment Lagrange multipliers (Box 5)",
+           "penalty": "explicit, penalty (k_N = 10 E t / h^2)",
+           "augmented": "quasi-static Newton, augmented Lagrangian (Uzawa)"}
+METHOD_COLUMNS = ("method", "route", "mesh", "ndofs", "ranks", "reached_deg", "torque_57_Nm", "max_penetration_m",
+                  "bounce_rms_Nm", "bounce_relative", "work", "wall_s", "note")
+BOUNCE_FROM = 10.0   # deg: the bounce is measured from here to the end (contact is established by then)
+
+
+def torque_bounce(angles: np.ndarray, torque: np.ndarray, window: int, from_angle: float = BOUNCE_FROM
+                  ) -> tuple[float, float]:
+    """Oscillation of the per-step contact torque of an explicit flexion: RMS over the steps with angle >=
+    `from_angle` [deg] of tau_n - <tau>_n, where <tau>_n is the centred moving average over `window` steps
+    (one record interval, 1 degree), in N m and relative to the RMS of <tau> there. Steps within half a window
+    of either end are left out (their average is one-sided)."""
+    angles, torque = np.asarray(angles, dtype=float), np.asarray(torque, dtype=float)
+    if window < 1 or len(torque) < window + 2:
+        return math.nan, math.nan
+    smooth = np.convolve(torque, np.ones(window) / window, mode="same")
+    keep = np.zeros(len(torque), dtype=bool)
+    keep[window // 2: len(torque) - window // 2] = True
+    keep &= angles >= from_angle
+    if not keep.any():
+        return math.nan, math.nan
+    rms = float(np.sqrt(np.mean((torque - smooth)[keep] ** 2)))
+    scale = float(np.sqrt(np.mean(smooth[keep] ** 2)))
+    return rms, rms / scale if scale > 0 else math.nan
+
+
+def _run_method(method: str, base: SleeveConfig, comm: MPI.Comm, al_budget: float) -> dict:
+    from fabricfem.sleeve import build_explicit, build_sleeve, run_explicit, run_quasistatic
+    row = {"method": method, "route": METHODS[method], "ranks": comm.size}
+    if method in ("lagrange", "penalty"):
+        problem = build_explicit(base.with_(solver="explicit", method=method), comm)
+        problem.contact.monitor_penetration = True
+        problem.contact.start_trace()
+        h = run_explicit(problem, stop_on_failure=False)
+        trace = problem.contact.trace_array()
+        angles = np.degrees([problem.flexion.angle(t) for t in trace[:, 0]])
+        rms, rel = torque_bounce(angles, -trace[:, 1], problem.steps_per_record)
+        row.update(max_penetration_m=problem.contact.max_penetration_all(), bounce_rms_Nm=rms, bounce_relative=rel,
+                   work=f"{sum(s.time_steps for s in h.steps)} steps of {problem.dt:.3g} s",
+                   note=f"penetration every step; {h.failure}" if h.failure else "penetration monitored every step")
+        problem.integrator.destroy()
+    else:
+        cfg = base.with_(solver="quasistatic", method="augmented", angle_steps=int(round(base.final_angle)))
+        problem = build_sleeve(cfg, comm)
+        h = run_quasistatic(problem, stop_on_failure=False, max_wall_time=al_budget)
+        row.update(max_penetration_m=max(s.max_penetration for s in h.steps), bounce_rms_Nm=math.nan,
+                   bounce_relative=math.nan,
+                   work=f"{sum(s.newton_iterations for s in h.steps)} Newton iterations",
+                   note=("static equilibria (no bounce); penetration at the converged angles"
+                         + (f"; STOPPED: {h.failure}" if h.failure else "")))
+        problem.solver.destroy()
+    reached = float(h.angles[-1])
+    row.update(mesh=f"{base.n_around}x{base.n_along}", ndofs=h.ndofs, reached_deg=reached,
+               torque_57_Nm=h.torque_at(base.final_angle) if reached >= base.final_angle - 1e-9 else math.nan,
+               wall_s=h.wall)
+    return row
+
+
+def run_methods(out: str | Path = "results/sleeve_methods.csv", mesh: str = "III", friction: float = 0.1,
+                methods: tuple[str, ...] = ("lagrange", "penalty", "augmented"), final_angle: float = 57.0,
+                comm: MPI.Comm = MPI.COMM_WORLD, al_budget: float = 1800.0) -> list[dict]:
+    """The three contact methods on the sleeve (mesh `mesh`, mu = `friction`, to `final_angle` degrees):
+    maximum penetration, torque at the final angle, bounce of the per-step torque (`torque_bounce`), wall time.
+    Methods are shared over the ranks (each runs on COMM_SELF, as the study's variants); the quasi-static
+    augmented-Lagrangian route stops where Newton fails or after `al_budget` seconds, and the row says at
+    which angle (a measured fact, not an error). Writes `out` (CSV, rank 0) and returns the rows."""
+    unknown = [m for m in methods if m not in METHODS]
+    if unknown:
+        raise ValueError(f"methods: unknown {unknown}, expected some of {sorted(METHODS)}")
+    if mesh not in MESHES:
+        raise ValueError(f"mesh: unknown mesh {mesh!r}, expected one of {sorted(MESHES)}")
+    n_around, n_along = MESHES[mesh]
+    base = SleeveConfig(n_around=n_around, n_along=n_along, friction=friction, final_angle=final_angle)
+    mine = {}
+    for i, method in enumerate(methods):
+        if i % comm.size == comm.rank:
+            print(f"  [rank {comm.rank}] sleeve methods: {method} on mesh {mesh} ...", flush=True)
+            mine[i] = _run_method(method, base, MPI.COMM_SELF, al_budget)
+            print(f"  [rank {comm.rank}] {method}: {mine[i]}", flush=True)
+    rows = [r for _, r in sorted((k, v) for d in comm.allgather(mine) for k, v in d.items())]
+    if comm.rank == 0:
+        out = Path(out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        with open(out, "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=METHOD_COLUMNS)
+            w.writeheader()
+            w.writerows(rows)
+        print(methods_markdown(rows), flush=True)
+    return rows
+
+
+def read_methods(path: str | Path = "results/sleeve_methods.csv") -> list[dict]:
+    with open(path) as f:
+        return list(csv.DictReader(f))
+
+
+def methods_markdown(rows: list[dict] | None = None, path: str | Path = "results/sleeve_methods.csv") -> str:
+    """The methods table as Markdown (rows from `run_methods`, or read from `path`)."""
+    rows = read_methods(path) if rows is None else rows
+
+    def num(v, fmt):
+        try:
+            x = float(v)
+        except (TypeError, ValueError):
+            return str(v)
+        return "n/a" if math.isnan(x) else format(x, fmt)
+
+    lines = ["| method | reached [deg] | torque at 57 deg [N m] | max penetration [m] | bounce RMS [N m] (relative) "
+             "| wall [s] | work | note |", "|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['route']} | {num(r['reached_deg'], '.1f')} | {num(r['torque_57_Nm'], '.4e')} | "
+                     f"{num(r['max_penetration_m'], '.2e')} | {num(r['bounce_rms_Nm'], '.2e')} "
+                     f"({num(r['bounce_relative'], '.2f')}) | {num(r['wall_s'], '.0f')} | {r['work']} | {r['note']} |")
+    mesh = rows[0]["mesh"] if rows else "?"
+    lines.append(f"\nSleeve mesh {mesh}, mu = 0.1. Bounce: RMS of the per-step elbow torque minus its centred "
+                 f"1-degree moving average, {BOUNCE_FROM:g}-57 deg (fabricfem.study.torque_bounce).")
+    return "\n".join(lines)

@@ -144,6 +144,62 @@ def test_torque_history_same_on_one_and_two_ranks():
     np.testing.assert_allclose(parallel.torques, serial.torques, rtol=1e-6, atol=1e-12)
 
 
+def test_explicit_run_reports_a_timing_breakdown():
+    """The explicit history carries the per-part wall times of `step_breakdown`: every part >= 0 except
+    `other` (the remainder, which can be slightly negative only by timer granularity: > -1 % of the loop), the
+    parts add up to the loop time (by construction, to round-off) and ms/step = loop / steps."""
+    from fabricfem.sleeve import TIMING_PARTS, format_breakdown
+    h = run_sleeve(QUICK_EXPLICIT.with_(final_angle=3.0), MPI.COMM_SELF)
+    t = h.timings
+    parts = [t[f"{p}_s"] for p in TIMING_PARTS]
+    assert all(v >= 0.0 for v in parts[:-1]) and parts[-1] > -0.01 * t["loop_s"]
+    assert sum(parts) == pytest.approx(t["loop_s"], rel=1e-12)
+    assert sum(t[f"{p}_share"] for p in TIMING_PARTS) == pytest.approx(1.0, rel=1e-12)
+    assert t["steps"] == sum(s.time_steps for s in h.steps) > 0
+    assert t["ms_per_step"] == pytest.approx(1e3 * t["loop_s"] / t["steps"])
+    assert "ms/step" in format_breakdown(t)
+
+
+def test_dynamic_similarity_scales_speed_and_damping_by_the_wave_speed():
+    """flexion_speed = omega c / c_ref and damping = alpha c / c_ref with c = sqrt(E / rho) (closed form for
+    fabrics II and III of the study: c_II / c_I = sqrt(350 / 1.2) = 17.08, c_III / c_I = sqrt(7200 / 1.2 x
+    436 / 700) = 61.13); off by default (factor 1)."""
+    from fabricfem.study import variants
+    fabrics = variants(quick=True)["fabrics"]
+    assert fabrics["fabric I"].flexion_speed == pytest.approx(45.0, rel=1e-14)
+    assert fabrics["fabric II"].flexion_speed == pytest.approx(45.0 * math.sqrt(350.0 / 1.2), rel=1e-14)
+    assert fabrics["fabric III"].damping == pytest.approx(10.0 * math.sqrt(7200.0 / 1.2 * 436.0 / 700.0), rel=1e-14)
+    plain = SleeveConfig(E=350e6)
+    assert plain.flexion_speed == 45.0 and plain.damping == 10.0
+    with pytest.raises(ValueError, match="similarity_reference"):
+        SleeveConfig(similarity_reference=(0.0, 436.0))
+
+
+def test_torque_bounce_of_an_alternating_signal():
+    """torque_bounce on tau_n = a n + b + A (-1)^n: the moving average over an even window w (entries n - w/2
+    ... n + w/2 - 1) removes the alternation exactly and gives a (n - 1/2) + b for the linear part, so the
+    deviation is A (-1)^n + a / 2 and its RMS sqrt(A^2 + a^2 / 4) (closed form); window 1 gives 0."""
+    from fabricfem.study import torque_bounce
+    n = np.arange(400)
+    tau = 1e-4 * n + 0.02 + 3e-3 * (-1.0) ** n
+    angles = n * 0.1
+    rms, rel = torque_bounce(angles, tau, 20, from_angle=10.0)
+    assert rms == pytest.approx(math.sqrt(3e-3 ** 2 + (1e-4 / 2) ** 2), rel=1e-9)
+    smooth = 1e-4 * (n - 0.5) + 0.02
+    assert rel == pytest.approx(rms / np.sqrt(np.mean(smooth[(angles >= 10.0) & (n < 390)] ** 2)), rel=1e-9)
+    assert torque_bounce(angles, tau, 1)[0] == 0.0
+
+
+def test_study_cli_rejects_unknown_meshes_and_fabrics(capsys):
+    """`fabricfem study sleeve --meshes I,V` / `--fabrics IV`: exit status 2 with the parameter named, before
+    any run."""
+    from fabricfem.cli import main
+    assert main(["study", "sleeve", "--meshes", "I,V"]) == 2
+    assert "fine / meshes: unknown mesh 'V'" in capsys.readouterr().err
+    assert main(["study", "sleeve", "--fabrics", "IV"]) == 2
+    assert "fabrics: unknown fabric set 'IV'" in capsys.readouterr().err
+
+
 # ------------------------------------------------------------------ active-set strategy and damped Newton
 TIGHT = {"snes_rtol": 1e-14, "snes_stol": 1e-15, "snes_max_it": 60}
 

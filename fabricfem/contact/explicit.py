@@ -19,13 +19,14 @@ points that move with the segments), with a penalty alternative.
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
 from mpi4py import MPI
 
-from fabricfem.body.ellipsoid import Ellipsoid
+from fabricfem.body.ellipsoid import Ellipsoid, _ray_to_surface
 from fabricfem.contact.nodal import positive_parameter
 
 MAX_PROJECTION_PASSES = 8
@@ -61,30 +62,97 @@ def project_along_gradient(x, ellipsoids: Sequence[Ellipsoid]) -> tuple[np.ndarr
     return out, moved
 
 
+def _normalised_radius(x: np.ndarray, e: Ellipsoid) -> np.ndarray:
+    """q(x) = sum_i y_i^2 / r_i^2 = f(x) + 1 (thesis eq. 3.61), y = R^T (x - c): q < 1 strictly inside."""
+    y = (x - e.center) @ e.rotation
+    return np.sum((y / e.radii) ** 2, axis=1)
+
+
+def _normalised_radii(x: np.ndarray, ellipsoids: Sequence[Ellipsoid]) -> np.ndarray:
+    """(K, N) q of every point against every segment with one matrix product: q_k = |x A_k - c_k A_k|^2 with
+    A_k = R_k diag(1 / r_k). Equal to `_normalised_radius` up to rounding (~1e-16), which only matters for
+    points within rounding of the surface; those are not "inside" for the projection's tolerance
+    (INSIDE_TOLERANCE), so the prefilter q < 1 selects the same points that the ray casts would move."""
+    A = np.concatenate([e.rotation / e.radii for e in ellipsoids], axis=1)           # (3, 3K)
+    b = np.concatenate([(e.center @ e.rotation) / e.radii for e in ellipsoids])      # (3K,)
+    y = x @ A - b
+    return np.sum((y * y).reshape(len(x), len(ellipsoids), 3), axis=2).T
+
+
+def _ray_gap(x: np.ndarray, e: Ellipsoid) -> np.ndarray:
+    """Signed gap [m] of `Ellipsoid.gap(x, ray_casts=1)` (the same arithmetic: one cast along grad f at x,
+    the ray towards the centre where it misses) without the input checks and the foot-point normal, which
+    the projection does not use."""
+    y = (x - e.center) @ e.rotation
+    r = e.radii
+    outside = np.sum((y / r) ** 2, axis=1) >= 1.0
+    grad = y / r ** 2
+    norm = np.linalg.norm(grad, axis=1)
+    at_center = norm == 0.0
+    if at_center.any():
+        u = np.where(at_center[:, None], np.eye(3)[int(np.argmin(r))], grad / np.where(at_center, 1.0, norm)[:, None])
+    else:
+        u = grad / norm[:, None]
+    s, hit = _ray_to_surface(y, r, u)
+    if not hit.all():
+        u_center = np.where(hit[:, None], u, y)
+        u_center = u_center / np.linalg.norm(u_center, axis=1, keepdims=True)
+        s = np.where(hit, s, _ray_to_surface(y, r, u_center)[0])
+    return np.abs(s) * np.where(outside, 1.0, -1.0)
+
+
 def project_with_segment(x, ellipsoids: Sequence[Ellipsoid]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """`project_along_gradient` that also returns the segment index (N,) each point was last projected
-    out of (for points never inside: the segment of smallest gap)."""
+    out of (for points inside no segment: the segment of smallest normalised radius q, a diagnostic).
+
+    Vectorised search: q = f + 1 (eq. 3.61) of every point and segment first (one small matrix product per
+    segment); only the points with q < 1 for some segment (the candidates) get the ray casts of
+    `Ellipsoid.gap`, and a later pass re-checks only the points moved by the previous one (the others have
+    not moved). The gap of a point with q >= 1 is >= 0 (`Ellipsoid.gap`), so casting rays only from the
+    points inside a segment, against that segment, gives the same projections as casting them from every
+    point against every segment.
+    """
     x = _points("x", x)
     out = x.copy()
-    moved = np.zeros(len(x), dtype=bool)
-    segment = np.zeros(len(x), dtype=np.int64)
+    n = len(x)
+    moved = np.zeros(n, dtype=bool)
+    if n == 0 or not ellipsoids:
+        return out, moved, np.zeros(n, dtype=np.int64)
+    q = _normalised_radii(x, ellipsoids)
+    segment = np.argmin(q, axis=0).astype(np.int64)
+    inside_q = q < 1.0
+    candidates = np.flatnonzero(inside_q.any(axis=0))
+    inside_q = inside_q[:, candidates]        # (K, candidates): inside segment k by q
     scale_of = np.array([e.radii.min() for e in ellipsoids])
     for k_pass in range(MAX_PROJECTION_PASSES):
-        gaps = np.stack([e.gap(out, ray_casts=1)[0] for e in ellipsoids]) if len(out) else np.zeros((1, 0))
+        if len(candidates) == 0:
+            return out, moved, segment
+        points = out[candidates]
+        # ray casts only against the segments a point is inside of: the gap is >= 0 against the others
+        gaps = np.full((len(ellipsoids), len(points)), np.inf)
+        for k, e in enumerate(ellipsoids):
+            if inside_q[k].any():
+                gaps[k, inside_q[k]] = _ray_gap(points[inside_q[k]], e)
         deepest = np.argmin(gaps, axis=0)
         if k_pass == 0:
-            segment = deepest.astype(np.int64)
-        g = gaps[deepest, np.arange(len(out))]
+            segment[candidates] = deepest
+        g = gaps[deepest, np.arange(len(points))]
         inside = g < -INSIDE_TOLERANCE * scale_of[deepest]
         if not inside.any():
             return out, moved, segment
         for k, e in enumerate(ellipsoids):  # loop over the few segments, vectorised over the points
             mask = inside & (deepest == k)
             if mask.any():
-                direction = e.normal(out[mask])          # grad f / |grad f| at the trial point
-                out[mask] = out[mask] - g[mask, None] * direction
-        segment = np.where(inside, deepest, segment)
-        moved |= inside
+                direction = e.normal(points[mask])          # grad f / |grad f| at the trial point
+                points[mask] = points[mask] - g[mask, None] * direction
+        out[candidates] = points
+        candidates = candidates[inside]
+        segment[candidates] = deepest[inside]
+        moved[candidates] = True
+        # the next pass re-checks the moved points (the others have not moved)
+        inside_q = _normalised_radii(out[candidates], ellipsoids) < 1.0
+        keep = inside_q.any(axis=0)
+        candidates, inside_q = candidates[keep], inside_q[:, keep]
     raise ValueError("ellipsoids: points remain inside after repeated projections (overlapping segments "
                      "trap them); refine the time step")
 
@@ -200,6 +268,11 @@ class ExplicitBodyContact:
     accumulators; `mean_torques()` / `mean_pressure()` return the means since the last `reset_means()`
     (the impulse over the interval divided by its length: the contact force of one explicit step is the
     change of momentum it imposes and oscillates from step to step).
+
+    Cost (issue 4): per step one pose of the body (`PoseCache`: the pose at t_{n+2} of one step is the
+    joint position at t_{n+1} of the next), the normalised radius q of every node against every segment, and
+    ray casts, friction and torque sums on the nodes in contact only (numpy, no loop over nodes).
+    `timings["pose_torque"]` [s] accumulates the time spent posing the body and summing torques.
     """
 
     def __init__(self, model, body, friction: float = 0.0, method: str = "lagrange",
@@ -210,6 +283,7 @@ class ExplicitBodyContact:
             raise ValueError(f"method must be one of {EXPLICIT_METHODS}, got {method!r}")
         self.model = model
         self.body = body
+        self.poses = PoseCache(body)
         self.method = method
         self.mu = friction_law.friction_coefficient(friction)
         self.nodes = nodal.contact_nodes(model)
@@ -233,10 +307,16 @@ class ExplicitBodyContact:
         self.active = np.zeros(M, dtype=bool)
         self.slip = np.zeros(M, dtype=bool)
         self.time = 0.0
-        self._monitors: dict[str, tuple[str, np.ndarray, list[int]]] = {}
+        self._monitors: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
         self._torque_impulse: dict[str, float] = {}
         self._normal_impulse = np.zeros(M)
         self._elapsed = 0.0
+        self._lumped: tuple[object, float, np.ndarray] | None = None   # (integrator, dt, (M, 3) of M + dt/2 C)
+        self.timings = {"pose_torque": 0.0}
+        # optional diagnostics (off by default: they cost a gap evaluation / a list append per step)
+        self.monitor_penetration = False     # track the largest penetration of d^{n+1} at t_{n+1} every step
+        self.max_penetration_seen = 0.0      # m, owned nodes (reduce with max_penetration_all)
+        self.trace: list[tuple[float, ...]] | None = None   # per step: (t, torque of each monitor, sum |lambda_N|)
 
     # ------------------------------------------------------------------ set-up and output
     def penalty_frequency(self) -> float:
@@ -254,15 +334,17 @@ class ExplicitBodyContact:
         a = np.asarray(axis, dtype=float)
         if a.shape != (3,) or not np.linalg.norm(a) > 0:
             raise ValueError(f"axis must be a non-zero 3-vector, got {axis!r}")
-        self._monitors[name] = (joint, a / np.linalg.norm(a), [self.names.index(s) for s in segments])
+        on_segments = np.zeros(len(self.names), dtype=bool)     # lookup table segment index -> tracked
+        on_segments[[self.names.index(s) for s in segments]] = True
+        self._monitors[name] = (joint, a / np.linalg.norm(a), on_segments)
         self._torque_impulse[name] = 0.0
 
     def torque(self, name: str) -> float:
         """The registered torque [N m] of the last step's forces (all ranks)."""
         from fabricfem.contact.torque import contact_torque
-        joint, axis, segments = self._monitors[name]
-        return contact_torque(self.position, -self.force, self.segment, segments,
-                              self.body.joint_position(joint, self.time), axis, self.comm)
+        joint, axis, on_segments = self._monitors[name]
+        return contact_torque(self.position, -self.force, self.segment, np.flatnonzero(on_segments),
+                              self.poses.joint(joint, self.time), axis, self.comm)
 
     def reset_means(self):
         for name in self._torque_impulse:
@@ -298,74 +380,140 @@ class ExplicitBodyContact:
     def max_penetration(self, d: np.ndarray, t: float) -> float:
         """max(0, -min g) [m] of the nodes at displacements `d` (local array of W) against the body at t, all ranks."""
         from fabricfem.contact.nodal import nearest_gap
-        g, _, _ = nearest_gap(self.reference + d[self.dofs], list(self.body.pose(t).values()))
+        g, _, _ = nearest_gap(self.reference + d[self.dofs], self.poses.ellipsoids(t))
         return float(self.comm.allreduce(float(np.max(-g, initial=0.0)), op=MPI.MAX))
 
     def min_gap(self, d: np.ndarray, t: float) -> float:
         """Smallest signed gap [m] of the nodes against the body at t (all ranks)."""
         from fabricfem.contact.nodal import nearest_gap
-        g, _, _ = nearest_gap(self.reference + d[self.dofs], list(self.body.pose(t).values()))
+        g, _, _ = nearest_gap(self.reference + d[self.dofs], self.poses.ellipsoids(t))
         return float(self.comm.allreduce(float(np.min(g, initial=np.inf)), op=MPI.MIN))
+
+    def start_trace(self):
+        """Record every step's time, registered torques (instantaneous, not averaged) and total normal force."""
+        self.trace = []
+
+    def trace_array(self) -> np.ndarray:
+        """(steps, 2 + monitors) array of the trace: t [s], the torques [N m] in registration order, sum of the
+        normal forces [N]; torques and forces summed over the ranks (all ranks call this)."""
+        local = np.array(self.trace if self.trace else np.zeros((0, 2 + len(self._monitors))), dtype=float)
+        total = np.zeros_like(local)
+        self.comm.Allreduce(local, total, op=MPI.SUM)
+        if len(total):
+            total[:, 0] = local[:, 0]
+        return total
+
+    def max_penetration_all(self) -> float:
+        """Largest penetration [m] seen by the per-step monitor (monitor_penetration), all ranks."""
+        return float(self.comm.allreduce(self.max_penetration_seen, op=MPI.MAX))
+
+    def _monitor_penetration(self, x: np.ndarray, ellipsoids):
+        """max(0, -g) of the points x against the posed segments (one ray cast from the points inside)."""
+        for e in ellipsoids:
+            inside = _normalised_radius(x, e) < 1.0
+            if inside.any():
+                self.max_penetration_seen = max(self.max_penetration_seen, float(np.max(-_ray_gap(x[inside], e))))
 
     def total_force(self) -> np.ndarray:
         """Sum of the last step's contact forces on the cloth [N] (3,), all ranks."""
         return self.comm.allreduce(self.force.sum(axis=0), op=MPI.SUM)
 
-    def _accumulate(self, dt: float):
-        from fabricfem.body.motion import joint_torque
-        for name, (joint, axis, segments) in self._monitors.items():
-            mask = self.active & np.isin(self.segment, segments)
-            if mask.any():
-                J = self.body.joint_position(joint, self.time)
-                self._torque_impulse[name] += dt * joint_torque(self.position[mask], -self.force[mask], J, axis)
-        self._normal_impulse += dt * self.normal_force
-        self._elapsed += dt
+    def _lumped_mass(self, integrator) -> np.ndarray:
+        """(M, 3) diagonal M + dt/2 C of the contact nodes' translations [kg] (cached per integrator and dt)."""
+        cached = self._lumped
+        if cached is None or cached[0] is not integrator or cached[1] != integrator.dt:
+            m = integrator.denominator.getArray(readonly=True)[self.dofs].copy()
+            self._lumped = cached = (integrator, integrator.dt, m)
+        return cached[2]
 
-    def _stick_points(self, ellipsoids, segment: np.ndarray, fallback: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Stick points at the current pose (global) and the mask of nodes that have one on `segment`."""
-        points = fallback.copy()
-        known = np.zeros(len(segment), dtype=bool)
-        for k, e in enumerate(ellipsoids):  # loop over the few segments
-            mask = (self._stick_segment == k) & (segment == k)
+    def _accumulate(self, dt: float, index: np.ndarray, position: np.ndarray, force: np.ndarray,
+                    segment: np.ndarray, normal_force: np.ndarray):
+        """Add dt x (torques, normal forces) of the nodes `index` in contact (their positions, forces on the
+        cloth, segments and normal forces) to the interval's impulses."""
+        tic = time.perf_counter()
+        step_torques = []
+        for name, (joint, axis, on_segments) in self._monitors.items():
+            mask = on_segments[segment]
+            tau = 0.0
             if mask.any():
-                points[mask] = e.to_global(self._stick_local[mask])
+                # tau = a . sum_i (x_i - J) x f_i, f_i = -force (on the body), as fabricfem.body.motion.joint_torque
+                arm = position[mask] - self.poses.joint(joint, self.time)
+                tau = float(np.dot(_cross(arm, -force[mask]).sum(axis=0), axis))
+                self._torque_impulse[name] += dt * tau
+            step_torques.append(tau)
+        if self.trace is not None:
+            self.trace.append((self.time, *step_torques, float(normal_force.sum())))
+        self._normal_impulse[index] += dt * normal_force
+        self._elapsed += dt
+        self.timings["pose_torque"] += time.perf_counter() - tic
+
+    def _stick_points(self, ellipsoids, index: np.ndarray, segment: np.ndarray,
+                      fallback: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Stick points at the current pose (global) of the nodes `index` touching `segment`, and the mask of
+        those that have one on that segment (the others get `fallback`)."""
+        points = fallback.copy()
+        stick_segment = self._stick_segment[index]
+        known = np.zeros(len(index), dtype=bool)
+        for k, e in enumerate(ellipsoids):  # loop over the few segments
+            mask = (stick_segment == k) & (segment == k)
+            if mask.any():
+                points[mask] = e.to_global(self._stick_local[index[mask]])
             known |= mask
         return points, known
 
-    def _store_stick_points(self, ellipsoids, points: np.ndarray, segment: np.ndarray, active: np.ndarray):
-        self._stick_segment = np.where(active, segment, -1)
+    def _store_stick_points(self, ellipsoids, index: np.ndarray, points: np.ndarray, segment: np.ndarray):
+        """Stick points (global) of the nodes `index` in contact with `segment`; every other node loses its."""
+        self._stick_segment[:] = -1
+        self._stick_segment[index] = segment
         for k, e in enumerate(ellipsoids):
-            mask = active & (segment == k)
+            mask = segment == k
             if mask.any():
-                self._stick_local[mask] = e.to_local(points[mask])
+                self._stick_local[index[mask]] = e.to_local(points[mask])
+
+    def _posed(self, t: float) -> list[Ellipsoid]:
+        tic = time.perf_counter()
+        ellipsoids = self.poses.ellipsoids(t)
+        self.timings["pose_torque"] += time.perf_counter() - tic
+        return ellipsoids
 
     # ------------------------------------------------------------------ integrator hooks
     def forces(self, integrator, t: float, rhs):
-        """Penalty method: rhs += f(d^{n+1}) against the body at t = t_{n+1} (no-op for Lagrange)."""
+        """Penalty method: rhs += f(d^{n+1}) against the body at t = t_{n+1} (no-op for Lagrange).
+        Only the nodes with q < 1 for some segment (inside: g < 0) can carry a force; the gaps, friction
+        and forces are evaluated on those."""
         if self.method != "penalty":
             return
         from fabricfem.contact import friction as friction_law
         from fabricfem.contact.nodal import nearest_gap, normal_pressure
         self.time = float(t)
-        ellipsoids = list(self.body.pose(t).values())
+        ellipsoids = self._posed(t)
         d = integrator.d.getArray(readonly=True)
-        x = self.reference + d[self.dofs]
+        x_all = _points("x", self.reference + d[self.dofs])
+        q = _normalised_radii(x_all, ellipsoids)
+        segment = np.argmin(q, axis=0).astype(np.int64)
+        index = np.flatnonzero(np.min(q, axis=0) < 1.0)
+        x = x_all[index]
         g, n, seg = nearest_gap(x, ellipsoids)
+        segment[index] = seg
         p = normal_pressure(g, np.zeros(len(g)), self.penalty)
-        active = p > 0.0
-        force = (self.area * p)[:, None] * n
-        traction = np.zeros_like(x)
+        inside = p > 0.0
+        if self.monitor_penetration and inside.any():
+            self.max_penetration_seen = max(self.max_penetration_seen, float(np.max(-g[inside])))
+        area = self.area[index]
+        force = (area * p)[:, None] * n
         slip = np.zeros(len(x), dtype=bool)
         if self.mu > 0.0:
-            stick, known = self._stick_points(ellipsoids, seg, x)
+            stick, known = self._stick_points(ellipsoids, index, seg, x)
             fr = friction_law.return_map(x, stick, n, p, self.mu, self.penalty, self.penalty)
             traction = np.where(known[:, None], fr.traction, 0.0)
             slip = fr.slip & known
-            force = force + self.area[:, None] * traction
-            self._store_stick_points(ellipsoids, friction_law.updated_stick_point(x, traction, self.penalty), seg,
-                                     active)
-        rhs.getArray()[self.dofs] += force
-        self._set_step(x, force, self.area * p, seg, active, slip, integrator.dt)
+            force = force + area[:, None] * traction
+            stick_new = friction_law.updated_stick_point(x, traction, self.penalty)
+            self._store_stick_points(ellipsoids, index[inside], stick_new[inside], seg[inside])
+        rhs.getArray()[self.dofs[index]] += force
+        contact = index[inside]
+        self._set_step(x_all, contact, force[inside], area[inside] * p[inside], segment, slip[inside],
+                       integrator.dt)
 
     def correct(self, integrator, t: float):
         """Lagrange method (Box 5 steps i-j with friction): a^{n+1} += a^c so that the predictor of
@@ -375,42 +523,128 @@ class ExplicitBodyContact:
         dt = integrator.dt
         t_next = t + dt
         self.time = float(t)
-        ellipsoids = list(self.body.pose(t_next).values())
+        ellipsoids = self._posed(t_next)
         d = integrator.d.getArray(readonly=True)
         v = integrator.velocity_predictor.getArray(readonly=True)
         a = integrator.a.getArray()
         rows = self.dofs
+        if self.monitor_penetration:   # the positions d^{n+1} against the body at t_{n+1} (posed last step)
+            self._monitor_penetration(self.reference + d[rows], self.poses.ellipsoids(t))
         x_trial = self.reference + d[rows] + dt * v[rows] + dt ** 2 * a[rows]
         projected, active, seg = project_with_segment(x_trial, ellipsoids)
-        m = integrator.denominator.getArray(readonly=True)[rows]            # M + dt/2 C (per component)
-        normal_correction = projected - x_trial
-        normal_force = np.linalg.norm(m * normal_correction, axis=1) / dt ** 2   # |lambda_N| [N]
-        final = projected
-        slip = np.zeros(len(x_trial), dtype=bool)
-        if self.mu > 0.0 and active.any():
-            stick, known = self._stick_points(ellipsoids, seg, projected)
-            n = np.zeros_like(projected)
+        index = np.flatnonzero(active)                                   # nodes in contact
+        m = self._lumped_mass(integrator)[index]                          # M + dt/2 C (per component)
+        trial, final, segment = x_trial[index], projected[index], seg[index]
+        normal_force = np.linalg.norm(m * (final - trial), axis=1) / dt ** 2   # |lambda_N| [N]
+        slip = np.zeros(len(index), dtype=bool)
+        if self.mu > 0.0 and len(index):
+            projected_c = final
+            stick, known = self._stick_points(ellipsoids, index, segment, projected_c)
+            n = np.zeros_like(projected_c)
             for k, e in enumerate(ellipsoids):   # normals at the contact points, per segment
-                mask = active & (seg == k)
+                mask = segment == k
                 if mask.any():
-                    n[mask] = e.normal(projected[mask])
-            diff = stick - projected
+                    n[mask] = e.normal(projected_c[mask])
+            diff = stick - projected_c
             d_t = diff - np.sum(diff * n, axis=1)[:, None] * n                   # P (s - x^c)
             f_t = np.linalg.norm(m * d_t, axis=1) / dt ** 2
             limit = self.mu * normal_force                                       # eq. 3.52: |t| <= mu lambda_N
-            slip = active & known & (f_t > limit)
+            slip = known & (f_t > limit)
             scale = np.where(slip, limit / np.where(f_t > 0.0, f_t, 1.0), 1.0)
-            d_t = np.where((active & known)[:, None], d_t * scale[:, None], 0.0)
-            final = projected + d_t
+            d_t = np.where(known[:, None], d_t * scale[:, None], 0.0)
+            final = projected_c + d_t
             # the stick point stays where it is on the segment when sticking, moves with the node when slipping
             # and is created at the contact point for a node touching down
-            self._store_stick_points(ellipsoids, np.where((slip | ~known)[:, None], final, stick), seg, active)
-        correction = np.where(active[:, None], final - x_trial, 0.0)
-        a_c = correction / dt ** 2
-        a[rows] += a_c
-        self._set_step(final, m * a_c, np.where(active, normal_force, 0.0), seg, active, slip, dt)
+            self._store_stick_points(ellipsoids, index, np.where((slip | ~known)[:, None], final, stick), segment)
+        a_c = (final - trial) / dt ** 2
+        a[rows[index]] += a_c
+        position = x_trial
+        position[index] = final
+        self._set_step(position, index, m * a_c, normal_force, seg, slip, dt)
 
-    def _set_step(self, position, force, normal_force, segment, active, slip, dt: float):
-        self.position, self.force, self.normal_force = position, force, normal_force
-        self.segment, self.active, self.slip = segment, active, slip
-        self._accumulate(dt)
+    def _set_step(self, position: np.ndarray, index: np.ndarray, force: np.ndarray, normal_force: np.ndarray,
+                  segment: np.ndarray, slip: np.ndarray, dt: float):
+        """State of the step: positions (M, 3) and segments (M,) of all nodes; contact forces on the cloth,
+        normal forces and slip flags of the nodes `index` in contact (zero / False elsewhere)."""
+        self.position, self.segment = position, segment
+        for buffer, values in ((self.force, force), (self.normal_force, normal_force), (self.slip, slip)):
+            buffer.fill(0)           # the state arrays are overwritten in place every step
+            buffer[index] = values
+        self.active.fill(False)
+        self.active[index] = True
+        self._accumulate(dt, index, position[index], force, segment[index], normal_force)
+
+
+class PoseCache:
+    """Posed segments and joint positions of a `Body` at the last few times [s]. An explicit step asks for
+    the pose at t_{n+2} and the joint position at t_{n+1}, which the previous step has posed already (the
+    same floating-point time), so each step poses the body once. Returns the same ellipsoids as
+    `Body.pose(t)` (in segment order) and the same points as `Body.joint_position`."""
+
+    SIZE = 3
+
+    def __init__(self, body):
+        self.body = body
+        self._positions: dict[float, dict] = {}
+        self._ellipsoids: dict[float, list[Ellipsoid]] = {}
+        self._validated = False
+
+    def positions(self, t: float) -> dict:
+        t = float(t)
+        p = self._positions.get(t)
+        if p is None:
+            if len(self._positions) >= self.SIZE:
+                self._positions.pop(next(iter(self._positions)))
+            p = self._positions[t] = self.body.kinematics.positions(t)
+        return p
+
+    def ellipsoids(self, t: float) -> list[Ellipsoid]:
+        t = float(t)
+        e = self._ellipsoids.get(t)
+        if e is None:
+            if len(self._ellipsoids) >= self.SIZE:
+                self._ellipsoids.pop(next(iter(self._ellipsoids)))
+            positions = self.positions(t)
+            if self._validated:
+                e = [_posed_segment(s, positions) for s in self.body.segments.values()]
+            else:   # the first pose goes through the validating constructors (Segment.pose, Ellipsoid)
+                e = [s.pose(positions) for s in self.body.segments.values()]
+                self._validated = True
+            self._ellipsoids[t] = e
+        return e
+
+    def joint(self, name: str, t: float) -> np.ndarray:
+        """Position [m] of a joint or marker at time t (ValueError for an unknown name)."""
+        if name not in self.body.kinematics.names:
+            raise ValueError(f"name: unknown joint or marker {name!r}")
+        return np.asarray(self.positions(t)[name], dtype=float)
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise a x b of (N, 3) arrays (the products and differences of np.cross, without its axis handling)."""
+    out = np.empty_like(a)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
+
+
+def _posed_segment(segment, positions) -> Ellipsoid:
+    """`Segment.pose` (fabricfem.body.pose.segment_frame, thesis sec. 5.1) with the same arithmetic but
+    without re-validating the inputs of every explicit step (the rigid motion keeps the frame proper; the
+    first pose of a PoseCache is validated): x^c = J1 + f (J2 - J1), e1 = (J2 - J1) / |J2 - J1|,
+    e2 = the unit part of M - x^c normal to e1, e3 = e1 x e2."""
+    j1 = np.asarray(positions[segment.proximal], dtype=float)
+    axis = np.asarray(positions[segment.distal], dtype=float) - j1
+    length = float(np.linalg.norm(axis))
+    center = j1 + segment.center_fraction * axis
+    e1 = axis / length
+    offset = np.asarray(positions[segment.marker], dtype=float) - center
+    perpendicular = offset - np.dot(offset, e1) * e1
+    e2 = perpendicular / float(np.linalg.norm(perpendicular))
+    e3 = np.array([e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]])
+    posed = object.__new__(Ellipsoid)        # frozen dataclass: fields set as its __post_init__ does
+    object.__setattr__(posed, "center", center)
+    object.__setattr__(posed, "rotation", np.column_stack([e1, e2, e3]))
+    object.__setattr__(posed, "radii", np.array(segment.radii, dtype=float))
+    return posed

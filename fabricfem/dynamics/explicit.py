@@ -24,6 +24,8 @@ the division so that the next predictor lands on the body), see fabricfem.contac
 """
 from __future__ import annotations
 
+import time
+
 from dolfinx.fem import petsc as fem_petsc
 
 from fabricfem.dynamics import stability
@@ -74,6 +76,8 @@ class CentralDifference(TimeIntegrator):
         self._v_pred = model.create_vector()
         self._rhs = model.create_vector()
         self._denominator = None
+        # wall time [s] spent in the internal-force assembly and in the contact hooks since construction
+        self.timings = {"internal_forces": 0.0, "contact": 0.0}
 
     @property
     def velocity_predictor(self):
@@ -107,22 +111,29 @@ class CentralDifference(TimeIntegrator):
         lam = self.load(t_new)
         self.model.set_load_factor(lam)
         fem_petsc.set_bc(self.d, self.model.bcs)  # prescribed displacements lambda(t) g
-        self._sync_model()
         if self.ops.stiffness_ufl is not None and self.step_count % self.damping_update_every == 0:
+            self._sync_model()
             self.ops.freeze(self.d)
         rhs = self._rhs
-        self.model.internal_force(self.d, rhs)  # f_int(d^{n+1})
+        tic = time.perf_counter()
+        self.model.internal_force(self.d, rhs)  # f_int(d^{n+1}); copies d^{n+1} into the model's Function
+        toc = time.perf_counter()
+        self.timings["internal_forces"] += toc - tic
         rhs.scale(-1.0)
         rhs.axpy(float(self.model.load_factor.value), self.model.F_ref)
         if self.ops.has_damping:
             self.ops.damping_action(self._v_pred, self._cv)
             rhs.axpy(-1.0, self._cv)
         if self.contact is not None:
+            tic = time.perf_counter()
             self.contact.forces(self, t_new, rhs)        # penalty contact: nodal forces at d^{n+1}
+            self.timings["contact"] += time.perf_counter() - tic
         self.zero_bc_rows(rhs)
         self.a.pointwiseDivide(rhs, self._denominator)
         if self.contact is not None:
+            tic = time.perf_counter()
             self.contact.correct(self, t_new)            # Box 5: a^{n+1} += a^c
+            self.timings["contact"] += time.perf_counter() - tic
         self._v_pred.copy(self.v)
         self.v.axpy(0.5 * dt, self.a)
         d_new_bc = self.d.getArray(readonly=True)[self.bc_rows]

@@ -9,7 +9,10 @@ otherwise runs the reduced quick study (mesh I, explicit flexion to 6 degrees) a
 * doubling the thickness multiplies the torque by 1.6 to 2.4 ("roughly double", membrane-dominated,
   sec. 5.3.4; the band is the task's reading of "roughly");
 * fabrics II and III give at least ten times fabric I's torque ("roughly proportional to the stiffness",
-  E ratios 292 and 6000, sec. 5.3.5);
+  E ratios 292 and 6000, sec. 5.3.5). The study runs them with dynamic similarity (fabricfem.sleeve), under
+  which torque / E is the same for all three fabrics (all moduli scale with E, G = E / 200): the check then
+  holds by that scaling (case sleeve-similarity), as it does in the quasi-static limit, where the
+  displacements imposed by the rigid arm do not depend on E at all;
 * the mu = 0.5 mesh series changes by less than 10% between the two finest meshes.
 
 A curve that stopped early (quasi-static Newton failure) is compared at the largest angle both curves
@@ -102,10 +105,13 @@ def trends(figures, tag: str, wall: float) -> list[CaseResult]:
 
 
 @case("sleeve-trends", known_failure=(
-    "evaluated on real 57-degree explicit data (reduced study, mesh I only, `run_study(fine='I', meshes=('I',), "
-    "fabrics=('I',))`, 585 s on 2 ranks): T(t=2mm)/T(t=1mm) = 1.66 passes; T(mu=0.5)/T(mu=0.1) at 57 deg = 0.97 "
-    "(0.0593 vs 0.0610 N m) and max T(R=0.07)/T(R=0.06) over 20-57 deg = 1.56 fail; fabrics II/III (17x and 60x "
-    "the explicit steps of fabric I) and the mesh series II-IV were not run, so those checks are not evaluated"))
+    "evaluated on real 57-degree explicit data at mesh III (20x26; `fabricfem study sleeve --fine III --meshes III`, "
+    "1848 s on 2 ranks, fabrics II/III with dynamic similarity): T(mu=0.5)/T(mu=0.1) at 57 deg = 1.45 passes "
+    "(0.0279 vs 0.0192 N m); T(fabric II, III)/T(fabric I) = 291.7 and 6000 pass (the E ratios: exact under "
+    "dynamic similarity); max T(R=0.07)/T(R=0.06) over 20-57 deg = 6.85 fails (0.94 at 57 deg) and "
+    "T(t=2mm)/T(t=1mm) at 57 deg = 2.83 fails: the explicit torque curves at 45 deg/s jump by factors of 2-3 "
+    "between degrees (tube buckling in a flexion whose torque at 10 deg on mesh I is 2.9 times the quasi-static one, case "
+    "sleeve-similarity); the mesh series (II-IV) was not run, so that check is not evaluated"))
 def sleeve_trends() -> list[CaseResult]:
     """Sleeve-study trends of thesis sec. 5.3 (friction, fit, thickness, fabrics, mesh) on study outputs."""
     with Timer() as timer:
@@ -122,3 +128,57 @@ def sleeve_trends() -> list[CaseResult]:
                 figures = _curves(Path(tmp))
             tag = "[reduced]"
     return trends(figures, tag, timer.elapsed)
+
+
+# ------------------------------------------------------------------------------------------------------------
+# dynamic similarity of the explicit flexion (fabricfem.sleeve.SleeveConfig.flexion_speed)
+# ------------------------------------------------------------------------------------------------------------
+SIMILARITY_ANGLE = 10.0      # deg: contact starts near 5 deg on mesh I
+
+
+@case("sleeve-similarity")
+def sleeve_similarity() -> list[CaseResult]:
+    """Dynamic similarity of the explicit sleeve flexion (mesh I, mu = 0.1, G = E / 200, to 10 degrees).
+
+    1. Exact scaling (derived in SleeveConfig.flexion_speed): fabric I (1.2 MPa, 436 kg/m^3) at 45 deg/s and a
+       fabric with E x 6.25 (c x 2.5, not a power of two, so the arithmetic is not a bitwise rescaling) at the
+       similar speed 112.5 deg/s with damping 25 1/s give the same torque / E. Tolerance 1e-6 relative: the two
+       runs are the same discrete equations up to rounding (dt, record time and damping all scale with
+       c_ref / c), and round-off reaches the torque through the contact decisions by no more than in the
+       1-vs-2-rank test of tests/test_sleeve.py (1e-6).
+    2. Independent reference, the quasi-static torque (Newton equilibrium per degree, solver "quasistatic";
+       rate independent and exactly proportional to E, so fabric I's T_qs / E serves): the E x 6.25 fabric
+       WITHOUT similarity at 22.5 deg/s (5 times slower in units of its wave speed than the similar run, the
+       same as fabric I at 9 deg/s) must lie within 5 % of it (the mass-damping drag at 45 deg/s is about 20 %
+       of the torque, fabricfem.sleeve docstring; a fifth of the dimensionless speed gives 4 %), and its
+       distance from it must be smaller than the similar run's (the flexion slowed approaches quasi-static).
+    The similar run carries fabric I's own distance from quasi-static equilibrium (reported in the quantity).
+    """
+    from mpi4py import MPI
+    from fabricfem.sleeve import SleeveConfig, run_sleeve
+    from fabricfem.verify import result
+    name = "sleeve-similarity"
+    with Timer() as timer:
+        base = SleeveConfig(n_around=10, n_along=13, final_angle=SIMILARITY_ANGLE, E=1.2e6, G=1.2e6 / 200,
+                            density=436.0)
+        stiff = base.with_(E=7.5e6, G=7.5e6 / 200)
+        a = SIMILARITY_ANGLE
+
+        def torque_over_E(cfg: SleeveConfig) -> tuple[float, int]:
+            h = run_sleeve(cfg, MPI.COMM_SELF)
+            return h.torque_at(a) / cfg.E, h.ndofs
+
+        t_ref, ndofs = torque_over_E(base.with_(dynamic_similarity=True))
+        t_similar, _ = torque_over_E(stiff.with_(dynamic_similarity=True))
+        t_slow, _ = torque_over_E(stiff.with_(angular_velocity=22.5))
+        t_qs, _ = torque_over_E(base.with_(solver="quasistatic", method=None, angle_steps=int(round(a))))
+    wall = timer.elapsed
+    out = [result(name, f"T/E at {a:g} deg: E x 6.25 at 112.5 deg/s (similar) vs fabric I at 45 deg/s [m^3]",
+                  t_similar, t_ref, 1e-6, ndofs, wall)]
+    excess_similar, excess_slow = abs(t_similar / t_qs - 1.0), abs(t_slow / t_qs - 1.0)
+    out.append(CaseResult(name, f"|T/T_qs - 1| at {a:g} deg: E x 6.25 at 22.5 deg/s without similarity "
+                          f"({excess_slow:.3g}) < similar run ({excess_similar:.3g})", excess_slow, excess_similar,
+                          float("nan"), float("nan"), bool(excess_slow < excess_similar), ndofs, wall))
+    out.append(result(name, f"T/E at {a:g} deg, E x 6.25 at 22.5 deg/s without similarity vs quasi-static [m^3]",
+                      t_slow, t_qs, 0.05, ndofs, wall))
+    return out
