@@ -454,15 +454,23 @@ def _check_dynamics(data: dict) -> None:
                              f"dt = \"auto\", or force = true")
 
 
+def _array_of_tables(dyn: dict, key: str) -> list[tuple[str, dict]]:
+    """[(location, table)] of the array of tables dynamics.<key>, each checked against its schema."""
+    items = dyn.get(key, [])
+    if not isinstance(items, list):
+        raise SceneError(f"dynamics.{key}: must be an array of tables: write [[dynamics.{key}]]")
+    checked = []
+    for i, item in enumerate(items):
+        where = f"dynamics.{key}[{i}]"
+        if not isinstance(item, dict):
+            raise SceneError(f"{where}: must be a table: write [[dynamics.{key}]]")
+        _check_table(f"dynamics.{key}", item, where)
+        checked.append((where, item))
+    return checked
+
+
 def _check_obstacles(dyn: dict) -> None:
-    obstacles = dyn.get("obstacles", [])
-    if not isinstance(obstacles, list):
-        raise SceneError("dynamics.obstacles: must be an array of tables: write [[dynamics.obstacles]]")
-    for i, obstacle in enumerate(obstacles):
-        where = f"dynamics.obstacles[{i}]"
-        if not isinstance(obstacle, dict):
-            raise SceneError(f"{where}: must be a table: write [[dynamics.obstacles]]")
-        _check_table("dynamics.obstacles", obstacle, where)
+    for where, obstacle in _array_of_tables(dyn, "obstacles"):
         kind = obstacle["type"]
         if kind not in OBSTACLE_KEYS:
             raise SceneError(f"{where}.type: unknown obstacle {kind!r}{_suggest(kind, OBSTACLE_KEYS)}; "
@@ -489,16 +497,9 @@ def _check_obstacles(dyn: dict) -> None:
 
 
 def _check_monitors(data: dict) -> None:
-    monitors = data["dynamics"].get("monitors", [])
-    if not isinstance(monitors, list):
-        raise SceneError("dynamics.monitors: must be an array of tables: write [[dynamics.monitors]]")
     names = set()
     naghdi = data.get("model", {}).get("kind", "naghdi") == "naghdi"
-    for i, monitor in enumerate(monitors):
-        where = f"dynamics.monitors[{i}]"
-        if not isinstance(monitor, dict):
-            raise SceneError(f"{where}: must be a table: write [[dynamics.monitors]]")
-        _check_table("dynamics.monitors", monitor, where)
+    for where, monitor in _array_of_tables(data["dynamics"], "monitors"):
         name = monitor["name"]
         if name in names or name in STANDARD_COLUMNS:
             raise SceneError(f"{where}.name: {name!r} is already a column of the CSV")

@@ -398,9 +398,8 @@ class SleeveProblem:
         return self.comm.allreduce(float(np.min(s.gap, initial=np.inf)), op=MPI.MIN)
 
 
-def build_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
-                 petsc_options: dict | None = None) -> SleeveProblem:
-    """Mesh, fabric, shoulder support, arm body and contact of a sleeve computation."""
+def sleeve_shell(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> ShellModel:
+    """The sleeve's tube shell: shoulder end (end0) held, optional gravity along -y."""
     # second-order geometry: the Q2 mid-side nodes lie on the circle (on a first-order mesh they sit on the
     # chords, at R cos(pi / n_around): 1.4 mm closer to the arm on mesh I, a third of the 4.3 mm clearance)
     fmesh = tube(config.length, config.radius, config.n_around, config.n_along, cell="quadrilateral", order=2,
@@ -412,6 +411,13 @@ def build_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
     model.constrain("end0", u=(0.0, 0.0, 0.0), theta=(0.0, 0.0) if config.hold_rotations else None)
     if config.gravity:
         model.add_gravity((0.0, -GRAVITY, 0.0))
+    return model
+
+
+def build_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
+                 petsc_options: dict | None = None) -> SleeveProblem:
+    """Mesh, fabric, shoulder support, arm body and contact of a sleeve computation."""
+    model = sleeve_shell(config, comm)
     flexion = elbow_flexion(angular_velocity=math.radians(config.angular_velocity),
                             final_angle=math.radians(config.final_angle))
     body = default_arm(flexion)
@@ -720,12 +726,7 @@ def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> Exp
     from fabricfem.dynamics import stability
     if config.density <= 0.0:
         raise ValueError("density: the explicit sleeve needs a positive fabric density [kg/m^3]")
-    fmesh = tube(config.length, config.radius, config.n_around, config.n_along, cell="quadrilateral", order=2,
-                 comm=comm)
-    model = ShellModel(fmesh, config.fabric, rebase=False)
-    model.constrain("end0", u=(0.0, 0.0, 0.0), theta=(0.0, 0.0) if config.hold_rotations else None)
-    if config.gravity:
-        model.add_gravity((0.0, -GRAVITY, 0.0))
+    model = sleeve_shell(config, comm)
     model.compile()
     flexion = elbow_flexion(angular_velocity=math.radians(config.flexion_speed),
                             final_angle=math.radians(config.final_angle))

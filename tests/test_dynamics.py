@@ -3,7 +3,6 @@ import csv
 
 import numpy as np
 import pytest
-import scipy.linalg
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -15,6 +14,7 @@ from fabricfem.materials import Fabric
 from fabricfem.meshes import plate
 from fabricfem.shell import ShellModel
 from fabricfem.verify.dynamics import STRIP, cantilever_strip, crossing_frequency, euler_bernoulli_f1
+from modal import first_mode
 
 
 def _component_indicator(model, field, i):
@@ -104,21 +104,6 @@ def test_prestressed_string_explicit():
     assert f == pytest.approx(f1, rel=5e-3)
 
 
-def _first_mode(model):
-    """Dense first eigenpair (omega1, mode as a Vec) of K phi = omega^2 M phi on the free dofs (serial)."""
-    K = model.create_matrix()
-    model.jacobian(model.w.vector, K)
-    M = consistent_mass(model, model.bcs, diagonal=0.0)
-    Kd, Md = K.convert("dense").getDenseArray(), M.convert("dense").getDenseArray()
-    bc = np.concatenate([bc.dof_indices()[0] for bc in model.bcs])
-    free = np.setdiff1d(np.arange(Kd.shape[0]), bc)
-    w2, phi = scipy.linalg.eigh(Kd[np.ix_(free, free)], Md[np.ix_(free, free)], subset_by_index=[0, 0])
-    mode = model.create_vector()
-    mode.set(0.0)
-    mode.getArray()[free] = phi[:, 0]
-    return float(np.sqrt(w2[0])), mode
-
-
 def _decay_rate(times, signal):
     """-slope of ln |local extrema| against time [1/s]."""
     s = np.abs(signal)
@@ -134,7 +119,7 @@ def test_rayleigh_damping_decay(kind):
     Euler-Bernoulli 0.01%, peak sampling +-0.15% per peak."""
     model = cantilever_strip(nx=8)
     model.w.x.array[:] = 0.0
-    omega_fe, mode = _first_mode(model)
+    omega_fe, mode = first_mode(model)
     omega = 2 * np.pi * euler_bernoulli_f1(**STRIP)
     zeta = 0.03
     rayleigh = (2 * zeta * omega, 0.0) if kind == "mass" else (0.0, 2 * zeta / omega)

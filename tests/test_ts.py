@@ -2,13 +2,13 @@
 conservation laws."""
 import numpy as np
 import pytest
-import scipy.linalg
 from mpi4py import MPI
 
-from fabricfem.dynamics import (DynamicsError, GeneralizedAlphaIntegrator, NewmarkIntegrator, consistent_mass,
+from fabricfem.dynamics import (DynamicsError, GeneralizedAlphaIntegrator, NewmarkIntegrator,
                                 node_monitor)
 from fabricfem.verify.dynamics import STRIP, cantilever_strip, crossing_frequency, euler_bernoulli_f1
 from fabricfem.verify.ts_cases import strip_free_vibration
+from modal import first_mode
 
 TIP = np.array([STRIP["L"], 0.0, 0.0])
 
@@ -28,21 +28,6 @@ def chung_hulbert_amplification(rho_inf: float, omega_dt: float) -> np.ndarray:
     lhs = np.array([[1.0, 0.0, -beta], [0.0, 1.0, -gamma], [(1.0 - alpha_f) * x2, 0.0, 1.0 - alpha_m]])
     rhs = np.array([[1.0, 1.0, 0.5 - beta], [0.0, 1.0, 1.0 - gamma], [-alpha_f * x2, 0.0, -alpha_m]])
     return np.linalg.eigvals(np.linalg.solve(lhs, rhs))
-
-
-def _first_mode(model):
-    """Dense first eigenpair (omega1 [rad/s], mode as a Vec) of K phi = omega^2 M phi on the free dofs (serial)."""
-    K = model.create_matrix()
-    model.jacobian(model.w.vector, K)
-    M = consistent_mass(model, model.bcs, diagonal=0.0)
-    Kd, Md = K.convert("dense").getDenseArray(), M.convert("dense").getDenseArray()
-    bc = np.concatenate([bc.dof_indices()[0] for bc in model.bcs])
-    free = np.setdiff1d(np.arange(Kd.shape[0]), bc)
-    w2, phi = scipy.linalg.eigh(Kd[np.ix_(free, free)], Md[np.ix_(free, free)], subset_by_index=[0, 0])
-    mode = model.create_vector()
-    mode.set(0.0)
-    mode.getArray()[free] = phi[:, 0]
-    return float(np.sqrt(w2[0])), mode
 
 
 def _two_root_fit(signal: np.ndarray) -> complex:
@@ -93,7 +78,7 @@ def test_numerical_dissipation_matches_spectral_radius(rho_inf):
     the Newton tolerance (1e-9 relative per step)."""
     model = cantilever_strip(nx=8)
     model.w.x.array[:] = 0.0
-    omega, mode = _first_mode(model)
+    omega, mode = first_mode(model)
     mode.scale(1e-6 * STRIP["L"] / abs(mode.getArray()[model.owned_node_dof(TIP, "u", 2)]))
     omega_dt = 1.0
     integrator = GeneralizedAlphaIntegrator(model, omega_dt / omega, rho_inf=rho_inf, load_factor=0.0)

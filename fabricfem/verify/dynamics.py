@@ -37,6 +37,19 @@ def cantilever_strip(nx: int = 20, comm=MPI.COMM_WORLD, L: float = STRIP["L"], w
     return model
 
 
+def static_tip_deflection(model: ShellModel, tip: np.ndarray) -> float:
+    """w [m] at `tip` of the static equilibrium under the full load (the centre of the free vibration); the
+    model is reset to the undeformed state with load factor 1 afterwards (released from rest)."""
+    model.set_load_factor(1.0)
+    solver = NewtonSolver(model)
+    if not solver.solve().converged:
+        raise RuntimeError("static solve of the free-vibration strip failed")
+    solver.destroy()
+    w_static = float(model.node_value(tip)[2])
+    model.w.x.array[:] = 0.0
+    return w_static
+
+
 def crossing_frequency(times: np.ndarray, signal: np.ndarray) -> float:
     """Frequency [Hz] from the linearly interpolated zero crossings of `signal` (first to last crossing)."""
     s = np.asarray(signal)
@@ -75,14 +88,7 @@ def free_vibration(nx: int = 20, steps_per_period: int = 40, n_steps: int = 200)
         model = cantilever_strip(nx)
         tip = np.array([STRIP["L"], 0.0, 0.0])
         f1 = euler_bernoulli_f1(**STRIP)
-        # static equilibrium under the load: the centre of the oscillation
-        model.set_load_factor(1.0)
-        solver = NewtonSolver(model)
-        if not solver.solve().converged:
-            raise RuntimeError("static solve of the free-vibration strip failed")
-        solver.destroy()
-        w_static = float(model.node_value(tip)[2])
-        model.w.x.array[:] = 0.0
+        w_static = static_tip_deflection(model, tip)  # the centre of the oscillation
         dt = 1.0 / (f1 * steps_per_period)
         newmark = NewmarkIntegrator(model, dt, beta=0.25, gamma=0.5, load_factor=1.0)
         history = newmark.run(n_steps, monitors={"tip_w": node_monitor(model, tip, "u", 2)})
