@@ -33,6 +33,7 @@ from petsc4py import PETSc
 
 import basix
 from fabricfem.forms import shell as shell_forms
+from fabricfem.materials import positive_number
 
 
 def _check_density(model) -> float:
@@ -50,12 +51,9 @@ def rotational_inertia_factor(model) -> float:
 
 def rotary_scale(value) -> float:
     """The rotary-inertia scale factor s >= 1 (finite) or ValueError naming `rotary_inertia_scale`."""
-    try:
-        s = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"rotary_inertia_scale must be a number >= 1, got {value!r}") from None
-    if not (np.isfinite(s) and s >= 1.0):
-        raise ValueError(f"rotary_inertia_scale must be a finite number >= 1 (1: physical rotary inertia), got {value!r}")
+    s = positive_number("rotary_inertia_scale", value)
+    if s < 1.0:
+        raise ValueError(f"rotary_inertia_scale must be >= 1 (1: physical rotary inertia), got {value!r}")
     return s
 
 
