@@ -212,11 +212,8 @@ class ObstacleShell(ShellModel):
         self.contact = ContactProblem(self, obstacles, penalty=penalty)
 
     def _subtract_contact_force(self, b: PETSc.Vec):
-        if self.contact is None:
-            return
-        state = self.contact.evaluate()  # at self.w, which the shell's assembly has just set
-        free = self.contact._free
-        b.getArray()[self.contact.nodes.dofs[free]] -= state.force[free]
+        if self.contact is not None:
+            self.contact.subtract_force(b)  # at self.w, which the shell's assembly has just set
 
     def internal_force(self, x: PETSc.Vec, b: PETSc.Vec):
         """b = R_int(x) - f_contact(x)."""
@@ -229,14 +226,8 @@ class ObstacleShell(ShellModel):
 
     def add_contact_tangent(self, A: PETSc.Mat):
         """A += the contact stiffness blocks at the current state self.w (free displacement rows)."""
-        if self.contact is None:
-            return
-        state = self.contact.evaluate()
-        free = self.contact._free.astype(float)
-        rows = self.contact.nodes.dofs.astype(PETSc.IntType)
-        A.setValuesLocalRCV(rows, rows, state.stiffness * free[:, :, None] * free[:, None, :],
-                            addv=PETSc.InsertMode.ADD_VALUES)
-        A.assemble()
+        if self.contact is not None:
+            self.contact.add_tangent(A)
 
     def jacobian(self, x: PETSc.Vec, A: PETSc.Mat):
         super().jacobian(x, A)

@@ -212,14 +212,21 @@ class ContactProblem:
     def residual(self, x: PETSc.Vec, b: PETSc.Vec):
         """b = R_shell(x) - f_contact(x) (Dirichlet rows untouched)."""
         self.model.residual(x, b)
-        s = self.evaluate()
-        arr = b.getArray()
-        free = self._free
-        arr[self.nodes.dofs[free]] -= s.force[free]   # owned rows only: no double counting of ghosts
+        self.subtract_force(b)
 
     def jacobian(self, x: PETSc.Vec, A: PETSc.Mat):
         """A = J_shell(x) + sum_i K_i (3x3 nodal blocks on the free displacement rows and columns)."""
         self.model.jacobian(x, A)
+        self.add_tangent(A)
+
+    def subtract_force(self, b: PETSc.Vec):
+        """b -= f_contact at the model's current state (free displacement rows of the owned nodes)."""
+        s = self.evaluate()
+        free = self._free
+        b.getArray()[self.nodes.dofs[free]] -= s.force[free]   # owned rows only: no double counting of ghosts
+
+    def add_tangent(self, A: PETSc.Mat):
+        """A += the contact stiffness blocks at the model's current state (free displacement rows/columns)."""
         s = self.evaluate()
         free = self._free.astype(float)
         blocks = s.stiffness * free[:, :, None] * free[:, None, :]
