@@ -248,6 +248,7 @@ class SleeveConfig:
     angular_velocity: float = 45.0       # deg/s (sets the body time t = alpha / omega only)
     min_angle_step: float = 0.05         # deg
     hold_rotations: bool = False         # also clamp the director rotations at the shoulder
+    quadrature: tuple[int, int] = (4, 2)  # (full, reduced) PSRI degrees of ShellModel; (4, 4) = no reduction
     stabilization: float = 1e-2          # c / (E t / R^2): viscous regularisation of unstable steps (Stabilized)
     predictor: bool = True               # forearm contact nodes follow the forearm's rotation (_predict)
     relaxation_steps: int = 40           # pseudo-time relaxations at one angle after a stabilised solve
@@ -262,6 +263,10 @@ class SleeveConfig:
             v = getattr(self, key)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
                 raise ValueError(f"{key} must be a positive number, got {v!r}")
+        q = self.quadrature
+        if not (isinstance(q, tuple) and len(q) == 2 and all(isinstance(d, int) and d >= 1 for d in q) and q[0] >= q[1]):
+            raise ValueError(f"quadrature must be (full, reduced) positive integer degrees with full >= reduced, "
+                             f"got {q!r}")
         if not (isinstance(self.density, (int, float)) and self.density >= 0.0):
             raise ValueError(f"density must be >= 0 [kg/m^3], got {self.density!r}")
         if not (isinstance(self.friction, (int, float)) and math.isfinite(self.friction) and self.friction >= 0.0):
@@ -407,7 +412,7 @@ def sleeve_shell(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> Shell
     # no director re-basing: re-basing moves the discrete equilibrium by O(h^2) between steps (measured on
     # mesh I: a residual of 10% of the contact forces after every step); the rotations stay far from the
     # two-angle singularity (|theta1| = pi/2) during a 57-degree flexion
-    model = ShellModel(fmesh, config.fabric, rebase=False)
+    model = ShellModel(fmesh, config.fabric, rebase=False, psri_degrees=config.quadrature)
     model.constrain("end0", u=(0.0, 0.0, 0.0), theta=(0.0, 0.0) if config.hold_rotations else None)
     if config.gravity:
         model.add_gravity((0.0, -GRAVITY, 0.0))

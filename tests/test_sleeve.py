@@ -61,6 +61,7 @@ def test_bad_sleeve_scene_fails_before_meshing(mutate, message, monkeypatch):
     (dict(method="mortar"), r"method must be"),
     (dict(solver="quasistatic", method="lagrange"), r"method must be one of \('penalty', 'augmented'\)"),
     (dict(rotary_inertia_scale=0.5), r"rotary_inertia_scale must be"),
+    (dict(quadrature=(2, 4)), r"quadrature must be"),
     (dict(time_step_safety=1.2), r"time_step_safety must lie in"),
 ])
 def test_bad_config_names_the_parameter(kwargs, message):
