@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
                          help="reduced smoke-test runs (stability-map: one k/rho, the smallest mesh, short runs; "
                               "speed-accuracy: t = 0.3 s, two levels per method, one timing)")
     p_study = sub.add_parser("study", help="parameter studies (CSV + PNG per figure)")
-    p_study.add_argument("name", choices=["sleeve", "unit-cell"],
+    p_study.add_argument("name", choices=["sleeve", "unit-cell", "fabric-link"],
                          help="study to run (sleeve: thesis sec. 5.3; unit-cell: thesis sec. 4.3.5, Figs. 21-28, 32-33)")
     p_study.add_argument("--quick", action="store_true", help="coarse mesh and few angle steps (reduced)")
     p_study.add_argument("--out", default="results/sleeve_study")
@@ -122,6 +122,11 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "demo":
         from fabricfem.demo import rollup_demo
         rollup_demo(args.out)
+        return 0
+    if args.command == "study" and args.name == "fabric-link":
+        from fabricfem.unit_cell_link import OUT_DIR, run_fabric_link
+        meshes = ((10, 13),) if args.quick else ((10, 13), (20, 26))
+        run_fabric_link(OUT_DIR if args.out == "results/sleeve_study" else args.out, sleeve_meshes=meshes)
         return 0
     if args.command == "study" and args.name == "unit-cell":
         from fabricfem.study_unit_cell import run_study as run_unit_cell_study

@@ -265,20 +265,9 @@ def convexity_points(strains: np.ndarray, n_grid: int = 9) -> np.ndarray:
     return np.vstack([cloud, grid])
 
 
-def _hessian_eigen(H_basis: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Eigenvalues (m, 3) ascending and eigenvectors (m, 3, 3) of H(x_i) = H_basis_i @ c."""
-    return np.linalg.eigh(H_basis @ c)
-
-
-def _relative_rms(G: np.ndarray, c: np.ndarray, b: np.ndarray) -> float:
-    nb = float(np.linalg.norm(b))
-    r = float(np.linalg.norm(G @ c - b))
-    return r / nb if nb > 0 else r
-
-
 def fit_membrane_law(samples: MembraneSamples, degree: int = 4, *, min_curvature_ratio: float = 1e-6,
                      repair: bool = True, max_residual: float = 0.05, n_grid: int = 9,
-                     max_rounds: int = 30) -> FittedMembraneLaw:
+                     max_rounds: int = 30, initial_stiffness: np.ndarray | None = None) -> FittedMembraneLaw:
     """Least-squares polynomial W of `degree` (>= 2) whose gradient matches the resultants.
 
     min_curvature_ratio: the Hessian counts as positive definite where its smallest eigenvalue is at
@@ -287,6 +276,10 @@ def fit_membrane_law(samples: MembraneSamples, degree: int = 4, *, min_curvature
         (otherwise raise ValueError). max_residual: largest acceptable relative RMS residual of the
         repaired fit (the data are then judged non-convex: ValueError naming `resultants`).
     n_grid: grid points per axis of the convexity check; max_rounds: cutting-plane rounds.
+    initial_stiffness: optional measured small-strain stiffness A0 [N/m] (3x3 Voigt, orthotropic: A13 =
+        A23 = 0, symmetric); the Hessian of W at eps = 0 is then held equal to it (the quadratic
+        coefficients are fixed: c_200 = A11/2, c_110 = A12, c_020 = A22/2, c_002 = A33/2) and only the
+        higher-order terms are fitted. Without it the quadratic terms are fitted like the others.
     """
     if not isinstance(samples, MembraneSamples):
         raise ValueError(f"samples must be MembraneSamples, got {type(samples).__name__}")
@@ -297,23 +290,31 @@ def fit_membrane_law(samples: MembraneSamples, degree: int = 4, *, min_curvature
     if isinstance(n_grid, bool) or int(n_grid) != n_grid or n_grid < 2:
         raise ValueError(f"n_grid must be an integer >= 2, got {n_grid!r}")
     X, N = samples.strains, samples.resultants
-    K = len(exps)
-    G = gradient_basis(X, exps).reshape(-1, K)  # rows: sample i, component j
     b = N.reshape(-1)
     if not np.any(b):
         raise ValueError("resultants are all zero: nothing to fit")
+    c_fixed = np.zeros(len(exps))
+    free = np.ones(len(exps), dtype=bool)
+    if initial_stiffness is not None:
+        c_fixed, free = _quadratic_from_stiffness(initial_stiffness, exps)
+    K = int(free.sum())
+    G_all = gradient_basis(X, exps).reshape(-1, len(exps))  # rows: sample i, component j
+    G = G_all[:, free]
+    b = b - G_all @ c_fixed  # what the free (higher-order) terms must supply
     scale = np.linalg.norm(G, axis=0)  # column scaling for conditioning
     rank = int(np.linalg.matrix_rank(G / np.where(scale > 0, scale, 1.0), tol=1e-10)) if np.all(scale > 0) else 0
     if G.shape[0] < K or rank < K:
         raise ValueError(
             f"samples: {len(X)} strain states give {G.shape[0]} stress equations of rank {rank}, fewer than the "
-            f"{K} coefficients of a degree-{int(degree)} energy; add states (biaxial and shear) or lower degree")
+            f"{K} free coefficients of a degree-{int(degree)} energy; add states (biaxial and shear) or lower degree")
     Gs = G / scale
     cs, *_ = np.linalg.lstsq(Gs, b, rcond=None)
 
     points = convexity_points(X, n_grid)
-    H_basis = hessian_basis(points, exps) / scale  # acts on the scaled coefficients
-    eigval, eigvec = _hessian_eigen(H_basis, cs)
+    H_all = hessian_basis(points, exps)
+    H_basis = H_all[..., free] / scale  # acts on the scaled free coefficients
+    H_offset = H_all @ c_fixed  # (m, 3, 3): the fixed quadratic part (constant)
+    eigval, eigvec = _hessian_eigen(H_basis, cs, H_offset)
     reference = float(eigval[:, -1].max())
     if not reference > 0:
         raise ValueError("resultants: the fitted energy has no positive curvature on the data (stress does "
@@ -324,19 +325,54 @@ def fit_membrane_law(samples: MembraneSamples, degree: int = 4, *, min_curvature
         if not repair:
             raise ValueError(f"resultants: the fitted energy is not convex on the data hull (min Hessian "
                              f"eigenvalue {eigval[:, 0].min():.4g} N/m < {margin:.4g} N/m) and repair=False")
-        cs = _repair_convexity(Gs, b, cs, H_basis, margin, max_rounds)
+        cs = _repair_convexity(Gs, b, cs, H_basis, margin, max_rounds, H_offset)
         repaired = True
-        eigval, _ = _hessian_eigen(H_basis, cs)
-    residual = _relative_rms(Gs, cs, b)
+        eigval, _ = _hessian_eigen(H_basis, cs, H_offset)
+    residual = _relative_rms(Gs, cs, b, N.reshape(-1))
     if repaired and residual > max_residual:
         raise ValueError(f"resultants: the data are not representable by a convex degree-{int(degree)} energy: the "
                          f"convexity-repaired fit leaves a relative RMS residual {residual:.3g} > max_residual = "
                          f"{max_residual:.3g}")
-    c = cs / scale
+    c = c_fixed.copy()
+    c[free] = cs / scale
     return FittedMembraneLaw(exponents=tuple(map(tuple, exps.tolist())), coefficients=tuple(c.tolist()),
                              strain_min=tuple(X.min(axis=0)), strain_max=tuple(X.max(axis=0)),
                              relative_rms_residual=residual, min_eigenvalue=float(eigval[:, 0].min()),
                              max_eigenvalue=float(eigval[:, -1].max()), n_samples=len(X), repaired=repaired)
+
+
+def _quadratic_from_stiffness(A0, exps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Fixed coefficients (K,) and the mask of free ones for W = 1/2 eps.A0 eps + higher order terms."""
+    A0 = np.asarray(A0, dtype=float)
+    if A0.shape != (3, 3) or not np.all(np.isfinite(A0)):
+        raise ValueError(f"initial_stiffness must be a finite 3x3 matrix [N/m], got {A0!r}")
+    size = float(np.abs(A0).max())
+    if not size > 0 or np.abs(A0 - A0.T).max() > 1e-12 * size:
+        raise ValueError(f"initial_stiffness must be symmetric and non-zero, got {A0.tolist()}")
+    if abs(A0[0, 2]) > 1e-12 * size or abs(A0[1, 2]) > 1e-12 * size:
+        raise ValueError("initial_stiffness: A13 and A23 must vanish (W is even in the shear strain)")
+    if np.linalg.eigvalsh(A0)[0] < 0:
+        raise ValueError(f"initial_stiffness must be positive semi-definite, got {A0.tolist()}")
+    values = {(2, 0, 0): A0[0, 0] / 2, (1, 1, 0): A0[0, 1], (0, 2, 0): A0[1, 1] / 2, (0, 0, 2): A0[2, 2] / 2}
+    c_fixed = np.zeros(len(exps))
+    free = np.ones(len(exps), dtype=bool)
+    for k, e in enumerate(map(tuple, exps.tolist())):
+        if e in values:
+            c_fixed[k], free[k] = values[e], False
+    return c_fixed, free
+
+
+def _hessian_eigen(H_basis: np.ndarray, c: np.ndarray, offset: np.ndarray | float = 0.0
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues (m, 3) ascending and eigenvectors (m, 3, 3) of H(x_i) = H_basis_i @ c + offset_i."""
+    return np.linalg.eigh(H_basis @ c + offset)
+
+
+def _relative_rms(G: np.ndarray, c: np.ndarray, b: np.ndarray, total: np.ndarray | None = None) -> float:
+    """|G c - b| / |total| (total: the full resultants; b by default)."""
+    nb = float(np.linalg.norm(b if total is None else total))
+    r = float(np.linalg.norm(G @ c - b))
+    return r / nb if nb > 0 else r
 
 
 def _least_squares_with_inequalities(Gs: np.ndarray, b: np.ndarray, C: np.ndarray, h: np.ndarray) -> np.ndarray:
@@ -359,14 +395,15 @@ def _least_squares_with_inequalities(Gs: np.ndarray, b: np.ndarray, C: np.ndarra
 
 
 def _repair_convexity(Gs: np.ndarray, b: np.ndarray, cs: np.ndarray, H_basis: np.ndarray, margin: float,
-                      max_rounds: int) -> np.ndarray:
-    """Least squares subject to v.H(x)v >= 2 margin at the cut points (x, v), cuts added where the
-    smallest eigenvalue falls below margin (cutting planes on a convex quadratic programme). The margin
-    keeps its ratio to the largest eigenvalue of the current fit."""
-    cuts = np.empty((0, len(cs)))
-    ratio = margin / float(_hessian_eigen(H_basis, cs)[0][:, -1].max())
+                      max_rounds: int, H_offset: np.ndarray | float = 0.0) -> np.ndarray:
+    """Least squares subject to v.H(x)v >= 2 margin at the cut points (x, v), H = H_basis c + H_offset, cuts
+    added where the smallest eigenvalue falls below margin (cutting planes on a convex quadratic programme).
+    The margin keeps its ratio to the largest eigenvalue of the current fit."""
+    cuts, rhs = np.empty((0, len(cs))), np.empty(0)
+    offset = np.broadcast_to(np.asarray(H_offset, dtype=float), H_basis.shape[:3])
+    ratio = margin / float(_hessian_eigen(H_basis, cs, offset)[0][:, -1].max())
     for _ in range(max_rounds):
-        eigval, eigvec = _hessian_eigen(H_basis, cs)
+        eigval, eigvec = _hessian_eigen(H_basis, cs, offset)
         margin = ratio * float(eigval[:, -1].max())  # relative to the current fit's stiffest curvature
         bad = np.flatnonzero(eigval[:, 0] < margin)
         if len(bad) == 0:
@@ -374,8 +411,10 @@ def _repair_convexity(Gs: np.ndarray, b: np.ndarray, cs: np.ndarray, H_basis: np
         bad = bad[np.argsort(eigval[bad, 0])][:60]  # the worst points first
         v = eigvec[bad, :, 0]
         new = np.einsum("mi,mijk,mj->mk", v, H_basis[bad], v) / margin  # rows: v.H_k v / margin
+        fixed = np.einsum("mi,mij,mj->m", v, offset[bad], v) / margin
         cuts = np.vstack([cuts, new])
-        cs = _least_squares_with_inequalities(Gs, b, cuts, np.full(len(cuts), 2.0))
+        rhs = np.concatenate([rhs, 2.0 - fixed])
+        cs = _least_squares_with_inequalities(Gs, b, cuts, rhs)
     raise ValueError(f"resultants: the convexity repair did not converge in max_rounds = {max_rounds} rounds")
 
 
