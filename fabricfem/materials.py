@@ -80,7 +80,8 @@ class Fabric:
         bending_rigidity: optional (B1, B2) [N m] overriding E t^3/12 (warp, weft)
         bending_law: optional nonlinear moment-curvature law per direction
         membrane_law: optional fitted membrane energy W(E11, E22, 2 E12) [J/m^2]
-            (fabricfem.fitted_law.FittedMembraneLaw, built with fitted_law.fitted_fabric); when given,
+            (fabricfem.fitted_law.FittedMembraneLaw or ConvexMembraneLaw, built with
+            fitted_law.fitted_fabric); when given,
             ShellModel uses it instead of 1/2 eps.A eps and E1, E2, G12, nu12 describe its
             small-strain stiffness only
     """
@@ -117,10 +118,11 @@ class Fabric:
                 raise ValueError("bending_rigidity must be a pair (B1, B2) in N m")
             positive_number("bending_rigidity[0]", self.bending_rigidity[0])
             positive_number("bending_rigidity[1]", self.bending_rigidity[1])
-        if self.membrane_law is not None and not (hasattr(self.membrane_law, "exponents")
-                                                  and hasattr(self.membrane_law, "coefficients")):
-            raise ValueError("membrane_law must be a fabricfem.fitted_law.FittedMembraneLaw (exponents and "
-                             f"coefficients), got {type(self.membrane_law).__name__}")
+        if self.membrane_law is not None and not (hasattr(self.membrane_law, "parameters")
+                                                  and callable(getattr(self.membrane_law, "ufl_energy", None))):
+            raise ValueError("membrane_law must be a fitted membrane law (fabricfem.fitted_law.FittedMembraneLaw "
+                             "or ConvexMembraneLaw: .parameters and .ufl_energy(eps, parameters)), got "
+                             f"{type(self.membrane_law).__name__}")
 
     @classmethod
     def isotropic(cls, E: float, nu: float, thickness: float, density: float = 0.0, **kw) -> "Fabric":

@@ -23,7 +23,6 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fabricfem import probe
-from fabricfem.forms import fitted as fitted_forms
 from fabricfem.forms import loads as load_forms
 from fabricfem.forms import shell as shell_forms
 from fabricfem.materials import Fabric, SquareRootBending
@@ -117,11 +116,11 @@ class ShellModel:
         membrane_density = None
         if fabric.membrane_law is not None:
             # fitted membrane energy W(E11, E22, 2 E12) [J/m^2] (fabricfem.fitted_law) instead of 1/2 eps.A eps
+            # (any law with .parameters and .ufl_energy(eps, parameters): polynomial or convex-ridge)
             self.membrane_coefficients = fem.Constant(
-                mesh, PETSc.ScalarType(np.asarray(fabric.membrane_law.coefficients, dtype=float)))
-            membrane_density = functools.partial(fitted_forms.polynomial_energy,
-                                                 exponents=fabric.membrane_law.exponents,
-                                                 coefficients=self.membrane_coefficients)
+                mesh, PETSc.ScalarType(np.asarray(fabric.membrane_law.parameters, dtype=float)))
+            membrane_density = functools.partial(fabric.membrane_law.ufl_energy,
+                                                 parameters=self.membrane_coefficients)
 
         if model == "naghdi":
             law = fabric.bending_law

@@ -10,11 +10,12 @@ torques N m, lengths m):
      mechanism). The shear stiffness appears with the contact pressure at the crossovers; it is measured
      at the thesis' "small biaxial pre-stretching" Phi11 = Phi22 = 1.02 of its shear tests (sec. 4.3.5.1),
      the first state with the crossovers in contact. The fitted W has Hessian at E = 0 held to
-     A0 = [[A11, A12, 0], [A12, A22, 0], [0, 0, A33(contact)]] (fit_membrane_law(initial_stiffness=...)),
+     A0 = [[A11, A12, 0], [A12, A22, 0], [0, 0, A33(contact)]] (fit_contact_law),
      i.e. the fabric is modelled as woven with its crossovers in contact, as real woven fabric is.
   2. samples: `contact_grid_paths` (biaxial ratios and shear at three pre-stretches), each path opened
      by a small first increment (a small-strain sample), every converged step a sample; fit
-     (`fit_contact_law`), store as fabricfem/fabrics/plain-weave-ti-contact.json.
+     (`fit_contact_law`: by default the law convex at every strain by construction,
+     fabricfem.fitted_law.ConvexMembraneLaw), store as fabricfem/fabrics/plain-weave-ti-contact.json.
   3. strip comparison (`strip_against_unit_cell`): membrane strip in uniaxial tension with the fitted law,
      then the unit cell driven along the strip's strain path (E11, E22).
   4. sleeve flexion with the unit-cell fabric vs an orthotropic SVK fabric of the same small-strain
@@ -33,8 +34,8 @@ import numpy as np
 from mpi4py import MPI
 from scipy.optimize import brentq
 
-from fabricfem.fitted_law import FittedMembraneLaw, MembraneSamples, fit_membrane_law, fitted_fabric, \
-    samples_from_steps
+from fabricfem.fitted_law import ConvexMembraneLaw, FittedMembraneLaw, MembraneSamples, fit_convex_law, \
+    fit_membrane_law, fitted_fabric, samples_from_steps
 from fabricfem.materials import Fabric
 from fabricfem.meshes.unit_cell import unit_cell
 from fabricfem.meshes.yarn_geometry import PlainWeave
@@ -195,12 +196,68 @@ def load_samples(path: str | Path) -> MembraneSamples:
     return MembraneSamples(data[:, :3], data[:, 3:])
 
 
-def fit_contact_law(samples: MembraneSamples, stiffness: InitialStiffness, degree: int = 5) -> FittedMembraneLaw:
-    """W of `degree` fitted to the samples with its Hessian at E = 0 held to stiffness.A0."""
-    return fit_membrane_law(samples, degree=degree, initial_stiffness=stiffness.A0)
+LAW_KINDS = ("convex", "polynomial")
 
 
-def contact_fabric(law: FittedMembraneLaw, name: str = FABRIC_NAME, density: float = 436.0) -> Fabric:
+def fit_contact_law(samples: MembraneSamples, stiffness: InitialStiffness | np.ndarray, kind: str = "convex",
+                    degree: int = 5) -> FittedMembraneLaw | ConvexMembraneLaw:
+    """W fitted to the samples with its Hessian at E = 0 held to A0 (stiffness.A0, or a 3x3 matrix [N/m]).
+
+    kind "convex" (default, stored): fabricfem.fitted_law.ConvexMembraneLaw, convex at every strain by
+    construction (NNLS fit); "polynomial": FittedMembraneLaw of `degree`, convex only on the data hull
+    (convexity repair), not outside it (the sleeve buckles into compressive, sheared states outside)."""
+    A0 = stiffness.A0 if isinstance(stiffness, InitialStiffness) else np.asarray(stiffness, dtype=float)
+    if kind == "convex":
+        return fit_convex_law(samples, A0)
+    if kind == "polynomial":
+        return fit_membrane_law(samples, degree=degree, initial_stiffness=A0)
+    raise ValueError(f"kind must be one of {LAW_KINDS}, got {kind!r}")
+
+
+def law_summary(law: FittedMembraneLaw | ConvexMembraneLaw) -> str:
+    """One line: type, samples, relative RMS residual and the convexity evidence of the law."""
+    if isinstance(law, ConvexMembraneLaw):
+        convexity = (f"convex everywhere by construction (Hessian >= A0, min eigenvalue of A0 "
+                     f"{law.min_eigenvalue:.5g} N/m), {len(law.terms)} active terms")
+    else:
+        convexity = (f"Hessian eigenvalues on the data hull [{law.min_eigenvalue:.4g}, {law.max_eigenvalue:.4g}] "
+                     f"N/m, repaired {law.repaired}")
+    return (f"{law.to_dict()['type']}: {law.n_samples} samples, relative RMS residual "
+            f"{law.relative_rms_residual:.4f}; {convexity}")
+
+
+def save_contact_fabrics(law: FittedMembraneLaw | ConvexMembraneLaw, prestretch: float = PRESTRETCH,
+                         samples_note: str = f"contact_grid_paths(1.06, 0.1) (docs/figures/fabric_link/{SAMPLES_CSV})"
+                         ) -> Fabric:
+    """Store the unit-cell fabric of `law` as fabricfem/fabrics/plain-weave-ti-contact.json and its SVK
+    counterpart (same small-strain constants) as plain-weave-ti-contact-svk.json; returns the fabric."""
+    from fabricfem.fabrics import FABRICS_DIR, save_fabric
+    fabric = contact_fabric(law)
+    A0 = law.initial_stiffness
+    what = ("W(E11, E22, 2E12) = 1/2 eps.A0.eps + non-negative sums of convex C2 ridge functions <l.eps - s>^n, "
+            "(l.eps)^4, (l.eps)^6 (convex at every strain by construction), fitted by NNLS"
+            if isinstance(law, ConvexMembraneLaw) else f"polynomial W(E11, E22, 2E12) of degree {law.degree}, fitted")
+    save_fabric(fabric, FABRICS_DIR / f"{FABRIC_NAME}.json",
+                description=(
+                    f"Plain weave of thesis sec. 4.3.5 (PlainWeave.balanced(), TI yarns), membrane energy {what} "
+                    f"to the homogenized unit cell WITH yarn contact. "
+                    f"Hessian at E = 0 held to the measured A0: A11 = A22 = {A0[0, 0]:.6g} N/m (crimp, by "
+                    f"central differences at Phi = I, contact inactive), A12 = {A0[0, 1]:.3g} N/m; the shear "
+                    f"stiffness at Phi = I is zero (trellis mechanism of the non-touching yarns), so A33 = "
+                    f"{A0[2, 2]:.6g} N/m is the tangent at the thesis' shear pre-stretch Phi11 = Phi22 = "
+                    f"{prestretch} with the crossovers in contact. Data: 0 <= E11, E22 <= 0.067 (down to -0.015 "
+                    f"laterally), |2E12| <= 0.21. Density nominal (thesis fabric I); bending t^3/12 Q0."),
+                source=(f"fabricfem.unit_cell_link.fit_contact_law: coarse quarter cell, contact, "
+                        f"{law.n_samples} samples on {samples_note}; {law_summary(law)}"))
+    save_fabric(svk_counterpart(fabric), FABRICS_DIR / f"{SVK_NAME}.json",
+                description=f"Orthotropic St. Venant-Kirchhoff fabric with the small-strain E1, E2, G12, nu12, "
+                            f"thickness and density of {FABRIC_NAME} (the difference is the nonlinearity)",
+                source="fabricfem.unit_cell_link.svk_counterpart")
+    return fabric
+
+
+def contact_fabric(law: FittedMembraneLaw | ConvexMembraneLaw, name: str = FABRIC_NAME,
+                   density: float = 436.0) -> Fabric:
     """The unit-cell fabric: thickness = cell height [m]; density nominal (thesis fabric I, 436 kg/m^3:
     the cell gives none)."""
     return fitted_fabric(law, weave_thickness(), density, name=name)
@@ -336,17 +393,16 @@ def sleeve_comparison(out_dir: str | Path = OUT_DIR, n_around: int = 10, n_along
                     w.writerow([name, f"{s.angle:.6g}", f"{s.torque:.8g}", f"{s.torque_all:.8g}",
                                 f"{s.contact_force:.8g}", f"{s.strain_energy:.8g}", h.failure])
         plot_torque(out / f"sleeve_torque_{tag}.png", {n: (h.angles, h.torques) for n, h in histories.items()},
-                    title=f"Sleeve flexion, mesh {tag}, mu = {friction}: unit-cell fabric vs SVK of the same "
-                          f"small-strain constants")
+                    title=f"Sleeve, mesh {tag}, mu = {friction}: unit-cell fabric vs SVK (same A0)")
     return histories
 
 
 # ------------------------------------------------------------------------------------- study
 def run_fabric_link(out_dir: str | Path = OUT_DIR, resample: bool = True, sleeve_meshes: Sequence[tuple[int, int]] =
-                    ((10, 13),), comm: MPI.Comm = MPI.COMM_WORLD) -> None:
+                    ((10, 13),), comm: MPI.Comm = MPI.COMM_WORLD, law_kind: str = "convex") -> None:
     """`fabricfem study fabric-link`: steps 1-4 of the module docstring. resample=False reuses the stored
-    samples out_dir/contact_samples.csv (the unit-cell grid takes ~3 min) but re-measures A0."""
-    from fabricfem.fabrics import FABRICS_DIR, save_fabric
+    samples out_dir/contact_samples.csv (the unit-cell grid takes ~3 min) but re-measures A0. law_kind: see
+    fit_contact_law ("convex" is the stored default)."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
 
@@ -360,31 +416,10 @@ def run_fabric_link(out_dir: str | Path = OUT_DIR, resample: bool = True, sleeve
     samples = run_grid(comm=comm, log=log) if resample else load_samples(out / SAMPLES_CSV)
     if resample and comm.rank == 0:
         save_samples(samples, out / SAMPLES_CSV)
-    law = fit_contact_law(samples, stiffness)
-    log(f"fit: {law.n_samples} samples, relative RMS residual {law.relative_rms_residual:.4f}, Hessian eigenvalues "
-        f"[{law.min_eigenvalue:.4g}, {law.max_eigenvalue:.4g}] N/m, repaired {law.repaired}")
-    fabric = contact_fabric(law)
+    law = fit_contact_law(samples, stiffness, kind=law_kind)
+    log(f"fit: {law_summary(law)}")
     if comm.rank == 0:
-        A0 = stiffness.A0
-        save_fabric(fabric, FABRICS_DIR / f"{FABRIC_NAME}.json",
-                    description=(
-                        "Plain weave of thesis sec. 4.3.5 (PlainWeave.balanced(), TI yarns), membrane energy "
-                        "W(E11, E22, 2E12) fitted (degree 5) to the homogenized unit cell WITH yarn contact. "
-                        f"Hessian at E = 0 held to the measured A0: A11 = A22 = {A0[0, 0]:.6g} N/m (crimp, by "
-                        f"central differences at Phi = I, contact inactive), A12 = {A0[0, 1]:.3g} N/m; the shear "
-                        f"stiffness at Phi = I is zero (trellis mechanism of the non-touching yarns), so A33 = "
-                        f"{A0[2, 2]:.6g} N/m is the tangent at the thesis' shear pre-stretch Phi11 = Phi22 = "
-                        f"{stiffness.prestretch} with the crossovers in contact. Valid for 0 <= E11, E22 <= 0.062, "
-                        f"|2E12| <= 0.11. Density nominal (thesis fabric I); bending t^3/12 Q0."),
-                    source=(f"fabricfem.unit_cell_link.run_fabric_link: coarse quarter cell, contact, "
-                            f"{law.n_samples} samples on contact_grid_paths(1.06, 0.1) "
-                            f"(docs/figures/fabric_link/{SAMPLES_CSV}); relative RMS residual "
-                            f"{law.relative_rms_residual:.4f}; min/max Hessian eigenvalue {law.min_eigenvalue:.4g}/"
-                            f"{law.max_eigenvalue:.4g} N/m on the data hull"))
-        save_fabric(svk_counterpart(fabric), FABRICS_DIR / f"{SVK_NAME}.json",
-                    description=f"Orthotropic St. Venant-Kirchhoff fabric with the small-strain E1, E2, G12, nu12, "
-                                f"thickness and density of {FABRIC_NAME} (the difference is the nonlinearity)",
-                    source="fabricfem.unit_cell_link.svk_counterpart")
+        save_contact_fabrics(law, stiffness.prestretch)
     rows = strip_against_unit_cell(law, (0.01, 0.02, 0.03, 0.04), comm=comm)  # E22 stays in the data (>= -0.015)
     log(strip_table(rows))
     if comm.rank == 0:

@@ -8,7 +8,10 @@ A file holds one fabric:
               or {"type": "polynomial-even-shear", "exponents": [[a, b, p], ...],
                   "coefficients": [J/m^2, ...], "strain_min": [...], "strain_max": [...], ...}
                   (fabricfem.fitted_law.FittedMembraneLaw.to_dict: W(E11, E22, 2 E12) fitted to
-                   homogenized unit-cell data; N = dW/deps = t S, resultants in N/m),
+                   homogenized unit-cell data; N = dW/deps = t S, resultants in N/m)
+              or {"type": "convex-ridge", "initial_stiffness": A0 [[N/m]], "directions": [[l1, l2, l3], ...],
+                  "terms": [[direction index, "macaulay" | "even", power], ...], "coefficients": [J/m^2, >= 0],
+                  ...} (fabricfem.fitted_law.ConvexMembraneLaw.to_dict: W convex by construction),
      "bending": {"rigidity": [B1, B2] N m (optional),
                  "law": {"type": "kawabata", "coefficients": [...]} or
                         {"type": "square-root", "B0": N m, "kappa0": 1/m} (optional)},
@@ -24,7 +27,7 @@ import math
 import re
 from pathlib import Path
 
-from fabricfem.fitted_law import LAW_TYPE, FittedMembraneLaw, fitted_fabric
+from fabricfem.fitted_law import MEMBRANE_LAW_TYPES, fitted_fabric, membrane_law_from_dict
 from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
 
 FABRICS_DIR = Path(__file__).resolve().parent
@@ -98,8 +101,8 @@ def fabric_from_dict(data: dict) -> Fabric:
                   bending_law=_bending_law(bending.get("law")), name=str(data["name"]))
     membrane = data["membrane"]
     kind = membrane.get("type")
-    if kind == LAW_TYPE:
-        fabric = fitted_fabric(FittedMembraneLaw.from_dict(membrane), data["thickness"], **common)
+    if kind in MEMBRANE_LAW_TYPES:
+        fabric = fitted_fabric(membrane_law_from_dict(membrane), data["thickness"], **common)
     elif kind == SVK_TYPE:
         for key in ("E1", "E2", "G12", "nu12"):
             if key not in membrane:
@@ -107,7 +110,7 @@ def fabric_from_dict(data: dict) -> Fabric:
         fabric = Fabric(E1=membrane["E1"], E2=membrane["E2"], G12=membrane["G12"], nu12=membrane["nu12"],
                         thickness=data["thickness"], **common)
     else:
-        raise ValueError(f"membrane.type must be {SVK_TYPE!r} or {LAW_TYPE!r}, got {kind!r}")
+        raise ValueError(f"membrane.type must be one of {[SVK_TYPE, *sorted(MEMBRANE_LAW_TYPES)]}, got {kind!r}")
     if "shear_correction" in shear:
         sc = float(shear["shear_correction"])
         if not (math.isfinite(sc) and sc > 0):
@@ -134,8 +137,8 @@ def save_fabric(fabric: Fabric, path: str | Path, description: str = "", source:
     if not isinstance(fabric, Fabric):
         raise ValueError(f"fabric must be a fabricfem.materials.Fabric, got {type(fabric).__name__}")
     text = json.dumps(fabric_to_dict(fabric, description, source), indent=1)
-    # one line per list of numbers (exponent triples, coefficients, ranges)
-    text = re.sub(r"\[[-+\d.eE,\s]*\]", lambda m: re.sub(r"\s+", " ", m.group(0)).replace("[ ", "[")
+    # one line per innermost list (exponent triples, terms, coefficients, ranges)
+    text = re.sub(r"\[[-+\w.,\s\"]*\]", lambda m: re.sub(r"\s+", " ", m.group(0)).replace("[ ", "[")
                   .replace(" ]", "]"), text)
     p.write_text(text + "\n")
     return p
