@@ -1,4 +1,4 @@
-"""Unit-cell study of thesis 000 sec. 4.3.5 (Figs. 21-28, 32-33): `fabricfem study unit-cell`.
+"""Unit-cell study of thesis 000 sec. 4.3.5 (Figs. 20-28, 32-33): `fabricfem study unit-cell`.
 
 Load cases (macroscopic Phi applied in equal increments, thesis sec. 4.3.5):
   biaxial      Phi11 = Phi22 -> 1.2
@@ -6,11 +6,25 @@ Load cases (macroscopic Phi applied in equal increments, thesis sec. 4.3.5):
   shear        biaxial pre-stretch Phi11 = Phi22 = 1.02 (one step), then Phi12 = Phi21 -> 0.2
   compression  Phi11 = Phi22 -> 0.9
 Yarns: isotropic (lambda = 48.82, mu = 32.55 GPa) or transversely isotropic (thesis parameters),
-with or without yarn contact, quarter (option B) or full (option A) cell, coarse or fine mesh, yarn
-end faces exactly periodic or with the thesis' u_z = 0 (ContactUnitCell end_faces; Fig. 27 shows both).
-Every figure gets a CSV (one row per converged step and curve) and a PNG under the output folder.
-A run that stops (Newton/augmentation failure) keeps its converged steps; the CSV column `stopped`
-holds the reason, so a curve shorter than its load case is visible, never silently extrapolated.
+with or without yarn contact, quarter (option B) or full (option A) cell, coarse or fine mesh.
+
+Yarn end faces (ContactUnitCell end_faces). The thesis' figures all use u*_z = 0 on the yarn end
+faces ("uz_fixed", the default here): sec. 4.3.5.3 (seed 000 line 2207) explains the quarter/full
+difference of Fig. 27 by "the boundary conditions applied here. In both unit cell models, the local
+vertical displacements on the end faces of a yarn are restricted. [...] as an end face, the section
+is restricted in the quarter model", and the quarter model is the one of all earlier figures ("The
+previous computations are based the quarter unit cell model", same section); sec. 4.3.5 (line 2149)
+"Periodic boundary conditions are specified on the pair of end faces of each yarn" is met by u*_x,
+u*_y periodic and u*_z = 0 on both faces. The exact periodicity ("periodic") is kept as an extra,
+labelled curve where it is cheap (coarse quarter cell; full-cell biaxial for the Fig. 27 check that
+the quarter cell is then an exact reduction of the full one).
+
+Every figure gets a CSV (one row per converged step and curve) and a PNG under the output folder;
+Figs. 20 and 23 (undeformed and deformed yarns, biaxial extension) are renders (PNG) of the
+deformed surface plus the deformed mesh as XDMF (out/snapshots/, for ParaView: WarpByVector with
+`displacement`). A run that stops (Newton/augmentation failure, time budget) keeps its converged
+steps; the CSV column `stopped` holds the reason, so a curve shorter than its load case is
+visible, never silently extrapolated.
 Units: S in Pa, E dimensionless, forces in N, lengths in m, times in s.
 """
 from __future__ import annotations
@@ -32,6 +46,10 @@ from fabricfem.unit_cell_contact import ContactUnitCell, contact_table
 
 MATERIALS: dict[str, YarnMaterial] = {"iso": THESIS_ISOTROPIC, "ti": THESIS_TRANSVERSELY_ISOTROPIC}
 PRESTRETCH = 1.02  # Phi11 = Phi22 before shear ("a small biaxial pre-stretching", sec. 4.3.5.1)
+THESIS_END_FACES = "uz_fixed"  # sec. 4.3.5.3, see the module docstring
+# wall-time budget [s] of one load case by (option, refinement); the fine cell costs ~40 s per step
+TIME_BUDGET = {("quarter", "coarse"): 240.0, ("full", "coarse"): 420.0, ("quarter", "fine"): 300.0,
+               ("full", "fine"): 300.0}
 
 
 def load_targets(load: str, scale: float = 1.0) -> list[tuple[np.ndarray, int]]:
@@ -58,12 +76,19 @@ class RunKey:
     contact: bool = True
     option: str = "quarter"
     refinement: str = "coarse"
-    end_faces: str = "periodic"  # "periodic" | "uz_fixed" (thesis sec. 4.3.5.3), see ContactUnitCell
+    end_faces: str = THESIS_END_FACES  # "uz_fixed" (thesis, sec. 4.3.5.3) | "periodic", see ContactUnitCell
 
     @property
     def label(self) -> str:
+        ends = "u_z=0" if self.end_faces == "uz_fixed" else self.end_faces
         return (f"{self.material} {self.load} {'contact' if self.contact else 'no contact'} "
-                f"{self.option} {self.refinement}" + ("" if self.end_faces == "periodic" else f" {self.end_faces}"))
+                f"{self.option} {self.refinement}, ends {ends}")
+
+    @property
+    def slug(self) -> str:
+        """File-name form of the key."""
+        return "_".join((self.material, self.load, "contact" if self.contact else "nocontact", self.option,
+                         self.refinement, self.end_faces))
 
 
 @dataclass
@@ -76,10 +101,94 @@ class Run:
     table: str
 
 
+def write_snapshot(model: ContactUnitCell, path: str) -> None:
+    """Deformed state of a solved cell: `path`.xdmf (mesh, `displacement` = (Phi - I) X + u* [m] and
+    the fluctuation u* [m]; collective) and, in serial runs, `path`.npz with the yarn boundary surface
+    (reference points [m], displacement [m], VTK faces, yarn tag per face) for render_configuration."""
+    from dolfinx import fem, io, plot
+    u = model.problem.u
+    V = u.function_space
+    Phi = np.asarray(model.Phi, dtype=float)
+    X = V.tabulate_dof_coordinates()  # (local + ghost nodes, 3), the order of u's blocks
+    disp = fem.Function(V, name="displacement")
+    disp.x.array[:] = (X @ (Phi - np.eye(3)).T + u.x.array.reshape(-1, 3)).reshape(-1)  # y - Y, eq. 4.52
+    mesh = V.mesh
+    with io.XDMFFile(mesh.comm, path + ".xdmf", "w") as xdmf:
+        xdmf.write_mesh(mesh)
+        xdmf.write_function(disp)
+        xdmf.write_function(u)
+    if mesh.comm.size > 1:
+        return  # the surface render is serial only (no gather of the distributed surface)
+    import pyvista
+    topology, cell_types, points = plot.create_vtk_mesh(V)
+    grid = pyvista.UnstructuredGrid(topology, cell_types, points)
+    n_cells = mesh.topology.index_map(3).size_local
+    yarn = np.zeros(n_cells, dtype=np.int32)
+    tags = model.cell.cell_tags
+    own = tags.indices < n_cells
+    yarn[tags.indices[own]] = tags.values[own]
+    grid.cell_data["yarn"] = yarn
+    grid.point_data["displacement"] = disp.x.array.reshape(-1, 3)
+    surface = grid.extract_surface(algorithm="dataset_surface")
+    np.savez(path + ".npz", points=np.asarray(surface.points), faces=np.asarray(surface.faces),
+             displacement=np.asarray(surface.point_data["displacement"]),
+             yarn=np.asarray(surface.cell_data["yarn"]), Phi=Phi)
+
+
+def render_configuration(npz_path: str, png_path: str, title: str) -> str:
+    """Undeformed (left) and deformed (right) yarn surfaces of a write_snapshot .npz as a PNG; pyvista
+    off-screen, else (no OpenGL context) a matplotlib 3-D plot of the same faces. Returns the renderer
+    used ("pyvista" | "matplotlib")."""
+    data = np.load(npz_path)
+    points, faces, disp, yarn = data["points"], data["faces"], data["displacement"], data["yarn"]
+    Phi = data["Phi"]
+    title = f"{title} (Phi11 = {Phi[0, 0]:.4f}, Phi22 = {Phi[1, 1]:.4f}, Phi12 = {Phi[0, 1]:.4f})"
+    try:
+        import pyvista
+        pyvista.OFF_SCREEN = True
+        plotter = pyvista.Plotter(off_screen=True, shape=(1, 2), window_size=(1400, 650))
+        for col, (name, pts) in enumerate((("undeformed", points), ("deformed", points + disp))):
+            plotter.subplot(0, col)
+            surf = pyvista.PolyData(pts, faces)
+            surf.cell_data["yarn"] = yarn
+            plotter.add_mesh(surf, scalars="yarn", cmap="coolwarm", show_edges=True, edge_color="grey",
+                             show_scalar_bar=False)
+            plotter.add_text(f"{title}: {name}", font_size=9)
+            plotter.view_isometric()
+        plotter.link_views()
+        plotter.subplot(0, 1)
+        plotter.reset_camera()  # the shared camera fits the (larger) deformed cell
+        plotter.screenshot(png_path)
+        plotter.close()
+        return "pyvista"
+    except Exception as exc:  # no rendering context: matplotlib fallback
+        print(f"render_configuration: pyvista failed ({exc}); matplotlib fallback")
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+    quads = faces.reshape(-1, 5)[:, 1:] if np.all(faces[::5] == 4) else None
+    if quads is None:
+        raise ValueError(f"npz_path: {npz_path} holds non-quadrilateral faces")
+    fig = plt.figure(figsize=(12, 5.5))
+    for col, (name, pts) in enumerate((("undeformed", points), ("deformed", points + disp))):
+        ax = fig.add_subplot(1, 2, col + 1, projection="3d")
+        colours = np.where(yarn == yarn.min(), "tab:blue", "tab:red")
+        ax.add_collection3d(Poly3DCollection(pts[quads], facecolors=colours, edgecolor="grey", linewidth=0.2))
+        lo, hi = (points + disp).min(0), (points + disp).max(0)
+        ax.set_xlim(lo[0], hi[0]); ax.set_ylim(lo[1], hi[1]); ax.set_zlim(lo[2], hi[2])
+        ax.set_box_aspect(hi - lo)
+        ax.set_title(f"{title}: {name}", fontsize=9)
+    fig.savefig(png_path, dpi=110)
+    plt.close(fig)
+    return "matplotlib"
+
+
 def run_case(key: RunKey, steps: int, scale: float = 1.0, weave: PlainWeave | None = None,
-             comm: MPI.Comm = MPI.COMM_WORLD, time_budget: float = math.inf) -> Run:
+             comm: MPI.Comm = MPI.COMM_WORLD, time_budget: float = math.inf, snapshot: str | None = None) -> Run:
     """Solve one load case; returns the converged steps (rows) and why it stopped, if it did (solver
-    failure after the bisections, or `time_budget` [s] of wall time used up: no new step is started)."""
+    failure after the bisections, or `time_budget` [s] of wall time used up: no new step is started).
+    snapshot: path prefix for write_snapshot of the last converged state (None: none written)."""
     if key.material not in MATERIALS:
         raise ValueError(f"material must be one of {sorted(MATERIALS)}, got {key.material!r}")
     t0 = time.perf_counter()
@@ -95,6 +204,8 @@ def run_case(key: RunKey, steps: int, scale: float = 1.0, weave: PlainWeave | No
                 model.solve(start + k / n * (target - start), 1)
     except (SolverError, TimeoutError) as exc:
         stopped = str(exc).split(";")[0]
+        if isinstance(exc, SolverError):  # the failed solve left u* at a non-converged iterate
+            model.problem.u.x.array[:] = model._u_converged
     rows = []
     for s in model.steps:
         c = s.contact
@@ -105,27 +216,31 @@ def run_case(key: RunKey, steps: int, scale: float = 1.0, weave: PlainWeave | No
                          tangential_force=0.0 if c is None else c.tangential_force,
                          active=0 if c is None else c.active, wall_s=s.wall_s, contact_s=s.contact_s,
                          pin_reaction=s.pin_reaction))
+    if snapshot is not None and model.steps:
+        write_snapshot(model, snapshot)
     return Run(key, rows, stopped, time.perf_counter() - t0, model.ndofs, contact_table(model.steps))
 
 
 # figure -> (title, x quantity, y quantities, runs)
 def figures(quick: bool) -> dict[str, tuple[str, str, list[str], list[RunKey]]]:
+    """The plotted figures; every curve has the thesis' end faces u_z = 0 unless labelled periodic."""
     K = RunKey
+
+    def P(*args, **kw) -> RunKey:  # the exact periodicity, extra curve
+        return K(*args, end_faces="periodic", **kw)
     figs = {
         "fig21": ("isotropic yarns: biaxial and uniaxial extension", "E11", ["S11", "S22"],
-                  [K("iso", "biaxial"), K("iso", "uniaxial")]),
-        "fig22": ("isotropic yarns: in-plane shear", "E12", ["S12"], [K("iso", "shear")]),
+                  [K("iso", "biaxial"), K("iso", "uniaxial"), P("iso", "biaxial"), P("iso", "uniaxial")]),
+        "fig22": ("isotropic yarns: in-plane shear", "E12", ["S12"], [K("iso", "shear"), P("iso", "shear")]),
         "fig24": ("TI yarns: biaxial and uniaxial extension, with and without contact", "E11", ["S11", "S22"],
                   [K("ti", "biaxial"), K("ti", "uniaxial"), K("ti", "biaxial", contact=False),
-                   K("ti", "uniaxial", contact=False)]),
+                   K("ti", "uniaxial", contact=False), P("ti", "biaxial"), P("ti", "uniaxial")]),
         "fig25": ("TI yarns: biaxial extension and compression", "E11", ["S11", "S22"],
-                  [K("ti", "biaxial"), K("ti", "compression")]),
-        "fig26": ("TI yarns: in-plane shear", "E12", ["S12"], [K("ti", "shear")]),
-        "fig27": ("quarter vs full cell: biaxial and uniaxial extension (end faces periodic / u_z = 0)", "E11",
-                  ["S11"],
+                  [K("ti", "biaxial"), K("ti", "compression"), P("ti", "compression")]),
+        "fig26": ("TI yarns: in-plane shear", "E12", ["S12"], [K("ti", "shear"), P("ti", "shear")]),
+        "fig27": ("quarter vs full cell: biaxial and uniaxial extension", "E11", ["S11"],
                   [K("ti", "biaxial"), K("ti", "uniaxial"), K("ti", "biaxial", option="full"),
-                   K("ti", "uniaxial", option="full"), K("ti", "biaxial", end_faces="uz_fixed"),
-                   K("ti", "biaxial", option="full", end_faces="uz_fixed")]),
+                   K("ti", "uniaxial", option="full"), P("ti", "biaxial"), P("ti", "biaxial", option="full")]),
         "fig28": ("quarter vs full cell: in-plane shear", "E12", ["S12"],
                   [K("ti", "shear"), K("ti", "shear", option="full")]),
         "fig32": ("coarse vs fine mesh: biaxial and uniaxial extension", "E11", ["S11"],
@@ -135,11 +250,19 @@ def figures(quick: bool) -> dict[str, tuple[str, str, list[str], list[RunKey]]]:
                   [K("ti", "shear"), K("ti", "shear", refinement="fine")]),
     }
     if quick:
-        keep = {"fig21", "fig24", "fig25", "fig26"}
-        figs = {k: v for k, v in figs.items() if k in keep}
-        figs["fig24"] = (figs["fig24"][0], "E11", ["S11", "S22"],
-                         [K("ti", "biaxial"), K("ti", "biaxial", contact=False)])
+        figs = {"fig21": (figs["fig21"][0], "E11", ["S11", "S22"], [K("iso", "biaxial"), K("iso", "uniaxial")]),
+                "fig24": (figs["fig24"][0], "E11", ["S11", "S22"],
+                          [K("ti", "biaxial"), K("ti", "biaxial", contact=False)]),
+                "fig25": figs["fig25"][:3] + ([K("ti", "biaxial"), K("ti", "compression")],),
+                "fig26": figs["fig26"][:3] + ([K("ti", "shear")],)}
     return figs
+
+
+# render figure -> (caption, load case): thesis Figs. 20 and 23, (a) undeformed, (b) biaxial extension
+RENDERS: dict[str, tuple[str, RunKey]] = {
+    "fig20": ("balanced weave, isotropic yarns, biaxial extension", RunKey("iso", "biaxial")),
+    "fig23": ("balanced weave, TI yarns, biaxial extension", RunKey("ti", "biaxial")),
+}
 
 
 def _write_csv(path: str, runs: list[Run]) -> None:
@@ -162,27 +285,32 @@ def _plot(path: str, title: str, x: str, ys: list[str], runs: list[Run]) -> None
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(figsize=(6.4, 4.6))
-    for run in runs:
+    colours = plt.cm.tab10.colors
+    for k, run in enumerate(runs):  # one colour per load case; S11/S12 dots, S22 crosses
         xs = [0.0] + [r[x] for r in run.rows]
-        for y in ys:
-            ax.plot(xs, [0.0] + [r[y] / 1e6 for r in run.rows], marker=".",
+        dashed = run.key.end_faces == "periodic"  # the extra curves: dashed
+        for y, marker in zip(ys, (".", "x")):
+            ax.plot(xs, [0.0] + [r[y] / 1e6 for r in run.rows], marker=marker, linestyle="--" if dashed else "-",
+                    color=colours[k % len(colours)], markersize=4,
                     label=f"{y} {run.key.label}" + (" (stopped)" if run.stopped else ""))
     ax.set_xlabel(x)
     ax.set_ylabel("S [MPa]")
-    ax.set_title(title, fontsize=9)
+    ax.set_title(title + "\n(solid: thesis end faces u_z = 0; dashed: exact periodicity)", fontsize=8)
     ax.grid(True, alpha=0.3)
-    ax.legend(fontsize=6)
+    ax.legend(fontsize=5.5)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
 
 
-def previous_runs(folder: str) -> dict[str, Run]:
-    """{curve label: Run} read back from the fig*.csv and contact_reports.txt of an earlier run_study
-    output folder (rows, stopped reason, wall time, dofs and the report table as written then)."""
+def previous_runs(folder: str) -> dict[RunKey, Run]:
+    """{RunKey: Run} read back from the fig*.csv and contact_reports.txt of an earlier run_study output
+    folder (rows, stopped reason, wall time, dofs and the report table as written then). Keys come from
+    the CSV columns (end_faces missing = "periodic", the only condition of the oldest studies), so
+    curves are found whatever label format wrote them."""
     import glob
     import re
-    runs: dict[str, Run] = {}
+    by_label: dict[str, Run] = {}
     fields = ("E11", "E22", "E12", "S11", "S22", "S12", "newton", "augmentations", "penetration", "normal_force",
               "tangential_force", "active", "wall_s", "contact_s", "pin_reaction")
     for path in sorted(glob.glob(os.path.join(folder, "fig*.csv"))):
@@ -196,52 +324,74 @@ def previous_runs(folder: str) -> dict[str, Run]:
             r = meta[label]
             key = RunKey(r["material"], r["load"], bool(int(r["contact"])), r["option"], r["refinement"],
                          r.get("end_faces") or "periodic")
-            runs.setdefault(label, Run(key, rows, r["stopped"], sum(x["wall_s"] for x in rows), 0, ""))
+            by_label.setdefault(label, Run(key, rows, r["stopped"], sum(x["wall_s"] for x in rows), 0, ""))
     report = os.path.join(folder, "contact_reports.txt")
     if os.path.exists(report):
         for block in open(report).read().split("## ")[1:]:
             head, _, table = block.partition("\n")
             m = re.match(r"(.*) \((\d+) dofs, ([\d.]+) s\)", head)
-            if m and m.group(1) in runs:
-                run = runs[m.group(1)]
+            if m and m.group(1) in by_label:
+                run = by_label[m.group(1)]
                 run.ndofs, run.wall_s, run.table = int(m.group(2)), float(m.group(3)), table.strip()
-    return runs
+    return {run.key: run for run in by_label.values()}
 
 
 def run_study(out: str = "results/unit_cell", quick: bool = False, steps: int | None = None,
               comm: MPI.Comm = MPI.COMM_WORLD, time_budget: float | None = None,
-              recompute: set[RunKey] | None = None, previous: str | None = None) -> dict[RunKey, Run]:
-    """Run the figures' load cases (each once, shared between figures), write fig*.csv / fig*.png and
-    contact_reports.txt under `out`. quick: only Figs. 21, 24, 25, 26 on the coarse quarter cell, 3 steps
-    to 1/4 of the thesis strains (a smoke test of the whole chain). time_budget [s] per load case
-    (default: none for quick, 240 s on the coarse quarter cell and 420 s on the full or fine cells).
-    recompute + previous: only the load cases in `recompute` are solved; every other curve is read
-    back from the earlier output folder `previous` (previous_runs), so that a change touching a few
-    cases regenerates all figures without rerunning the rest (ValueError if a curve is missing there)."""
-    old = previous_runs(previous) if previous is not None else {}
+              recompute: set[RunKey] | None = None, previous: str | None = None,
+              reuse: bool | None = None) -> dict[RunKey, Run]:
+    """Run the figures' load cases (each once, shared between figures), write fig*.csv / fig*.png,
+    the renders fig20.png / fig23.png (+ snapshots/*.xdmf) and contact_reports.txt under `out`.
+    quick: only Figs. 21, 24, 25, 26 (+ 20, 23) on the coarse quarter cell, 3 steps to 1/4 of the
+    thesis strains (a smoke test of the whole chain). time_budget [s] per load case (default: none for
+    quick, else TIME_BUDGET by cell).
+    reuse (default: not quick): a load case whose curve is in the CSVs of the earlier output folder
+    `previous` (default `out`) is read back (previous_runs, matched by RunKey, so a changed key
+    reruns) instead of solved, unless it is in `recompute`; a render whose snapshot is missing reruns
+    its load case. Delete the folder (or pass the keys in `recompute`) to recompute after a solver
+    change."""
+    reuse = (not quick) if reuse is None else bool(reuse)
+    folder = out if previous is None else previous
+    old = previous_runs(folder) if (reuse and os.path.isdir(folder)) else {}
+    recompute = set() if recompute is None else set(recompute)
     n_steps = (3 if quick else 10) if steps is None else int(steps)
     scale = 0.25 if quick else 1.0
     figs = figures(quick)
+    snap_dir = os.path.join(out, "snapshots")
+    snapshots = {key: os.path.join(snap_dir, key.slug) for _, key in RENDERS.values()}
     runs: dict[RunKey, Run] = {}
     if comm.rank == 0:
-        os.makedirs(out, exist_ok=True)
+        os.makedirs(snap_dir, exist_ok=True)
+    comm.barrier()
+
+    def solve(name: str, key: RunKey) -> None:
+        if key in runs:
+            return
+        snap = snapshots.get(key)
+        have_snap = snap is not None and os.path.exists(snap + ".xdmf") and (
+            comm.size > 1 or os.path.exists(snap + ".npz"))
+        if key in old and key not in recompute and (snap is None or have_snap):
+            runs[key] = old[key]
+            return
+        budget = time_budget if time_budget is not None else (
+            math.inf if quick else TIME_BUDGET[(key.option, key.refinement)])
+        runs[key] = r = run_case(key, n_steps, scale, comm=comm, time_budget=budget, snapshot=snap)
+        if comm.rank == 0:
+            print(f"[{name}] {key.label}: {len(r.rows)} steps, {r.wall_s:.1f} s"
+                  + (f", STOPPED: {r.stopped[:160]}" if r.stopped else ""), flush=True)
+
     for name, (title, x, ys, keys) in figs.items():
         for key in keys:
-            if key not in runs and recompute is not None and key not in recompute:
-                if key.label not in old:
-                    raise ValueError(f"previous: no curve {key.label!r} in {previous!r} to reuse")
-                runs[key] = old[key.label]
-            if key not in runs:
-                budget = time_budget if time_budget is not None else (
-                    math.inf if quick else 240.0 if (key.option, key.refinement) == ("quarter", "coarse") else 420.0)
-                runs[key] = run_case(key, n_steps, scale, comm=comm, time_budget=budget)
-                r = runs[key]
-                if comm.rank == 0:
-                    print(f"[{name}] {key.label}: {len(r.rows)} steps, {r.wall_s:.1f} s"
-                          + (f", STOPPED: {r.stopped[:160]}" if r.stopped else ""), flush=True)
+            solve(name, key)
         if comm.rank == 0:
             _write_csv(os.path.join(out, f"{name}.csv"), [runs[k] for k in keys])
             _plot(os.path.join(out, f"{name}.png"), f"thesis {name}: {title}", x, ys, [runs[k] for k in keys])
+    for name, (caption, key) in RENDERS.items():
+        solve(name, key)
+        run = runs[key]
+        if comm.rank == 0 and comm.size == 1 and run.rows:
+            render_configuration(snapshots[key] + ".npz", os.path.join(out, f"{name}.png"),
+                                 f"thesis {name}: {caption}" + (" (stopped early)" if run.stopped else ""))
     if comm.rank == 0:
         with open(os.path.join(out, "contact_reports.txt"), "w") as f:
             for key, run in runs.items():
@@ -250,50 +400,124 @@ def run_study(out: str = "results/unit_cell", quick: bool = False, steps: int | 
     return runs
 
 
-# ------------------------------------------------------------------ fitted membrane law (issue 5, item 5)
-def contact_grid_paths(max_stretch: float = 1.06, shear: float = 0.1) -> list[list[np.ndarray]]:
-    """Load paths of the fitting grid: biaxial stretches in ratios 1:1, 1:0, 0:1, 1:0.5, 0.5:1 up to
-    `max_stretch` (the TI contact cell converges to Phi = 1.13 biaxially, measured) and three shear
-    paths (pre-stretches (PRESTRETCH, PRESTRETCH), (max, max), (max, PRESTRETCH), then Phi12 = Phi21 =
-    shear): shear at several stretches is needed to determine the stretch-shear coupling terms."""
-    d = max_stretch - 1.0
-    paths = [[np.diag([1.0 + a * d, 1.0 + b * d, 1.0])] for a, b in
-             ((1, 1), (1, 0), (0, 1), (1, 0.5), (0.5, 1))]
-    for pre in (np.diag([PRESTRETCH, PRESTRETCH, 1.0]), np.diag([1.0 + d, 1.0 + d, 1.0]),
-                np.diag([1.0 + d, PRESTRETCH, 1.0])):
-        sheared = pre.copy()
-        sheared[0, 1] = sheared[1, 0] = shear
-        paths.append([pre, sheared])
-    return paths
+# ------------------------------------------------------------------ geometry sensitivity (issue 5)
+# 0.04 is infeasible with phi = 0.4 and aspect ratio 1.5 (the yarns would interpenetrate at the
+# crossing; the smallest feasible crimp is ~0.062), so 0.065 is the lowest crimp that can be built
+SENSITIVITY_CRIMPS = (0.04, 0.065, 0.08, 0.10, 0.12)
 
 
-def fit_contact_law(material: str = "ti", steps: int = 3, degree: int = 4, name: str | None = None,
-                    comm: MPI.Comm = MPI.COMM_WORLD):
-    """Fit W(E11, E22, 2 E12) (fabricfem.fitted_law, degree `degree`) to the homogenized S of the coarse
-    quarter cell WITH contact on the contact_grid_paths grid (every converged step a sample; N = t S with
-    t = the fabric thickness 2 (A + b) [m]). Returns (law, samples, fabric or None); the fabric is
-    written to fabricfem/fabrics/<name>.json only if `name` is given, the fit is convex on the data
-    hull (min Hessian eigenvalue > 0) and its relative RMS residual is at most 5%."""
-    from pathlib import Path
+def geometry_sensitivity(out: str = "docs/figures/unit_cell", crimps: tuple[float, ...] = SENSITIVITY_CRIMPS,
+                         end_faces: tuple[str, ...] = ("uz_fixed", "periodic"), steps: int = 10,
+                         comm: MPI.Comm = MPI.COMM_WORLD) -> list[dict]:
+    """Checks 1-2 of unit-cell-trends (isotropic secant-modulus spread, uniaxial S22/S11 at the last
+    step) against the ASSUMED crimp ratio of PlainWeave.balanced (the thesis gives none): coarse quarter
+    cell with contact, isotropic yarns, biaxial and uniaxial extension to E11 = 0.22, for each crimp
+    and end-face condition. Writes out/geometry_sensitivity.csv (one row per run: geometry, checks,
+    E11 at first contact) and .png; returns the rows. A map, not a calibration: the study keeps the
+    default crimp."""
+    from fabricfem.verify.unit_cell_trends import secant_spread
+    rows = []
+    nan = math.nan
+    for crimp in crimps:
+        try:
+            weave = PlainWeave.balanced(crimp=crimp)
+        except ValueError as exc:  # e.g. crimp 0.04: phi = 0.4 then needs yarns that interpenetrate
+            rows.extend(dict(crimp=crimp, amplitude_m=nan, semi_width_m=nan, semi_height_m=nan, crossing_gap_m=nan,
+                             end_faces=ends, load=load, steps=0, last_E11=nan, secant_spread=nan, S22_over_S11=nan,
+                             first_contact_E11=nan, wall_s=0.0, stopped=f"geometry infeasible: {exc}", curve_E11="",
+                             curve_S11="", curve_S22="") for ends in end_faces for load in ("biaxial", "uniaxial"))
+            if comm.rank == 0:
+                print(f"crimp {crimp}: geometry infeasible ({exc})", flush=True)
+            continue
+        yarn = weave.warp
+        for ends in end_faces:
+            for load in ("biaxial", "uniaxial"):
+                key = RunKey("iso", load, end_faces=ends)
+                run = run_case(key, steps, weave=weave, comm=comm)
+                touching = [r["E11"] for r in run.rows if r["normal_force"] > 0]
+                last = run.rows[-1] if run.rows else None
+                rows.append(dict(
+                    crimp=crimp, amplitude_m=yarn.amplitude, semi_width_m=yarn.semi_width,
+                    semi_height_m=yarn.semi_height, crossing_gap_m=2.0 * (yarn.amplitude - yarn.semi_height),
+                    end_faces=ends, load=load, steps=len(run.rows), last_E11=math.nan if last is None else last["E11"],
+                    secant_spread=secant_spread(run.rows) if run.rows else math.nan,
+                    S22_over_S11=math.nan if last is None else last["S22"] / last["S11"],
+                    first_contact_E11=touching[0] if touching else math.nan,
+                    wall_s=run.wall_s, stopped=run.stopped,
+                    curve_E11=" ".join(f"{r['E11']:.5g}" for r in run.rows),
+                    curve_S11=" ".join(f"{r['S11']:.5g}" for r in run.rows),
+                    curve_S22=" ".join(f"{r['S22']:.5g}" for r in run.rows)))
+                if comm.rank == 0:
+                    r = rows[-1]
+                    print(f"crimp {crimp} {ends} {load}: spread {r['secant_spread']:.3f}, S22/S11 "
+                          f"{r['S22_over_S11']:.4f}, contact from E11 {r['first_contact_E11']:.3f}, "
+                          f"{r['wall_s']:.0f} s {r['stopped'][:80]}", flush=True)
+    if comm.rank == 0:
+        os.makedirs(out, exist_ok=True)
+        with open(os.path.join(out, "geometry_sensitivity.csv"), "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=list(rows[0]))
+            w.writeheader()
+            for r in rows:
+                w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+        _plot_sensitivity(os.path.join(out, "geometry_sensitivity.png"), rows)
+    return rows
 
-    from fabricfem.fabrics import FABRICS_DIR, save_fabric
-    from fabricfem.fitted_law import fit_membrane_law, fitted_fabric, samples_from_steps
-    weave = PlainWeave.balanced()
-    thickness = 2.0 * weave.half_thickness()
-    collected = []
-    for path in contact_grid_paths():
-        model = ContactUnitCell(unit_cell(weave, "quarter", "coarse", comm), MATERIALS[material], contact=True)
-        for k, target in enumerate(path):
-            model.solve(target, 1 if (len(path) > 1 and k == 0) else steps)
-        collected.extend(model.steps)
-    samples = samples_from_steps(collected, thickness)
-    law = fit_membrane_law(samples, degree=degree)
-    fabric = None
-    if name is not None and law.min_eigenvalue > 0 and law.relative_rms_residual <= 0.05:
-        fabric = fitted_fabric(law, thickness, name=name)
-        if comm.rank == 0:
-            save_fabric(fabric, Path(FABRICS_DIR) / f"{name}.json",
-                        description=f"plain weave (thesis sec. 4.3.5 geometry), {MATERIALS[material].name} yarns, "
-                                    f"homogenized with yarn contact (quarter cell, coarse)",
-                        source="fabricfem.study_unit_cell.fit_contact_law")
-    return law, samples, fabric
+
+def _plot_sensitivity(path: str, rows: list[dict]) -> None:
+    """Checks 1-2 against the crimp (left, middle) and the S11(E11) curves (right: colour = crimp,
+    solid = ends u_z = 0, dashed = periodic, circle = biaxial, square = uniaxial); infeasible crimps
+    are named in the title."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, 3, figsize=(14, 4.6))
+    styles = {"uz_fixed": "-", "periodic": "--"}
+    markers = {"biaxial": "o", "uniaxial": "s"}
+    feasible = [r for r in rows if not str(r["stopped"]).startswith("geometry infeasible")]
+    infeasible = sorted({r["crimp"] for r in rows} - {r["crimp"] for r in feasible})
+    crimps = sorted({r["crimp"] for r in feasible})
+    colours = dict(zip(crimps, plt.cm.viridis(np.linspace(0.0, 0.85, max(len(crimps), 1)))))
+    for ends in sorted({r["end_faces"] for r in feasible}):
+        lab_ends = "u_z=0" if ends == "uz_fixed" else ends
+        for load in ("biaxial", "uniaxial"):
+            sel = sorted((r for r in feasible if r["end_faces"] == ends and r["load"] == load),
+                         key=lambda r: r["crimp"])
+            lab = f"{load}, ends {lab_ends}"
+            axes[0].plot([r["crimp"] for r in sel], [r["secant_spread"] for r in sel], styles[ends],
+                         marker=markers[load], label=lab)
+            if load == "uniaxial":
+                axes[1].plot([r["crimp"] for r in sel], [r["S22_over_S11"] for r in sel], styles[ends],
+                             marker=markers[load], label=lab)
+            for r in sel:
+                E = [0.0] + [float(v) for v in str(r["curve_E11"]).split()]
+                S = [0.0] + [float(v) / 1e6 for v in str(r["curve_S11"]).split()]
+                axes[2].plot(E, S, styles[ends], marker=markers[load], markersize=3, color=colours[r["crimp"]],
+                             label=f"crimp {r['crimp']}" if (ends, load) == ("uz_fixed", "biaxial") else None)
+    axes[0].axhline(0.25, color="k", lw=0.8, ls=":", label="check 1 bound 0.25")
+    axes[1].axhline(0.05, color="k", lw=0.8, ls=":", label="check 2 bound 0.05")
+    for ax in axes[:2]:
+        ax.axvline(0.08, color="grey", lw=0.8, ls="-.", label="default crimp 0.08 (assumed)")
+    axes[0].set(xlabel="crimp ratio (assumed)", ylabel="max |secant S11/E11 / mean - 1|",
+                title="check 1: isotropic S11 linearity")
+    axes[1].set(xlabel="crimp ratio (assumed)", ylabel="S22 / S11 at E11 = 0.22",
+                title="check 2: uniaxial S22/S11")
+    axes[2].set(xlabel="E11", ylabel="S11 [MPa]", title="S11(E11): solid u_z=0, dashed periodic; o biaxial, s uniaxial")
+    axes[2].title.set_fontsize(9)
+    for ax in axes:
+        ax.grid(True, alpha=0.3)
+        if ax.get_legend_handles_labels()[0]:
+            ax.legend(fontsize=6)
+    fig.suptitle("Isotropic yarns, coarse quarter cell with contact, phi = 0.4, section ratio 1.5: checks 1-2 of "
+                 "unit-cell-trends vs the assumed crimp (the thesis gives none)"
+                 + (f"; crimp {', '.join(map(str, infeasible))} infeasible (yarns interpenetrate)" if infeasible
+                    else ""), fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def read_sensitivity(path: str) -> list[dict]:
+    """Rows of a geometry_sensitivity CSV with the numbers as floats (for re-plotting)."""
+    text = ("end_faces", "load", "stopped", "curve_E11", "curve_S11", "curve_S22")
+    with open(path) as f:
+        return [{k: (v if k in text else float(v)) for k, v in row.items()} for row in csv.DictReader(f)]

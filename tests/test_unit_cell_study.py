@@ -98,15 +98,51 @@ def test_full_cell_pins_and_bad_input():
 
 
 def test_quick_study_writes_figures(tmp_path):
-    """The --quick study writes one CSV + PNG per figure (21, 24, 25, 26) with converged rows."""
-    from fabricfem.study_unit_cell import run_study
+    """The --quick study writes one CSV + PNG per figure (21, 24, 25, 26) with converged rows, all with
+    the thesis' end faces u_z = 0, and the renders of Figs. 20 and 23 (PNG + XDMF of the deformed
+    cell). The snapshot surface is checked against the applied load: closed (every edge shared by two
+    faces: the yarns are closed bodies) and its stored Phi is the end of the quick biaxial path
+    (1 + 0.2 / 4, exact). A second call with reuse=True solves nothing (every key is found in the
+    CSVs, matched by RunKey) and returns the same rows."""
+    import time
+
+    import pyvista
+
+    from fabricfem.study_unit_cell import RENDERS, RunKey, run_study
     runs = run_study(str(tmp_path), quick=True)
     for fig in ("fig21", "fig24", "fig25", "fig26"):
         assert os.path.getsize(tmp_path / f"{fig}.png") > 0
         with open(tmp_path / f"{fig}.csv") as f:
             rows = list(csv.DictReader(f))
         assert rows and all(np.isfinite(float(r["S11"])) for r in rows)
+        assert {r["end_faces"] for r in rows} == {"uz_fixed"}
     assert all(len(r.rows) > 0 for r in runs.values())
+    for fig, (_, key) in RENDERS.items():
+        assert os.path.getsize(tmp_path / f"{fig}.png") > 0
+        snap = tmp_path / "snapshots" / key.slug
+        assert os.path.getsize(str(snap) + ".xdmf") > 0
+        data = np.load(str(snap) + ".npz")
+        np.testing.assert_allclose(np.diag(data["Phi"]), [1.05, 1.05, 1.0], rtol=0, atol=1e-14)
+        surf = pyvista.PolyData(data["points"] + data["displacement"], data["faces"])
+        assert surf.n_open_edges == 0 and surf.n_cells > 0
+        assert len(np.unique(data["yarn"])) == 2  # warp and weft, one tag each
+    t0 = time.perf_counter()
+    again = run_study(str(tmp_path), quick=True, reuse=True)
+    assert time.perf_counter() - t0 < 20.0  # reading CSVs and re-rendering only (a solve costs > 1 s a step)
+    for key, run in runs.items():
+        assert [r["S11"] for r in again[key].rows] == pytest.approx([r["S11"] for r in run.rows], rel=1e-9)
+    assert RunKey("ti", "biaxial").end_faces == "uz_fixed"
+
+
+def test_geometry_sensitivity_reports_infeasible_crimp(tmp_path):
+    """crimp 0.04 with phi = 0.4 and section ratio 1.5 needs yarns that interpenetrate at the crossing
+    (2 A < 2 b; PlainWeave.balanced raises): geometry_sensitivity records it as infeasible (nan checks,
+    reason in `stopped`) instead of failing or dropping it, and still writes the CSV."""
+    from fabricfem.study_unit_cell import geometry_sensitivity
+    rows = geometry_sensitivity(str(tmp_path), crimps=(0.04,), end_faces=("uz_fixed",))
+    assert len(rows) == 2 and all(np.isnan(r["secant_spread"]) for r in rows)
+    assert all(r["stopped"].startswith("geometry infeasible") for r in rows)
+    assert os.path.getsize(tmp_path / "geometry_sensitivity.csv") > 0
 
 
 def test_fe2_paragraph_arithmetic():
