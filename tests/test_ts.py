@@ -168,3 +168,32 @@ def test_failure_restores_last_converged_state(cls):
     # a finite state, and the integrator can go on from it with a sane load (no stale solver state)
     assert np.isfinite(state).all()
     assert MPI.COMM_WORLD.allreduce(int(np.isfinite(integrator.d.getArray()).all()), op=MPI.MIN) == 1
+
+
+def test_refused_newton_state_halves_the_newmark_step():
+    """A sub-step whose Newton solve the solver guard refuses (SolverError, an absurd "converged" state: see
+    fabricfem.solvers.newton) is a failed sub-step like a diverged one: halved and retried, not the end of the
+    run. The first solve is made to raise; the run must complete on the user grid with one halving, and its
+    tip history must equal an undisturbed run to the integrator's own accuracy (the halved first step only
+    changes the time discretisation of that step: 1e-2 of the amplitude is the O((omega dt)^2) bound)."""
+    from fabricfem.solvers.newton import SolverError
+
+    f1 = euler_bernoulli_f1(**STRIP)
+    runs = []
+    for refuse_first in (False, True):
+        model = cantilever_strip(nx=6)
+        integrator = NewmarkIntegrator(model, 1 / (30 * f1), load_factor=1.0)
+        if refuse_first:
+            solve, calls = integrator.solver.solve, []
+
+            def refusing_solve():
+                calls.append(1)
+                if len(calls) == 1:
+                    raise SolverError("ABSURD_INCREMENT: constructed", reason="ABSURD_INCREMENT")
+                return solve()
+            integrator.solver.solve = refusing_solve
+        history = integrator.run(10, monitors={"w": node_monitor(model, TIP, "u", 2)})
+        runs.append((integrator, np.asarray(history.monitors["w"])))
+    (plain, w_plain), (refused, w_refused) = runs
+    assert plain.halvings == 0 and refused.halvings == 1
+    assert np.abs(w_refused - w_plain).max() < 1e-2 * np.abs(w_plain).max()

@@ -38,7 +38,7 @@ from dolfinx.fem import petsc as fem_petsc
 from petsc4py import PETSc
 
 from fabricfem.dynamics.mass import InertiaDamping
-from fabricfem.solvers.newton import NewtonSolver
+from fabricfem.solvers.newton import NewtonSolver, SolverError
 
 LoadFactor = Callable[[float], float] | float
 
@@ -551,7 +551,11 @@ class NewmarkIntegrator(StepHalving, TimeIntegrator):
         self.model.set_load_factor(self.load(t_new))
         self.d_pred.copy(self.model.w.vector)
         self.model.w.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
-        result = self.solver.solve()
+        try:
+            result = self.solver.solve()
+        except SolverError as refused:  # an absurd "converged" state (NewtonSolver guard): a failed sub-step
+            self._restore_last_converged()
+            return SubStep(False, h, self.solver.snes.getIterationNumber(), refused.reason)
         if not result.converged:
             self._restore_last_converged()
             return SubStep(False, h, result.iterations, result.reason)

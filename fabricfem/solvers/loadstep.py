@@ -6,7 +6,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from fabricfem.solvers.newton import NewtonSolver, SolverError
+from fabricfem.solvers.newton import NewtonResult, NewtonSolver, SolverError
 
 
 @dataclass
@@ -24,7 +24,8 @@ def solve_load_path(model, targets: Sequence[float] | float, solver: NewtonSolve
     """Drive the load factor of `model` from its current value through the increasing `targets`.
 
     Each target is reached exactly (`on_target(lambda)` is called there). A step whose Newton
-    solve fails (divergence, NaN, too many iterations) is undone and retried at half size; a
+    solve fails (divergence, NaN, too many iterations, or a "converged" state refused by the solver's
+    guard, SolverError from NewtonSolver.solve) is undone and retried at half size; a
     step that converges within `easy_iterations` lets the next one grow by `growth`. With
     `extrapolate`, each step starts from the secant predictor through the last two converged states
     (increments are measured before the director is re-based, so they stay valid after it). When the
@@ -51,7 +52,11 @@ def solve_load_path(model, targets: Sequence[float] | float, solver: NewtonSolve
                 # Secant predictor: w = w_n + (dlambda / dlambda_prev) (w_n - w_{n-1})
                 model.w.x.array[:] += (trial - lam) / increment_dlam * increment
             model.set_load_factor(trial)
-            result = solver.solve()
+            try:
+                result = solver.solve()
+            except SolverError as refused:   # an absurd "converged" state: a failure like any other
+                result = NewtonResult(False, solver.snes.getIterationNumber() if hasattr(solver, "snes") else 0,
+                                      refused.reason or str(refused))
             if result.converged:
                 increment, increment_dlam = model.w.x.array - saved, trial - lam
                 lam = trial

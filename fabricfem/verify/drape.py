@@ -34,7 +34,7 @@ from fabricfem.materials import Fabric
 from fabricfem.meshes import plate
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.loadstep import solve_load_path
-from fabricfem.solvers.newton import NewtonSolver
+from fabricfem.solvers.newton import NewtonResult, NewtonSolver, SolverError
 from fabricfem.verify import case, result
 from fabricfem.verify.particles_cases import (AIR_DRAG, OVERHANG_SEED_PARTICLE, TABLECLOTH_EXPERIMENT,
                                               flatness_imperfection, hem_folds, particle_overhanging_beam,
@@ -277,22 +277,33 @@ def tablecloth_problem(n: int = 10, imperfection: float = CLOTH_IMPERFECTION, de
 
 
 def lowest_tangent_eigenvalue(problem: ContactProblem) -> float:
-    """Smallest eigenvalue of the tangent (shell + contact) restricted to the free dofs (serial, dense).
-    Its sign decides stability (the inertia does not depend on the mixed units of u and theta)."""
-    if problem.comm.size > 1:
-        raise ValueError("lowest_tangent_eigenvalue is serial (dense eigensolver)")
+    """Smallest eigenvalue of the tangent (shell + contact) restricted to the free dofs (dense; under MPI the
+    owned rows are gathered on rank 0 and the value broadcast, so every rank returns the same number). Its
+    sign decides stability (the inertia does not depend on the mixed units of u and theta)."""
+    comm = problem.comm
     A = problem.create_matrix()
     x = problem.create_vector()
     problem.w.vector.copy(x)
     problem.jacobian(x, A)
-    K = A.convert("dense").getDenseArray().copy()
+    start, _ = A.getOwnershipRange()
+    indptr, columns, values = A.getValuesCSR()
+    n = A.getSize()[0]
     A.destroy()
     x.destroy()
-    fixed = np.zeros(K.shape[0], dtype=bool)
-    for bc in problem.bcs:
-        fixed[bc.dof_indices()[0]] = True
-    K = K[~fixed][:, ~fixed]
-    return float(scipy.linalg.eigh(0.5 * (K + K.T), eigvals_only=True, subset_by_index=[0, 0])[0])
+    fixed_local = [bc.dof_indices()[0][:bc.dof_indices()[1]] for bc in problem.bcs]
+    fixed_local = np.concatenate(fixed_local) if fixed_local else np.zeros(0, dtype=np.int32)
+    parts = comm.gather((start, indptr, columns, values, start + fixed_local.astype(np.int64)), root=0)
+    lowest = None
+    if comm.rank == 0:
+        K = np.zeros((n, n))
+        fixed = np.zeros(n, dtype=bool)
+        for row0, ptr, cols, vals, fixed_global in parts:
+            rows = row0 + np.repeat(np.arange(len(ptr) - 1), np.diff(ptr))
+            K[rows, cols] = vals
+            fixed[fixed_global] = True
+        K = K[~fixed][:, ~fixed]
+        lowest = float(scipy.linalg.eigh(0.5 * (K + K.T), eigvals_only=True, subset_by_index=[0, 0])[0])
+    return comm.bcast(lowest, root=0)
 
 
 def _measure_tablecloth(problem: ContactProblem, top: float, eigenvalue: bool = True) -> dict:
@@ -300,7 +311,7 @@ def _measure_tablecloth(problem: ContactProblem, top: float, eigenvalue: bool = 
     z = 0). 'values': the seed's floor reading (tablecloth_reading, midside (0, L/2)); 'midside (L/2, 0)':
     the other midside's (height, horizontal distance) / L; 'readings': both readings of y (kept for the MPI
     test of fabricfem.verify, tests/test_dynamic_scene.py); 'corner', 'midside': positions [m] (table top
-    z = 0); 'lowest_eigenvalue' (serial runs with eigenvalue=True)."""
+    z = 0); 'lowest_eigenvalue' (with eigenvalue=True)."""
     half = 0.5 * CLOTH_L
     shift = np.array([0.0, 0.0, -top])
     corner = np.array([half, half, 0.0]) + problem.node_value((half, half, 0.0)) + shift
@@ -323,7 +334,7 @@ def _measure_tablecloth(problem: ContactProblem, top: float, eigenvalue: bool = 
            "midside (L/2, 0)": ((TABLE_HEIGHT + mid_x[2]) / CLOTH_L, mid_x[0] / CLOTH_L),
            "folds": hem_folds(ring, 1e-3 * CLOTH_L), "diagonal_asymmetry": abs(corner[0] - corner[1]) / CLOTH_L,
            "total_force_z": float(total[2]), "weight": CLOTH_WEIGHT * half ** 2, "ndofs": problem.ndofs}
-    if eigenvalue and problem.comm.size == 1:
+    if eigenvalue:
         out["lowest_eigenvalue"] = lowest_tangent_eigenvalue(problem)
     return out
 
@@ -449,7 +460,10 @@ def fe_tablecloth_drop(n: int = 10, t_end: float = DROP_T_END, dt_max: float = D
         while t < t_end * (1.0 - 1e-12):
             step.dt = min(dt, t_end - t)
             saved = model.w.x.array.copy()
-            result = solver.solve()
+            try:
+                result = solver.solve()
+            except SolverError as refused:   # an absurd "converged" state: retried at half step
+                result = NewtonResult(False, solver.snes.getIterationNumber(), refused.reason)
             newton += result.iterations
             if not result.converged:
                 model.w.x.array[:] = saved
@@ -504,7 +518,7 @@ def _drape_rows(name: str, label: str, run: dict, out: list):
                           run["lowest_eigenvalue"], 0.0, math.inf, run["ndofs"], run["wall_s"], scale=1.0))
 
 
-@case("tablecloth-drape")
+@case("tablecloth-drape", mpi=True)
 def tablecloth_drape() -> list:
     """Seed 001 sec. 4.4, static routes, against the experiment row (floor reading).
 
@@ -521,6 +535,10 @@ def tablecloth_drape() -> list:
     eigenvalues are reported (tolerance inf): the drape has several equilibria and which one a path reaches
     is not a property of the model; accepting one by its agreement with the experiment would be tuning.
     The dynamic routes (the cloth falls, as in the seed) are the case tablecloth-drop.
+
+    Under mpirun -n 2 every row equals the serial one (measured: positions and contact forces to 2e-14
+    relative; the lowest eigenvalues, ~1e-6, to 2e-13 absolute: below eps ||K|| ~ 1e-12 with the tangent's
+    norm ||K||_1 ~ 6e3 in SI units, the round-off of the dense eigensolver).
     """
     name = "tablecloth-drape"
     out = []
