@@ -13,6 +13,11 @@ Fabrics II and III (E = 350 MPa and 7.2 GPa) run with dynamic similarity (`Sleev
 flexion speed and mass damping times c_k / c_I, c = sqrt(E / rho)), so they cost the steps of fabric I and
 carry fabric I's relative inertia and damping; fabric I of that figure runs with the flag too (factor 1).
 
+Checkpoints: every finished variant is written to <out>/variants/<hash of its configuration>.csv and a
+rerun of the study reads it instead of flexing again (an interrupted or partly rerun study resumes).
+`mesh_frictions` and `only` select the mesh series and figures; the variants are scheduled longest first
+on the least loaded rank (`schedule`).
+
 Progress: rank 0 prints one line when each variant starts and ends, for its own variants and, relayed by
 point-to-point messages polled between its records, for the other ranks' variants.
 """
@@ -21,6 +26,7 @@ from __future__ import annotations
 import csv
 import math
 import time
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -39,8 +45,11 @@ FIGURE_TITLES = {"mesh_mu0.1": "mesh convergence, mu = 0.1 (Fig. 37)",
 
 
 def variants(quick: bool = False, fine: str = "III", meshes: tuple[str, ...] = ("I", "II", "III", "IV"),
-             fabrics: tuple[str, ...] = ("I", "II", "III")) -> dict[str, dict[str, SleeveConfig]]:
+             fabrics: tuple[str, ...] = ("I", "II", "III"), mesh_frictions: tuple[float, ...] = (0.1, 0.5),
+             only: tuple[str, ...] | None = None) -> dict[str, dict[str, SleeveConfig]]:
     """figure -> {label: config}. Identical configurations appear in several figures (run once).
+    `mesh_frictions` selects the mesh series run (mu = 0.1 and / or 0.5; a figure left out is not written);
+    `only` restricts the study to the named figures (FIGURE_TITLES keys; None: all).
 
     `fabrics` selects the fabric sets of the fabrics figure: the explicit step scales with
     h / sqrt(E / rho), so fabrics II and III would need 17 and 60 times the steps of fabric I at the same
@@ -51,6 +60,12 @@ def variants(quick: bool = False, fine: str = "III", meshes: tuple[str, ...] = (
     for name in fabrics:
         if name not in FABRICS:
             raise ValueError(f"fabrics: unknown fabric set {name!r}, expected one of {sorted(FABRICS)}")
+    for name in only or ():
+        if name not in FIGURE_TITLES:
+            raise ValueError(f"only: unknown figure {name!r}, expected some of {sorted(FIGURE_TITLES)}")
+    for mu in mesh_frictions:
+        if mu not in (0.1, 0.5):
+            raise ValueError(f"mesh_frictions: the mesh series exist for mu = 0.1 and 0.5, got {mu!r}")
     base = SleeveConfig()
     meshes = {"I": MESHES["I"]} if quick else {k: MESHES[k] for k in meshes}
     fine = MESHES["I"] if quick else MESHES[fine]
@@ -65,16 +80,40 @@ def variants(quick: bool = False, fine: str = "III", meshes: tuple[str, ...] = (
         "thickness": {"t = 1 mm": at(fine, friction=0.5), "t = 2 mm": at(fine, friction=0.5, thickness=2e-3)},
         "fabrics": {f"fabric {k}": at(fine, friction=0.1, dynamic_similarity=True, **FABRICS[k]) for k in fabrics},
     }
+    for mu in (0.1, 0.5):
+        if mu not in mesh_frictions:
+            del figures[f"mesh_mu{mu}"]
+    if only is not None:
+        figures = {name: fig for name, fig in figures.items() if name in only}
     return figures
+
+
+def relative_cost(config: SleeveConfig) -> float:
+    """Estimated cost of a flexion relative to others: nodes x steps ~ (n_around n_along) x (1 / h) (the
+    explicit step scales with the element size h; dynamic similarity keeps the steps of fabric I)."""
+    return (config.n_around * config.n_along) ** 1.5
+
+
+def schedule(configs: list[SleeveConfig], ranks: int) -> list[int]:
+    """Rank of each configuration: longest first, each to the least loaded rank (the same on every rank)."""
+    load = [0.0] * ranks
+    owner = [0] * len(configs)
+    for i in sorted(range(len(configs)), key=lambda k: -relative_cost(configs[k])):
+        r = min(range(ranks), key=lambda k: load[k])
+        owner[i] = r
+        load[r] += relative_cost(configs[i])
+    return owner
 
 
 def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
               comm: MPI.Comm = MPI.COMM_WORLD, fine: str = "III",
               meshes: tuple[str, ...] = ("I", "II", "III", "IV"),
-              fabrics: tuple[str, ...] = ("I", "II", "III")) -> dict[str, dict[str, SleeveHistory]]:
-    """Run every distinct variant once (round-robin over the ranks), write CSV + PNG per figure."""
+              fabrics: tuple[str, ...] = ("I", "II", "III"), mesh_frictions: tuple[float, ...] = (0.1, 0.5),
+              only: tuple[str, ...] | None = None) -> dict[str, dict[str, SleeveHistory]]:
+    """Run every distinct variant once (longest first, to the least loaded rank: `schedule`), write CSV + PNG
+    per figure."""
     out = Path(out)
-    figures = variants(quick, fine, meshes, fabrics)
+    figures = variants(quick, fine, meshes, fabrics, mesh_frictions, only)
     unique: list[SleeveConfig] = []
     for fig in figures.values():
         for cfg in fig.values():
@@ -84,17 +123,27 @@ def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
     say(f"sleeve study{' (quick, reduced)' if quick else ''}: {len(unique)} variants on {comm.size} rank(s)")
     t0 = time.perf_counter()
     progress = _Progress(comm, t0, len(unique))
+    owner = schedule(unique, comm.size)
+    order = sorted(range(len(unique)), key=lambda k: -relative_cost(unique[k]))
     mine = {}
-    for i, cfg in enumerate(unique):
-        if i % comm.size != comm.rank:
+    for i in order:
+        cfg = unique[i]
+        if owner[i] != comm.rank:
+            continue
+        saved = _load_variant(out, cfg)
+        if saved is not None:
+            mine[i] = saved
+            progress.report(f"variant {i + 1}/{len(unique)} read from {_variant_path(out, cfg)} (not rerun)")
+            progress.report(f"variant {i + 1}/{len(unique)} done on rank {comm.rank}: {_describe(cfg)}")
             continue
         progress.report(f"variant {i + 1}/{len(unique)} started on rank {comm.rank}: {_describe(cfg)}")
         h = run_sleeve(cfg, MPI.COMM_SELF, on_step=lambda step: progress.poll(), stop_on_failure=False)
+        _save_variant(out, cfg, h)
         mine[i] = h
         progress.report(f"variant {i + 1}/{len(unique)} done on rank {comm.rank}: {_describe(cfg)}: reached "
                         f"{h.angles[-1]:.1f} deg, torque {h.torques[-1]:.4e} N m, {h.wall:.0f} s"
                         + (f" STOPPED: {h.failure}" if h.failure else ""))
-    progress.finish(sum(1 for i in range(len(unique)) if i % comm.size != 0))
+    progress.finish(sum(1 for i in range(len(unique)) if owner[i] != 0))
     gathered = comm.allgather(mine)
     histories = {k: v for d in gathered for k, v in d.items()}
     results = {name: {label: histories[unique.index(cfg)] for label, cfg in fig.items()}
@@ -117,13 +166,16 @@ def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
             w = csv.writer(f)
             w.writerow(["figure", "variant", "reason"])
             w.writerows(failures)
-        similar = [label for label, cfg in figures["fabrics"].items() if cfg.similarity_factor != 1.0]
+        similar = [label for label, cfg in figures.get("fabrics", {}).items() if cfg.similarity_factor != 1.0]
         (out / "README.txt").write_text(
             ("QUICK (reduced) study: mesh I only, 6 degrees\n" if quick else
-             "full study\n" if (fine, tuple(meshes), tuple(fabrics)) == ("III", tuple(MESHES), tuple(FABRICS)) else
-             f"REDUCED study: parameter figures on mesh {fine}, mesh series {', '.join(meshes)}, "
-             f"fabrics {', '.join(fabrics)}\n")
+             "full study\n" if ((fine, tuple(meshes), tuple(fabrics)) == ("III", tuple(MESHES), tuple(FABRICS))
+                                 and tuple(mesh_frictions) == (0.1, 0.5)) else
+             f"REDUCED study: parameter figures on mesh {fine}, mesh series {', '.join(meshes)} "
+             f"(mu = {', '.join(str(m) for m in mesh_frictions)}), fabrics {', '.join(fabrics)}\n")
             + f"wall time {time.perf_counter() - t0:.0f} s on {comm.size} rank(s)\n"
+            + f"flexion {base_description(next(iter(next(iter(figures.values())).values())))}\n"
+            + f"figures: {', '.join(figures)}\n"
             + ("dynamic similarity (flexion speed and mass damping x c / c_fabric I): " + "; ".join(
                 f"{label} at {figures['fabrics'][label].flexion_speed:.4g} deg/s" for label in similar) + "\n"
                if similar else ""))
@@ -132,6 +184,51 @@ def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
 
 
 PROGRESS_TAG = 4711
+
+
+def _variant_path(out: Path, cfg: SleeveConfig) -> Path:
+    """Checkpoint of one finished variant: <out>/variants/<sha1 of the configuration>.csv."""
+    import hashlib
+    key = hashlib.sha1(repr(sorted(asdict(cfg).items())).encode()).hexdigest()[:16]
+    return Path(out) / "variants" / f"{key}.csv"
+
+
+def _save_variant(out: Path, cfg: SleeveConfig, h: SleeveHistory):
+    """Write a finished variant (its configuration on the first line, then the history rows) so that an
+    interrupted study resumes without rerunning it (`_load_variant`)."""
+    path = _variant_path(out, cfg)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with open(path, "w", newline="") as f:
+        f.write(f"# {repr(sorted(asdict(cfg).items()))} | wall {h.wall:.1f} | failure {h.failure}\n")
+        w = csv.writer(f)
+        w.writerow(SleeveHistory.HEADER)
+        w.writerows(h.rows())
+
+
+def _load_variant(out: Path, cfg: SleeveConfig) -> SleeveHistory | None:
+    """The history saved by `_save_variant` for exactly this configuration, or None."""
+    from fabricfem.sleeve import SleeveStep
+    path = _variant_path(out, cfg)
+    if not path.exists():
+        return None
+    with open(path) as f:
+        first = f.readline()
+        if not first.startswith(f"# {repr(sorted(asdict(cfg).items()))} |"):
+            return None
+        rows = list(csv.DictReader(f))
+    h = SleeveHistory(cfg)
+    h.steps = [SleeveStep(*(int(float(r[k])) if k in ("newton_iterations", "time_steps") else float(r[k])
+                            for k in SleeveHistory.HEADER)) for r in rows]
+    h.wall = float(first.split("| wall ")[1].split(" |")[0])
+    h.failure = first.split("| failure ")[1].strip()
+    return h
+
+
+def base_description(cfg: SleeveConfig) -> str:
+    """One line: the flexion settings common to the study's variants."""
+    return (f"at {cfg.angular_velocity:g} deg/s, mass damping {cfg.mass_damping:g} 1/s, rotary-inertia scale "
+            f"{cfg.rotary_inertia_scale:g}, gravity {'on (-y, ' + format(cfg.settle_time, 'g') + ' s rest before the flexion)' if cfg.gravity else 'off'}, "
+            f"{cfg.method} contact, records every {cfg.output_angle_step:g} deg")
 
 
 def _describe(cfg: SleeveConfig) -> str:

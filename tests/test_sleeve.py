@@ -305,3 +305,95 @@ def test_bad_active_set_cap_names_the_parameter():
         type(problem)(problem.model, [cases.sphere()], max_active_set_updates=0)
     with pytest.raises(ValueError, match="max_rotation_step"):
         SleeveConfig(max_rotation_step=0.0)
+
+
+# ----------------------------------------------------------------------------- stored fabric (fabric_name)
+def test_fabric_name_uses_the_stored_fabric_everywhere(tmp_path):
+    """fabric_name replaces the E/G/nu12/thickness/density fields: the fabric, the wave speed of dynamic
+    similarity, the explicit step estimate and the penalty default all follow the stored fabric.
+    Independent reference: a fabric saved to a tmp file with moduli 4x fabric I's and density 436 kg/m^3
+    (c = 2 c_I exactly, so the similarity factor is 2 and the membrane-limited critical step halves)."""
+    from fabricfem.fabrics import load_fabric, save_fabric
+    from fabricfem.materials import Fabric
+    from fabricfem.sleeve import build_explicit
+    stored = Fabric(E1=4.8e6, E2=4.8e6, G12=4e5, nu12=0.0, thickness=1e-3, density=436.0, name="four-times")
+    path = save_fabric(stored, tmp_path / "four-times.json")
+    base = SleeveConfig(n_around=10, n_along=13, final_angle=2.0, dynamic_similarity=True,
+                        method="penalty")
+    named = base.with_(fabric_name=str(path))
+    assert named.fabric.E1 == 4.8e6 and named.fabric.name == "four-times"
+    # c = sqrt(E / rho): 4x E at the same rho gives twice the wave speed (exact up to rounding)
+    assert named.similarity_factor == pytest.approx(2.0, rel=1e-12)
+    assert named.flexion_speed == pytest.approx(2.0 * base.flexion_speed, rel=1e-12)
+    p_base, p_named = build_explicit(base), build_explicit(named)
+    try:
+        assert p_named.model.fabric.E1 == 4.8e6
+        # penalty default 10 E t / h^2 (fabricfem.contact.nodal.default_penalty) scales with E
+        assert p_named.contact.penalty == pytest.approx(4.0 * p_base.contact.penalty, rel=1e-12)
+        # every frequency of the step estimate (membrane, bending, shear, penalty) scales with sqrt(E / rho) at
+        # equal geometry and thickness: the estimate halves (damping alpha c / c_ref scales likewise)
+        assert p_named.dt_estimate == pytest.approx(0.5 * p_base.dt_estimate, rel=1e-9)
+    finally:
+        p_base.integrator.destroy()
+        p_named.integrator.destroy()
+
+
+def test_fabric_name_with_a_fitted_law_uses_its_small_strain_moduli():
+    """The stored laminate (fitted membrane law): SleeveConfig.fabric is load_fabric's Fabric (membrane_law
+    set, E1/E2/G12 = fitted_fabric's small-strain values), and the wave speed is the plane-stress one of those
+    moduli (stability.plane_stress_wave_speed, eq. 2.87 with nu12)."""
+    from fabricfem.fabrics import load_fabric
+    cfg = SleeveConfig(n_around=10, n_along=13, final_angle=2.0, fabric_name="two-layer-laminate")
+    ref = load_fabric("two-layer-laminate")
+    f = cfg.fabric
+    assert f.membrane_law is not None
+    assert (f.E1, f.E2, f.G12, f.nu12, f.thickness, f.density) == (ref.E1, ref.E2, ref.G12, ref.nu12,
+                                                                    ref.thickness, ref.density)
+    c = math.sqrt(max(ref.E1, ref.E2) / (ref.density * (1.0 - ref.nu12 * ref.nu12 * ref.E2 / ref.E1)))
+    assert cfg.wave_speed == pytest.approx(c, rel=1e-12)
+    assert cfg.membrane_modulus == max(ref.E1, ref.E2)
+
+
+def test_fitted_fabric_sleeve_flexes_a_few_degrees():
+    """Mesh I, stored laminate, 2 degrees explicit: the run completes with finite torques (smoke test of the
+    fitted-law sleeve; the law itself is verified in tests/test_fitted_law.py)."""
+    cfg = SleeveConfig(n_around=10, n_along=13, final_angle=2.0, fabric_name="two-layer-laminate")
+    history = run_sleeve(cfg)
+    assert history.completed and len(history.steps) == 3
+    assert np.all(np.isfinite(history.torques))
+
+
+@pytest.mark.parametrize("name", ["no-such-fabric", "", 3])
+def test_unknown_fabric_name_raises_naming_it(name):
+    with pytest.raises(ValueError, match="fabric_name"):
+        SleeveConfig(fabric_name=name)
+
+
+def test_sleeve_settles_on_the_resting_arm_before_the_flexion():
+    """Gravity on (the explicit default): during the 0.4 s rest the sleeve falls onto the arm and comes to
+    rest. Reference: a twice longer rest (0.8 s) of the same model, i.e. the static state it tends to. The
+    torque at rest (the weight the forearm carries) and the strain energy after 0.4 s must be within 5 % of
+    those after 0.8 s: with mass damping alpha = 10 1/s every mode's amplitude decays at least like
+    exp(-alpha t / 2), by exp(-2) = 14 % between 0.4 and 0.8 s, and the transient left at 0.4 s is itself a
+    small part of the state (kinetic / strain energy 0.016 measured on mesh I), so the difference is a few
+    per cent at most (measured: 1.4 % torque, 0.2 % strain energy)."""
+    cfg = SleeveConfig(n_around=10, n_along=13, friction=0.5, final_angle=1.0)
+    assert cfg.gravity and cfg.settle_time == 0.4
+    short = run_sleeve(cfg, MPI.COMM_SELF)
+    long = run_sleeve(cfg.with_(settle_time=0.8), MPI.COMM_SELF)
+    assert short.timings["settle_s"] == pytest.approx(0.4, rel=1e-12)
+    assert short.torques[0] > 0.0          # the forearm carries part of the sleeve's weight at rest
+    assert short.torques[0] == pytest.approx(long.torques[0], rel=0.05)
+    assert short.timings["settle_strain_energy"] == pytest.approx(long.timings["settle_strain_energy"], rel=0.05)
+    assert short.timings["settle_kinetic_energy"] < 0.05 * short.timings["settle_strain_energy"]
+
+
+def test_gravity_default_depends_on_the_route():
+    """gravity=None resolves to on for the explicit route and off for the quasi-static one; an explicit value
+    is kept; changing the solver re-resolves an unnamed gravity."""
+    assert SleeveConfig().gravity is True
+    assert SleeveConfig(solver="quasistatic").gravity is False
+    assert SleeveConfig(gravity=False).gravity is False
+    assert SleeveConfig().with_(solver="quasistatic").gravity is False
+    with pytest.raises(ValueError, match="settle_time"):
+        SleeveConfig(settle_time=-1.0)

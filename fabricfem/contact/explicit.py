@@ -30,6 +30,7 @@ from fabricfem.body.ellipsoid import Ellipsoid, _ray_to_surface
 from fabricfem.contact.nodal import positive_parameter
 
 MAX_PROJECTION_PASSES = 8
+MAX_CREASE_ITERATIONS = 20   # bisector pushes out of overlapping segments after the passes (project_with_segment)
 INSIDE_TOLERANCE = 1e-12   # relative to the smallest radius: rounding of a projected point is not "inside"
 
 
@@ -153,6 +154,38 @@ def project_with_segment(x, ellipsoids: Sequence[Ellipsoid]) -> tuple[np.ndarray
         inside_q = _normalised_radii(out[candidates], ellipsoids) < 1.0
         keep = inside_q.any(axis=0)
         candidates, inside_q = candidates[keep], inside_q[:, keep]
+    # crease fallback: a point in the lens where two segments overlap (the inner side of a flexed elbow) is
+    # sent back and forth by the one-segment projections above; push it out of all the segments it is inside
+    # of at once, along the bisector d of their outward normals (in the cone of the normals, where a contact
+    # force between the cloth and two rigid bodies lies), by the largest |g_k| / (d . n_k)
+    for _ in range(MAX_CREASE_ITERATIONS):
+        if len(candidates) == 0:
+            return out, moved, segment
+        points = out[candidates]
+        direction = np.zeros_like(points)
+        gaps = np.zeros((len(ellipsoids), len(points)))
+        normals = np.zeros((len(ellipsoids),) + points.shape)
+        for k, e in enumerate(ellipsoids):
+            if inside_q[k].any():
+                gaps[k, inside_q[k]] = np.minimum(_ray_gap(points[inside_q[k]], e), 0.0)
+                normals[k, inside_q[k]] = e.normal(points[inside_q[k]])
+                direction += normals[k]
+        direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-300)
+        cosine = np.einsum("kni,ni->kn", normals, direction)
+        reach = np.where(inside_q & (gaps < 0.0), -gaps / np.maximum(cosine, 1e-3), 0.0)
+        out[candidates] = points + reach.max(axis=0)[:, None] * direction
+        segment[candidates] = np.argmin(gaps, axis=0)
+        inside_q = _normalised_radii(out[candidates], ellipsoids) < 1.0
+        # rounding of a point projected onto a surface is not "inside" (as in the passes above)
+        gap_left = np.full(len(candidates), np.inf)
+        for k, e in enumerate(ellipsoids):
+            if inside_q[k].any():
+                gap_left[inside_q[k]] = np.minimum(gap_left[inside_q[k]],
+                                                   _ray_gap(out[candidates][inside_q[k]], e))
+        keep = gap_left < -INSIDE_TOLERANCE * scale_of.min()
+        candidates, inside_q = candidates[keep], inside_q[:, keep]
+    if len(candidates) == 0:
+        return out, moved, segment
     raise ValueError("ellipsoids: points remain inside after repeated projections (overlapping segments "
                      "trap them); refine the time step")
 

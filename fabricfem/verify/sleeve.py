@@ -1,6 +1,6 @@
 """sleeve-trends: the trends of the thesis's sleeve study (sec. 5.3) checked on our study outputs.
 
-Reads results/sleeve_study/<figure>.csv when a full study (`fabricfem study sleeve`) has been run;
+Reads docs/figures/sleeve/<figure>.csv (the committed study outputs), else results/sleeve_study/<figure>.csv, when a study (`fabricfem study sleeve`) has been run;
 otherwise runs the reduced quick study (mesh I, explicit flexion to 6 degrees) and says so in every quantity
 ("[reduced]"). The thesis's statements are the references (they are trends, not numbers):
 
@@ -10,9 +10,9 @@ otherwise runs the reduced quick study (mesh I, explicit flexion to 6 degrees) a
   sec. 5.3.4; the band is the task's reading of "roughly");
 * fabrics II and III give at least ten times fabric I's torque ("roughly proportional to the stiffness",
   E ratios 292 and 6000, sec. 5.3.5). The study runs them with dynamic similarity (fabricfem.sleeve), under
-  which torque / E is the same for all three fabrics (all moduli scale with E, G = E / 200): the check then
-  holds by that scaling (case sleeve-similarity), as it does in the quasi-static limit, where the
-  displacements imposed by the rigid arm do not depend on E at all;
+  which torque / E would be the same for all three fabrics without gravity (all moduli scale with E,
+  G = E / 200; case sleeve-similarity); with the sleeve's weight (on since issue 4) fabric I's torque is
+  partly the weight the forearm carries, which does not scale with E, so the ratios fall below the E ratios;
 * the mu = 0.5 mesh series changes by less than 10% between the two finest meshes.
 
 A curve that stopped early (quasi-static Newton failure) is compared at the largest angle both curves
@@ -28,7 +28,8 @@ import numpy as np
 
 from fabricfem.verify import CaseResult, Timer, case
 
-STUDY_DIR = Path("results/sleeve_study")
+STUDY_DIRS = (Path("docs/figures/sleeve"), Path("results/sleeve_study"))   # committed study first, then a local one
+FIGURES = ("mesh_mu0.1", "mesh_mu0.5", "friction", "fit", "thickness", "fabrics")
 
 
 def _read(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -40,7 +41,7 @@ def _read(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
 
 
 def _curves(directory: Path) -> dict[str, dict[str, tuple[np.ndarray, np.ndarray]]]:
-    return {p.stem: _read(p) for p in directory.glob("*.csv") if p.stem != "failures"}
+    return {name: _read(directory / f"{name}.csv") for name in FIGURES if (directory / f"{name}.csv").exists()}
 
 
 def _common(a, b) -> float:
@@ -89,7 +90,7 @@ def trends(figures, tag: str, wall: float) -> list[CaseResult]:
         a = _common(fb["fabric I"], fb[f"fabric {k}"])
         r = _at(fb[f"fabric {k}"], a) / _at(fb["fabric I"], a)
         out.append(_check(n, f"{tag} T(fabric {k})/T(fabric I) at {a:.1f} deg >= 10", r, 10.0, r >= 10.0, wall))
-    ms = figures["mesh_mu0.5"]
+    ms = figures.get("mesh_mu0.5", {})
     labels = list(ms)
     if len(labels) >= 2:
         c1, c2 = ms[labels[-2]], ms[labels[-1]]
@@ -105,20 +106,22 @@ def trends(figures, tag: str, wall: float) -> list[CaseResult]:
 
 
 @case("sleeve-trends", known_failure=(
-    "evaluated on real 57-degree explicit data at mesh III (20x26; `fabricfem study sleeve --fine III --meshes III`, "
-    "1848 s on 2 ranks, fabrics II/III with dynamic similarity): T(mu=0.5)/T(mu=0.1) at 57 deg = 1.45 passes "
-    "(0.0279 vs 0.0192 N m); T(fabric II, III)/T(fabric I) = 291.7 and 6000 pass (the E ratios: exact under "
-    "dynamic similarity); max T(R=0.07)/T(R=0.06) over 20-57 deg = 6.85 fails (0.94 at 57 deg) and "
-    "T(t=2mm)/T(t=1mm) at 57 deg = 2.83 fails: the explicit torque curves at 45 deg/s jump by factors of 2-3 "
-    "between degrees (tube buckling in a flexion whose torque at 10 deg on mesh I is 2.9 times the quasi-static one, case "
-    "sleeve-similarity); the mesh series (II-IV) was not run, so that check is not evaluated"))
+    "evaluated on 57-degree explicit data with gravity (issue 4) in docs/figures/sleeve: parameter figures on mesh II "
+    "(15x20; mesh III did not fit the session's CPU budget on the shared machine), mesh series I-II at mu = 0.5: "
+    "T(mu=0.5)/T(mu=0.1) at 57 deg = 1.65 passes (0.0420 vs 0.0255 N m); T(fabric II, III)/T(fabric I) = 224 and "
+    "3322 pass; |T(mesh II) - T(mesh I)| / T at 57 deg = 3.3 % passes; max T(R=0.07)/T(R=0.06) over 20-57 deg = "
+    "1.68 fails (the ratio stays 0.85-1.3: the looser sleeve hangs with more of its weight on the forearm, torque "
+    "at rest 0.057 vs 0.028 N m, and R = 0.06 m has 4.3 mm clearance on our ANSUR II arm, not a tight fit); "
+    "T(t=2mm)/T(t=1mm) at 57 deg = 3.11 fails (mean 2.97 over 20-57 deg: about a fifth of the torque is bending of "
+    "the sagging, wrinkling sleeve, which scales with t^3). See docs/figures/sleeve/README.txt"))
 def sleeve_trends() -> list[CaseResult]:
     """Sleeve-study trends of thesis sec. 5.3 (friction, fit, thickness, fabrics, mesh) on study outputs."""
     with Timer() as timer:
-        if (STUDY_DIR / "friction.csv").exists():
-            readme = STUDY_DIR / "README.txt"
+        found = [d for d in STUDY_DIRS if (d / "friction.csv").exists()]
+        if found:
+            readme = found[0] / "README.txt"
             first = readme.read_text().splitlines()[0] if readme.exists() else "study"
-            figures, tag = _curves(STUDY_DIR), "[full study]" if first == "full study" else f"[{first}]"
+            figures, tag = _curves(found[0]), "[full study]" if first == "full study" else f"[{first}]"
         else:
             import tempfile
             from mpi4py import MPI
@@ -138,7 +141,7 @@ SIMILARITY_ANGLE = 10.0      # deg: contact starts near 5 deg on mesh I
 
 @case("sleeve-similarity")
 def sleeve_similarity() -> list[CaseResult]:
-    """Dynamic similarity of the explicit sleeve flexion (mesh I, mu = 0.1, G = E / 200, to 10 degrees).
+    """Dynamic similarity of the explicit sleeve flexion (mesh I, mu = 0.1, G = E / 200, to 10 degrees, gravity off).
 
     1. Exact scaling (derived in SleeveConfig.flexion_speed): fabric I (1.2 MPa, 436 kg/m^3) at 45 deg/s and a
        fabric with E x 6.25 (c x 2.5, not a power of two, so the arithmetic is not a bitwise rescaling) at the
@@ -159,8 +162,11 @@ def sleeve_similarity() -> list[CaseResult]:
     from fabricfem.verify import result
     name = "sleeve-similarity"
     with Timer() as timer:
+        # gravity off: the weight rho t g does not scale with E, so the similarity is exact only without it
+        # (the study's fabrics runs have gravity on: there torque / E differs between the fabrics by the
+        # weight's share, which is physics, not a scaling error)
         base = SleeveConfig(n_around=10, n_along=13, final_angle=SIMILARITY_ANGLE, E=1.2e6, G=1.2e6 / 200,
-                            density=436.0)
+                            density=436.0, gravity=False)
         stiff = base.with_(E=7.5e6, G=7.5e6 / 200)
         a = SIMILARITY_ANGLE
 
