@@ -38,15 +38,41 @@ s = p/2 is dropped there (that section is free in the thesis' full model).
 
 Materials: the yarns follow the Neo-Hookean + Bonet-Burton law (eqs. 4.66-4.68, forms.yarn) with
 the axis A = the centreline tangent (UnitCellMesh.yarn_axis, DG0).
+
+Crushed elements (issue 5, measured on the coarse quarter cell, TI yarns, biaxial): the contact
+pressure at the crossing is smooth over the patch (31 nodes, 0.25-1.3 GPa, mean 0.73 GPa ~ 0.55 E_T
+at E11 = 0.105) and flattens the transversely soft yarns; the outer ring of hexahedra of the lower
+yarn at the crossing takes the crush (min det F at the Gauss points 0.97, 0.77, 0.60, 0.45, 0.33,
+0.23 for E11 = 0.02 ... 0.127). The material stays strongly elliptic there (acoustic tensor >= 0.19
+GPa), but the discrete tangent of those elements turns indefinite (softest eigenvalue -6.6e3 N/m
+against 1.2e7 N/m), so a full Newton correction is as large as the elements (87 um) and inverts
+them (det F < 0 at a Gauss point). The energy uses J = sqrt(det C), blind to the sign of det F, so
+an inverted state is not rejected by the energy itself. Hence (1) every Newton update is
+backtracked until the smallest det F over the Gauss points stays above half its value at the start
+of the iteration (ADMISSIBLE_DET_RATIO: no element inverts or is suddenly crushed), before the usual
+residual-decrease test (`_admissible_backtrack`), and (2) a load increment that still fails is cut in halves (at most
+MAX_CUTS times) and grown back by doubling after each converged sub-increment (`_increment`). The
+smallest det F of every converged step is reported (ContactUnitCellStep.min_det_F), and a run that
+cannot proceed stops with a SolverError naming the load step, Phi and the most crushed element (the
+furthest converged sub-increment is kept as a step). Measured with these changes: the TI biaxial
+path goes on to E11 = 0.142 (Phi = 1.133; before: 0.138 periodic, 0.133 with u_z = 0 ends), det F
+min = 0.17, and there stops because Newton and the Uzawa updates cycle on stick/slip switches at
+~2e-5 of the force scale (above rtol) with a crushed coarse ring layer: a limit of this mesh and
+contact discretisation, not of the inversion any more (uniaxial, shear and compression reach their
+full paths with the same S as before).
 """
 from __future__ import annotations
 
 import dataclasses
 import time
+import types
 from dataclasses import dataclass
 
+import basix
+import dolfinx.fem as fem
 import dolfinx_mpc
 import numpy as np
+import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
@@ -58,13 +84,20 @@ from fabricfem.meshes.unit_cell import UnitCellMesh
 from fabricfem.solvers.newton import SolverError
 
 __all__ = ["ContactUnitCell", "ContactUnitCellStep", "default_contact_parameters", "symmetry_pins",
-           "DEFAULT_VOLUME_FRACTION", "DEFAULT_FRICTION"]
+           "DEFAULT_VOLUME_FRACTION", "DEFAULT_FRICTION", "DeformationCheck", "MAX_CUTS"]
 
 DEFAULT_VOLUME_FRACTION = 0.4  # phi of eq. 4.65 (thesis sec. 4.3.5)
-DEFAULT_FRICTION = 0.2
 END_FACES = ("periodic", "uz_fixed")
-MAX_BISECTIONS = 2  # a failed load increment is halved at most this many times
-PRESSURE_RATIO = 1.0  # eps_N h / p_max kept above this (ContactUnitCell._adapt_penalty)  # Coulomb coefficient yarn on yarn (assumed; the thesis does not give one for ch. 4)
+DEFAULT_FRICTION = 0.2  # Coulomb coefficient yarn on yarn (assumed; the thesis does not give one for ch. 4)
+MAX_CUTS = 5  # a failed load increment is halved at most this many times (smallest sub-increment 1/32)
+PRESSURE_RATIO = 1.0  # eps_N h / p_max kept above this (ContactUnitCell._adapt_penalty)
+# A Newton update may shrink the smallest det F over the Gauss points to no less than this fraction of
+# its value at the start of the iteration: beyond that the linearisation is not trusted (measured at
+# E11 = 0.14: the full correction takes the crushed elements from det F = 0.156 to -0.03, 1/32 of it
+# leaves 0.156)
+ADMISSIBLE_DET_RATIO = 0.5
+MAX_LINE_SEARCH_HALVINGS = 12  # admissibility halvings of one Newton update (step >= 2^-12)
+RESIDUAL_HALVINGS = 5  # then halvings until |R| decreases, as MPCNewtonSolver._backtrack
 
 
 @dataclass
@@ -81,6 +114,8 @@ class ContactUnitCellStep:
     wall_s: float
     contact_s: float
     pin_reaction: float  # largest |residual| at a pin over the force scale (0 = the pin carries no load)
+    min_det_F: float = 1.0  # smallest det F over all Gauss points at the converged state (volume ratio)
+    sub_increments: int = 1  # converged sub-increments the step took (1 = no cut)
 
     @property
     def augmentations(self) -> int:
@@ -145,6 +180,78 @@ class _TimedContact:
         self.elapsed += time.perf_counter() - t0
 
 
+class DeformationCheck:
+    """det F = det(Phi + grad u*) at the Gauss points of the residual's quadrature rule (one
+    fem.Expression, evaluated on the owned cells; reduced over all ranks).
+
+    Parameters:
+        problem: UnitCellProblem (its Phi constant, fluctuation u and mesh)
+        degree: quadrature degree of the residual (2 for trilinear hexahedra)
+    """
+
+    def __init__(self, problem: UnitCellProblem, degree: int = 2):
+        mesh = problem.mesh
+        cell_type = basix.cell.string_to_type(mesh.topology.cell_name())
+        points, _ = basix.make_quadrature(cell_type, degree)
+        self._det = fem.Expression(ufl.det(problem.Phi + ufl.grad(problem.u)), points)
+        self.cells = np.arange(mesh.topology.index_map(mesh.topology.dim).size_local, dtype=np.int32)
+        centre = basix.geometry(cell_type).mean(axis=0)[None, :]
+        self.centres = fem.Expression(ufl.SpatialCoordinate(mesh), centre).eval(self.cells).reshape(-1, 3)
+        self.comm = mesh.comm
+
+    def local(self) -> np.ndarray:
+        """det F (owned cells, Gauss points) on this rank."""
+        if len(self.cells) == 0:
+            return np.ones((0, 1))
+        return self._det.eval(self.cells).reshape(len(self.cells), -1)
+
+    def minimum(self) -> float:
+        """Smallest det F over all Gauss points of the cell (all ranks; NaN counts as inverted: -inf)."""
+        det = self.local()
+        value = float(np.nanmin(det, initial=np.inf)) if not np.any(np.isnan(det)) else -np.inf
+        return self.comm.allreduce(value, op=MPI.MIN)
+
+    def worst(self) -> tuple[float, np.ndarray]:
+        """(smallest det F, reference centre [m] of the element holding it), same on every rank."""
+        det = self.local().min(axis=1, initial=np.inf) if len(self.cells) else np.zeros(0)
+        k = int(np.argmin(det)) if len(det) else -1
+        mine = (float(det[k]), *self.centres[k].tolist()) if k >= 0 else (np.inf, 0.0, 0.0, 0.0)
+        best = min(self.comm.allgather(mine))
+        return best[0], np.array(best[1:])
+
+
+def _admissible_backtrack(newton, check: DeformationCheck, rnorm: float) -> None:
+    """Line search of one Newton update u <- u - s du (bound to the MPCNewtonSolver instance): s is
+    halved (at most MAX_LINE_SEARCH_HALVINGS times) until the smallest det F over the Gauss points
+    exceeds ADMISSIBLE_DET_RATIO x its value at the start of the iteration (no inverted, no suddenly
+    crushed element), then halved (at most RESIDUAL_HALVINGS times) until |R| < rnorm; if
+    |R| never decreases, the smallest step is kept (as MPCNewtonSolver._backtrack)."""
+    u = newton.u.vector
+    x0 = u.copy()
+    floor = ADMISSIBLE_DET_RATIO * max(check.minimum(), 0.0)
+
+    def restore() -> None:
+        x0.copy(u)
+        u.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+
+    step = 1.0
+    for _ in range(MAX_LINE_SEARCH_HALVINGS):
+        newton._update(step)
+        if check.minimum() > floor:
+            break
+        restore()
+        step *= 0.5
+    else:
+        newton._update(step)  # still crushing at 2^-12: the residual test below and the step cuts decide
+    for _ in range(RESIDUAL_HALVINGS):
+        if newton.assemble_residual().norm() < rnorm:
+            break
+        restore()
+        step *= 0.5
+        newton._update(step)  # the last, smallest step is kept if |R| never decreases
+    x0.destroy()
+
+
 class ContactUnitCell:
     """Periodic woven unit cell of Bonet-Burton yarns with (optional) yarn-yarn frictional contact.
 
@@ -202,6 +309,9 @@ class ContactUnitCell:
                                        pins=symmetry_pins(cell, end_faces), fixed_facets=fixed)
         newton = self.problem.newton
         newton.line_search = True
+        self.deformation = DeformationCheck(self.problem)
+        newton._backtrack = types.MethodType(
+            lambda solver, rnorm: _admissible_backtrack(solver, self.deformation, rnorm), newton)
         self.contact: YarnContact | None = None
         self._timed: _TimedContact | None = None
         if contact is True:
@@ -267,7 +377,7 @@ class ContactUnitCell:
 
     def _contact_step(self, force_scale: float, n: int, Phi_n: np.ndarray) -> ContactReport:
         """Box 7 loop of one load step (Newton with fixed multipliers, Uzawa updates) with the adapted
-        penalty; the state is restored on failure so that the caller can bisect the increment."""
+        penalty; the state is restored on failure so that the caller can cut the increment."""
         c, newton, problem = self.contact, self.problem.newton, self.problem
         saved = (problem.u.x.array.copy(), c.lam_N.copy(), c.lam_T.copy(), c.ref_quad.copy(), c.ref_weights.copy())
         self._adapt_penalty()
@@ -279,46 +389,88 @@ class ContactUnitCell:
             c.state = None
             raise
 
-    def _increment(self, Phi_n: np.ndarray, n: int, depth: int = 0) -> tuple[ContactReport | None, list[int]]:
-        """Reach Phi_n from self.Phi; on a failed solve the increment is bisected (at most
-        MAX_BISECTIONS times); the reports of the sub-increments are merged (summed augmentations
-        and iterations, the last one's forces)."""
+    def _sub_increment(self, Phi_b: np.ndarray, n: int) -> tuple[ContactReport | None, list[int]]:
+        """Solve at Phi_b from the converged state (self.Phi); SolverError on failure with the state
+        restored (u*, multipliers and contact references), or if an element ends inverted."""
         problem, newton = self.problem, self.problem.newton
-        problem.Phi.value[:] = Phi_n
+        problem.Phi.value[:] = Phi_b
         force_scale = problem._force_scale()
         self.last_force_scale = force_scale
-        try:
-            if self.contact is None:
-                result = newton.solve(force_scale, problem.length_scale)
-                if not result.converged:
-                    raise SolverError(f"unit cell: Newton {result.reason} after {result.iterations} iterations",
-                                      reason=result.reason)
-                return None, [result.iterations]
-            self.contact.Phi = Phi_n
-            report = self._contact_step(force_scale, n, Phi_n)
-            return report, list(report.newton_iterations)
-        except SolverError as exc:
-            if depth >= MAX_BISECTIONS:
-                raise SolverError(f"{str(exc).split(';')[0]} at Phi = {np.round(Phi_n, 6).tolist()} after "
-                                  f"{depth} bisections of the increment (last converged Phi = "
-                                  f"{np.round(self.Phi, 6).tolist()})", reason=exc.reason) from None
-            if self.contact is None:
-                problem.u.x.array[:] = self._u_converged
-            mid = 0.5 * (self.Phi + Phi_n)
-            first, its1 = self._increment(mid, n, depth + 1)
-            self.Phi = mid.copy()
-            self._u_converged = problem.u.x.array.copy()
-            second, its2 = self._increment(Phi_n, n, depth + 1)
-            if second is not None:
-                second.augmentations += first.augmentations
-                second.newton_iterations = its1 + its2
-            return second, its1 + its2
+        saved_u = problem.u.x.array.copy()
+        c = self.contact
+        saved_contact = None if c is None else (c.lam_N.copy(), c.lam_T.copy(), c.ref_quad.copy(),
+                                                c.ref_weights.copy())
+        if self.contact is None:
+            result = newton.solve(force_scale, problem.length_scale)
+            if not result.converged:
+                problem.u.x.array[:] = saved_u
+                raise SolverError(f"unit cell: Newton {result.reason} after {result.iterations} iterations",
+                                  reason=result.reason)
+            report, iterations = None, [result.iterations]
+        else:
+            self.contact.Phi = Phi_b
+            report = self._contact_step(force_scale, n, Phi_b)
+            iterations = list(report.newton_iterations)
+        det_min = self.deformation.minimum()
+        if not det_min > 0.0:  # converged onto an inverted element: not a physical state (J = sqrt(det C))
+            problem.u.x.array[:] = saved_u
+            if c is not None:  # solve_with_contact committed: take the references and multipliers back
+                c.lam_N, c.lam_T, c.ref_quad, c.ref_weights = saved_contact
+                c.state = None
+            raise SolverError(f"unit cell: an element is inverted (det F = {det_min:.3g}) at a converged state",
+                              reason="INVERTED_ELEMENT")
+        return report, iterations
+
+    def _increment(self, Phi_n: np.ndarray, n: int) -> tuple[ContactReport | None, list[int], int]:
+        """Reach Phi_n from self.Phi in adaptive sub-increments: a failed one is halved (at most
+        MAX_CUTS times below the whole increment), a converged one is followed by one twice as long
+        (up to the rest of the increment). Returns the merged report (summed augmentations, all Newton
+        iteration counts, the last sub-increment's forces), the iteration counts and the number of
+        converged sub-increments. SolverError naming step n, Phi and the most crushed element if the
+        smallest sub-increment fails."""
+        start = self.Phi.copy()
+        reached, length = 0.0, 1.0
+        smallest = 0.5 ** MAX_CUTS
+        iterations: list[int] = []
+        augmentations, report, parts = 0, None, 0
+        while reached < 1.0:
+            target = min(1.0, reached + length)
+            Phi_b = start + target * (Phi_n - start)
+            try:
+                report, its = self._sub_increment(Phi_b, n)
+            except SolverError as exc:
+                self.problem.Phi.value[:] = self.Phi  # back to the converged state (u* restored already)
+                if self.contact is not None:
+                    self.contact.Phi = self.Phi
+                if length <= smallest * (1.0 + 1e-12):
+                    det_min, where = self.deformation.worst()
+                    raise SolverError(
+                        f"{str(exc).split(';')[0]} at Phi = {np.round(Phi_b, 6).tolist()} (load step {n}) after "
+                        f"{MAX_CUTS} cuts of the increment (last converged Phi = {np.round(self.Phi, 6).tolist()}; "
+                        f"smallest det F there {det_min:.3g} in the element at X = "
+                        f"{np.round(where * 1e3, 4).tolist()} mm)", reason=exc.reason) from None
+                length *= 0.5
+                continue
+            iterations += its
+            if report is not None:
+                augmentations += report.augmentations
+                report.augmentations = augmentations
+                report.newton_iterations = list(iterations)
+            self._partial = (report, list(iterations), parts + 1)
+            self._converged_force_scale = self.last_force_scale
+            self.Phi = Phi_b.copy()
+            self._u_converged = self.problem.u.x.array.copy()  # read by study_unit_cell.run_case on a stop
+            reached, parts = target, parts + 1
+            length = min(2.0 * length, 1.0)
+        return report, iterations, parts
 
     def solve(self, Phi, steps: int = 1) -> list[ContactUnitCellStep]:
         """Go from the current Phi to `Phi` in `steps` equal increments (Phi_n = Phi_0 + n/steps (Phi -
         Phi_0)); one ContactUnitCellStep per step (also appended to self.steps). A failed increment
-        is bisected up to MAX_BISECTIONS times; SolverError (with the last converged Phi in the
-        message) if it still fails."""
+        is cut adaptively (`_increment`, at most MAX_CUTS halvings); SolverError (with the load step,
+        the last converged Phi and the most crushed element in the message) if it still fails; the
+        furthest converged sub-increment of that step is then kept as the last entry of self.steps (its
+        Phi short of the step's target)."""
         Phi = np.asarray(Phi, dtype=float)
         if Phi.shape != (3, 3) or not np.all(np.isfinite(Phi)):
             raise ValueError(f"Phi must be a finite 3 x 3 matrix, got {Phi!r}")
@@ -334,27 +486,41 @@ class ContactUnitCell:
             t0 = time.perf_counter()
             c0 = 0.0 if self._timed is None else self._timed.elapsed
             self._u_converged = problem.u.x.array.copy()
-            report, iterations = self._increment(Phi_n, n)
-            force_scale = self.last_force_scale
-            S, P = problem.homogenized_stress()
-            if not (np.all(np.isfinite(S)) and np.all(np.isfinite(P))):
-                raise SolverError(f"unit cell: non-finite homogenized stress at Phi = {Phi_n.tolist()}")
-            reaction = self.pin_reactions(force_scale)
-            self.Phi = Phi_n.copy()
-            wall = time.perf_counter() - t0
-            c_s = 0.0 if self._timed is None else self._timed.elapsed - c0
-            step = ContactUnitCellStep(Phi_n.copy(), green_lagrange(Phi_n), S, P, iterations, report, wall, c_s,
-                                       reaction)
-            out.append(step)
-            self.steps.append(step)
+            self._partial = None
+            try:
+                report, iterations, parts = self._increment(Phi_n, n)
+            except SolverError:
+                if self._partial is not None:  # keep the furthest converged sub-increment as a step
+                    self._record(*self._partial, t0, c0)
+                raise
+            self._record(report, iterations, parts, t0, c0)
+            out.append(self.steps[-1])
         return out
+
+    def _record(self, report: ContactReport | None, iterations: list[int], parts: int, t0: float,
+                c0: float) -> None:
+        """Append the converged state at self.Phi as a ContactUnitCellStep (wall time since t0 [s],
+        contact time since the contact timer read c0 [s])."""
+        problem = self.problem
+        Phi_n = self.Phi.copy()
+        force_scale = self._converged_force_scale
+        S, P = problem.homogenized_stress()
+        if not (np.all(np.isfinite(S)) and np.all(np.isfinite(P))):
+            raise SolverError(f"unit cell: non-finite homogenized stress at Phi = {Phi_n.tolist()}")
+        reaction = self.pin_reactions(force_scale)
+        wall = time.perf_counter() - t0
+        c_s = 0.0 if self._timed is None else self._timed.elapsed - c0
+        self.steps.append(ContactUnitCellStep(Phi_n, green_lagrange(Phi_n), S, P, iterations, report, wall, c_s,
+                                              reaction, self.deformation.minimum(), parts))
 
 
 def contact_table(steps: list[ContactUnitCellStep]) -> str:
     """Per-step report: E11, E22, E12, S11, S22, S12 [Pa], Newton iterations, augmentations, final
-    penetration [m], normal and tangential contact force [N], active / slipping nodes."""
+    penetration [m], normal and tangential contact force [N], active / slipping nodes, smallest det F,
+    converged sub-increments and wall time [s] of the step."""
     lines = [f"{'step':>4} {'E11':>8} {'E22':>8} {'E12':>8} {'S11 [Pa]':>11} {'S22 [Pa]':>11} {'S12 [Pa]':>11} "
-             f"{'Newton':>12} {'aug':>3} {'penetr. [m]':>11} {'F_N [N]':>10} {'F_T [N]':>10} {'act/slip':>9}"]
+             f"{'Newton':>12} {'aug':>3} {'penetr. [m]':>11} {'F_N [N]':>10} {'F_T [N]':>10} {'act/slip':>9} "
+             f"{'detF min':>8} {'sub':>3} {'wall [s]':>8}"]
     for k, s in enumerate(steps, start=1):
         c = s.contact
         its = ",".join(map(str, s.newton_iterations))
@@ -364,5 +530,6 @@ def contact_table(steps: list[ContactUnitCellStep]) -> str:
             tail = (f"{c.augmentations:>3d} {c.max_penetration:>11.3e} {c.normal_force:>10.3e} "
                     f"{c.tangential_force:>10.3e} {f'{c.active}/{c.slipping}':>9}")
         lines.append(f"{k:>4d} {s.E[0, 0]:>8.4f} {s.E[1, 1]:>8.4f} {s.E[0, 1]:>8.4f} {s.S[0, 0]:>11.4e} "
-                     f"{s.S[1, 1]:>11.4e} {s.S[0, 1]:>11.4e} {its[:12]:>12} " + tail)
+                     f"{s.S[1, 1]:>11.4e} {s.S[0, 1]:>11.4e} {its[:12]:>12} " + tail
+                     + f" {s.min_det_F:>8.3f} {s.sub_increments:>3d} {s.wall_s:>8.1f}")
     return "\n".join(lines)
