@@ -137,7 +137,7 @@ def measure_initial_stiffness(material: str = "ti", contact: bool = True, strain
 # --------------------------------------------------------------------------------- 2. samples, fit
 def contact_grid_paths(max_stretch: float = 1.06, shear: float = 0.1) -> list[list[np.ndarray]]:
     """Load paths of the fitting grid: biaxial stretches in ratios 1:1, 1:0, 0:1, 1:0.5, 0.5:1, 1:-0.25,
-    -0.25:1 up to `max_stretch` (the TI contact cell converges to Phi = 1.13 biaxially, measured; the
+    -0.25:1 up to `max_stretch` (the TI contact cell converges to Phi = 1.133 biaxially, measured; the
     negative ratios cover the lateral contraction of uniaxial tension: with contact, pulling the warp at
     fixed weft stretch loads the weft, N22 > 0, so N22 = 0 needs E22 < 0) and three shear
     paths (pre-stretches (PRESTRETCH, PRESTRETCH), (max, max), (max, PRESTRETCH), then Phi12 = Phi21 =
