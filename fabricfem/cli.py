@@ -1,6 +1,7 @@
 """Command line: `fabricfem run SCENE`, `fabricfem verify [CASE ...] [--json]`, `fabricfem demo`,
 `fabricfem bench ...`,
-`fabricfem study sleeve [--quick] [--out DIR] [--fine III] [--meshes I,II,III,IV] [--fabrics I,II,III]`."""
+`fabricfem study sleeve [--quick] [--out DIR] [--fine III] [--meshes I,II,III,IV] [--fabrics I,II,III]
+[--mesh-frictions 0.1,0.5] [--only mesh_mu0.5,fit]`."""
 from __future__ import annotations
 
 import argparse
@@ -100,6 +101,9 @@ def main(argv: list[str] | None = None) -> int:
                          help="sleeve: mesh of the parameter figures (friction, fit, thickness, fabrics)")
     p_study.add_argument("--meshes", default="I,II,III,IV", help="sleeve: meshes of the mesh series, e.g. I,II")
     p_study.add_argument("--fabrics", default="I,II,III", help="sleeve: fabric sets of the fabrics figure")
+    p_study.add_argument("--mesh-frictions", default="0.1,0.5", help="sleeve: mu of the mesh series run, e.g. 0.5")
+    p_study.add_argument("--only", default=None,
+                         help="sleeve: run only these figures, e.g. mesh_mu0.5,fit (default: all)")
     args = parser.parse_args(argv)
 
     if args.command == "verify":
@@ -137,6 +141,14 @@ def main(argv: list[str] | None = None) -> int:
         options = dict(quick=args.quick, fine=args.fine,
                        meshes=tuple(m.strip() for m in args.meshes.split(",") if m.strip()),
                        fabrics=tuple(f.strip() for f in args.fabrics.split(",") if f.strip()))
+        try:
+            options["mesh_frictions"] = tuple(float(m) for m in args.mesh_frictions.split(",") if m.strip())
+        except ValueError:
+            _print(f"fabricfem study sleeve: --mesh-frictions must be numbers, got {args.mesh_frictions!r}",
+                   file=sys.stderr)
+            return 2
+        if args.only is not None:
+            options["only"] = tuple(f.strip() for f in args.only.split(",") if f.strip())
         try:
             variants(**options)   # bad --fine / --meshes / --fabrics: a message, not a traceback
         except ValueError as exc:

@@ -142,7 +142,7 @@ SCHEMA: dict[str, dict[str, tuple[type | tuple, bool]]] = {
     "motion": {"type": (str, True), "final_angle": ((int, float), False), "angular_velocity": ((int, float), False),
                "steps": (int, False), "solver": (str, False), "mass_damping": ((int, float), False),
                "rotary_inertia_scale": ((int, float), False), "output_angle_step": ((int, float), False),
-               "dynamic_similarity": (bool, False)},
+               "dynamic_similarity": (bool, False), "settle_time": ((int, float), False)},
     "contact": {"method": (str, False), "friction": ((int, float), False), "penalty": ((int, float), False),
                 "stabilization": ((int, float), False), "gravity": (bool, False)},
     # dynamic scenes (fabricfem.run.run_dynamic_scene)
@@ -320,6 +320,8 @@ def _check_sleeve(data: dict) -> None:
     for key in ("angular_velocity", "steps"):
         if key in motion:
             _positive(f"motion.{key}", motion[key])
+    if "settle_time" in motion:
+        _finite("motion.settle_time", motion["settle_time"], minimum=0.0, strict=False)
     from fabricfem.body.arm import DEFAULT_ARM
     for key in ("upper_arm_girth", "forearm_girth"):
         girth = body.get(key, getattr(DEFAULT_ARM, key))

@@ -43,6 +43,7 @@ def test_sleeve_scene_is_valid():
     (lambda d: d["motion"].update(solver="implicit"), r"motion.solver: unknown solver 'implicit'"),
     (lambda d: d["contact"].update(method="augmented"), r"contact.method: unknown method 'augmented' for the explicit"),
     (lambda d: d["motion"].update(rotary_inertia_scale=0.5), r"motion.rotary_inertia_scale: must be >= 1"),
+    (lambda d: d["motion"].update(settle_time=-0.1), r"motion.settle_time: must be >= 0"),
     (lambda d: d.pop("motion"), r"missing section \[motion\]"),
 ])
 def test_bad_sleeve_scene_fails_before_meshing(mutate, message, monkeypatch):
@@ -192,13 +193,17 @@ def test_torque_bounce_of_an_alternating_signal():
 
 
 def test_study_cli_rejects_unknown_meshes_and_fabrics(capsys):
-    """`fabricfem study sleeve --meshes I,V` / `--fabrics IV`: exit status 2 with the parameter named, before
+    """`fabricfem study sleeve --meshes I,V` / `--fabrics IV` / `--mesh-frictions 0.7` / `--only nosuch`: exit status 2 with the parameter named, before
     any run."""
     from fabricfem.cli import main
     assert main(["study", "sleeve", "--meshes", "I,V"]) == 2
     assert "fine / meshes: unknown mesh 'V'" in capsys.readouterr().err
     assert main(["study", "sleeve", "--fabrics", "IV"]) == 2
     assert "fabrics: unknown fabric set 'IV'" in capsys.readouterr().err
+    assert main(["study", "sleeve", "--mesh-frictions", "0.7"]) == 2
+    assert "mesh_frictions" in capsys.readouterr().err
+    assert main(["study", "sleeve", "--only", "mesh_mu0.5,nosuch"]) == 2
+    assert "only: unknown figure 'nosuch'" in capsys.readouterr().err
 
 
 # ------------------------------------------------------------------ active-set strategy and damped Newton
