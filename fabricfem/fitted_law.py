@@ -358,18 +358,27 @@ def fit_membrane_law(samples: MembraneSamples, degree: int = 4, *, min_curvature
                              max_eigenvalue=float(eigval[:, -1].max()), n_samples=len(X), repaired=repaired)
 
 
+def _orthotropic_stiffness(A0, definite: bool) -> np.ndarray:
+    """A0 [N/m] (3x3 Voigt) checked: finite, symmetric, non-zero, A13 = A23 = 0 (W even in the shear strain),
+    positive definite (`definite`) or semi-definite; ValueError naming initial_stiffness otherwise."""
+    A = np.array(A0, dtype=float)
+    if A.shape != (3, 3) or not np.all(np.isfinite(A)):
+        raise ValueError(f"initial_stiffness must be a finite 3x3 matrix [N/m], got {A0!r}")
+    size = float(np.abs(A).max())
+    if not size > 0 or np.abs(A - A.T).max() > 1e-12 * size:
+        raise ValueError(f"initial_stiffness must be symmetric and non-zero, got {A.tolist()}")
+    if abs(A[0, 2]) > 1e-12 * size or abs(A[1, 2]) > 1e-12 * size:
+        raise ValueError("initial_stiffness: A13 and A23 must vanish (W is even in the shear strain)")
+    lowest = np.linalg.eigvalsh(A)[0]
+    if lowest < 0 or (definite and lowest <= 0):
+        raise ValueError(f"initial_stiffness must be positive {'definite' if definite else 'semi-definite'} "
+                         f"(eigenvalues {np.linalg.eigvalsh(A).tolist()} N/m), got {A.tolist()}")
+    return A
+
+
 def _quadratic_from_stiffness(A0, exps: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Fixed coefficients (K,) and the mask of free ones for W = 1/2 eps.A0 eps + higher order terms."""
-    A0 = np.asarray(A0, dtype=float)
-    if A0.shape != (3, 3) or not np.all(np.isfinite(A0)):
-        raise ValueError(f"initial_stiffness must be a finite 3x3 matrix [N/m], got {A0!r}")
-    size = float(np.abs(A0).max())
-    if not size > 0 or np.abs(A0 - A0.T).max() > 1e-12 * size:
-        raise ValueError(f"initial_stiffness must be symmetric and non-zero, got {A0.tolist()}")
-    if abs(A0[0, 2]) > 1e-12 * size or abs(A0[1, 2]) > 1e-12 * size:
-        raise ValueError("initial_stiffness: A13 and A23 must vanish (W is even in the shear strain)")
-    if np.linalg.eigvalsh(A0)[0] < 0:
-        raise ValueError(f"initial_stiffness must be positive semi-definite, got {A0.tolist()}")
+    A0 = _orthotropic_stiffness(A0, definite=False)
     values = {(2, 0, 0): A0[0, 0] / 2, (1, 1, 0): A0[0, 1], (0, 2, 0): A0[1, 1] / 2, (0, 0, 2): A0[2, 2] / 2}
     c_fixed = np.zeros(len(exps))
     free = np.ones(len(exps), dtype=bool)
@@ -541,17 +550,7 @@ class ConvexMembraneLaw:
     n_samples: int = 0
 
     def __post_init__(self):
-        A0 = np.array(self.initial_stiffness, dtype=float)
-        if A0.shape != (3, 3) or not np.all(np.isfinite(A0)):
-            raise ValueError(f"initial_stiffness must be a finite 3x3 matrix [N/m], got {self.initial_stiffness!r}")
-        size = float(np.abs(A0).max())
-        if not size > 0 or np.abs(A0 - A0.T).max() > 1e-12 * size:
-            raise ValueError(f"initial_stiffness must be symmetric and non-zero, got {A0.tolist()}")
-        if abs(A0[0, 2]) > 1e-12 * size or abs(A0[1, 2]) > 1e-12 * size:
-            raise ValueError("initial_stiffness: A13 and A23 must vanish (W is even in the shear strain)")
-        if np.linalg.eigvalsh(A0)[0] <= 0:
-            raise ValueError(f"initial_stiffness must be positive definite (eigenvalues "
-                             f"{np.linalg.eigvalsh(A0).tolist()} N/m), got {A0.tolist()}")
+        A0 = _orthotropic_stiffness(self.initial_stiffness, definite=True)
         A0 = 0.5 * (A0 + A0.T)
         A0.setflags(write=False)
         dirs = np.array(self.directions, dtype=float)
