@@ -318,7 +318,7 @@ def test_fabric_name_uses_the_stored_fabric_everywhere(tmp_path):
     similarity, the explicit step estimate and the penalty default all follow the stored fabric.
     Independent reference: a fabric saved to a tmp file with moduli 4x fabric I's and density 436 kg/m^3
     (c = 2 c_I exactly, so the similarity factor is 2 and the membrane-limited critical step halves)."""
-    from fabricfem.fabrics import load_fabric, save_fabric
+    from fabricfem.fabrics import save_fabric
     from fabricfem.materials import Fabric
     from fabricfem.sleeve import build_explicit
     stored = Fabric(E1=4.8e6, E2=4.8e6, G12=4e5, nu12=0.0, thickness=1e-3, density=436.0, name="four-times")
