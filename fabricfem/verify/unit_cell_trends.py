@@ -54,8 +54,9 @@ def read_curves(path: str) -> dict[str, list[dict]]:
     curves: dict[str, list[dict]] = {}
     with open(path) as f:
         for row in csv.DictReader(f):
-            rec = {k: (float(v) if k not in ("curve", "material", "load", "option", "refinement", "end_faces", "stopped") else v)
-                   for k, v in row.items()}
+            text = ("curve", "material", "load", "option", "refinement", "end_faces", "stopped")
+            # columns added later (min_det_F, sub_increments) are empty on curves reused from older runs: NaN
+            rec = {k: (v if k in text else float(v) if v != "" else math.nan) for k, v in row.items()}
             curves.setdefault(row["curve"], []).append(rec)
     return curves
 
