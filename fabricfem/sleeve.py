@@ -854,17 +854,21 @@ def run_explicit(problem: ExplicitSleeve, on_step: Callable[[SleeveStep], None] 
         output_time[0] += time.perf_counter() - tic
         return step
 
-    # rest: the arm holds still (the flexion angle is 0 before t_start) while the sleeve settles on it; the
-    # start record's torque is the mean over the last record interval of the rest
-    for k in range(problem.settle_records):
-        contact.reset_means()
+    def advance_one_record() -> bool:
+        """steps_per_record explicit steps; whether displacement and velocity are still finite."""
         for _ in range(problem.steps_per_record):
             integ.step()
             integ.step_count += 1
-    if problem.settle_records:
-        if not (math.isfinite(integ.d.norm()) and math.isfinite(integ.v.norm())):
+        return math.isfinite(integ.d.norm()) and math.isfinite(integ.v.norm())
+
+    # rest: the arm holds still (the flexion angle is 0 before t_start) while the sleeve settles on it; the
+    # start record's torque is the mean over the last record interval of the rest
+    for _ in range(problem.settle_records):
+        contact.reset_means()
+        if not advance_one_record():
             raise SleeveError("sleeve: the explicit run blew up while the sleeve settled on the arm",
                               last_converged_load_factor=0.0, reason="EXPLICIT_BLOW_UP")
+    if problem.settle_records:
         history.timings.update(settle_s=flexion.t_start, settle_kinetic_energy=integ.kinetic_energy(),
                                settle_strain_energy=integ.strain_energy())
     start = record(problem.settle_records * problem.steps_per_record, 0.0)
@@ -879,11 +883,7 @@ def run_explicit(problem: ExplicitSleeve, on_step: Callable[[SleeveStep], None] 
     loop_start, cpu_start = time.perf_counter(), time.process_time()
     for k in range(n_records):
         try:
-            for _ in range(problem.steps_per_record):
-                integ.step()
-                integ.step_count += 1
-            finite = math.isfinite(integ.d.norm()) and math.isfinite(integ.v.norm())
-            if not finite:
+            if not advance_one_record():
                 raise ValueError("non-finite displacement or velocity")
         except ValueError as exc:
             message = (f"sleeve: the explicit flexion blew up before {math.degrees(flexion.angle(integ.t)):.3g} deg "

@@ -102,6 +102,16 @@ def _ray_gap(x: np.ndarray, e: Ellipsoid) -> np.ndarray:
     return np.abs(s) * np.where(outside, 1.0, -1.0)
 
 
+def _gaps_inside(points: np.ndarray, ellipsoids: Sequence[Ellipsoid], inside_q: np.ndarray) -> np.ndarray:
+    """(K, n) ray-cast gaps [m] of `points` against the segments each is inside of (inside_q, (K, n) bool);
+    +inf against the others (the gap is >= 0 there, no ray cast needed)."""
+    gaps = np.full((len(ellipsoids), len(points)), np.inf)
+    for k, e in enumerate(ellipsoids):  # loop over the few segments, vectorised over the points
+        if inside_q[k].any():
+            gaps[k, inside_q[k]] = _ray_gap(points[inside_q[k]], e)
+    return gaps
+
+
 def project_with_segment(x, ellipsoids: Sequence[Ellipsoid]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """`project_along_gradient` that also returns the segment index (N,) each point was last projected
     out of (for points inside no segment: the segment of smallest normalised radius q, a diagnostic).
@@ -129,11 +139,7 @@ def project_with_segment(x, ellipsoids: Sequence[Ellipsoid]) -> tuple[np.ndarray
         if len(candidates) == 0:
             return out, moved, segment
         points = out[candidates]
-        # ray casts only against the segments a point is inside of: the gap is >= 0 against the others
-        gaps = np.full((len(ellipsoids), len(points)), np.inf)
-        for k, e in enumerate(ellipsoids):
-            if inside_q[k].any():
-                gaps[k, inside_q[k]] = _ray_gap(points[inside_q[k]], e)
+        gaps = _gaps_inside(points, ellipsoids, inside_q)
         deepest = np.argmin(gaps, axis=0)
         if k_pass == 0:
             segment[candidates] = deepest
@@ -163,11 +169,10 @@ def project_with_segment(x, ellipsoids: Sequence[Ellipsoid]) -> tuple[np.ndarray
             return out, moved, segment
         points = out[candidates]
         direction = np.zeros_like(points)
-        gaps = np.zeros((len(ellipsoids), len(points)))
+        gaps = np.minimum(_gaps_inside(points, ellipsoids, inside_q), 0.0)   # 0 where not inside
         normals = np.zeros((len(ellipsoids),) + points.shape)
         for k, e in enumerate(ellipsoids):
             if inside_q[k].any():
-                gaps[k, inside_q[k]] = np.minimum(_ray_gap(points[inside_q[k]], e), 0.0)
                 normals[k, inside_q[k]] = e.normal(points[inside_q[k]])
                 direction += normals[k]
         direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-300)
@@ -177,11 +182,7 @@ def project_with_segment(x, ellipsoids: Sequence[Ellipsoid]) -> tuple[np.ndarray
         segment[candidates] = np.argmin(gaps, axis=0)
         inside_q = _normalised_radii(out[candidates], ellipsoids) < 1.0
         # rounding of a point projected onto a surface is not "inside" (as in the passes above)
-        gap_left = np.full(len(candidates), np.inf)
-        for k, e in enumerate(ellipsoids):
-            if inside_q[k].any():
-                gap_left[inside_q[k]] = np.minimum(gap_left[inside_q[k]],
-                                                   _ray_gap(out[candidates][inside_q[k]], e))
+        gap_left = _gaps_inside(out[candidates], ellipsoids, inside_q).min(axis=0)
         keep = gap_left < -INSIDE_TOLERANCE * scale_of.min()
         candidates, inside_q = candidates[keep], inside_q[:, keep]
     if len(candidates) == 0:
