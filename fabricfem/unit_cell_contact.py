@@ -50,7 +50,8 @@ them (det F < 0 at a Gauss point). The energy uses J = sqrt(det C), blind to the
 an inverted state is not rejected by the energy itself. Hence (1) every Newton update is
 backtracked until the smallest det F over the Gauss points stays above half its value at the start
 of the iteration (ADMISSIBLE_DET_RATIO: no element inverts or is suddenly crushed), before the usual
-residual-decrease test (`_admissible_backtrack`), and (2) a load increment that still fails is cut in halves (at most
+residual-decrease test (the predicate `crush_guard` of
+fabricfem.solvers.mpc_newton.backtrack), and (2) a load increment that still fails is cut in halves (at most
 MAX_CUTS times) and grown back by doubling after each converged sub-increment (`_increment`). The
 smallest det F of every converged step is reported (ContactUnitCellStep.min_det_F), and a run that
 cannot proceed stops with a SolverError naming the load step, Phi and the most crushed element (the
@@ -65,8 +66,8 @@ from __future__ import annotations
 
 import dataclasses
 import time
-import types
 from dataclasses import dataclass
+from typing import Callable
 
 import basix
 import dolfinx.fem as fem
@@ -96,8 +97,6 @@ PRESSURE_RATIO = 1.0  # eps_N h / p_max kept above this (ContactUnitCell._adapt_
 # E11 = 0.14: the full correction takes the crushed elements from det F = 0.156 to -0.03, 1/32 of it
 # leaves 0.156)
 ADMISSIBLE_DET_RATIO = 0.5
-MAX_LINE_SEARCH_HALVINGS = 12  # admissibility halvings of one Newton update (step >= 2^-12)
-RESIDUAL_HALVINGS = 5  # then halvings until |R| decreases, as MPCNewtonSolver._backtrack
 
 
 @dataclass
@@ -220,36 +219,12 @@ class DeformationCheck:
         return best[0], np.array(best[1:])
 
 
-def _admissible_backtrack(newton, check: DeformationCheck, rnorm: float) -> None:
-    """Line search of one Newton update u <- u - s du (bound to the MPCNewtonSolver instance): s is
-    halved (at most MAX_LINE_SEARCH_HALVINGS times) until the smallest det F over the Gauss points
-    exceeds ADMISSIBLE_DET_RATIO x its value at the start of the iteration (no inverted, no suddenly
-    crushed element), then halved (at most RESIDUAL_HALVINGS times) until |R| < rnorm; if
-    |R| never decreases, the smallest step is kept (as MPCNewtonSolver._backtrack)."""
-    u = newton.u.vector
-    x0 = u.copy()
+def crush_guard(check: DeformationCheck) -> Callable[[], bool]:
+    """The line-search predicate of the unit cell (fabricfem.solvers.mpc_newton.backtrack, built at the start
+    of each Newton update): the smallest det F over the Gauss points stays above ADMISSIBLE_DET_RATIO x its
+    value at the start of the iteration (no inverted, no suddenly crushed element)."""
     floor = ADMISSIBLE_DET_RATIO * max(check.minimum(), 0.0)
-
-    def restore() -> None:
-        x0.copy(u)
-        u.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
-
-    step = 1.0
-    for _ in range(MAX_LINE_SEARCH_HALVINGS):
-        newton._update(step)
-        if check.minimum() > floor:
-            break
-        restore()
-        step *= 0.5
-    else:
-        newton._update(step)  # still crushing at 2^-12: the residual test below and the step cuts decide
-    for _ in range(RESIDUAL_HALVINGS):
-        if newton.assemble_residual().norm() < rnorm:
-            break
-        restore()
-        step *= 0.5
-        newton._update(step)  # the last, smallest step is kept if |R| never decreases
-    x0.destroy()
+    return lambda: check.minimum() > floor
 
 
 class ContactUnitCell:
@@ -310,8 +285,7 @@ class ContactUnitCell:
         newton = self.problem.newton
         newton.line_search = True
         self.deformation = DeformationCheck(self.problem)
-        newton._backtrack = types.MethodType(
-            lambda solver, rnorm: _admissible_backtrack(solver, self.deformation, rnorm), newton)
+        newton.admissible_step = lambda: crush_guard(self.deformation)
         self.contact: YarnContact | None = None
         self._timed: _TimedContact | None = None
         if contact is True:

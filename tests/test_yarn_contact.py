@@ -169,10 +169,11 @@ def test_admissible_backtrack_rejects_inverting_and_crushing_steps():
     """The line search keeps the largest step 2^-k with det F > ADMISSIBLE_DET_RATIO x det F(start):
     with det F = 1 - 1.5 s (start 1) and ratio 0.5 that is s < 1/3, so s = 1/4 (closed form); the full
     step (det F = -0.5, inverted) and s = 1/2 (det F = 0.25, crushed by 75% in one iteration) are rejected."""
-    from fabricfem.unit_cell_contact import ADMISSIBLE_DET_RATIO, _admissible_backtrack
+    from fabricfem.solvers.mpc_newton import backtrack
+    from fabricfem.unit_cell_contact import ADMISSIBLE_DET_RATIO, crush_guard
     assert ADMISSIBLE_DET_RATIO == 0.5  # the closed form above assumes it
     newton = _ScalarNewton()
-    _admissible_backtrack(newton, _ScalarCheck(newton), rnorm=1.0)
+    backtrack(newton, rnorm=1.0, admissible_step=lambda: crush_guard(_ScalarCheck(newton)))
     assert newton.u.vector.array[0] == 0.25
 
 

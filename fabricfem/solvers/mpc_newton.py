@@ -12,7 +12,7 @@ dofs of other processes added as ghosts), not on the space the MPC was built fro
 from __future__ import annotations
 
 import itertools
-from typing import Sequence
+from typing import Callable, Sequence
 
 import dolfinx.cpp as _cpp
 import dolfinx.fem as fem
@@ -71,6 +71,8 @@ class MPCNewtonSolver:
         self.u, self.mpc, self.bcs = u, mpc, list(bcs)
         self.contact = contact
         self.line_search = bool(line_search)
+        # optional admissibility test of the line search (see `backtrack`), e.g. set by the unit cell
+        self.admissible_step: Callable[[], Callable[[], bool]] | None = None
         self.rtol, self.stol, self.max_it = float(rtol), float(stol), int(max_it)
         if jacobian is None:
             trial = ufl.TrialFunction(residual.arguments()[0].ufl_function_space())
@@ -177,21 +179,49 @@ class MPCNewtonSolver:
         self.mpc.backsubstitution(x)
 
     def _backtrack(self, rnorm: float) -> None:
-        """Halve the step (at most 5 times) until |R| decreases: breaks the two-cycles that Newton
-        falls into on the kinks of a contact / friction law (stick-slip switches)."""
-        x0 = self.u.vector.copy()
-        step = 1.0
-        for _ in range(5):
-            self._update(step)
-            if self.assemble_residual().norm() < rnorm:
-                break
-            x0.copy(self.u.vector)
-            self.u.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
-            step *= 0.5
-        else:
-            self._update(step)
-        x0.destroy()
+        """Line search of one Newton update (backtrack)."""
+        backtrack(self, rnorm, self.admissible_step)
 
     def destroy(self) -> None:
         for obj in (self.ksp, self.A, self.b, self.du):
             obj.destroy()
+
+
+ADMISSIBLE_HALVINGS = 12  # admissibility halvings of one Newton update (step >= 2^-12), see backtrack
+RESIDUAL_HALVINGS = 5     # halvings until |R| decreases
+
+
+def backtrack(solver, rnorm: float, admissible_step: Callable[[], Callable[[], bool]] | None = None) -> None:
+    """Line search of the update u <- u - s du of `solver` (an MPCNewtonSolver: u, _update, assemble_residual).
+
+    With `admissible_step` (called at the start of the search, it returns the predicate "the updated state is
+    admissible", e.g. no element crushed relative to the start state), s is first halved (at most
+    ADMISSIBLE_HALVINGS times) until the predicate holds. Then s is halved (at most RESIDUAL_HALVINGS times)
+    until |R| < rnorm: breaks the two-cycles that Newton falls into on the kinks of a contact / friction law
+    (stick-slip switches); if |R| never decreases the last, smallest step is kept."""
+    u = solver.u.vector
+    x0 = u.copy()
+
+    def restore() -> None:
+        x0.copy(u)
+        u.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+
+    step = 1.0
+    if admissible_step is not None:
+        admissible = admissible_step()
+        for _ in range(ADMISSIBLE_HALVINGS):
+            solver._update(step)
+            ok = admissible()
+            restore()
+            if ok:
+                break
+            step *= 0.5
+    for _ in range(RESIDUAL_HALVINGS):
+        solver._update(step)
+        if solver.assemble_residual().norm() < rnorm:
+            break
+        restore()
+        step *= 0.5
+    else:
+        solver._update(step)
+    x0.destroy()
