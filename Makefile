@@ -12,7 +12,7 @@ demo: setup
 	$(VENV)/bin/fabricfem demo
 
 test: setup
-	$(PY) -m pytest -q tests
+	$(PY) -m pytest -q --durations=15 tests
 	$(MPIRUN) $(PY) -m pytest -q -p no:cacheprovider -m mpi tests
 
 verify: setup

@@ -197,3 +197,13 @@ def test_refused_newton_state_halves_the_newmark_step():
     (plain, w_plain), (refused, w_refused) = runs
     assert plain.halvings == 0 and refused.halvings == 1
     assert np.abs(w_refused - w_plain).max() < 1e-2 * np.abs(w_plain).max()
+
+
+def test_mumps_options_reach_the_factorization():
+    """Options read when TS's LU factor is set up (MUMPS ICNTL(14)) are in the database during the step: they
+    used to be removed after setFromOptions and silently ignored (MUMPS default ICNTL(14) = 20 or 30)."""
+    model = cantilever_strip(nx=4)
+    integrator = GeneralizedAlphaIntegrator(model, 1e-4, load_factor=1.0, newton_options={"mat_mumps_icntl_14": 50})
+    integrator.initialize()
+    integrator.run(1)
+    assert integrator.ts.getSNES().getKSP().getPC().getFactorMatrix().getMumpsIcntl(14) == 50

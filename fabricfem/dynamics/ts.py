@@ -186,7 +186,8 @@ class GeneralizedAlphaIntegrator(StepHalving, TimeIntegrator):
         t_before = ts.getTime()
         iterations_before = ts.getSNESIterations()
         self.ops.freeze(self.d)  # C = a M + b K_M(d^n) (eq. 2.85)
-        ts.step()
+        with prefixed_options(self.prefix, self.options):  # read again when the LU factor is set up
+            ts.step()
         iterations = ts.getSNESIterations() - iterations_before
         if ts.getConvergedReason() < 0:
             snes_reason = ts.getSNES().getConvergedReason()

@@ -67,9 +67,15 @@ def arc_length(model, ds: float, max_steps: int, lambda_max: float | None = None
     ksp = PETSc.KSP().create(model.comm)
     ksp.setOperators(K)
     ksp.setOptionsPrefix("fabricfem_arclength_")
-    with prefixed_options("fabricfem_arclength_", {"ksp_type": "preonly", "pc_type": "lu",
-                                                   "pc_factor_mat_solver_type": "mumps", **(petsc_options or {})}):
+    ksp_options = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps",
+                   **(petsc_options or {})}
+    with prefixed_options("fabricfem_arclength_", ksp_options):
         ksp.setFromOptions()
+
+    def linear_solve(rhs: PETSc.Vec, out: PETSc.Vec):
+        """K out = rhs; the options are in the database while the LU factor is set up (MUMPS ICNTL)."""
+        with prefixed_options("fabricfem_arclength_", ksp_options):
+            ksp.solve(rhs, out)
     F_ref = model.F_ref
     fscale = max(F_ref.norm(), 1e-300)
 
@@ -93,7 +99,7 @@ def arc_length(model, ds: float, max_steps: int, lambda_max: float | None = None
             # Predictor along the tangent du_I = K^-1 F_ref
             x_n.copy(x)
             assemble_and_factor(x, lam_n)
-            ksp.solve(F_ref, du_I)
+            linear_solve(F_ref, du_I)
             dlam = length / np.sqrt(du_I.dot(du_I) + psi ** 2)
             if direction is not None and (du_I.dot(direction[0]) + psi ** 2 * direction[1]) < 0:
                 dlam = -dlam
@@ -112,9 +118,9 @@ def arc_length(model, ds: float, max_steps: int, lambda_max: float | None = None
                 if rnorm < rtol * fscale * max(abs(lam), 1.0) and abs(f) < 1e-9 * length:
                     converged = True
                     break
-                ksp.solve(F_ref, du_I)
+                linear_solve(F_ref, du_I)
                 residual.scale(-1.0)  # F_ext - P
-                ksp.solve(residual, du_II)
+                linear_solve(residual, du_II)
                 dl = -(f * (f + length) + delta.dot(du_II)) / (psi ** 2 * (lam - lam_n) + delta.dot(du_I))
                 du_II.axpy(dl, du_I)  # the correction of eq. 22
                 x.axpy(1.0, du_II)
