@@ -73,6 +73,9 @@ class MPCNewtonSolver:
         self.line_search = bool(line_search)
         # optional admissibility test of the line search (see `backtrack`), e.g. set by the unit cell
         self.admissible_step: Callable[[], Callable[[], bool]] | None = None
+        # damped fallback of an update whose line search cannot decrease |R| (see `_damped_update`); off by default
+        self.damping = False
+        self.damped_updates = 0  # updates that needed it in the last solve
         self.rtol, self.stol, self.max_it = float(rtol), float(stol), int(max_it)
         if jacobian is None:
             trial = ufl.TrialFunction(residual.arguments()[0].ufl_function_space())
@@ -144,6 +147,7 @@ class MPCNewtonSolver:
         if not (np.isfinite(length_scale) and length_scale > 0):
             raise ValueError(f"length_scale must be a positive finite number, got {length_scale!r}")
         norms: list[float] = []
+        self.damped_updates = 0
         for it in range(self.max_it + 1):
             rnorm = self.assemble_residual().norm()
             norms.append(float(rnorm))
@@ -157,7 +161,13 @@ class MPCNewtonSolver:
             self.ksp.solve(self.b, self.du)
             if self.ksp.getConvergedReason() < 0:
                 return NewtonResult(False, it, "DIVERGED_LINEAR_SOLVE", norms)
-            if self.line_search:
+            if self.line_search and self.damping:
+                x_start = self.u.vector.copy()
+                self._backtrack(rnorm)
+                if not self.assemble_residual().norm() < rnorm:
+                    self._damped_update(rnorm, x_start)
+                x_start.destroy()
+            elif self.line_search:
                 self._backtrack(rnorm)
             else:
                 self._update(1.0)
@@ -182,6 +192,34 @@ class MPCNewtonSolver:
         """Line search of one Newton update (backtrack)."""
         backtrack(self, rnorm, self.admissible_step)
 
+    def _damped_update(self, rnorm: float, x_start: PETSc.Vec) -> None:
+        """Fallback when the line search along the Newton direction cannot decrease |R| (a near-singular or
+        indefinite tangent, e.g. crushed hexahedra under contact, makes the Newton correction far larger than
+        the region where the linearisation holds): back to the start state, the correction is recomputed
+        with the shifted matrix J + alpha d I (d = mean |diag J|, alpha = DAMPING_FACTORS in turn,
+        Levenberg-Marquardt style) and line-searched the same way, until |R| decreases; the last, most
+        damped one is kept otherwise. Only the iteration matrix changes: the residual, hence the converged
+        state and the tolerance, are those of the undamped Newton method."""
+        u = self.u.vector
+        x_start.copy(u)
+        u.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        self._assemble_jacobian()
+        diag = self.A.getDiagonal()
+        scale = diag.norm(PETSc.NormType.NORM_1) / diag.getSize()
+        diag.destroy()
+        shifted = 0.0
+        self.damped_updates += 1
+        for alpha in DAMPING_FACTORS:
+            self.A.shift(alpha * scale - shifted)
+            shifted = alpha * scale
+            self.assemble_residual()
+            self.ksp.solve(self.b, self.du)
+            if self.ksp.getConvergedReason() < 0:
+                continue
+            self._backtrack(rnorm)
+            if self.assemble_residual().norm() < rnorm:
+                return
+
     def destroy(self) -> None:
         for obj in (self.ksp, self.A, self.b, self.du):
             obj.destroy()
@@ -189,6 +227,9 @@ class MPCNewtonSolver:
 
 ADMISSIBLE_HALVINGS = 12  # admissibility halvings of one Newton update (step >= 2^-12), see backtrack
 RESIDUAL_HALVINGS = 5     # halvings until |R| decreases
+# shifts alpha of the damped fallback J + alpha mean|diag J| I (MPCNewtonSolver._damped_update): from a
+# perturbation far below the stiff modes up to the diagonal's own size
+DAMPING_FACTORS = (1e-4, 1e-3, 1e-2, 1e-1, 1.0)
 
 
 def backtrack(solver, rnorm: float, admissible_step: Callable[[], Callable[[], bool]] | None = None) -> None:
