@@ -12,8 +12,8 @@ demo: setup
 	$(VENV)/bin/fabricfem demo
 
 test: setup
-	$(PY) -m pytest -q --durations=15 tests
-	$(MPIRUN) $(PY) -m pytest -q -p no:cacheprovider -m mpi tests
+	OMP_NUM_THREADS=1 $(PY) -m pytest -q -n 2 --durations=15 tests
+	OMP_NUM_THREADS=1 $(MPIRUN) $(PY) -m pytest -q -p no:cacheprovider -m mpi tests
 
 verify: setup
 	$(VENV)/bin/fabricfem verify
