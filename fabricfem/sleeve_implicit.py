@@ -1,0 +1,372 @@
+"""Implicit route of the arm-in-sleeve flexion (SleeveConfig.solver = "implicit"): backward Euler + Newton.
+
+The same equations as the explicit route (fabricfem.sleeve.build_explicit / run_explicit): the sleeve's lumped
+translational mass M (HRZ lumping, thesis eq. 2.82, fabricfem.dynamics.mass.lumped_mass), mass damping C = alpha M
+(alpha = SleeveConfig.damping [1/s]), gravity g along -y (on by default), the arm resting for `settle_time`
+while the sleeve settles on it, then the elbow flexion at `flexion_speed` [deg/s] to `final_angle`. Units: SI.
+
+Time stepping: backward Euler with steps dt = (angle step) / omega (angle step = final_angle / angle_steps),
+
+    M (x - x^n - dt v^n) / dt^2 + alpha M (x - x^n) / dt + R_shell(x) - f_contact(x) = 0,   v = (x - x^n) / dt,
+
+i.e. M a + C v + f_int = F_gravity + f_contact at t^{n+1} (thesis eq. 2.84 with the accelerations and velocities
+of backward Euler). The nodal terms are a spring k_i (x_i - a_i) to an anchor with k_i = m_i (1 + alpha dt) / dt^2
+and a_i = x_i^n + dt v_i^n / (1 + alpha dt) (`InertiaDamping`, the generalised nodal drag of
+fabricfem.sleeve.Stabilized, Jacobian k_i I on the free displacement components). The director rotations carry
+no inertia here (the explicit route's rotary inertia, scaled x100, is t^2 s / 12 = 8e-6 of the translational).
+
+Why backward Euler (not the trapezoidal Newmark rule): the flexion is meant to be quasi-static (damping time
+1 / alpha = 0.1 s, flexion 1.27 s), so second-order accuracy of the inertia is not needed, whereas the
+buckling wrinkles of the tube and the contact switches excite modes far above 1 / dt that the trapezoidal rule
+keeps undamped (they would ring in the contact forces, the bounce this study measures); backward Euler is
+L-stable and damps them (amplification -> 0 as omega dt -> inf). Its numerical dissipation acts on the
+resolved motion as an extra damping of order omega^2 dt / 2 (at the flexion frequency omega = 0.79 rad/s and
+dt = 5.6 ms: 2e-3 1/s, against alpha = 10 1/s). The inertia term regularises the step's tangent: the bending
+stiffness scale D / R^4 ~ 8 N/m^3 (D = E t^3 / 12 = 1e-4 N m, R = 0.06 m) is small beside rho t / dt^2
+(1.4e4 N/m^3 at dt = 5.6 ms) and alpha rho t / dt (780 N/m^3), so a step stays positive definite where the
+static tube buckles (the quasi-static route stalled at 16-20 degrees).
+
+Each step: predictor x = x^n + dt v^n, the body posed at t^{n+1}, Newton (ContactProblem.solve with the
+active-set strategy on the contact set only, `ReturnMapContact`; StepLimiter; backtracking line search; a plain
+semi-smooth Newton solve as fallback, `_solve_step`) and, for method "augmented", Uzawa updates of eq. 3.69 until
+the largest penetration is below `augmentation_tolerance` (ContactProblem.solve_augmented); the multipliers
+carry over to the next step. Coulomb friction: the stick points are committed after every converged step
+(ContactProblem.after_converged_step). A failed step is undone and halved down to `min_angle_step` / omega,
+then SleeveError names the time and the elbow angle.
+
+Records (SleeveHistory, as the explicit route): every `output_angle_step` degrees; the torque of a record is the
+dt-weighted mean of the per-step resisting torques over the record interval (the explicit route averages over
+the interval too); the start record (angle 0) is the mean over the last record interval of the rest. The
+per-step values are kept in `ImplicitSleeve.trace` (`trace_array`: t [s], angle [deg], torque [N m],
+penetration [m], Newton iterations, dt [s]).
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+from dolfinx import fem
+from mpi4py import MPI
+
+from fabricfem.body.arm import default_arm, elbow_flexion
+from fabricfem.contact.problem import ContactProblem
+from fabricfem.dynamics.mass import lumped_mass
+from fabricfem.sleeve import (ELBOW_AXIS, SleeveConfig, SleeveError, SleeveHistory, SleeveProblem, SleeveStep,
+                              Stabilized, StepLimiter, sleeve_shell)
+from fabricfem.solvers.newton import NewtonSolver, SolverError
+
+ACTIVE_SET_MAX_ITERATIONS = 30   # Newton iterations of one active-set solve before the plain fallback (_solve_step)
+TRACE_COLUMNS = ("t_s", "angle_deg", "torque_Nm", "max_penetration_m", "newton_iterations", "dt_s")
+
+
+class InertiaDamping(Stabilized):
+    """Backward-Euler inertia and mass damping of the lumped translational masses m_i [kg]:
+
+        r_i += m_i (x_i - x_i^n - dt v_i^n) / dt^2 + alpha m_i (x_i - x_i^n) / dt = k_i (x_i - a_i)   [N]
+
+    with k_i = m_i (1 + alpha dt) / dt^2 [N/m] and a_i = x_i^n + dt v_i^n / (1 + alpha dt) (module docstring);
+    the Jacobian gets k_i I. Held components (shoulder) get nothing. `commit` (after a converged step) sets
+    v^{n+1} = (x - x^n) / dt and x^n <- x; `set_time_step` changes dt for the next step (step halving).
+    Wraps a ContactProblem with the NewtonSolver callback interface (through Stabilized).
+    """
+
+    def __init__(self, contact: ContactProblem, mass: np.ndarray, damping: float, dt: float):
+        mass = np.asarray(mass, dtype=float)
+        if not (mass.ndim == 1 and np.all(np.isfinite(mass)) and np.all(mass > 0.0)):
+            raise ValueError("mass: the lumped nodal masses must be positive and finite [kg]")
+        if not (math.isfinite(damping) and damping >= 0.0):
+            raise ValueError(f"damping must be a number >= 0 [1/s], got {damping!r}")
+        self.damping = float(damping)
+        self.dt = _positive("dt", dt)
+        self.displacement: np.ndarray | None = None    # u^n (N, 3) [m]
+        self.velocity: np.ndarray | None = None        # v^n (N, 3) [m/s]
+        super().__init__(contact, self._coefficient(self.dt), weights=mass)   # commits u^n, v^n = 0
+
+    @property
+    def mass(self) -> np.ndarray:
+        """(N,) lumped translational masses [kg] of the owned nodes."""
+        return self._area
+
+    def _coefficient(self, dt: float) -> float:
+        return (1.0 + self.damping * dt) / dt ** 2      # [1/s^2]: k_i = m_i x this
+
+    def _set_anchor(self):
+        self._previous = self.displacement + self.dt * self.velocity / (1.0 + self.damping * self.dt)
+
+    def set_time_step(self, dt: float):
+        """Use step dt [s] for the next solve (from the committed x^n, v^n)."""
+        self.dt = _positive("dt", dt)
+        self.coefficient = self._coefficient(self.dt)
+        self._set_anchor()
+
+    def commit(self):
+        """After a converged step: v^{n+1} = (x - x^n) / dt, x^n <- x (at construction: the state at rest)."""
+        u = self.contact.w.x.array[self._dofs].copy()
+        if self.displacement is None:
+            self.velocity = np.zeros_like(u)
+        else:
+            self.velocity = np.where(self._free, (u - self.displacement) / self.dt, 0.0)
+        self.displacement = u
+        self._set_anchor()
+
+    def predict(self):
+        """Start the next solve from x^n + dt v^n (free components of the owned nodes, ghosts updated)."""
+        w = self.contact.w
+        free = self._free
+        w.x.array[self._dofs[free]] = (self.displacement + self.dt * self.velocity)[free]
+        w.x.scatter_forward()
+
+    def kinetic_energy(self) -> float:
+        """1/2 sum m_i |v_i^n|^2 [J] over all ranks."""
+        local = 0.5 * float(np.sum(self._area * np.sum(self.velocity ** 2, axis=1)))
+        return self.contact.comm.allreduce(local, op=MPI.SUM)
+
+
+class ReturnMapContact(ContactProblem):
+    """ContactProblem whose active-set strategy freezes the contact set and the body segments during a Newton
+    solve but not the slip set: friction takes the return map (eqs. 3.51-3.52) at every iterate.
+
+    Why: on a frozen slip branch the traction mu p t* / |t*| is discontinuous at x = a, and a node at the Coulomb
+    limit whose slip |x - a| is of the order of mu p / eps_T (~1e-6 m, below one Newton update) flips its
+    direction from one iterate to the next: measured on mesh I while the sleeve settles, Newton stalled at the
+    residual 2 mu p w of that one node, on the slip and the all-stick sequences alike, and the steps had to be
+    halved below min_angle_step (smaller steps make the slips per step smaller, hence worse). The return map is
+    continuous in x (the stick and slip branches meet on the cone), so that node converges. The converged state
+    satisfies the same unilateral law and return map (ContactProblem docstring): the solution is unchanged.
+    """
+
+    def evaluate(self, state_array: np.ndarray | None = None):
+        sliding, self.sliding = self.sliding, None      # return map at this state, whatever the frozen slip set
+        try:
+            return super().evaluate(state_array)
+        finally:
+            self.sliding = sliding
+
+    def contact_set(self):
+        """(contact, sliding, segment) as ContactProblem's, with no slip set (`sliding` all False: never frozen,
+        so slip changes do not count as set changes)."""
+        active, sliding, segment = super().contact_set()
+        return active, np.zeros_like(sliding), segment
+
+
+def _positive(name: str, value) -> float:
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
+        raise ValueError(f"{name} must be a positive number, got {value!r}")
+    return float(value)
+
+
+@dataclass
+class ImplicitSleeve(SleeveProblem):
+    """The sleeve set up for backward Euler (`build_implicit`); system is the InertiaDamping wrapper."""
+
+    dt: float = 0.0               # s, nominal step = angle step / omega
+    settle_steps: int = 0         # steps of rest before the flexion (t_start = settle_steps x dt)
+    record_time: float = 0.0      # s, duration of a record interval (output_angle_step / omega)
+    trace: list = field(default_factory=list)   # per accepted step: TRACE_COLUMNS
+    energy_form: object = None
+
+    def trace_array(self) -> np.ndarray:
+        """(steps, 6) array of the per-step TRACE_COLUMNS (rest steps have angle 0)."""
+        return np.array(self.trace, dtype=float).reshape(-1, len(TRACE_COLUMNS))
+
+    def strain_energy(self) -> float:
+        """Strain energy [J] of the current state (all ranks)."""
+        return float(self.comm.allreduce(fem.assemble_scalar(self.energy_form), op=MPI.SUM))
+
+
+def build_implicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
+                   petsc_options: dict | None = None) -> ImplicitSleeve:
+    """Sleeve, arm, contact, lumped masses and Newton solver of the backward-Euler route (module docstring).
+
+    Raises ValueError naming the parameter: solver not "implicit", density not positive, final_angle /
+    angle_steps / angular_velocity giving a non-positive step."""
+    if config.solver != "implicit":
+        raise ValueError(f"solver: build_implicit needs solver='implicit', got {config.solver!r}")
+    if config.fabric.density <= 0.0:
+        raise ValueError("density: the implicit sleeve needs a positive fabric density [kg/m^3] (its inertia)")
+    omega = math.radians(config.flexion_speed)                 # rad/s
+    angle_step = config.final_angle / config.angle_steps       # deg
+    dt = _positive("dt (angle step / angular_velocity)", math.radians(angle_step) / omega)
+    record_time = math.radians(config.output_angle_step) / omega
+    # rest before the flexion: settle_time (in fabric I's time units under dynamic similarity), whole steps
+    settle_steps = (math.ceil(config.settle_time / config.similarity_factor / dt - 1e-9) if config.gravity else 0)
+    model = sleeve_shell(config, comm)
+    flexion = elbow_flexion(config.arm, angular_velocity=omega, final_angle=math.radians(config.final_angle),
+                            t_start=settle_steps * dt)
+    body = default_arm(flexion, config.arm)
+    contact = ReturnMapContact(model, body, method=config.method, penalty=config.penalty, friction=config.friction,
+                               time=0.0, active_set=config.active_set)
+    model.compile()
+    masses = lumped_mass(model, rotational=False)
+    mass = masses.array[contact.nodes.dofs[:, 0]].copy()     # the same on the three components of a node
+    masses.destroy()
+    system = InertiaDamping(contact, mass, config.damping, dt)
+    # backtracking line search on the residual norm: without it Newton 2-cycled (residual alternating between
+    # 1.2e-2 and 1.4e-2 N for 60 iterations) on nodes switching between stick and slip while the sleeve settles on
+    # the arm (mesh I, 4 steps per degree), and the steps were halved below min_angle_step; with it the settling
+    # and the flexion converge (measured: 459 Newton iterations for the 72 steps of the rest on mesh I)
+    options = {"snes_max_it": config.newton_max_iterations, "snes_linesearch_type": "bt"}
+    if not config.gravity:
+        # no dead load: F_ref = 0; absolute tolerance on the scale of the contact forces as build_sleeve does
+        options["snes_atol"] = 1e-10 * config.membrane_modulus * config.fabric.thickness * config.length
+    options.update(petsc_options or {})
+    solver = NewtonSolver(system, options)
+    solver.snes.setLineSearchPreCheck(StepLimiter(model, config.max_rotation_step, config.max_displacement_step))
+    return ImplicitSleeve(config, model, contact, body, flexion, solver, system, dt=dt, settle_steps=settle_steps,
+                          record_time=record_time, energy_form=fem.form(model.energy))
+
+
+def _solve_once(problem: ImplicitSleeve) -> tuple[bool, int, str]:
+    """Newton (+ Uzawa updates for method augmented) at the current pose and step; (converged, its, reason)."""
+    contact, cfg = problem.contact, problem.config
+    try:
+        if cfg.method == "augmented":
+            report = contact.solve_augmented(problem.solver, tolerance=cfg.augmentation_tolerance)
+            return True, sum(report.newton_iterations), "augmented"
+        result = contact.solve(problem.solver)
+    except SolverError as exc:
+        return False, 0, str(exc)
+    return result.converged, result.iterations, result.reason
+
+
+def _solve_step(problem: ImplicitSleeve) -> tuple[bool, int, str]:
+    """One step's equilibrium: Newton with the active-set strategy of ReturnMapContact (frozen contact set and
+    segments) and, if that fails (sets that keep changing, or a stalled solve, cut at ACTIVE_SET_MAX_ITERATIONS),
+    once more from the same start with the plain semi-smooth Newton on the unilateral law and return map (the
+    contact set may then change between iterates). Both solve the same equations; (converged, its, reason)."""
+    contact, snes = problem.contact, problem.solver.snes
+    if not contact.active_set:
+        return _solve_once(problem)
+    start, multiplier = problem.system.w.x.array.copy(), contact.multiplier.copy()
+    # the converged active-set solves of the settling sleeve took <= 22 iterations (mesh I); a stalled one is
+    # cut at ACTIVE_SET_MAX_ITERATIONS instead of newton_max_iterations (a stall costs that per sequence)
+    snes.setTolerances(max_it=min(ACTIVE_SET_MAX_ITERATIONS, problem.config.newton_max_iterations))
+    try:
+        ok, its, reason = _solve_once(problem)
+    finally:
+        snes.setTolerances(max_it=problem.config.newton_max_iterations)
+    if ok:
+        return ok, its, reason
+    # restart from the step's start (measured on mesh I: continuing from the stalled iterate took more
+    # iterations in all, 871 against 657 for the settling)
+    problem.system.w.x.array[:] = start
+    contact.multiplier = multiplier
+    contact.active_set = False
+    try:
+        ok, more, plain = _solve_once(problem)
+    finally:
+        contact.active_set = True
+    return ok, its + more, f"active set: {reason}; plain Newton: {plain}"
+
+
+def run_implicit(problem: ImplicitSleeve, on_step: Callable[[SleeveStep], None] | None = None,
+                 stop_on_failure: bool = True, max_wall_time: float | None = None) -> SleeveHistory:
+    """Rest (settle_steps steps) and flexion to final_angle by backward-Euler steps (module docstring); returns
+    the torque history with a record every output_angle_step degrees (the first: angle 0, the settled sleeve).
+
+    A failed step is halved down to min_angle_step / omega; then SleeveError naming the time and angle, or,
+    with stop_on_failure=False, the history up to the last record with `history.failure` set. `max_wall_time`
+    [s] stops the same way. `history.timings` gets cpu_s (time.process_time of the run) and steps."""
+    cfg, contact, system, flexion = problem.config, problem.contact, problem.system, problem.flexion
+    t0, cpu0 = time.perf_counter(), time.process_time()
+    history = SleeveHistory(cfg, ndofs=problem.model.ndofs)
+    contact.set_time(0.0)
+    gap0 = problem.min_gap()
+    if gap0 <= 0.0:
+        raise ValueError(f"radius: the arm penetrates the undeformed sleeve (min gap {gap0:.3e} m)")
+    history.initial_gap = gap0
+    contact.set_load_factor(1.0)            # gravity (the dead load) on
+    min_dt = math.radians(cfg.min_angle_step) / math.radians(cfg.flexion_speed)
+    state = {"t": 0.0}
+
+    def angle_at(t: float) -> float:
+        return math.degrees(flexion.angle(t))
+
+    def step_once(h: float) -> tuple[bool, int, str]:
+        saved = system.w.x.array.copy()
+        saved_multiplier = contact.multiplier.copy()
+        system.set_time_step(h)
+        system.predict()
+        contact.set_time(state["t"] + h)
+        ok, its, reason = _solve_step(problem)
+        if ok:
+            state["t"] += h
+            system.after_converged_step()    # friction stick points, then v^{n+1}, x^n
+            problem.trace.append((state["t"], angle_at(state["t"]), problem.resisting_torque(),
+                                  contact.max_penetration(), its, h))
+            return True, its, reason
+        system.w.x.array[:] = saved
+        contact.multiplier = saved_multiplier
+        contact.set_time(state["t"])
+        return False, its, reason
+
+    def advance_to(target: float) -> int:
+        """Steps of dt (halved on failure, down to min_dt) until t = target; returns the Newton iterations."""
+        h, total = problem.dt, 0
+        while state["t"] < target - 1e-12 * max(1.0, target):
+            if max_wall_time is not None and time.perf_counter() - t0 > max_wall_time:
+                raise SleeveError(f"sleeve: wall-time budget of {max_wall_time:g} s used up at t = {state['t']:.4g} s, "
+                                  f"elbow angle {angle_at(state['t']):.4g} deg (last converged)",
+                                  last_converged_load_factor=angle_at(state["t"]), reason="WALL_TIME")
+            trial = min(h, target - state["t"])
+            ok, its, reason = step_once(trial)
+            total += its
+            if ok:
+                h = min(problem.dt, 2.0 * h)    # back towards the nominal step after a halving
+                continue
+            h = 0.5 * trial
+            if h < min_dt * (1.0 - 1e-9):
+                raise SleeveError(f"sleeve: backward-Euler step failed at t = {state['t'] + trial:.4g} s, elbow angle "
+                                  f"{angle_at(state['t'] + trial):.4g} deg ({reason}); the step fell below "
+                                  f"min_angle_step = {cfg.min_angle_step} deg; last converged angle "
+                                  f"{angle_at(state['t']):.4g} deg", last_converged_load_factor=angle_at(state["t"]),
+                                  reason="STEP_TOO_SMALL")
+        return total
+
+    def record(angle: float, iterations: int, since: float) -> SleeveStep:
+        trace = problem.trace_array()
+        window = trace[trace[:, 0] > since + 1e-12] if len(trace) else trace
+        if len(window):
+            torque = float(np.sum(window[:, 2] * window[:, 5]) / np.sum(window[:, 5]))
+            penetration = float(window[:, 3].max())
+        else:
+            torque, penetration = problem.resisting_torque(), contact.max_penetration()
+        if not math.isfinite(torque):
+            raise SleeveError(f"sleeve: the torque is not finite at {angle} deg")
+        return SleeveStep(angle=angle, torque=torque, torque_all=-contact.joint_torque("elbow", ELBOW_AXIS),
+                          newton_iterations=iterations, max_penetration=penetration,
+                          contact_force=float(np.linalg.norm(contact.total_force())), wall=time.perf_counter() - t0,
+                          time_steps=len(window), kinetic_energy=system.kinetic_energy(),
+                          strain_energy=problem.strain_energy())
+
+    n_records = round(cfg.final_angle / cfg.output_angle_step)
+    if not math.isclose(n_records * cfg.output_angle_step, cfg.final_angle, rel_tol=1e-9):
+        n_records = math.ceil(cfg.final_angle / cfg.output_angle_step)
+    try:
+        its = advance_to(flexion.t_start)
+        if problem.settle_steps:
+            history.timings.update(settle_s=flexion.t_start, settle_kinetic_energy=system.kinetic_energy())
+        start = record(0.0, its, flexion.t_start - problem.record_time)
+        history.steps.append(start)
+        if on_step:
+            on_step(start)
+        for k in range(n_records):
+            angle = min((k + 1) * cfg.output_angle_step, cfg.final_angle)
+            since = state["t"]
+            its = advance_to(problem.time_at(angle))
+            step = record(angle, its, since)
+            history.steps.append(step)
+            if on_step:
+                on_step(step)
+    except SleeveError as exc:
+        if stop_on_failure:
+            raise
+        history.failure = str(exc)
+        if not history.steps:
+            history.steps.append(record(0.0, 0, -math.inf))
+    history.timings.update(dt=problem.dt, steps=len(problem.trace), cpu_s=time.process_time() - cpu0)
+    history.wall = time.perf_counter() - t0
+    return history
