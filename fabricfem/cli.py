@@ -1,7 +1,8 @@
 """Command line: `fabricfem run SCENE`, `fabricfem verify [CASE ...] [--json]`, `fabricfem demo`,
 `fabricfem bench ...`,
 `fabricfem study sleeve [--quick] [--out DIR] [--fine III] [--meshes I,II,III,IV] [--fabrics I,II,III]
-[--mesh-frictions 0.1,0.5] [--only mesh_mu0.5,fit]`."""
+[--mesh-frictions 0.1,0.5] [--only mesh_mu0.5,fit]`,
+`fabricfem study sleeve-methods [--mesh III] [--out results/sleeve_methods_gravity.csv]`."""
 from __future__ import annotations
 
 import argparse
@@ -93,7 +94,7 @@ def main(argv: list[str] | None = None) -> int:
                          help="reduced smoke-test runs (stability-map: one k/rho, the smallest mesh, short runs; "
                               "speed-accuracy: t = 0.3 s, two levels per method, one timing)")
     p_study = sub.add_parser("study", help="parameter studies (CSV + PNG per figure)")
-    p_study.add_argument("name", choices=["sleeve", "unit-cell", "fabric-link"],
+    p_study.add_argument("name", choices=["sleeve", "unit-cell", "fabric-link", "sleeve-fit", "sleeve-methods"],
                          help="study to run (sleeve: thesis sec. 5.3; unit-cell: thesis sec. 4.3.5, Figs. 21-28, 32-33)")
     p_study.add_argument("--quick", action="store_true", help="coarse mesh and few angle steps (reduced)")
     p_study.add_argument("--out", default="results/sleeve_study")
@@ -104,6 +105,12 @@ def main(argv: list[str] | None = None) -> int:
     p_study.add_argument("--mesh-frictions", default="0.1,0.5", help="sleeve: mu of the mesh series run, e.g. 0.5")
     p_study.add_argument("--only", default=None,
                          help="sleeve: run only these figures, e.g. mesh_mu0.5,fit (default: all)")
+    p_study.add_argument("--mesh", choices=["I", "II", "III", "IV"], default="II", help="sleeve-fit: sleeve mesh")
+    p_study.add_argument("--scales", default=None, help="sleeve-fit: arm girth scales (default 1,1.04,1.0771)")
+    p_study.add_argument("--docs", default=None, help="sleeve-fit: also write fit_sensitivity.* into this folder")
+    p_study.add_argument("--long-axis-factors", default=None,
+                         help="sleeve-fit: arm long semi-axis / segment length, e.g. 0.5,0.6,0.7 (default 0.5; "
+                              "other than 0.5 alone: docs files fit_sensitivity_elbow.*)")
     args = parser.parse_args(argv)
 
     if args.command == "verify":
@@ -131,6 +138,31 @@ def main(argv: list[str] | None = None) -> int:
         from fabricfem.unit_cell_link import OUT_DIR, run_fabric_link
         meshes = ((10, 13),) if args.quick else ((10, 13), (20, 26))
         run_fabric_link(OUT_DIR if args.out == "results/sleeve_study" else args.out, sleeve_meshes=meshes)
+        return 0
+    if args.command == "study" and args.name == "sleeve-fit":
+        from fabricfem.sleeve_fit import DEFAULT_LONG_AXIS_FACTOR, FIT_SCALES, fit_configs, run_fit_study
+        try:
+            scales = FIT_SCALES if args.scales is None else tuple(float(s) for s in args.scales.split(",") if s.strip())
+            factors = ((DEFAULT_LONG_AXIS_FACTOR,) if args.long_axis_factors is None else
+                       tuple(float(f) for f in args.long_axis_factors.split(",") if f.strip()))
+            for factor in factors:    # a scale not positive, an arm too thick or a factor outside [0.5, 1]: a message
+                fit_configs(scales, args.mesh, long_axis_factor=factor)
+        except ValueError as exc:
+            _print(f"fabricfem study sleeve-fit: --scales {args.scales} --long-axis-factors "
+                   f"{args.long_axis_factors}: {exc}", file=sys.stderr)
+            return 2
+        prefix = "fit_sensitivity" if factors == (DEFAULT_LONG_AXIS_FACTOR,) else "fit_sensitivity_elbow"
+        run_fit_study("results/sleeve_fit" if args.out == "results/sleeve_study" else args.out, mesh=args.mesh,
+                      scales=scales, docs=args.docs, long_axis_factors=factors, prefix=prefix)
+        return 0
+    if args.command == "study" and args.name == "sleeve-methods":
+        # the three contact methods on the sleeve with gravity (fabricfem.study.run_methods); --mesh defaults to
+        # III here (the sleeve-fit default is II)
+        from fabricfem.study import run_methods
+        given = sys.argv[1:] if argv is None else argv
+        mesh = args.mesh if any(a == "--mesh" or a.startswith("--mesh=") for a in given) else "III"
+        run_methods("results/sleeve_methods_gravity.csv" if args.out == "results/sleeve_study" else args.out,
+                    mesh=mesh)
         return 0
     if args.command == "study" and args.name == "unit-cell":
         from fabricfem.study_unit_cell import run_study as run_unit_cell_study

@@ -3,7 +3,8 @@
 Setup (SI units): the sleeve is an open cylinder of length L [m] and radius R [m] along +x
 (`fabricfem.meshes.tube`), its shoulder end (tag end0, x = 0) held (all displacement components zero,
 rotations free: "boundary conditions are specified to restrain the motion of fabric nodes around the
-shoulder", sec. 5.3), its wrist end free. The arm is `fabricfem.body.default_arm`: upper arm fixed,
+shoulder", sec. 5.3), its wrist end free. The arm is `fabricfem.body.default_arm` of
+`SleeveConfig.arm` (lengths and girths; default ANSUR II medians, scene keys body.*): upper arm fixed,
 forearm flexing about the elbow (+z axis through x = 0.335 m) at constant angular velocity up to
 57 degrees. Contact: `fabricfem.contact.ContactProblem` (nodal penalty or augmented Lagrangian,
 Coulomb friction with stick points that move with the segments).
@@ -34,6 +35,9 @@ Solution routes (SleeveConfig.solver, scene key motion.solver):
   fails is undone and split in two (down to `min_angle_step`), otherwise `SleeveError` names the angle. It
   stalls where the tube buckles (20.25 deg at mu = 0.1, 17 deg at mu = 0.5 on mesh I) and is kept as the
   static reference of the explicit route at small angles and for the moment-balance test.
+* "implicit" (fabricfem.sleeve_implicit): the explicit route's equations (lumped mass, mass damping, gravity,
+  rest, flexion) by backward Euler, steps of angle_step / omega solved by Newton with the augmented Lagrangian
+  (Uzawa updates, eq. 3.69) or penalty; the inertia and damping regularise the buckling steps (it reaches 57 deg).
 
 Newton at one angle (issue 4: the plain solve stalled at 20.2 deg, mu = 0.1, and 12.6 deg, mu = 0.5, on
 mesh I) uses two devices, neither of which changes the converged solution:
@@ -79,7 +83,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fabricfem.body.arm import DEFAULT_ARM, default_arm, elbow_flexion
+from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions, default_arm, elbow_flexion
 from fabricfem.body.motion import ElbowFlexion
 from fabricfem.body.pose import Body
 from fabricfem.dynamics.explicit import CentralDifference
@@ -106,15 +110,22 @@ class Stabilized:
     definite and follows the stable branch, at the price of a fictitious force that is reported
     (`drag_force`, compared with the contact force in SleeveStep.drag_ratio). c = 0 switches it off.
     Wraps a ContactProblem with the callback interface the NewtonSolver expects.
+
+    General form (a nodal spring to an anchor): r_i = c w_i (x_i - a_i) with per-node `weights` w_i (default
+    the lumped areas [m^2]) and the anchor a_i set by `commit` (here x^n). fabricfem.sleeve_implicit subclasses it
+    for the backward-Euler inertia and mass damping (w_i = lumped mass [kg], a_i from x^n and v^n).
     """
 
-    def __init__(self, contact: ContactProblem, coefficient: float):
+    def __init__(self, contact: ContactProblem, coefficient: float, weights: np.ndarray | None = None):
         self.contact = contact
         self.coefficient = float(coefficient)
         nodes = contact.nodes
         self._free = ~nodes.constrained
         self._dofs = nodes.dofs
-        self._area = nodes.area
+        self._area = nodes.area if weights is None else np.asarray(weights, dtype=float)
+        if self._area.shape != nodes.area.shape:
+            raise ValueError(f"weights must have one entry per owned node ({nodes.area.shape}), "
+                             f"got shape {self._area.shape}")
         self.commit()
 
     def __getattr__(self, name):
@@ -240,7 +251,8 @@ class SleeveConfig:
     nu12: float = 0.0
     density: float = 436.0               # kg/m^3
     friction: float = 0.1                # Coulomb mu
-    solver: str = "explicit"             # explicit (central differences, default) | quasistatic (Newton)
+    solver: str = "explicit"             # explicit (central differences, default) | quasistatic (Newton) |
+                                         # implicit (backward Euler + Newton, fabricfem.sleeve_implicit)
     method: str | None = None            # contact: explicit lagrange (default) | penalty; quasistatic penalty
                                          # (default) | augmented
     mass_damping: float = 10.0           # 1/s, explicit: Rayleigh alpha of C = alpha M (see run_explicit)
@@ -253,7 +265,8 @@ class SleeveConfig:
     max_rotation_step: float = 0.3       # rad, largest director-angle change per Newton iteration (StepLimiter)
     max_displacement_step: float = 5e-3  # m, largest displacement change per Newton iteration (StepLimiter)
     newton_max_iterations: int = 60      # per Newton solve (damped steps need more than full ones)
-    gravity: bool | None = None          # g along -y; None: on for the explicit route, off for quasistatic
+    gravity: bool | None = None          # g along -y; None: on for the explicit and implicit routes, off for
+                                         # quasistatic
     settle_time: float = 0.4             # s, explicit with gravity: the arm rests this long before the flexion
                                          # starts while the sleeve settles on it (rounded up to whole records)
     final_angle: float = 57.0            # deg
@@ -269,6 +282,7 @@ class SleeveConfig:
     drag_tolerance: float = 1e-3         # accept a relaxed state when sum|drag| < this * sum|contact force|
     dynamic_similarity: bool = False     # explicit: flex at omega c / c_ref with damping alpha c / c_ref (below)
     similarity_reference: tuple[float, float] = (1.2e6, 436.0)   # (E_ref [Pa], rho_ref [kg/m^3]): fabric I
+    arm: ArmDimensions = DEFAULT_ARM     # arm lengths and girths [m] (default: ANSUR II medians, body.arm)
     name: str = "sleeve"
     fabric_name: str | None = None       # a stored fabric (fabricfem.fabrics.load_fabric) replacing E, G, nu12,
                                          # thickness and density (see `fabric`)
@@ -287,13 +301,14 @@ class SleeveConfig:
             raise ValueError(f"density must be >= 0 [kg/m^3], got {self.density!r}")
         if not (isinstance(self.friction, (int, float)) and math.isfinite(self.friction) and self.friction >= 0.0):
             raise ValueError(f"friction must be a number >= 0, got {self.friction!r}")
-        methods = {"explicit": ("lagrange", "penalty"), "quasistatic": ("penalty", "augmented")}
+        methods = {"explicit": ("lagrange", "penalty"), "quasistatic": ("penalty", "augmented"),
+                   "implicit": ("augmented", "penalty")}   # implicit: fabricfem.sleeve_implicit (backward Euler)
         if self.solver not in methods:
-            raise ValueError(f"solver must be 'explicit' or 'quasistatic', got {self.solver!r}")
+            raise ValueError(f"solver must be one of {tuple(methods)}, got {self.solver!r}")
         if self.method is None:
             object.__setattr__(self, "method", methods[self.solver][0])
         if self.gravity is None:
-            object.__setattr__(self, "gravity", self.solver == "explicit")
+            object.__setattr__(self, "gravity", self.solver in ("explicit", "implicit"))
         if self.method not in methods[self.solver]:
             raise ValueError(f"method must be one of {methods[self.solver]} for solver {self.solver!r}, "
                              f"got {self.method!r}")
@@ -319,7 +334,9 @@ class SleeveConfig:
                 raise ValueError(f"{key} must be a positive integer, got {v!r}")
         if self.final_angle >= 180.0:
             raise ValueError(f"final_angle must be below 180 degrees, got {self.final_angle!r}")
-        check_fit(self.radius)
+        if not isinstance(self.arm, ArmDimensions):
+            raise ValueError(f"arm must be a fabricfem.body.ArmDimensions, got {type(self.arm).__name__}")
+        check_fit(self.radius, self.arm)
         if self.fabric_name is not None:
             self._load_stored_fabric()
         E_ref, rho_ref = self.similarity_reference
@@ -412,13 +429,17 @@ class SleeveConfig:
         return replace(self, **changes)
 
 
-def check_fit(radius: float, arm=DEFAULT_ARM) -> float:
-    """Clearance [m] between the sleeve radius and the thickest arm segment; ValueError naming `radius`
-    when the arm does not fit inside the undeformed sleeve (the arm must start without penetration)."""
-    thickest = max(arm.upper_arm_radius, arm.forearm_radius)
+def check_fit(radius: float, arm: ArmDimensions = DEFAULT_ARM) -> float:
+    """Clearance [m] between the sleeve radius and the thickest arm segment (circle-equivalent radius
+    girth / (2 pi), ArmDimensions); ValueError naming `radius` and the girth (arm.upper_arm_girth or
+    arm.forearm_girth) when the arm does not fit inside the undeformed sleeve (it must start without
+    penetration)."""
+    key, thickest = max((("upper_arm_girth", arm.upper_arm_radius), ("forearm_girth", arm.forearm_radius)),
+                        key=lambda item: item[1])
     if radius <= thickest:
         raise ValueError(f"radius: the sleeve radius {radius} m must exceed the arm's largest radius "
-                         f"{thickest:.4f} m (the arm must start inside the sleeve without penetration)")
+                         f"{thickest:.4f} m = arm.{key} / (2 pi) (arm.{key} = {getattr(arm, key)} m; the arm must "
+                         f"start inside the sleeve without penetration)")
     return radius - thickest
 
 
@@ -477,9 +498,9 @@ def build_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                  petsc_options: dict | None = None) -> SleeveProblem:
     """Mesh, fabric, shoulder support, arm body and contact of a sleeve computation."""
     model = sleeve_shell(config, comm)
-    flexion = elbow_flexion(angular_velocity=math.radians(config.angular_velocity),
+    flexion = elbow_flexion(config.arm, angular_velocity=math.radians(config.angular_velocity),
                             final_angle=math.radians(config.final_angle))
-    body = default_arm(flexion)
+    body = default_arm(flexion, config.arm)
     contact = ContactProblem(model, body, method=config.method, penalty=config.penalty, friction=config.friction,
                              time=flexion.t_start, active_set=config.active_set)
     system = Stabilized(contact, 0.0)
@@ -738,10 +759,15 @@ def run_quasistatic(problem: SleeveProblem, angles: np.ndarray | None = None,
 
 def run_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                on_step: Callable[[SleeveStep], None] | None = None, stop_on_failure: bool = True) -> SleeveHistory:
-    """Build and flex one sleeve configuration (config.solver: explicit or quasistatic); returns its torque
-    history."""
+    """Build and flex one sleeve configuration (config.solver: explicit, implicit or quasistatic); returns its
+    torque history."""
     t0 = time.perf_counter()
-    if config.solver == "explicit":
+    if config.solver == "implicit":
+        from fabricfem.sleeve_implicit import build_implicit, run_implicit   # imports this module
+        problem = build_implicit(config, comm)
+        history = run_implicit(problem, on_step=on_step, stop_on_failure=stop_on_failure)
+        problem.solver.destroy()
+    elif config.solver == "explicit":
         problem = build_explicit(config, comm)
         history = run_explicit(problem, on_step=on_step, stop_on_failure=stop_on_failure)
         problem.integrator.destroy()
@@ -792,9 +818,9 @@ def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> Exp
     # rest before the flexion: settle_time in fabric I's time units under dynamic similarity (x c_ref / c)
     settle_records = (math.ceil(config.settle_time / config.similarity_factor / record_time - 1e-9)
                       if config.gravity else 0)
-    flexion = elbow_flexion(angular_velocity=math.radians(config.flexion_speed),
+    flexion = elbow_flexion(config.arm, angular_velocity=math.radians(config.flexion_speed),
                             final_angle=math.radians(config.final_angle), t_start=settle_records * record_time)
-    body = default_arm(flexion)
+    body = default_arm(flexion, config.arm)
     contact = ExplicitBodyContact(model, body, friction=config.friction, method=config.method,
                                   penalty=config.penalty)
     contact.track_torque("forearm", "elbow", ELBOW_AXIS, ["forearm"])
@@ -949,11 +975,13 @@ def config_from_scene(scene) -> SleeveConfig:
     motion, contact, body = scene["motion"], scene["contact"], scene["body"]
     if fabric["E1"] != fabric["E2"]:
         raise ValueError("fabric.E2: the sleeve study uses E1 = E2 (thesis sec. 5.3)")
+    # body.* lengths and girths [m] replace those of the default arm (ANSUR II medians, fabricfem.body.arm)
     dims = {k: float(body[k]) for k in ("upper_arm_length", "forearm_length", "upper_arm_girth", "forearm_girth")
             if k in body}
-    if dims:
-        raise ValueError(f"body: custom arm dimensions {sorted(dims)} are not supported by the sleeve runner yet "
-                         f"(the default arm is used)")
+    try:
+        arm = replace(DEFAULT_ARM, **dims)
+    except ValueError as exc:
+        raise ValueError(f"body: {exc}") from exc
     kw = dict(length=float(mesh["length"]), radius=float(mesh["radius"]), n_around=mesh["n_around"],
               n_along=mesh["n_along"], thickness=float(fabric["thickness"]), E=float(fabric["E1"]),
               G=float(fabric["G12"]), nu12=float(fabric["nu12"]), density=float(fabric.get("density", 0.0)),
@@ -962,7 +990,7 @@ def config_from_scene(scene) -> SleeveConfig:
               penalty=None if "penalty" not in contact else float(contact["penalty"]),
               gravity=None if "gravity" not in contact else bool(contact["gravity"]), final_angle=float(motion.get("final_angle", 57.0)),
               angle_steps=int(motion.get("steps", 57)), angular_velocity=float(motion.get("angular_velocity", 45.0)),
-              name=scene.get("scene", {}).get("name", "sleeve"))
+              name=scene.get("scene", {}).get("name", "sleeve"), arm=arm)
     if "stabilization" in contact:
         kw["stabilization"] = float(contact["stabilization"])
     for key in ("mass_damping", "rotary_inertia_scale", "output_angle_step", "settle_time"):
