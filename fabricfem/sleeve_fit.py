@@ -49,6 +49,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
+from fabricfem.materials import positive_number
 from fabricfem.sleeve import SleeveConfig, SleeveHistory, SleeveStep, build_explicit, check_fit, run_explicit
 
 FIT_SCALES = (1.0, 1.04, 1.0771)
@@ -66,8 +67,7 @@ ENERGY_PARTS = ("membrane", "bending", "shear")
 
 def scaled_arm(scale: float, arm: ArmDimensions = DEFAULT_ARM) -> ArmDimensions:
     """`arm` with both girths times `scale` (> 0), lengths unchanged."""
-    if not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0.0):
-        raise ValueError(f"scale must be a positive number, got {scale!r}")
+    scale = positive_number("scale", scale)
     return replace(arm, upper_arm_girth=arm.upper_arm_girth * scale, forearm_girth=arm.forearm_girth * scale)
 
 

@@ -27,7 +27,8 @@ stiffness scale D / R^4 ~ 8 N/m^3 (D = E t^3 / 12 = 1e-4 N m, R = 0.06 m) is sma
 static tube buckles (the quasi-static route stalled at 16-20 degrees).
 
 Each step: predictor x = x^n + dt v^n, the body posed at t^{n+1}, Newton (ContactProblem.solve with the
-active-set strategy on the contact set only, `ReturnMapContact`; StepLimiter; backtracking line search; a plain
+active-set strategy on the contact set only, `ReturnMapContact`, nodes on the contact switch within
+TIE_FRACTION x augmentation_tolerance keeping their status; StepLimiter; backtracking line search; a plain
 semi-smooth Newton solve as fallback, `_solve_step`) and, for method "augmented", Uzawa updates of eq. 3.69 until
 the largest penetration is below `augmentation_tolerance` (ContactProblem.solve_augmented); the multipliers
 carry over to the next step. Coulomb friction: the stick points are committed after every converged step
@@ -54,10 +55,14 @@ from mpi4py import MPI
 from fabricfem.body.arm import default_arm, elbow_flexion
 from fabricfem.contact.problem import ContactProblem
 from fabricfem.dynamics.mass import lumped_mass
+from fabricfem.materials import positive_number
 from fabricfem.sleeve import (ELBOW_AXIS, SleeveConfig, SleeveError, SleeveHistory, SleeveProblem, SleeveStep,
                               Stabilized, StepLimiter, sleeve_shell)
 from fabricfem.solvers.newton import NewtonSolver, SolverError
 
+# active-set ties (ContactProblem.tie_tolerance) = this x augmentation_tolerance: a node on the contact switch keeps
+# its status within a gap of 1e-6 m (default tolerance 1e-5 m), an order below what the Uzawa loop accepts
+TIE_FRACTION = 0.1
 ACTIVE_SET_MAX_ITERATIONS = 30   # Newton iterations of one active-set solve before the plain fallback (_solve_step)
 TRACE_COLUMNS = ("t_s", "angle_deg", "torque_Nm", "max_penetration_m", "newton_iterations", "dt_s")
 
@@ -80,7 +85,7 @@ class InertiaDamping(Stabilized):
         if not (math.isfinite(damping) and damping >= 0.0):
             raise ValueError(f"damping must be a number >= 0 [1/s], got {damping!r}")
         self.damping = float(damping)
-        self.dt = _positive("dt", dt)
+        self.dt = positive_number("dt", dt)
         self.displacement: np.ndarray | None = None    # u^n (N, 3) [m]
         self.velocity: np.ndarray | None = None        # v^n (N, 3) [m/s]
         super().__init__(contact, self._coefficient(self.dt), weights=mass)   # commits u^n, v^n = 0
@@ -98,7 +103,7 @@ class InertiaDamping(Stabilized):
 
     def set_time_step(self, dt: float):
         """Use step dt [s] for the next solve (from the committed x^n, v^n)."""
-        self.dt = _positive("dt", dt)
+        self.dt = positive_number("dt", dt)
         self.coefficient = self._coefficient(self.dt)
         self._set_anchor()
 
@@ -152,12 +157,6 @@ class ReturnMapContact(ContactProblem):
         return active, np.zeros_like(sliding), segment
 
 
-def _positive(name: str, value) -> float:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0.0):
-        raise ValueError(f"{name} must be a positive number, got {value!r}")
-    return float(value)
-
-
 @dataclass
 class ImplicitSleeve(SleeveProblem):
     """The sleeve set up for backward Euler (`build_implicit`); system is the InertiaDamping wrapper."""
@@ -189,7 +188,7 @@ def build_implicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
         raise ValueError("density: the implicit sleeve needs a positive fabric density [kg/m^3] (its inertia)")
     omega = math.radians(config.flexion_speed)                 # rad/s
     angle_step = config.final_angle / config.angle_steps       # deg
-    dt = _positive("dt (angle step / angular_velocity)", math.radians(angle_step) / omega)
+    dt = positive_number("dt (angle step / angular_velocity)", math.radians(angle_step) / omega)
     record_time = math.radians(config.output_angle_step) / omega
     # rest before the flexion: settle_time (in fabric I's time units under dynamic similarity), whole steps
     settle_steps = (math.ceil(config.settle_time / config.similarity_factor / dt - 1e-9) if config.gravity else 0)
@@ -198,7 +197,8 @@ def build_implicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                             t_start=settle_steps * dt)
     body = default_arm(flexion, config.arm)
     contact = ReturnMapContact(model, body, method=config.method, penalty=config.penalty, friction=config.friction,
-                               time=0.0, active_set=config.active_set)
+                               time=0.0, active_set=config.active_set,
+                               tie_tolerance=TIE_FRACTION * config.augmentation_tolerance)
     model.compile()
     masses = lumped_mass(model, rotational=False)
     mass = masses.array[contact.nodes.dofs[:, 0]].copy()     # the same on the three components of a node

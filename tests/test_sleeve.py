@@ -204,6 +204,10 @@ def test_study_cli_rejects_unknown_meshes_and_fabrics(capsys):
     assert "mesh_frictions" in capsys.readouterr().err
     assert main(["study", "sleeve", "--only", "mesh_mu0.5,nosuch"]) == 2
     assert "only: unknown figure 'nosuch'" in capsys.readouterr().err
+    assert main(["study", "sleeve-methods", "--methods", "lagrange,uzawa"]) == 2
+    assert "methods: unknown ['uzawa']" in capsys.readouterr().err
+    assert main(["study", "sleeve-methods", "--al-budget", "-5"]) == 2
+    assert "al_budget" in capsys.readouterr().err
 
 
 # ------------------------------------------------------------------ active-set strategy and damped Newton
@@ -303,11 +307,58 @@ def test_step_limiter_scales_by_the_largest_increment():
     assert limiter.factor(step) == pytest.approx(0.1, rel=1e-15)
 
 
+def test_keep_ties_holds_the_status_of_nodes_on_the_switch():
+    """nodal.keep_ties on hand-made trial pressures lambda - k g (k = 1e6 Pa/m, tie 1e-6 m, so k tie = 1 Pa):
+    nodes within 1 Pa of the switch keep their previous status, the others follow the sign of the trial."""
+    from fabricfem.contact.nodal import keep_ties
+    k, tie = 1e6, 1e-6
+    multiplier = np.array([0.0, 0.0, 5.0, 5.0, 0.0, 0.0])
+    trial = np.array([0.5, -0.5, 4.0, -2.0, 1.5, -1.5])          # Pa
+    gap = (multiplier - trial) / k
+    previous = np.array([False, True, False, True, False, True])
+    kept = keep_ties(previous, gap, multiplier, k, tie)
+    assert kept.tolist() == [False, True, True, False, True, False]
+    # the bounds of the docstring: a kept contact node pulls with at most k tie, a kept free node
+    # penetrates at most tie
+    held_contact, held_free = kept & (trial <= 0.0), ~kept & (trial > 0.0)
+    assert np.all(trial[held_contact] >= -k * tie) and np.all(-gap[held_free] <= tie)
+
+
+def test_tie_tolerance_solution_satisfies_the_law_within_the_tie():
+    """Signorini plate with the active-set strategy and tie_tolerance delta = 1e-5 m: the converged state solves
+    the unilateral law (no fixed set) up to the nodal forces of the kept ties, at most w_i k_N delta per node
+    (nodal.keep_ties), plus the Newton tolerance; and it is the tie-free solution to within that force over the
+    contact stiffness (delta, times 10 for the conditioning of the plate under a point-like contact)."""
+    from fabricfem.solvers.newton import NewtonSolver
+    from fabricfem.verify import contact as cases
+    states = []
+    for tie in (0.0, 1e-5):
+        reference = cases.signorini_problem(n=6, comm=MPI.COMM_SELF)
+        problem = type(reference)(reference.model, [cases.sphere()], active_set=True, tie_tolerance=tie)
+        solver = NewtonSolver(problem, TIGHT)
+        for lam in (0.5, 1.0):
+            problem.set_load_factor(lam)
+            result = problem.solve(solver)
+            assert result.converged, result.reason
+            if lam < 1.0:
+                problem.after_converged_step()
+        b = problem.model.create_vector()
+        problem.residual(problem.model.w.vector, b)          # unilateral law: no fixed set after solve
+        bound = np.max(problem.nodes.area) * problem.penalty * tie + 1e-9 * problem.F_ref.norm()
+        assert np.max(np.abs(b.array)) <= bound
+        assert np.count_nonzero(problem.evaluate().pressure > 0.0) >= 1
+        states.append(problem.model.w.x.array.copy())
+        solver.destroy()
+    assert np.max(np.abs(states[1] - states[0])) <= 10 * 1e-5
+
+
 def test_bad_active_set_cap_names_the_parameter():
     from fabricfem.verify import contact as cases
     problem = cases.signorini_problem(n=2, comm=MPI.COMM_SELF)
     with pytest.raises(ValueError, match="max_active_set_updates"):
         type(problem)(problem.model, [cases.sphere()], max_active_set_updates=0)
+    with pytest.raises(ValueError, match="tie_tolerance"):
+        type(problem)(problem.model, [cases.sphere()], tie_tolerance=-1e-6)
     with pytest.raises(ValueError, match="max_rotation_step"):
         SleeveConfig(max_rotation_step=0.0)
 

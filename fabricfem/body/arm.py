@@ -99,9 +99,9 @@ class ArmDimensions:
         """The two segments: radii (f L, r, r), f = long_axis_factor (f = 0.5: (L / 2, r, r))."""
         r_u, r_f = self.upper_arm_radius, self.forearm_radius
         return (Segment("upper_arm", "shoulder", "elbow", "upper_arm_marker",
-                        (self.long_axis_factor * self.upper_arm_length, r_u, r_u)),
+                        (self.upper_arm_long_semi_axis, r_u, r_u)),
                 Segment("forearm", "elbow", "wrist", "forearm_marker",
-                        (self.long_axis_factor * self.forearm_length, r_f, r_f)))
+                        (self.forearm_long_semi_axis, r_f, r_f)))
 
 
 DEFAULT_ARM = ArmDimensions()

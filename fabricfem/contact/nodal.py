@@ -164,6 +164,16 @@ def normal_pressure(gap: np.ndarray, multiplier: np.ndarray, penalty: float,
     return np.where(active, trial, 0.0)
 
 
+def keep_ties(previous: np.ndarray, gap: np.ndarray, multiplier: np.ndarray, penalty: float,
+              tie: float) -> np.ndarray:
+    """Contact set of an active-set update (ContactProblem) in which the nodes on the switch keep their status:
+    (N,) bool, `previous` where |lambda - k_N g| <= k_N tie, else lambda - k_N g > 0 (eq. 3.69's switch).
+    A kept contact node has tension lambda - k_N g >= -k_N tie [Pa]; a kept free node has
+    -g <= tie - lambda / k_N <= tie [m] (lambda >= 0)."""
+    trial = multiplier - penalty * gap
+    return np.where(np.abs(trial) <= penalty * tie, np.asarray(previous, dtype=bool), trial > 0.0)
+
+
 def normal_force_and_tangent(area: np.ndarray, pressure: np.ndarray, normal: np.ndarray,
                              penalty: float, active: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Nodal normal force f = w p n [N] (N, 3) and its stiffness K = -df/dx = w k_N n n^T [N/m] (N, 3, 3)

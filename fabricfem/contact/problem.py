@@ -23,7 +23,11 @@ nearest one -- hence the normal and the stick point -- switches discontinuously)
 from the sign of lambda - k_N g, S from Phi* > 0 and the nearest segments at the converged state and
 repeats until none changes (at most `max_active_set_updates` updates, else SolverError naming the nodes
 that flip). When A is stable the converged state satisfies the unilateral law exactly, so the solution
-is the plain penalty / augmented solution (tests/test_contact.py checks this to 1e-10).
+is the plain penalty / augmented solution (tests/test_sleeve.py checks this to 1e-10).
+With `tie_tolerance` = delta > 0 [m] a node whose trial pressure lambda - k_N g lies within k_N delta of
+zero keeps its status in an update (`nodal.keep_ties`): a node on the switch can otherwise leave and
+re-enter A at every update without end. The converged state then satisfies the law within a gap of delta:
+a kept contact node carries a tension below k_N delta, a kept free node penetrates less than delta.
 """
 from __future__ import annotations
 
@@ -40,6 +44,7 @@ from fabricfem.body.pose import Body
 from fabricfem.contact import friction as friction_law
 from fabricfem.contact import nodal
 from fabricfem.contact.torque import adjacent_segments, contact_torque
+from fabricfem.meshes._validate import non_negative
 from fabricfem.solvers.newton import NewtonResult, NewtonSolver, SolverError
 
 METHODS = ("penalty", "augmented")
@@ -85,13 +90,15 @@ class ContactProblem:
 
     def __init__(self, model, obstacles: Sequence[Ellipsoid] | Body, method: str = "penalty",
                  penalty: float | None = None, friction: float = 0.0, tangential_penalty: float | None = None,
-                 time: float = 0.0, active_set: bool = False, max_active_set_updates: int = 30):
+                 time: float = 0.0, active_set: bool = False, max_active_set_updates: int = 30,
+                 tie_tolerance: float = 0.0):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         if not (isinstance(max_active_set_updates, int) and max_active_set_updates >= 1):
             raise ValueError(f"max_active_set_updates must be a positive integer, got {max_active_set_updates!r}")
         self.active_set = bool(active_set)
         self.max_active_set_updates = max_active_set_updates
+        self.tie_tolerance = non_negative("tie_tolerance", tie_tolerance)   # m
         # the fixed contact and slip sets during a solve with the active-set strategy (None: unilateral law
         # and return map)
         self.active: np.ndarray | None = None
@@ -292,6 +299,9 @@ class ContactProblem:
                 if not result.converged:
                     return NewtonResult(False, total, result.reason, norms)
                 active, sliding, segment = self.contact_set()
+                if self.tie_tolerance > 0.0:    # nodes on the switch within the tie keep their status
+                    active = nodal.keep_ties(self.active, self.state.gap, self.multiplier, self.penalty,
+                                             self.tie_tolerance)
                 # a segment change matters only where a contact force acts (before or after)
                 moved = (segment != self.segment) & (active | self.active)
                 changed = self.comm.allreduce(int(np.count_nonzero((active != self.active) | (sliding != self.sliding)
