@@ -2,7 +2,8 @@
 `fabricfem bench ...`,
 `fabricfem study sleeve [--quick] [--out DIR] [--fine III] [--meshes I,II,III,IV] [--fabrics I,II,III]
 [--mesh-frictions 0.1,0.5] [--only mesh_mu0.5,fit]`,
-`fabricfem study sleeve-methods [--mesh III] [--out results/sleeve_methods_gravity.csv]`."""
+`fabricfem study sleeve-methods [--mesh III] [--methods lagrange,penalty,augmented] [--al-budget 1800]
+[--out results/sleeve_methods_gravity.csv]`."""
 from __future__ import annotations
 
 import argparse
@@ -111,6 +112,10 @@ def main(argv: list[str] | None = None) -> int:
     p_study.add_argument("--long-axis-factors", default=None,
                          help="sleeve-fit: arm long semi-axis / segment length, e.g. 0.5,0.6,0.7 (default 0.5; "
                               "other than 0.5 alone: docs files fit_sensitivity_elbow.*)")
+    p_study.add_argument("--methods", default="lagrange,penalty,augmented",
+                         help="sleeve-methods: contact methods to run (shared over the MPI ranks)")
+    p_study.add_argument("--al-budget", type=float, default=1800.0,
+                         help="sleeve-methods: wall-time budget [s] of the augmented-Lagrangian (implicit) run")
     args = parser.parse_args(argv)
 
     if args.command == "verify":
@@ -161,8 +166,13 @@ def main(argv: list[str] | None = None) -> int:
         from fabricfem.study import run_methods
         given = sys.argv[1:] if argv is None else argv
         mesh = args.mesh if any(a == "--mesh" or a.startswith("--mesh=") for a in given) else "III"
-        run_methods("results/sleeve_methods_gravity.csv" if args.out == "results/sleeve_study" else args.out,
-                    mesh=mesh)
+        methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
+        try:
+            run_methods("results/sleeve_methods_gravity.csv" if args.out == "results/sleeve_study" else args.out,
+                        mesh=mesh, methods=methods, al_budget=args.al_budget)
+        except ValueError as exc:
+            _print(f"fabricfem study sleeve-methods: {exc}", file=sys.stderr)
+            return 2
         return 0
     if args.command == "study" and args.name == "unit-cell":
         from fabricfem.study_unit_cell import run_study as run_unit_cell_study

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from fabricfem.materials import positive_number
 from fabricfem.sleeve import SleeveConfig, SleeveHistory, plot_torque, run_sleeve
 
 MESHES = {"I": (10, 13), "II": (15, 20), "III": (20, 26), "IV": (30, 39)}
@@ -362,8 +363,9 @@ def run_methods(out: str | Path = "results/sleeve_methods.csv", mesh: str = "III
     Each row has the wall and the CPU time (time.process_time) of its process. Writes `out` (CSV, rank 0)
     and returns the rows."""
     unknown = [m for m in methods if m not in METHODS]
-    if unknown:
-        raise ValueError(f"methods: unknown {unknown}, expected some of {sorted(METHODS)}")
+    if unknown or not methods:
+        raise ValueError(f"methods: unknown {unknown or 'none given'}, expected some of {sorted(METHODS)}")
+    al_budget = positive_number("al_budget", al_budget)
     if mesh not in MESHES:
         raise ValueError(f"mesh: unknown mesh {mesh!r}, expected one of {sorted(MESHES)}")
     n_around, n_along = MESHES[mesh]
