@@ -438,7 +438,7 @@ class ContactUnitCell:
         reached, length = 0.0, 1.0
         smallest = 0.5 ** MAX_CUTS
         iterations: list[int] = []
-        augmentations, report, parts = 0, None, 0
+        augmentations, growths, report, parts = 0, 0, None, 0
         while reached < 1.0:
             target = min(1.0, reached + length)
             Phi_b = start + target * (Phi_n - start)
@@ -460,7 +460,8 @@ class ContactUnitCell:
             iterations += its
             if report is not None:
                 augmentations += report.augmentations
-                report.augmentations = augmentations
+                growths += report.penalty_growths
+                report.augmentations, report.penalty_growths = augmentations, growths
                 report.newton_iterations = list(iterations)
             self._partial = (report, list(iterations), parts + 1)
             self._converged_force_scale = self.last_force_scale
@@ -521,8 +522,8 @@ class ContactUnitCell:
 
 
 def contact_table(steps: list[ContactUnitCellStep]) -> str:
-    """Per-step report: E11, E22, E12, S11, S22, S12 [Pa], Newton iterations, augmentations, final
-    penetration [m], normal and tangential contact force [N], active / slipping nodes, smallest det F,
+    """Per-step report: E11, E22, E12, S11, S22, S12 [Pa], Newton iterations, augmentations (+ penalty growths
+    of solve_with_contact, if any), final penetration [m], normal and tangential contact force [N], active / slipping nodes, smallest det F,
     converged sub-increments and wall time [s] of the step."""
     lines = [f"{'step':>4} {'E11':>8} {'E22':>8} {'E12':>8} {'S11 [Pa]':>11} {'S22 [Pa]':>11} {'S12 [Pa]':>11} "
              f"{'Newton':>12} {'aug':>3} {'penetr. [m]':>11} {'F_N [N]':>10} {'F_T [N]':>10} {'act/slip':>9} "
@@ -533,7 +534,8 @@ def contact_table(steps: list[ContactUnitCellStep]) -> str:
         if c is None:
             tail = f"{'-':>3} {'-':>11} {'-':>10} {'-':>10} {'-':>9}"
         else:
-            tail = (f"{c.augmentations:>3d} {c.max_penetration:>11.3e} {c.normal_force:>10.3e} "
+            aug = f"{c.augmentations}" + (f"+{c.penalty_growths}g" if c.penalty_growths else "")
+            tail = (f"{aug:>3} {c.max_penetration:>11.3e} {c.normal_force:>10.3e} "
                     f"{c.tangential_force:>10.3e} {f'{c.active}/{c.slipping}':>9}")
         lines.append(f"{k:>4d} {s.E[0, 0]:>8.4f} {s.E[1, 1]:>8.4f} {s.E[0, 1]:>8.4f} {s.S[0, 0]:>11.4e} "
                      f"{s.S[1, 1]:>11.4e} {s.S[0, 1]:>11.4e} {its[:12]:>12} " + tail

@@ -408,3 +408,43 @@ def test_friction_tangent_is_consistent_on_sliding_cylinders():
         newton.u.vector.ghostUpdate(addv=P.InsertMode.INSERT, mode=P.ScatterMode.FORWARD)
     # O(h): the error drops ~10x with h (5x allows for round-off in the differences), and is small
     assert errors[1] < errors[0] / 5.0 and errors[1] < 1e-3, errors
+
+
+class _ScriptedUzawa:
+    """A contact whose Uzawa map diverges (violation x1.1 per update) while eps_N is below 10 x its start and
+    contracts (x0.3) above: the pattern measured on the crushed TI crossing (solve_with_contact docstring)."""
+
+    def __init__(self, growth: float):
+        self.params = ContactParameters(penalty=1.0, tolerance=1e-3, max_augmentations=30, penalty_growth=growth)
+        self.violation_now, self.dropped_active, self.penalties = 1e-2, 0, []
+
+    def violation(self):
+        return self.violation_now, 0.5 * self.violation_now
+
+    def augment(self):
+        self.penalties.append(self.params.penalty)
+        self.violation_now *= 1.1 if self.params.penalty < 10.0 else 0.3
+
+    def totals(self):
+        return np.zeros(3), 0.0, 0.0, 0, 0
+
+    def commit(self):
+        pass
+
+
+def test_uzawa_penalty_grows_after_two_growing_violations():
+    """Violations 1e-2, 1.1e-2, 1.21e-2 (grown twice): eps_N x10 before the third update, then 3.63e-3,
+    1.09e-3, 3.27e-4 <= 1e-3: converged after 5 augmentations with one growth; without growth
+    (penalty_growth = 1) the same contact never converges and SolverError names the augmentations."""
+    from fabricfem.contact.yarn import solve_with_contact
+    from fabricfem.solvers.newton import NewtonResult, SolverError
+    newton = lambda: NewtonResult(True, 1, "converged", [])   # noqa: E731
+    growing = _ScriptedUzawa(10.0)
+    report = solve_with_contact(newton, growing)
+    assert growing.penalties == [1.0, 1.0, 10.0, 10.0, 10.0]
+    assert report.augmentations == 5 and report.penalty_growths == 1
+    assert report.max_penetration == pytest.approx(1e-2 * 1.21 * 0.3 ** 3, rel=1e-12)
+    with pytest.raises(SolverError, match="after 30 augmentations"):
+        solve_with_contact(newton, _ScriptedUzawa(1.0))
+    with pytest.raises(ValueError, match="penalty_growth"):
+        ContactParameters(penalty=1.0, penalty_growth=0.5)
