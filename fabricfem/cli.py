@@ -3,11 +3,13 @@
 `fabricfem study sleeve [--quick] [--out DIR] [--fine III] [--meshes I,II,III,IV] [--fabrics I,II,III]
 [--mesh-frictions 0.1,0.5] [--only mesh_mu0.5,fit]`,
 `fabricfem study sleeve-methods [--mesh III] [--methods lagrange,penalty,augmented] [--al-budget 1800]
-[--out results/sleeve_methods_gravity.csv]`."""
+[--out results/sleeve_methods_gravity.csv]`,
+`fabricfem study unit-cell [--quick] [--out DIR] [--recompute-stopped [--coarse-only]]`."""
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 
 from mpi4py import MPI
@@ -116,6 +118,10 @@ def main(argv: list[str] | None = None) -> int:
                          help="sleeve-methods: contact methods to run (shared over the MPI ranks)")
     p_study.add_argument("--al-budget", type=float, default=1800.0,
                          help="sleeve-methods: wall-time budget [s] of the augmented-Lagrangian (implicit) run")
+    p_study.add_argument("--recompute-stopped", action="store_true",
+                         help="unit-cell: solve again the curves of --out that stopped early (others are read back)")
+    p_study.add_argument("--coarse-only", action="store_true",
+                         help="unit-cell: with --recompute-stopped, only the coarse cells' curves")
     args = parser.parse_args(argv)
 
     if args.command == "verify":
@@ -175,8 +181,14 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         return 0
     if args.command == "study" and args.name == "unit-cell":
-        from fabricfem.study_unit_cell import run_study as run_unit_cell_study
-        run_unit_cell_study("results/unit_cell" if args.out == "results/sleeve_study" else args.out, quick=args.quick)
+        from fabricfem.study_unit_cell import previous_runs, run_study as run_unit_cell_study
+        out = "results/unit_cell" if args.out == "results/sleeve_study" else args.out
+        # --recompute-stopped: solve again the curves of `out` that stopped early (after a solver change);
+        # --coarse-only: only those on coarse cells (the fine ones stop at their time budget anyway)
+        stopped = ({key for key, run in previous_runs(out).items() if run.stopped
+                    and (not args.coarse_only or key.refinement == "coarse")}
+                   if args.recompute_stopped and os.path.isdir(out) else set())
+        run_unit_cell_study(out, quick=args.quick, recompute=stopped)
         return 0
     if args.command == "study":
         from fabricfem.study import run_study, variants

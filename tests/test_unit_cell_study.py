@@ -192,3 +192,28 @@ def test_thesis_end_faces_are_a_variational_upper_bound():
     assert energies["uz_fixed"] > energies["periodic"]  # the restriction is active (stiffer quarter cell)
     with pytest.raises(ValueError, match="end_faces"):
         ContactUnitCell(_cell(), THESIS_TRANSVERSELY_ISOTROPIC, contact=None, end_faces="clamped")
+
+
+def test_recompute_stopped_selects_the_stopped_curves(tmp_path, monkeypatch):
+    """`fabricfem study unit-cell --recompute-stopped [--coarse-only]` hands run_study the keys of the curves
+    that stopped in --out's CSVs (a hand-written fig CSV: one finished, one stopped coarse, one stopped fine)."""
+    import fabricfem.study_unit_cell as study
+    from fabricfem.cli import main
+    from fabricfem.study_unit_cell import RunKey
+    columns = ["curve", "material", "load", "contact", "option", "refinement", "end_faces", "stopped", "E11", "S11",
+               "wall_s"]
+    rows = [("a", "ti", "uniaxial", 1, "quarter", "coarse", "uz_fixed", ""),
+            ("b", "ti", "biaxial", 1, "quarter", "coarse", "uz_fixed", "yarn contact: diverged"),
+            ("c", "ti", "biaxial", 1, "quarter", "fine", "uz_fixed", "time budget 300 s used up")]
+    with open(tmp_path / "fig99.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(columns)
+        for r in rows:
+            w.writerow(list(r) + [0.01, 1e6, 1.0])
+    seen = []
+    monkeypatch.setattr(study, "run_study", lambda out, quick=False, recompute=None: seen.append(set(recompute)))
+    assert main(["study", "unit-cell", "--out", str(tmp_path), "--recompute-stopped"]) == 0
+    assert main(["study", "unit-cell", "--out", str(tmp_path), "--recompute-stopped", "--coarse-only"]) == 0
+    assert main(["study", "unit-cell", "--out", str(tmp_path)]) == 0
+    coarse, fine = RunKey("ti", "biaxial"), RunKey("ti", "biaxial", refinement="fine")
+    assert seen == [{coarse, fine}, {coarse}, set()]
