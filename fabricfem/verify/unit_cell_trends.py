@@ -1,9 +1,9 @@
 """Trends of the woven unit cell with contact (thesis 000 sec. 4.3.5): case `unit-cell-trends`.
 
-Computed from the CSVs that `fabricfem study unit-cell` writes (results/unit_cell/fig*.csv, the full
-study: coarse and fine, quarter and full cells, 10 steps per load case, several minutes), not from
-a run inside the case: the contact runs cost 5-30 s per load step on this machine, far beyond the
-case budget. If those CSVs are missing (results/ is not versioned) the case runs the quick study
+Computed from the CSVs that `fabricfem study unit-cell` writes (fig*.csv of the full study: coarse and
+fine, quarter and full cells, 10 steps per load case, several minutes; the committed docs/figures/unit_cell
+first, else a local results/unit_cell), not from a run inside the case: the contact runs cost 5-30 s per
+load step on this machine, far beyond the case budget. If neither exists the case runs the quick study
 (Figs. 21, 24, 25, 26 only, coarse quarter cell, 1/4 of the strains, ~40 s) into
 results/unit_cell_quick, and the full-versus-quarter trend, which needs the full cell, fails with
 value nan.
@@ -45,7 +45,7 @@ import numpy as np
 from fabricfem.verify import Timer, case, result
 
 NAME = "unit-cell-trends"
-STUDY_DIR = "results/unit_cell"
+STUDY_DIRS = ("docs/figures/unit_cell", "results/unit_cell")   # committed study first, then a local one
 QUICK_DIR = "results/unit_cell_quick"
 
 
@@ -162,16 +162,16 @@ def trends(study_dir: str, end_faces: str = "uz_fixed") -> dict[str, float]:
                     "E11 ~ 0.08 on; PlainWeave.balanced crimp 0.08 is assumed, the thesis gives only phi = 0.4 "
                     "and the section ratio 1.5; with exactly periodic end faces 0.138). The other checks pass: "
                     "isotropic secant spread 0.165 biaxial / 0.061 uniaxial (< 0.25; periodic ends 0.339 / 0.231), "
-                    "TI stiffening 19.6x (TI biaxial stops at E11 = 0.127 of 0.22, Newton), shear tangent x25.5, "
-                    "|S11| compression/extension 0.031, full/quarter S11 = 0.9974 at E11 = 0.127 (exact "
-                    "periodicity: 1.0002, reported). Crimp map: docs/figures/unit_cell/geometry_sensitivity.csv. "
-                    "In a clean checkout (no results/unit_cell) the quick study cannot give the full-cell trend "
-                    "(nan).")
+                    "TI stiffening 23.1x (TI biaxial to E11 = 0.22), shear tangent x25.5, |S11| compression/"
+                    "extension 0.031, full/quarter S11 = 0.9989 at E11 = 0.131 (exact periodicity: 0.9991 at "
+                    "E11 = 0.091, reported). Crimp map: docs/figures/unit_cell/geometry_sensitivity.csv. "
+                    "Without the committed study CSVs the quick study cannot give the full-cell trend (nan).")
 def unit_cell_trends() -> list:
-    """Unit-cell trends of thesis sec. 4.3.5 from the study CSVs (results/unit_cell, else the quick study)."""
+    """Unit-cell trends of thesis sec. 4.3.5 from the study CSVs (docs/figures/unit_cell, the committed study,
+    else results/unit_cell, else the quick study)."""
     with Timer() as t:
-        study_dir = STUDY_DIR
-        if not os.path.exists(os.path.join(STUDY_DIR, "fig21.csv")):
+        study_dir = next((d for d in STUDY_DIRS if os.path.exists(os.path.join(d, "fig21.csv"))), None)
+        if study_dir is None:
             from fabricfem.study_unit_cell import run_study
             run_study(QUICK_DIR, quick=True)
             study_dir = QUICK_DIR
