@@ -267,3 +267,59 @@ def test_bad_input_names_the_parameter():
         JointTrajectory([0.0, 1.0], {"a": [[0, 0, 0], [np.nan, 0, 0]]})
     with pytest.raises(ValueError, match="segment"):
         Body([Segment("s", "a", "b", "m", (0.1, 0.1, 0.1))], elbow_flexion())
+
+
+def _two_spheres():
+    """Two unit spheres whose centres are 1.2 apart along x: they overlap, and their union has a concave
+    crease on the circle x = 0.6, y^2 + z^2 = 1 - 0.36 (radius 0.8)."""
+    return [Ellipsoid(center=np.array([0.0, 0.0, 0.0]), rotation=np.eye(3), radii=np.array([1.0, 1.0, 1.0])),
+            Ellipsoid(center=np.array([1.2, 0.0, 0.0]), rotation=np.eye(3), radii=np.array([1.0, 1.0, 1.0]))]
+
+
+def test_blended_gap_bounds_and_far_field():
+    """Soft minimum of width rho: min g_k - rho log 2 <= g <= min g_k at every point (closed-form bounds of the
+    log-sum-exp), and g = min g_k to 1e-12 where one sphere is nearer by 40 rho (exp(-40) ~ 4e-18)."""
+    from fabricfem.body.ellipsoid import blended_gap, nearest_gap
+    rho = 1e-3
+    rng = np.random.default_rng(3)
+    x = rng.uniform([-1.5, -1.5, -1.5], [2.7, 1.5, 1.5], size=(4000, 3))
+    g, n, k = blended_gap(x, _two_spheres(), rho)
+    g_near, _, k_near = nearest_gap(x, _two_spheres())
+    assert np.all(g <= g_near + 1e-15) and np.all(g >= g_near - rho * math.log(2.0) - 1e-15)
+    assert np.array_equal(k, k_near)
+    assert np.allclose(np.linalg.norm(n, axis=1), 1.0, atol=1e-14)
+    d1 = np.linalg.norm(x, axis=1) - 1.0
+    d2 = np.linalg.norm(x - [1.2, 0.0, 0.0], axis=1) - 1.0
+    far = np.abs(d1 - d2) > 40 * rho
+    assert np.max(np.abs(g[far] - g_near[far])) < 1e-12
+    with pytest.raises(ValueError, match="width"):
+        blended_gap(x, _two_spheres(), 0.0)
+
+
+def test_blended_normal_is_the_gradient_and_continuous_across_the_crease():
+    """On a path crossing the concave crease of two overlapping spheres (just outside it, x from 0.5 to 0.7 at
+    y = 0.8 + 2e-3), the nearest sphere's normal jumps by the crease angle theta = 2 asin(0.6) = 73.7 deg between
+    two samples dx = 2e-5 apart; the blended normal turns at most by (d phi / d w) (d w / d x) dx, with
+    d phi / d w <= 2 tan(theta / 2) = 1.5 (at w = 1/2, where the blend of the two unit normals is shortest) and
+    d w / d x <= (1/4) |d(g_1 - g_2)/dx| / rho = (1/4) 1.2 / rho: 0.018 rad = 1.03 deg per sample (bound x 1.1
+    for the path's offset from the crease). And it is the direction of the central-difference gradient of the
+    blended gap (angle < 1e-5 rad, h = 1e-7)."""
+    from fabricfem.body.ellipsoid import blended_gap, nearest_gap
+    rho = 5e-4
+    xs = np.linspace(0.5, 0.7, 10001)
+    path = np.column_stack([xs, np.full_like(xs, 0.8 + 2e-3), np.zeros_like(xs)])
+    _, n_near, _ = nearest_gap(path, _two_spheres())
+    _, n_blend, _ = blended_gap(path, _two_spheres(), rho)
+
+    def turn(n):
+        return np.degrees(np.arccos(np.clip(np.sum(n[1:] * n[:-1], axis=1), -1.0, 1.0)))
+    assert np.max(turn(n_near)) > 60.0
+    dx = xs[1] - xs[0]
+    assert np.max(turn(n_blend)) < 1.1 * np.degrees(2 * 0.75 * 0.25 * 1.2 / rho * dx)
+    h = 1e-7
+    points = path[::500]
+    grad = np.column_stack([(blended_gap(points + h * e, _two_spheres(), rho)[0]
+                             - blended_gap(points - h * e, _two_spheres(), rho)[0]) / (2 * h) for e in np.eye(3)])
+    _, n_points, _ = blended_gap(points, _two_spheres(), rho)
+    cosine = np.sum(grad * n_points, axis=1) / np.linalg.norm(grad, axis=1)
+    assert np.max(np.arccos(np.clip(cosine, -1.0, 1.0))) < 1e-5

@@ -359,6 +359,8 @@ def test_bad_active_set_cap_names_the_parameter():
         type(problem)(problem.model, [cases.sphere()], max_active_set_updates=0)
     with pytest.raises(ValueError, match="tie_tolerance"):
         type(problem)(problem.model, [cases.sphere()], tie_tolerance=-1e-6)
+    with pytest.raises(ValueError, match="crease_width"):
+        type(problem)(problem.model, [cases.sphere()], crease_width=-1e-3)
     with pytest.raises(ValueError, match="max_rotation_step"):
         SleeveConfig(max_rotation_step=0.0)
 

@@ -28,6 +28,11 @@ With `tie_tolerance` = delta > 0 [m] a node whose trial pressure lambda - k_N g 
 zero keeps its status in an update (`nodal.keep_ties`): a node on the switch can otherwise leave and
 re-enter A at every update without end. The converged state then satisfies the law within a gap of delta:
 a kept contact node carries a tension below k_N delta, a kept free node penetrates less than delta.
+With `crease_width` = rho > 0 [m] and several segments the gap is that of their smooth union
+(`nodal.blended_gap`, a soft minimum of width rho): the normal is continuous across the concave crease where
+two segments meet, so a node there is pushed out of both and the segments are not frozen (the nearest
+segment still carries the node's friction and its share of the joint torque). It rounds the crease by at
+most rho log 2 and leaves the surface unchanged where one segment is nearer by many rho.
 """
 from __future__ import annotations
 
@@ -91,7 +96,7 @@ class ContactProblem:
     def __init__(self, model, obstacles: Sequence[Ellipsoid] | Body, method: str = "penalty",
                  penalty: float | None = None, friction: float = 0.0, tangential_penalty: float | None = None,
                  time: float = 0.0, active_set: bool = False, max_active_set_updates: int = 30,
-                 tie_tolerance: float = 0.0):
+                 tie_tolerance: float = 0.0, crease_width: float = 0.0):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         if not (isinstance(max_active_set_updates, int) and max_active_set_updates >= 1):
@@ -99,6 +104,7 @@ class ContactProblem:
         self.active_set = bool(active_set)
         self.max_active_set_updates = max_active_set_updates
         self.tie_tolerance = non_negative("tie_tolerance", tie_tolerance)   # m
+        self.crease_width = non_negative("crease_width", crease_width)      # m, 0: nearest segment
         # the fixed contact and slip sets during a solve with the active-set strategy (None: unilateral law
         # and return map)
         self.active: np.ndarray | None = None
@@ -194,7 +200,10 @@ class ContactProblem:
         """Contact state at the owned nodes for the local state array of model.w (owned + ghosts)."""
         arr = self.model.w.x.array if state_array is None else state_array
         x = self.nodes.reference + arr[self.nodes.dofs]
-        g, n, seg = nodal.nearest_gap(x, self.ellipsoids, self.segment)
+        if self.crease_width > 0.0 and len(self.ellipsoids) > 1:   # smooth union: no segment to freeze
+            g, n, seg = nodal.blended_gap(x, self.ellipsoids, self.crease_width)
+        else:
+            g, n, seg = nodal.nearest_gap(x, self.ellipsoids, self.segment)
         active = self.active
         p = nodal.normal_pressure(g, self.multiplier, self.penalty, active)
         force, stiffness = nodal.normal_force_and_tangent(self.nodes.area, p, n, self.penalty, active)
@@ -302,8 +311,9 @@ class ContactProblem:
                 if self.tie_tolerance > 0.0:    # nodes on the switch within the tie keep their status
                     active = nodal.keep_ties(self.active, self.state.gap, self.multiplier, self.penalty,
                                              self.tie_tolerance)
-                # a segment change matters only where a contact force acts (before or after)
-                moved = (segment != self.segment) & (active | self.active)
+                # a segment change matters only where a contact force acts (before or after), and not at all
+                # on the smooth union (crease_width > 0), whose normal is continuous across segments
+                moved = (segment != self.segment) & (active | self.active) & (self.crease_width == 0.0)
                 changed = self.comm.allreduce(int(np.count_nonzero((active != self.active) | (sliding != self.sliding)
                                                                    | moved)), op=MPI.SUM)
                 if changed == 0:
