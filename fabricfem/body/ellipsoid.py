@@ -279,18 +279,26 @@ class Ellipsoid:
         return 4.0 / 3.0 * math.pi * float(np.prod(self.radii))
 
 
+def _all_gaps(x: np.ndarray, obstacles) -> tuple[np.ndarray, np.ndarray]:
+    """Gaps (K, N) [m] and unit normals (K, N, 3) of the points x (N, 3) to each of the K `obstacles`
+    (anything with gap(x) -> (g, n)): a loop over the (few) obstacles, vectorised over the points."""
+    x = np.asarray(x, dtype=float).reshape(-1, 3)
+    gaps = np.empty((len(obstacles), len(x)))
+    normals = np.empty((len(obstacles), len(x), 3))
+    for k, obstacle in enumerate(obstacles):
+        if len(x):
+            gaps[k], normals[k] = obstacle.gap(x)
+    return gaps, normals
+
+
 def nearest_gap(x: np.ndarray, obstacles, segment: np.ndarray | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Smallest signed gap [m] of the points x (N, 3) over `obstacles` (anything with gap(x) -> (g, n)),
     the unit outward normal there and the obstacle index; with `segment` (N,), that obstacle's gap
-    instead of the nearest one. Loops over the (few) obstacles, vectorised over the points."""
-    x = np.asarray(x, dtype=float).reshape(-1, 3)
-    if len(x) == 0:
+    instead of the nearest one."""
+    gaps, normals = _all_gaps(x, obstacles)
+    if gaps.shape[1] == 0:
         return np.zeros(0), np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
-    gaps = np.empty((len(obstacles), len(x)))
-    normals = np.empty((len(obstacles), len(x), 3))
-    for k, obstacle in enumerate(obstacles):
-        gaps[k], normals[k] = obstacle.gap(x)
     nearest = np.argmin(gaps, axis=0) if segment is None else np.asarray(segment, dtype=np.int64)
     cols = np.arange(len(x))
     return gaps[nearest, cols], normals[nearest, cols], nearest
@@ -309,15 +317,11 @@ def blended_gap(x: np.ndarray, obstacles, width: float) -> tuple[np.ndarray, np.
     inner elbow): a point there is pushed out of both along the blend instead of out of one into the other."""
     if not (np.isfinite(width) and width > 0.0):
         raise ValueError(f"width must be a positive length [m], got {width!r}")
-    x = np.asarray(x, dtype=float).reshape(-1, 3)
-    if len(x) == 0:
+    gaps, normals = _all_gaps(x, obstacles)
+    if gaps.shape[1] == 0:
         return np.zeros(0), np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
-    gaps = np.empty((len(obstacles), len(x)))
-    normals = np.empty((len(obstacles), len(x), 3))
-    for k, obstacle in enumerate(obstacles):
-        gaps[k], normals[k] = obstacle.gap(x)
     nearest = np.argmin(gaps, axis=0)
-    g_min = gaps[nearest, np.arange(len(x))]
+    g_min = gaps[nearest, np.arange(gaps.shape[1])]
     weights = np.exp(-(gaps - g_min) / width)                 # (K, N), the nearest one has weight 1
     total = weights.sum(axis=0)
     g = g_min - width * np.log(total)                          # soft minimum, shifted for stability
