@@ -4,11 +4,13 @@
 [--mesh-frictions 0.1,0.5] [--only mesh_mu0.5,fit]`,
 `fabricfem study sleeve-methods [--mesh III] [--methods lagrange,penalty,augmented] [--al-budget 1800]
 [--out results/sleeve_methods_gravity.csv]`,
-`fabricfem study unit-cell [--quick] [--out DIR] [--recompute-stopped [--coarse-only]]`."""
+`fabricfem study unit-cell [--quick] [--out DIR] [--recompute-stopped [--coarse-only | --fine-only]]
+[--budget SECONDS]`."""
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import sys
 
@@ -120,8 +122,14 @@ def main(argv: list[str] | None = None) -> int:
                          help="sleeve-methods: wall-time budget [s] of the augmented-Lagrangian (implicit) run")
     p_study.add_argument("--recompute-stopped", action="store_true",
                          help="unit-cell: solve again the curves of --out that stopped early (others are read back)")
-    p_study.add_argument("--coarse-only", action="store_true",
-                         help="unit-cell: with --recompute-stopped, only the coarse cells' curves")
+    refinement = p_study.add_mutually_exclusive_group()
+    refinement.add_argument("--coarse-only", action="store_true",
+                            help="unit-cell: with --recompute-stopped, only the coarse cells' curves")
+    refinement.add_argument("--fine-only", action="store_true",
+                            help="unit-cell: with --recompute-stopped, only the fine cells' curves")
+    p_study.add_argument("--budget", type=float, default=None,
+                         help="unit-cell: wall-time budget [s] of each solved load case (default: by cell, "
+                              "fabricfem.study_unit_cell.TIME_BUDGET)")
     args = parser.parse_args(argv)
 
     if args.command == "verify":
@@ -183,12 +191,16 @@ def main(argv: list[str] | None = None) -> int:
     if args.command == "study" and args.name == "unit-cell":
         from fabricfem.study_unit_cell import previous_runs, run_study as run_unit_cell_study
         out = "results/unit_cell" if args.out == "results/sleeve_study" else args.out
-        # --recompute-stopped: solve again the curves of `out` that stopped early (after a solver change);
-        # --coarse-only: only those on coarse cells (the fine ones stop at their time budget anyway)
-        stopped = ({key for key, run in previous_runs(out).items() if run.stopped
-                    and (not args.coarse_only or key.refinement == "coarse")}
+        # --recompute-stopped: solve again the curves of `out` that stopped early (after a solver change or with
+        # a larger --budget); --coarse-only / --fine-only: only those on coarse / fine cells
+        if args.budget is not None and not (math.isfinite(args.budget) and args.budget > 0.0):
+            _print(f"fabricfem study unit-cell: --budget must be a positive time [s], got {args.budget}",
+                   file=sys.stderr)
+            return 2
+        skip = "fine" if args.coarse_only else "coarse" if args.fine_only else None
+        stopped = ({key for key, run in previous_runs(out).items() if run.stopped and key.refinement != skip}
                    if args.recompute_stopped and os.path.isdir(out) else set())
-        run_unit_cell_study(out, quick=args.quick, recompute=stopped)
+        run_unit_cell_study(out, quick=args.quick, recompute=stopped, time_budget=args.budget)
         return 0
     if args.command == "study":
         from fabricfem.study import run_study, variants

@@ -194,9 +194,10 @@ def test_thesis_end_faces_are_a_variational_upper_bound():
         ContactUnitCell(_cell(), THESIS_TRANSVERSELY_ISOTROPIC, contact=None, end_faces="clamped")
 
 
-def test_recompute_stopped_selects_the_stopped_curves(tmp_path, monkeypatch):
-    """`fabricfem study unit-cell --recompute-stopped [--coarse-only]` hands run_study the keys of the curves
-    that stopped in --out's CSVs (a hand-written fig CSV: one finished, one stopped coarse, one stopped fine)."""
+def test_recompute_stopped_selects_the_stopped_curves(tmp_path, monkeypatch, capsys):
+    """`fabricfem study unit-cell --recompute-stopped [--coarse-only | --fine-only] [--budget S]` hands run_study
+    the keys of the curves that stopped in --out's CSVs (a hand-written fig CSV: one finished, one stopped coarse,
+    one stopped fine) and the budget; a non-positive budget is refused naming the option."""
     import fabricfem.study_unit_cell as study
     from fabricfem.cli import main
     from fabricfem.study_unit_cell import RunKey
@@ -211,9 +212,14 @@ def test_recompute_stopped_selects_the_stopped_curves(tmp_path, monkeypatch):
         for r in rows:
             w.writerow(list(r) + [0.01, 1e6, 1.0])
     seen = []
-    monkeypatch.setattr(study, "run_study", lambda out, quick=False, recompute=None: seen.append(set(recompute)))
+    monkeypatch.setattr(study, "run_study", lambda out, quick=False, recompute=None, time_budget=None:
+                        seen.append((set(recompute), time_budget)))
     assert main(["study", "unit-cell", "--out", str(tmp_path), "--recompute-stopped"]) == 0
     assert main(["study", "unit-cell", "--out", str(tmp_path), "--recompute-stopped", "--coarse-only"]) == 0
+    assert main(["study", "unit-cell", "--out", str(tmp_path), "--recompute-stopped", "--fine-only",
+                 "--budget", "1500"]) == 0
     assert main(["study", "unit-cell", "--out", str(tmp_path)]) == 0
     coarse, fine = RunKey("ti", "biaxial"), RunKey("ti", "biaxial", refinement="fine")
-    assert seen == [{coarse, fine}, {coarse}, set()]
+    assert seen == [({coarse, fine}, None), ({coarse}, None), ({fine}, 1500.0), (set(), None)]
+    assert main(["study", "unit-cell", "--out", str(tmp_path), "--budget", "-5"]) == 2
+    assert "--budget" in capsys.readouterr().err
