@@ -71,6 +71,46 @@ def gather_surface(mesh, displacement: fem.Function | None = None) -> tuple[np.n
     return allcells.reshape(-1, 3), np.arange(m * k).reshape(m, k)
 
 
+def gather_field(mesh, field: fem.Function) -> np.ndarray | None:
+    """A scalar field at the vertices of the owned cells of all ranks on rank 0 (interpolated to P1), in the
+    point layout of `gather_surface` (one copy of each vertex per cell)."""
+    V1 = fem.FunctionSpace(mesh, ("Lagrange", 1))
+    f1 = fem.Function(V1)
+    f1.interpolate(field)
+    n_cells = mesh.topology.index_map(mesh.topology.dim).size_local
+    dofs = V1.dofmap.list.array.reshape(-1, V1.dofmap.dof_layout.num_dofs)[:n_cells]
+    if dofs.shape[1] == 4:
+        dofs = dofs[:, [0, 1, 3, 2]]
+    gathered = mesh.comm.gather(f1.x.array[dofs].reshape(-1), root=0)
+    return np.concatenate(gathered) if mesh.comm.rank == 0 else None
+
+
+def render_field(path: str | Path, surface: tuple[np.ndarray, np.ndarray], values: np.ndarray, title: str,
+                 bodies: Sequence[tuple[np.ndarray, np.ndarray]] = (), camera: str = "xy", zoom: float = 1.0):
+    """Render a gathered surface coloured by per-point `values` (viridis, from 0), with translucent body
+    surfaces (points, cells) behind it, to a PNG off-screen (call on rank 0 with gathered data)."""
+    os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")
+    import pyvista as pv
+    points, cells = surface
+    cloth = pv.PolyData(points, np.hstack([np.full((len(cells), 1), cells.shape[1]), cells]).ravel())
+    cloth.point_data["field"] = values
+    plotter = pv.Plotter(off_screen=True, window_size=(1200, 800))
+    for bp, bc in bodies:
+        plotter.add_mesh(pv.PolyData(bp, np.hstack([np.full((len(bc), 1), bc.shape[1]), bc]).ravel()),
+                         color="wheat", opacity=0.35)
+    # no scalar bar: its tick layout crashes VTK 9.x off-screen here (segfault in vtkScalarBarActor); the
+    # colour range goes into the title instead
+    top = max(float(np.max(values)), 1e-12)
+    plotter.add_mesh(cloth, scalars="field", cmap="viridis", show_edges=True, show_scalar_bar=False,
+                     clim=(0.0, top))
+    plotter.add_text(f"{title}\ncolour: 0 (dark) to {top:.3g} (yellow)", font_size=11)
+    {"xz": plotter.view_xz, "xy": plotter.view_xy, "yz": plotter.view_yz, "iso": plotter.view_isometric}[camera]()
+    plotter.camera.zoom(zoom)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    plotter.screenshot(str(path))
+    plotter.close()
+
+
 def render_surfaces(path: str | Path, surfaces: list[tuple[np.ndarray, np.ndarray]], title: str = "",
                     colors: Sequence[str] | None = None, camera: str = "xz"):
     """Render gathered surfaces (points, cells) to a PNG off-screen (rank 0 only)."""

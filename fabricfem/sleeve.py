@@ -1050,37 +1050,12 @@ def _posed(problem, angle: float) -> list:
 def _render_pressure(path, problem, title: str, angle: float):
     """Deformed sleeve coloured by contact pressure [Pa] with the posed arm (pyvista, off-screen)."""
     from fabricfem import io as fio
-    from dolfinx import fem as dfem
-    pressure = problem.contact.pressure_field()
-    V1 = dfem.FunctionSpace(problem.model.mesh, ("Lagrange", 1))
-    p1 = dfem.Function(V1)
-    p1.interpolate(pressure)
-    surface = fio.gather_surface(problem.model.mesh, problem.model.displacement())
-    # per-cell-vertex pressure, in the same (owned cells, one copy per vertex) layout as gather_surface
-    n_cells = problem.model.mesh.topology.index_map(2).size_local
-    dofs = V1.dofmap.list.array.reshape(-1, V1.dofmap.dof_layout.num_dofs)[:n_cells][:, [0, 1, 3, 2]]
-    values = problem.comm.gather(p1.x.array[dofs].reshape(-1), root=0)
-    if problem.comm.rank != 0:
-        return
-    import os
-    os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")
-    import pyvista as pv
-    points, cells = surface
-    cloth = pv.PolyData(points, np.hstack([np.full((len(cells), 1), 4), cells]).ravel())
-    cloth.point_data["contact pressure [Pa]"] = np.concatenate(values)
-    bp, bc = body_surface(_posed(problem, angle))
-    arm = pv.PolyData(bp, np.hstack([np.full((len(bc), 1), 3), bc]).ravel())
-    plotter = pv.Plotter(off_screen=True, window_size=(1200, 800))
-    plotter.add_mesh(arm, color="wheat", opacity=0.35)
-    values = cloth.point_data["contact pressure [Pa]"]
-    # no scalar bar: its tick layout crashes VTK 9.x off-screen here (segfault in vtkScalarBarActor); the
-    # colour range is printed in the title instead
-    plotter.add_mesh(cloth, scalars="contact pressure [Pa]", cmap="viridis", show_edges=True,
-                     show_scalar_bar=False, clim=(0.0, max(float(values.max()), 1e-12)))
-    plotter.add_text(f"{title}\ncolour: 0 (dark) to {values.max():.3g} Pa (yellow)", font_size=11)
-    plotter.view_xy()
-    plotter.screenshot(str(path))
-    plotter.close()
+    mesh = problem.model.mesh
+    surface = fio.gather_surface(mesh, problem.model.displacement())
+    values = fio.gather_field(mesh, problem.contact.pressure_field())
+    if problem.comm.rank == 0:
+        fio.render_field(path, surface, values, f"{title}, contact pressure [Pa]",
+                         bodies=[body_surface(_posed(problem, angle))])
 
 
 def run_sleeve_scene(scene, comm: MPI.Comm = MPI.COMM_WORLD) -> SleeveHistory:

@@ -51,6 +51,13 @@ def membrane_strain(F, F0):
     return 0.5 * (F.T * F - F0.T * F0)
 
 
+def area_stretch(F, F0, t1, t2):
+    """J = da / dA = |F e1 x F e2| of the mid-surface, (e1, e2) the orthonormal reference frame (Nanson)."""
+    e1, e2 = material_frame(F0, t1, t2)
+    a = ufl.cross(F * e1, F * e2)
+    return ufl.sqrt(ufl.dot(a, a))
+
+
 def bending_strain(F, F0, d, n0):
     """Change of curvature K (seed 001 eq. 5, symmetrised), sign chosen so K > 0 bends towards -n0."""
     grad_d, grad_n0 = ufl.grad(d), ufl.grad(n0)

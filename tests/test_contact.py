@@ -18,6 +18,7 @@ from fabricfem.body.motion import ElbowFlexion
 from fabricfem.body.pose import Body, Segment
 from fabricfem.contact import ContactProblem, adjacent_segments, box5_step, contact_torque, return_map
 from fabricfem.contact.explicit import forward_increment_correction, initial_state, project_along_gradient
+from fabricfem.forms.shell import area_stretch
 from fabricfem.materials import Fabric
 from fabricfem.meshes import plate
 from fabricfem.shell import ShellModel
@@ -126,14 +127,23 @@ def test_stick_points_move_with_the_body():
 
 
 def test_pressure_field_integrates_to_nodal_normal_forces():
-    """int p_h dA = sum_i w_i p_i (w_i = int phi_i dA): the Q2 pressure field and the nodal forces agree."""
+    """int p_h dA = sum_i w_i p_i (w_i = int phi_i dA) for the reference pressure, and int p_h J dA = sum_i
+    a_i p_i^cur (a_i = int phi_i J dA) for the pressure on the body: both fields integrate to the sum of the
+    nodal normal forces."""
     problem = cases.solve_signorini(cases.signorini_problem())
-    p = problem.pressure_field()
-    integral = problem.comm.allreduce(fem.assemble_scalar(fem.form(p * ufl.dx)), op=MPI.SUM)
     s = problem.evaluate()
     nodal = problem.comm.allreduce(float(np.sum(problem.nodes.area * s.pressure)), op=MPI.SUM)
+    p = problem.pressure_field(per="reference")
+    integral = problem.comm.allreduce(fem.assemble_scalar(fem.form(p * ufl.dx)), op=MPI.SUM)
     assert integral == pytest.approx(nodal, rel=1e-12)
     assert integral > 0.0
+    model = problem.model
+    F0 = ufl.grad(model.phi0)
+    J = area_stretch(F0 + ufl.grad(ufl.split(model.w)[0]), F0, model.t1, model.t2)
+    p_current = problem.pressure_field()
+    integral_current = problem.comm.allreduce(fem.assemble_scalar(fem.form(
+        p_current * J * ufl.dx(metadata={"quadrature_degree": 4}))), op=MPI.SUM)
+    assert integral_current == pytest.approx(nodal, rel=1e-12)
 
 
 def test_capstan_torque_balances_end_tensions():

@@ -347,6 +347,7 @@ class ExplicitBodyContact:
         self._elapsed = 0.0
         self._lumped: tuple[object, float, np.ndarray] | None = None   # (integrator, dt, (M, 3) of M + dt/2 C)
         self.timings = {"pose_torque": 0.0}
+        self._current_areas = None                          # nodal.CurrentAreas, compiled on first use
         # optional diagnostics (off by default: they cost a gap evaluation / a list append per step)
         self.monitor_penetration = False     # track the largest penetration of d^{n+1} at t_{n+1} every step
         self.max_penetration_seen = 0.0      # m, owned nodes (reduce with max_penetration_all)
@@ -403,11 +404,21 @@ class ExplicitBodyContact:
             return self.normal_force / self.area
         return self._normal_impulse / self._elapsed / self.area
 
-    def pressure_field(self, mean: bool = True):
-        """Contact pressure [Pa] as a Q2 scalar Function (held nodes: 0), time-averaged or the last step's."""
+    def pressure_field(self, mean: bool = True, per: str = "current"):
+        """Contact pressure [Pa] as a Q2 scalar Function (held nodes: 0), time-averaged or the last step's,
+        per unit current cloth area for the state in model.w (the pressure on the body) or per unit
+        reference area (`per="reference"`, as `mean_pressure`)."""
         from dolfinx import fem
+        from fabricfem.contact.nodal import CurrentAreas
+        pressure = self.mean_pressure() if mean else self.normal_force / self.area
+        if per == "current":
+            if self._current_areas is None:
+                self._current_areas = CurrentAreas(self.model, self.nodes)
+            pressure = pressure * self.area / self._current_areas()[self.moving]
+        elif per != "reference":
+            raise ValueError(f"per must be 'current' or 'reference', got {per!r}")
         f = fem.Function(self.nodes.scalar_space, name="contact_pressure")
-        f.x.array[self.nodes.node_index[self.moving]] = self.mean_pressure() if mean else self.normal_force / self.area
+        f.x.array[self.nodes.node_index[self.moving]] = pressure
         f.x.scatter_forward()
         return f
 

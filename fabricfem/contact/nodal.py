@@ -39,6 +39,7 @@ from petsc4py import PETSc
 
 from fabricfem.body import ellipsoid as ellipsoid_module
 from fabricfem.body.ellipsoid import Ellipsoid
+from fabricfem.forms import shell as shell_forms
 from fabricfem.meshes._validate import positive
 
 DEFAULT_PENALTY_FACTOR = 10.0
@@ -84,6 +85,27 @@ def _displacement_space(model):
     V = model.W
     n = (V.dofmap.index_map.size_local + V.dofmap.index_map.num_ghosts) * V.dofmap.index_map_bs
     return V, np.arange(n, dtype=np.int32)
+
+
+class CurrentAreas:
+    """Lumped current (deformed) areas a_i = int phi_i J dA [m^2] of the contact nodes for the state in
+    model.w (J = da / dA, forms.shell.area_stretch). The contact law's p_i is per reference area w_i; the
+    pressure on the body, force per unit deformed cloth area, is p_i w_i / a_i (Cauchy pressure)."""
+
+    def __init__(self, model, nodes: ContactNodes):
+        u = ufl.split(model.w)[0] if model.model == "naghdi" else model.w
+        F0 = ufl.grad(model.phi0)
+        J = shell_forms.area_stretch(F0 + ufl.grad(u), F0, model.t1, model.t2)
+        dx = ufl.dx(domain=model.mesh, metadata={"quadrature_degree": 4})
+        self._form = fem.form(ufl.TestFunction(nodes.scalar_space) * J * dx)
+        self._index = nodes.node_index
+
+    def __call__(self) -> np.ndarray:
+        vec = fem_petsc.assemble_vector(self._form)
+        vec.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        areas = vec.array[self._index].copy()
+        vec.destroy()
+        return areas
 
 
 def contact_nodes(model) -> ContactNodes:

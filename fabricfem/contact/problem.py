@@ -63,7 +63,7 @@ class ContactState:
     gap: np.ndarray           # (N,) signed gaps g [m], positive outside
     normal: np.ndarray        # (N, 3) unit outward body normals
     segment: np.ndarray       # (N,) index of the nearest segment
-    pressure: np.ndarray      # (N,) p [Pa]
+    pressure: np.ndarray      # (N,) p of the contact law [Pa], per unit reference area
     traction: np.ndarray      # (N, 3) friction traction t_T [Pa]
     slip: np.ndarray          # (N,) sliding nodes
     force: np.ndarray         # (N, 3) f = w (p n + t_T) [N], zero on Dirichlet components
@@ -131,6 +131,7 @@ class ContactProblem:
         self._store_stick_points(self.nodes.reference, np.zeros((N, 3)))
         self._free = ~self.nodes.constrained
         self.state: ContactState | None = None
+        self._current_areas: nodal.CurrentAreas | None = None   # compiled on the first `contact_pressure`
 
     # ------------------------------------------------------------------ delegation
     def __getattr__(self, name):
@@ -367,11 +368,23 @@ class ContactProblem:
         s = self.evaluate()
         return self.comm.allreduce(s.force.sum(axis=0), op=MPI.SUM)
 
-    def pressure_field(self) -> fem.Function:
-        """Contact pressure p [Pa] as a P2 (Q2) scalar Function (for output)."""
-        s = self.evaluate()
+    def contact_pressure(self, per: str = "current") -> np.ndarray:
+        """(N,) normal contact pressure at the owned nodes [Pa]: per unit current (deformed) cloth area, the
+        pressure on the body (`per="current"`), or per unit reference area, the p of the contact law
+        (`per="reference"`); they differ by the area stretch a_i / w_i."""
+        pressure = self.evaluate().pressure
+        if per == "reference":
+            return pressure
+        if per != "current":
+            raise ValueError(f"per must be 'current' or 'reference', got {per!r}")
+        if self._current_areas is None:
+            self._current_areas = nodal.CurrentAreas(self.model, self.nodes)
+        return pressure * self.nodes.area / self._current_areas()
+
+    def pressure_field(self, per: str = "current") -> fem.Function:
+        """Contact pressure [Pa] (`contact_pressure`) as a Q2 scalar Function (for output)."""
         f = fem.Function(self.nodes.scalar_space, name="contact_pressure")
-        f.x.array[self.nodes.node_index] = s.pressure
+        f.x.array[self.nodes.node_index] = self.contact_pressure(per)
         f.x.scatter_forward()
         return f
 
