@@ -17,19 +17,30 @@ uniformly, lambda_h = r / R0 around, and presses on it with
 
 for the orthotropic St. Venant-Kirchhoff fabric with the weft (E2) around the tube (meshes.tube) and the
 contact on the mid-surface. Pressures are in Pa (1 mmHg = 133.322 Pa, the unit of compression classes).
+
+A compression sleeve on a limb (`fit_sleeve`, `pressure_report`; `fabricfem run` of a scene with a [limb]
+section, scenes/compression_sleeve.toml; demos/demo_compression_sleeve.py): a tube along x (meshes.tube,
+n_around a multiple of 4) on one ellipsoid whose axes are x, y, z and whose centre is on the x axis, so that
+tube and limb are mirror-symmetric about y = 0 and z = 0: those planes hold u_y and u_z of the nodes on them
+(which also removes the rigid modes before the limb touches), and the end0 ring is held along the axis.
+On a section x = const of the limb, p = T kappa (Laplace with the section curvature kappa, the hoop
+tension T uniform around the ring without friction) up to the axial force times the limb's axial curvature.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
+from mpi4py import MPI
 
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.contact.problem import ContactProblem
 from fabricfem.materials import Fabric
 from fabricfem.meshes._validate import choice, count, positive
+from fabricfem.shell import ShellModel
 from fabricfem.solvers.newton import NewtonSolver, SolverError
 
 PA_PER_MMHG = 133.322387415      # Pa
@@ -75,34 +86,171 @@ class DonningStep:
 
 def don(problem: ContactProblem, segments: Sequence[Ellipsoid], start: float, steps: int = 10,
         tolerance: float = 1e-7, solver: NewtonSolver | None = None,
-        on_step: Callable[[DonningStep], None] | None = None) -> list[DonningStep]:
+        on_step: Callable[[DonningStep], None] | None = None, max_cuts: int = 4) -> list[DonningStep]:
     """Grow `segments` from `start` x their transverse radii to full size in `steps` equal increments
-    (module docstring). `problem` must use method="augmented". On a failed increment the model is put
-    back to the last converged state and SolverError names the growth factors reached and tried."""
+    (module docstring). `problem` must use method="augmented". A failed increment is undone and retried at
+    half size, up to `max_cuts` times in a row; then the model is left in the last converged state and
+    SolverError names the growth factors reached and tried."""
     if not (isinstance(start, (int, float)) and 0.0 < start <= 1.0):
         raise ValueError(f"start must lie in (0, 1], got {start!r}")
     steps = count("steps", steps)
     solver = solver or NewtonSolver(problem)
     history: list[DonningStep] = []
-    reached = start
+    reached, increment = start, (1.0 - start) / steps
     for k in range(1, steps + 1):
-        factor = start + (1.0 - start) * k / steps
-        last_good = problem.model.w.x.array.copy()
-        multipliers = problem.multiplier.copy()
-        problem.set_obstacles([grown(e, factor) for e in segments])
-        try:
-            report = problem.solve_augmented(solver, tolerance=tolerance)
-        except SolverError as err:
-            problem.model.w.x.array[:] = last_good
-            problem.multiplier[:] = multipliers
-            problem.set_obstacles([grown(e, reached) for e in segments])
-            raise SolverError(f"donning: body grown to {reached:.4g} of its size; the increment to {factor:.4g} "
-                              f"failed ({err}); the model holds the state at {reached:.4g}",
-                              reason=getattr(err, "reason", "")) from err
-        problem.after_converged_step()
-        reached = factor
-        history.append(DonningStep(factor, report.augmentations, sum(report.newton_iterations),
-                                   report.max_penetration))
+        target = start + (1.0 - start) * k / steps
+        h, cuts, augmentations, iterations, penetration = increment, 0, 0, 0, 0.0
+        while reached < target - 1e-14:
+            factor = min(target, reached + h)
+            last_good, multipliers = problem.model.w.x.array.copy(), problem.multiplier.copy()
+            problem.set_obstacles([grown(e, factor) for e in segments])
+            try:
+                report = problem.solve_augmented(solver, tolerance=tolerance)
+            except SolverError as err:
+                problem.model.w.x.array[:] = last_good
+                problem.multiplier[:] = multipliers
+                problem.set_obstacles([grown(e, reached) for e in segments])
+                if cuts == max_cuts:
+                    raise SolverError(f"donning: body grown to {reached:.4g} of its size; the increment to "
+                                      f"{factor:.4g} failed after {cuts} cuts ({err}); the model holds the state "
+                                      f"at {reached:.4g}", reason=getattr(err, "reason", "")) from err
+                h, cuts = 0.5 * h, cuts + 1
+                continue
+            problem.after_converged_step()
+            reached = factor
+            augmentations += report.augmentations
+            iterations += sum(report.newton_iterations)
+            penetration = report.max_penetration
+            cuts = 0
+        history.append(DonningStep(target, augmentations, iterations, penetration))
         if on_step is not None:
             on_step(history[-1])
     return history
+
+
+def check_symmetric_limb(limb: Ellipsoid) -> None:
+    """ValueError unless the limb is mirror-symmetric about y = 0 and z = 0 (module docstring)."""
+    if limb.center[1] != 0.0 or limb.center[2] != 0.0 or not np.allclose(np.abs(limb.rotation), np.eye(3)):
+        raise ValueError("limb: its centre must lie on the tube axis (y = z = 0) and its axes along x, y, z")
+
+
+def fit_sleeve(fmesh, fabric: Fabric, limb: Ellipsoid, start: float, steps: int = 10, tolerance: float = 1e-7,
+               on_step: Callable[[DonningStep], None] | None = None) -> ContactProblem:
+    """Naghdi shell of the tube `fmesh` (meshes.tube, n_around a multiple of 4) donned onto `limb` (module
+    docstring: end0 held along the axis, mirror planes y = 0 and z = 0), frictionless augmented Lagrangian."""
+    check_symmetric_limb(limb)
+    x = fmesh.mesh.geometry.x
+    planes = fmesh.mesh.comm.allreduce(np.array([np.sum(np.isclose(x[:, 1], 0.0, atol=1e-9) & (x[:, 2] > 0)),
+                                                 np.sum(np.isclose(x[:, 2], 0.0, atol=1e-9) & (x[:, 1] > 0))]))
+    if planes.min() == 0:
+        raise ValueError("mesh: no tube nodes on the symmetry planes y = 0 and z = 0 (n_around must be a multiple "
+                         "of 4)")
+    model = ShellModel(fmesh, fabric)
+    model.constrain("end0", u=(0.0, None, None))
+    model.constrain(lambda x: np.isclose(x[1], 0.0, atol=1e-9), u=(None, 0.0, None))
+    model.constrain(lambda x: np.isclose(x[2], 0.0, atol=1e-9), u=(None, None, 0.0))
+    problem = ContactProblem(model, [limb], method="augmented", active_set=True, tie_tolerance=0.1 * tolerance)
+    don(problem, [limb], start, steps, tolerance, on_step=on_step)
+    return problem
+
+
+def section_curvature(limb: Ellipsoid, points: np.ndarray) -> np.ndarray:
+    """Curvature [1/m] of the limb's cross-section ellipse x = const (local e1 = const) through each point."""
+    local = limb.to_local(points)
+    scale = np.sqrt(np.clip(1.0 - (local[:, 0] / limb.radii[0]) ** 2, 1e-12, None))
+    a, b = limb.radii[1] * scale, limb.radii[2] * scale
+    y, z = local[:, 1], local[:, 2]
+    return 1.0 / (a ** 2 * b ** 2 * (y ** 2 / a ** 4 + z ** 2 / b ** 4) ** 1.5)
+
+
+def pressure_report(problem: ContactProblem, limb: Ellipsoid, out: Path, title: str = "compression sleeve",
+                    render: bool = True) -> dict | None:
+    """Write into `out`: sleeve.xdmf (displacement [m], pressure on the skin [mmHg]), pressure.png (render),
+    pressure_profile.csv / .png (ring-mean pressure along x; p against the section curvature at the ring
+    nearest the limb's centre, with the least-squares Laplace fit p = T kappa). Returns on rank 0 the
+    pressure range and ring means [mmHg], T [N/m] and the largest deviation from T kappa / the peak there."""
+    from dolfinx import io
+
+    from fabricfem import io as fio
+    from fabricfem.sleeve import body_surface
+    comm, model = problem.comm, problem.model
+    out = Path(out)
+    if comm.rank == 0:
+        out.mkdir(parents=True, exist_ok=True)
+    comm.barrier()
+    field = problem.pressure_field()
+    field.x.array[:] /= PA_PER_MMHG
+    field.name = "pressure_mmHg"
+    with io.XDMFFile(comm, str(out / "sleeve.xdmf"), "w") as xdmf:
+        xdmf.write_mesh(model.mesh)
+        xdmf.write_function(model.displacement(), 0.0)
+        xdmf.write_function(field, 0.0)
+    surface = fio.gather_surface(model.mesh, model.displacement())
+    values = fio.gather_field(model.mesh, field)
+    if render and comm.rank == 0:
+        fio.render_field(out / "pressure.png", surface, values, f"{title}, pressure on the skin [mmHg]",
+                         bodies=[body_surface([limb])], camera="iso", zoom=1.8)
+    s = problem.evaluate()
+    p_mmhg = problem.contact_pressure() / PA_PER_MMHG
+    gathered = [comm.gather(a, root=0) for a in (s.position, problem.nodes.reference[:, 0], p_mmhg)]
+    if comm.rank != 0:
+        return None
+    x, X, p = (np.concatenate(a) for a in gathered)
+    ring_X, rings = np.unique(np.round(X, 9), return_inverse=True)     # the node rings of the tube
+    ring_x = np.bincount(rings, x[:, 0]) / np.bincount(rings)
+    ring_p = np.bincount(rings, p) / np.bincount(rings)
+    centre_ring = int(np.argmin(np.abs(ring_X - limb.center[0])))
+    widest = rings == centre_ring
+    kappa = section_curvature(limb, x[widest])
+    tension = float(np.sum(p[widest] * kappa) / np.sum(kappa ** 2))    # least squares p = T kappa [mmHg m]
+    deviation = float(np.max(np.abs(p[widest] - tension * kappa)) / np.max(p[widest]))
+    fio.write_csv(out / "pressure_profile.csv", ["x_m", "ring_mean_pressure_mmHg"],
+                  np.column_stack([ring_x, ring_p]), MPI.COMM_SELF)
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4))
+    left.plot(ring_x * 1e3, ring_p, "o-")
+    left.set(xlabel="x along the limb [mm]", ylabel="ring-mean pressure [mmHg]", title="along the limb")
+    order = np.argsort(kappa)
+    right.plot(kappa, p[widest], "o", label=f"computed (nodes of the ring at x = {1e3 * ring_X[centre_ring]:.0f} mm)")
+    right.plot(kappa[order], tension * kappa[order], "-",
+               label=f"Laplace p = T kappa, T = {tension * PA_PER_MMHG:.1f} N/m")
+    right.set(xlabel="section curvature kappa [1/m]", ylabel="pressure [mmHg]", title="around the widest ring")
+    right.legend()
+    fig.tight_layout()
+    fig.savefig(out / "pressure_profile.png", dpi=120)
+    plt.close(fig)
+    return {"min_mmHg": float(p.min()), "max_mmHg": float(p.max()), "ring_min_mmHg": float(ring_p.min()),
+            "ring_max_mmHg": float(ring_p.max()), "hoop_tension": tension * PA_PER_MMHG,
+            "laplace_deviation": deviation}
+
+
+def run_compression_scene(scene, comm=MPI.COMM_WORLD) -> dict | None:
+    """`fabricfem run` for compression scenes ([limb], optional [donning], fabricfem.scene): don the tube onto the
+    limb with progress lines (rank 0) and write `pressure_report` into output.dir (default results/<name>)."""
+    from fabricfem.run import build_fabric, build_mesh
+    from fabricfem.scene import donning_start
+    say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
+    fabric = build_fabric(scene["fabric"])                       # before meshing: a bad fabric fails fast
+    limb = Ellipsoid(np.array(scene["limb"]["center"], dtype=float), np.eye(3),
+                     np.array(scene["limb"]["radii"], dtype=float))
+    donning = scene.get("donning", {})
+    name = scene.get("scene", {}).get("name", "compression")
+    out = Path(scene.get("output", {}).get("dir", f"results/{name}"))
+    fmesh = build_mesh(scene["mesh"], comm)
+    start, steps = donning_start(scene.data), int(donning.get("steps", 10))
+    say(f"{name}: tube R = {scene['mesh']['radius']} m on a limb of radii {limb.radii.tolist()} m, growing from "
+        f"{start:.3g} of its size in {steps} steps, {comm.size} rank(s)")
+    problem = fit_sleeve(fmesh, fabric, limb, start, steps, float(donning.get("tolerance", 1e-7)),
+                         on_step=lambda s: say(f"  limb at {s.factor:5.3f}: {s.augmentations} augmentations, "
+                                               f"{s.newton_iterations} Newton iterations, penetration "
+                                               f"{s.max_penetration:.1e} m"))
+    summary = pressure_report(problem, limb, out, name, render=scene.get("output", {}).get("render", True))
+    if summary is not None:
+        say(f"{name}: pressure on the skin {summary['min_mmHg']:.1f}-{summary['max_mmHg']:.1f} mmHg (ring means "
+            f"{summary['ring_min_mmHg']:.1f}-{summary['ring_max_mmHg']:.1f} mmHg); ring nearest the limb's centre: "
+            f"p = T kappa, T = {summary['hoop_tension']:.1f} N/m, largest deviation "
+            f"{100 * summary['laplace_deviation']:.2f}% of its peak; wrote {out}/sleeve.xdmf, pressure.png, "
+            f"pressure_profile.csv/.png")
+    return summary

@@ -132,13 +132,17 @@ def build_model(scene: Scene, comm=MPI.COMM_WORLD, model_class: type = ShellMode
 
 
 def run_scene(scene: Scene, comm=MPI.COMM_WORLD):
-    """Run a scene: sleeve scenes (with [body]/[motion]/[contact]) go to fabricfem.sleeve, others are
-    static load-stepping scenes (returns the list of LoadStep)."""
+    """Run a scene: sleeve scenes (with [body]/[motion]/[contact]) go to fabricfem.sleeve, dynamic ones to
+    run_dynamic_scene, compression scenes (with [limb]) to fabricfem.compression, others are static
+    load-stepping scenes (returns the list of LoadStep)."""
     if "body" in scene.data:
         from fabricfem.sleeve import run_sleeve_scene
         return run_sleeve_scene(scene, comm)
     if "dynamics" in scene.data:
         return run_dynamic_scene(scene, comm)
+    if "limb" in scene.data:
+        from fabricfem.compression import run_compression_scene
+        return run_compression_scene(scene, comm)
     return run_static_scene(scene, comm)
 
 

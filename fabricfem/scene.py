@@ -145,6 +145,9 @@ SCHEMA: dict[str, dict[str, tuple[type | tuple, bool]]] = {
                "dynamic_similarity": (bool, False), "settle_time": ((int, float), False)},
     "contact": {"method": (str, False), "friction": ((int, float), False), "penalty": ((int, float), False),
                 "stabilization": ((int, float), False), "gravity": (bool, False)},
+    # compression scenes (fabricfem.compression): a tube donned onto one limb ellipsoid
+    "limb": {"center": (list, True), "radii": (list, True)},
+    "donning": {"start": ((int, float), False), "steps": (int, False), "tolerance": ((int, float), False)},
     # dynamic scenes (fabricfem.run.run_dynamic_scene)
     "dynamics": {"integrator": (str, True), "dt": ((int, float, str), True), "end_time": ((int, float), True),
                  "dt_fraction": ((int, float), False), "force": (bool, False), "beta": ((int, float), False),
@@ -174,6 +177,7 @@ STANDARD_COLUMNS = {"time", "kinetic", "strain", "external_work", "dissipated", 
 LIST_SECTIONS = {"support", "load"}
 REQUIRED_SECTIONS = {"mesh", "fabric", "solver"}
 SLEEVE_SECTIONS = {"body", "motion", "contact"}     # a scene with any of them is a sleeve scene
+COMPRESSION_SECTIONS = {"limb", "donning"}           # a scene with any of them is a compression scene
 BODY_TYPES = {"default_arm"}
 MOTION_TYPES = {"elbow_flexion"}
 CONTACT_METHODS = {"explicit": {"lagrange", "penalty"}, "quasistatic": {"penalty", "augmented"}}
@@ -225,12 +229,19 @@ def validate(data: dict, source: str = "scene") -> Scene:
                              f"allowed: {sorted(SCHEMA)}")
     sleeve = bool(SLEEVE_SECTIONS & set(data))
     dynamic = "dynamics" in data
+    compression = bool(COMPRESSION_SECTIONS & set(data))
     if dynamic and (sleeve or "solver" in data):
         other = "[solver]" if "solver" in data else "[body]/[motion]/[contact]"
         raise SceneError(f"{source}: [dynamics] and {other} given: a scene is either dynamic (time integration "
                          f"from rest) or static/sleeve, not both")
+    if compression and (sleeve or dynamic or "solver" in data):
+        other = sorted((SLEEVE_SECTIONS | {"dynamics", "solver"}) & set(data))
+        raise SceneError(f"{source}: [limb]/[donning] (a compression scene) and {other} given: a compression "
+                         f"scene has [mesh], [fabric], [limb], optional [donning] and [output]")
     if sleeve:
         required = (REQUIRED_SECTIONS - {"solver"}) | SLEEVE_SECTIONS
+    elif compression:
+        required = (REQUIRED_SECTIONS - {"solver"}) | {"limb"}
     elif dynamic:
         required = (REQUIRED_SECTIONS - {"solver"}) | {"dynamics"}
     else:
@@ -265,6 +276,8 @@ def validate(data: dict, source: str = "scene") -> Scene:
             _numbers(f"support[{i}].point", support["point"], 3)
     if sleeve:
         _check_sleeve(data)
+    if compression:
+        _check_compression(data)
     if dynamic:
         _check_dynamics(data)
     return Scene(data)
@@ -329,6 +342,41 @@ def _check_sleeve(data: dict) -> None:
             raise SceneError(f"body.{key}: an arm of girth {girth} m (radius {girth / (2 * math.pi):.4f} m) does not "
                              f"fit inside a sleeve of mesh.radius {mesh['radius']} m; the arm must start inside "
                              f"the sleeve without penetration")
+
+
+def donning_start(data: dict) -> float:
+    """donning.start, by default the largest that leaves the limb inside the tube: 0.95 R / max(r2, r3)."""
+    radii = data["limb"]["radii"]
+    return float(data.get("donning", {}).get("start", min(1.0, 0.95 * data["mesh"]["radius"] / max(radii[1:]))))
+
+
+def _check_compression(data: dict) -> None:
+    """Compression scenes: a tube (n_around a multiple of 4), a limb symmetric about y = 0 and z = 0 that
+    starts inside the tube, and donning increments that grow it to full size."""
+    mesh, limb, donning = data["mesh"], data["limb"], data.get("donning", {})
+    if mesh["type"] != "tube":
+        raise SceneError(f"mesh.type: a compression scene needs a 'tube' mesh, got {mesh['type']!r}")
+    for key in ("length", "radius"):
+        _positive(f"mesh.{key}", mesh[key])
+    if mesh["n_around"] % 4:
+        raise SceneError(f"mesh.n_around: must be a multiple of 4 in a compression scene (nodes on the symmetry "
+                         f"planes y = 0 and z = 0), got {mesh['n_around']}")
+    center = _numbers("limb.center", limb["center"], 3)
+    radii = _numbers("limb.radii", limb["radii"], 3)
+    if center[1] != 0.0 or center[2] != 0.0:
+        raise SceneError(f"limb.center: the limb must lie on the tube axis (y = z = 0), got {center}")
+    for r in radii:
+        _positive("limb.radii", r)
+    start = donning_start(data)
+    if not 0.0 < start <= 1.0:
+        raise SceneError(f"donning.start: the limb's starting size must lie in (0, 1] of its size, got {start!r}")
+    if start * max(radii[1:]) >= mesh["radius"]:
+        raise SceneError(f"donning.start: the limb at {start} of its radii ({start * max(radii[1:]):.4g} m) does not "
+                         f"fit inside the tube of mesh.radius {mesh['radius']} m; the limb must start inside")
+    if "steps" in donning:
+        _positive("donning.steps", donning["steps"])
+    if "tolerance" in donning:
+        _positive("donning.tolerance", donning["tolerance"])
 
 
 def _numbers(where: str, values, n: int | None = None, allow_inf: bool = False) -> list[float]:
