@@ -189,6 +189,13 @@ def test_bad_long_axis_factor_on_the_command_line(capsys):
     assert "long_axis_factor" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("speed", ["0", "-22.5", "nan"])
+def test_bad_angular_velocity_on_the_command_line(speed, capsys):
+    from fabricfem.cli import main
+    assert main(["study", "sleeve-fit", "--scales", "1", "--angular-velocity", speed]) == 2
+    assert "angular_velocity" in capsys.readouterr().err
+
+
 def test_default_factor_gives_the_old_segments_and_checkpoints():
     """f = 0.5 is the arm as it was: the segments of the former formula (0.5 L, r, r), compared exactly, and
     the study's checkpoint keys unchanged (`_key` leaves the default factor out). The hash below is the file
