@@ -119,6 +119,9 @@ def main(argv: list[str] | None = None) -> int:
     p_study.add_argument("--angular-velocity", type=float, default=None,
                          help="sleeve-fit: flexion speed [deg/s] of every run (default 45, SleeveConfig; other "
                               "speeds: files <prefix>_omega<speed>.*, a rate-convergence check)")
+    p_study.add_argument("--full-quadrature", action="store_true",
+                         help="sleeve-fit: full 3x3 quadrature (SleeveConfig.quadrature = (4, 4)) instead of the "
+                              "default PSRI; files <prefix>_fullquad.*")
     p_study.add_argument("--methods", default="lagrange,penalty,augmented",
                          help="sleeve-methods: contact methods to run (shared over the MPI ranks)")
     p_study.add_argument("--al-budget", type=float, default=1800.0,
@@ -167,20 +170,24 @@ def main(argv: list[str] | None = None) -> int:
             scales = FIT_SCALES if args.scales is None else tuple(float(s) for s in args.scales.split(",") if s.strip())
             factors = ((DEFAULT_LONG_AXIS_FACTOR,) if args.long_axis_factors is None else
                        tuple(float(f) for f in args.long_axis_factors.split(",") if f.strip()))
-            speed = {} if args.angular_velocity is None else {"angular_velocity": args.angular_velocity}
+            overrides = {} if args.angular_velocity is None else {"angular_velocity": args.angular_velocity}
+            if args.full_quadrature:
+                overrides["quadrature"] = (4, 4)
             for factor in factors:    # a scale not positive, an arm too thick, a factor outside [0.5, 1] or a
-                fit_configs(scales, args.mesh, long_axis_factor=factor, **speed)   # speed <= 0: a message
+                fit_configs(scales, args.mesh, long_axis_factor=factor, **overrides)   # speed <= 0: a message
         except ValueError as exc:
             _print(f"fabricfem study sleeve-fit: --scales {args.scales} --long-axis-factors "
                    f"{args.long_axis_factors} --angular-velocity {args.angular_velocity}: {exc}", file=sys.stderr)
             return 2
         prefix = "fit_sensitivity" if factors == (DEFAULT_LONG_AXIS_FACTOR,) else "fit_sensitivity_elbow"
-        if speed:
+        if args.angular_velocity is not None:
             prefix += f"_omega{args.angular_velocity:g}"
+        if args.full_quadrature:
+            prefix += "_fullquad"
         if args.mesh != "II":                # the default mesh's files carry no mesh tag (docs/figures/sleeve)
             prefix += f".mesh{args.mesh}"
         run_fit_study("results/sleeve_fit" if args.out == "results/sleeve_study" else args.out, mesh=args.mesh,
-                      scales=scales, docs=args.docs, long_axis_factors=factors, prefix=prefix, **speed)
+                      scales=scales, docs=args.docs, long_axis_factors=factors, prefix=prefix, **overrides)
         return 0
     if args.command == "study" and args.name == "sleeve-methods":
         # the three contact methods on the sleeve with gravity (fabricfem.study.run_methods); --mesh defaults to

@@ -6,9 +6,9 @@ derived from them, the weft direction E2 = N x E1.
 """
 from .gmsh_io import FabricMesh, model_to_mesh
 from .plate import plate
-from .tube import tube
+from .tube import cylindrical_panel, tube
 
-__all__ = ["FabricMesh", "model_to_mesh", "plate", "tube"]
+__all__ = ["FabricMesh", "model_to_mesh", "plate", "tube", "cylindrical_panel"]
 
 # Woven unit cells (3D hexahedral yarn meshes, thesis ch. 4.3)
 from .unit_cell import MeshResolution, UnitCellMesh, unit_cell  # noqa: E402

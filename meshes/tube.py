@@ -36,26 +36,33 @@ def _n_arcs(n_around: int) -> int:
 
 
 def _build(model, length: float, radius: float, n_around: int, n_along: int,
-           cell: str, order: int) -> None:
-    """Geometry, physical groups and mesh of the tube in ``model``."""
+           cell: str, order: int, sector: tuple[float, float] | None = None) -> None:
+    """Geometry, physical groups and mesh of the tube (``sector`` None) or of the cylindrical panel between
+    the angles ``sector`` = (a0, a1) [rad] about +x, measured from +y towards +z, in ``model``."""
     geo = model.geo
     k = _n_arcs(n_around)
     centre = geo.addPoint(0.0, 0.0, 0.0)
-    angles = 2.0 * np.pi * np.arange(k) / k
+    a0, a1 = (0.0, 2.0 * np.pi) if sector is None else sector
+    angles = a0 + (a1 - a0) * np.arange(k + (sector is not None)) / k
     points = [geo.addPoint(0.0, radius * np.cos(a), radius * np.sin(a)) for a in angles]
-    # arcs run with increasing angle about +x
-    arcs = [geo.addCircleArc(points[i], centre, points[(i + 1) % k]) for i in range(k)]
+    # arcs run with increasing angle about +x (the tube closes on its first point)
+    arcs = [geo.addCircleArc(points[i], centre, points[(i + 1) % len(points)]) for i in range(k)]
     for arc in arcs:
         geo.mesh.setTransfiniteCurve(arc, n_around // k + 1)
     out = geo.extrude([(1, a) for a in arcs], length, 0.0, 0.0, numElements=[n_along],
                       recombine=(cell == "quadrilateral"))
-    # per extruded curve: (1, top curve), (2, surface), (1, side), (1, side)
+    # per extruded curve: (1, top curve), (2, surface), (1, lateral line), (1, lateral line)
     tops = [tag for dim, tag in out[0::4]]
     surfaces = [tag for dim, tag in out[1::4]]
     geo.remove([(0, centre)])
     geo.synchronize()
     model.setPhysicalName(1, model.addPhysicalGroup(1, arcs), "end0")
     model.setPhysicalName(1, model.addPhysicalGroup(1, tops), "end1")
+    if sector is not None:     # the straight edges: the lateral lines extruded from the sector's end points
+        laterals = {tag for dim, tag in out if dim == 1} - set(tops)
+        for name, start in (("side0", points[0]), ("side1", points[-1])):
+            side = [c for c in laterals if start in {abs(p) for _, p in model.getBoundary([(1, c)], oriented=False)}]
+            model.setPhysicalName(1, model.addPhysicalGroup(1, side), name)
     model.setPhysicalName(2, model.addPhysicalGroup(2, surfaces), "fabric")
     model.mesh.generate(2)
     if order > 1:
@@ -90,6 +97,33 @@ def tube(length: float, radius: float, n_around: int, n_along: int, cell: str = 
     mesh, cell_tags, facet_tags, names = mesh_from_gmsh(
         lambda model: _build(model, length, radius, n_around, n_along, cell, order),
         comm, 0, gdim=3, name="tube", ghost_mode=ghost_mode)
+    return FabricMesh(mesh=mesh, facet_tags=facet_tags, tags=names,
+                      warp=directions.constant((1.0, 0.0, 0.0)),
+                      normal=directions.radial_from_x_axis(), cell_tags=cell_tags)
+
+
+def cylindrical_panel(length: float, radius: float, angle: float, n_around: int, n_along: int,
+                      cell: str = "quadrilateral", comm: MPI.Comm = MPI.COMM_WORLD, order: int = 2, *,
+                      ghost_mode: GhostMode = GhostMode.shared_facet) -> FabricMesh:
+    """Mesh of the open cylindrical panel ``0 <= x <= length``, ``y^2 + z^2 = radius^2``, spanning ``angle``
+    [rad] (< 2 pi) symmetrically about the +z axis (a roof: its crown at (x, 0, radius)).
+
+    Same construction, material frame and arguments as :func:`tube` (``n_around`` elements across the
+    panel, at least 3); edge tags ``end0`` (x = 0), ``end1`` (x = length), ``side0`` (the straight edge
+    at the angle pi/2 - angle/2 from +y, i.e. y > 0) and ``side1`` (y < 0).
+    """
+    length = _validate.positive_length("length", length)
+    radius = _validate.positive_length("radius", radius)
+    if not (isinstance(angle, (int, float)) and 0.0 < angle < 2.0 * np.pi):
+        raise ValueError(f"angle: must lie in (0, 2 pi) radians, got {angle!r}")
+    n_around = _validate.count("n_around", n_around, minimum=3)
+    n_along = _validate.count("n_along", n_along)
+    cell = _validate.choice("cell", cell, _validate.CELLS)
+    order = _validate.choice("order", _validate.count("order", order), (1, 2))
+    sector = (0.5 * np.pi - 0.5 * angle, 0.5 * np.pi + 0.5 * angle)
+    mesh, cell_tags, facet_tags, names = mesh_from_gmsh(
+        lambda model: _build(model, length, radius, n_around, n_along, cell, order, sector),
+        comm, 0, gdim=3, name="cylindrical_panel", ghost_mode=ghost_mode)
     return FabricMesh(mesh=mesh, facet_tags=facet_tags, tags=names,
                       warp=directions.constant((1.0, 0.0, 0.0)),
                       normal=directions.radial_from_x_axis(), cell_tags=cell_tags)

@@ -14,7 +14,7 @@ import pytest
 import ufl
 from mpi4py import MPI
 
-from fabricfem.meshes import FabricMesh, model_to_mesh, plate, tube
+from fabricfem.meshes import FabricMesh, cylindrical_panel, model_to_mesh, plate, tube
 from fabricfem.meshes.gmsh_io import mesh_from_gmsh
 
 COMM = MPI.COMM_WORLD
@@ -171,6 +171,33 @@ def test_tube_tags_on_ends():
     assert np.allclose(facet_midpoints(fm, "end1")[:, 0], 0.5)
     for name in fm.tags:
         assert tag_length(fm, name) == pytest.approx(12 * 2 * 0.1 * math.sin(math.pi / 12), rel=1e-12)
+
+
+@pytest.mark.parametrize("n_around", [3, 8])
+def test_cylindrical_panel_geometry_and_tags(n_around):
+    """The Scordelis-Lo roof: nodes on the cylinder, the 80-degree opening symmetric about +z, straight
+    edges side0 (y > 0) and side1 (y < 0) of length L, curved ends of the arc's chord length (order 1)."""
+    length, radius, angle = 50.0, 25.0, math.radians(80.0)
+    fm = cylindrical_panel(length, radius, angle, n_around, 4, order=1)
+    assert set(fm.tags) == {"end0", "end1", "side0", "side1"}
+    x = fm.mesh.geometry.x
+    assert np.allclose(np.hypot(x[:, 1], x[:, 2]), radius)
+    assert COMM.allreduce(x[:, 2].min(), op=MPI.MIN) == pytest.approx(radius * math.cos(angle / 2))
+    assert np.allclose(facet_midpoints(fm, "end0")[:, 0], 0.0)
+    assert np.allclose(facet_midpoints(fm, "end1")[:, 0], length)
+    for side, sign in (("side0", 1.0), ("side1", -1.0)):
+        mid = facet_midpoints(fm, side)
+        assert np.allclose(mid[:, 1], sign * radius * math.sin(angle / 2))
+        assert tag_length(fm, side) == pytest.approx(length, rel=1e-12)
+    assert tag_length(fm, "end0") == pytest.approx(2 * n_around * radius * math.sin(angle / (2 * n_around)),
+                                                   rel=1e-12)
+    assert n_cells(fm) == n_around * 4
+
+
+@pytest.mark.parametrize("angle", [0.0, -1.0, 2 * math.pi, float("nan")])
+def test_cylindrical_panel_bad_angle(angle):
+    with pytest.raises(ValueError, match="^angle:"):
+        cylindrical_panel(1.0, 0.1, angle, 4, 2)
 
 
 # ---------------------------------------------------------------- frame
