@@ -113,7 +113,9 @@ def trends(figures, tag: str, wall: float) -> list[CaseResult]:
     "on the forearm, torque at rest 0.0515 vs 0.0285 N m, and R = 0.06 m has 4.3 mm clearance on our ANSUR II arm, "
     "not a tight fit); T(t=2mm)/T(t=1mm) at 57 deg = 3.44 fails (about a quarter of the torque is bending of the "
     "sagging, wrinkling sleeve, which scales with t^3). Neither is a rate effect: at 22.5 deg/s they are 1.37-1.54 "
-    "and 3.3-3.5 on meshes II-III. See docs/figures/sleeve/README.txt and fit_sensitivity.md"))
+    "and 3.3-3.5 on meshes II-III. Nor a mesh effect: mesh IV gives 1.41 and a median thickness ratio of 3.1 over 20-57 deg. "
+    "The thesis's 'roughly double' is what a membrane-locked (fully integrated) tube gives: 2.2-2.3 on meshes II-III, "
+    "fading with refinement; see verify scordelis-lo, docs/figures/sleeve/fit_sensitivity.md"))
 def sleeve_trends() -> list[CaseResult]:
     """Sleeve-study trends of thesis sec. 5.3 (friction, fit, thickness, fabrics, mesh) on study outputs."""
     with Timer() as timer:
