@@ -338,6 +338,10 @@ class SleeveConfig:
             raise ValueError(f"arm must be a fabricfem.body.ArmDimensions, got {type(self.arm).__name__}")
         check_fit(self.radius, self.arm)
         if self.fabric_name is not None:
+            for key in ("E", "G", "nu12", "thickness", "density"):   # the stored fabric gives them: not silently ignored
+                if getattr(self, key) != type(self).__dataclass_fields__[key].default:
+                    raise ValueError(f"{key}: given together with fabric_name {self.fabric_name!r}, whose stored "
+                                     f"fabric sets it; give one or the other")
             self._load_stored_fabric()
         E_ref, rho_ref = self.similarity_reference
         if not (math.isfinite(E_ref) and E_ref > 0.0 and math.isfinite(rho_ref) and rho_ref > 0.0):

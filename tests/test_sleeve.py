@@ -396,6 +396,14 @@ def test_fabric_name_uses_the_stored_fabric_everywhere(tmp_path):
         p_named.integrator.destroy()
 
 
+@pytest.mark.parametrize("key, value", [("E", 2.0e6), ("G", 2.0e5), ("nu12", 0.3), ("thickness", 2e-3),
+                                        ("density", 500.0)])
+def test_fabric_field_given_with_fabric_name_is_refused(key, value):
+    """A fabric field next to fabric_name would be ignored (the stored fabric sets it): refused, naming it."""
+    with pytest.raises(ValueError, match=rf"^{key}: given together with fabric_name"):
+        SleeveConfig(n_around=10, n_along=13, fabric_name="two-layer-laminate", **{key: value})
+
+
 def test_fabric_name_with_a_fitted_law_uses_its_small_strain_moduli():
     """The stored laminate (fitted membrane law): SleeveConfig.fabric is load_fabric's Fabric (membrane_law
     set, E1/E2/G12 = fitted_fabric's small-strain values), and the wave speed is the plane-stress one of those
