@@ -88,18 +88,7 @@ def tube(length: float, radius: float, n_around: int, n_along: int, cell: str = 
         FabricMesh with warp +x, outward radial normal, edge tags
         ``end0`` (x = 0) and ``end1`` (x = length).
     """
-    length = _validate.positive_length("length", length)
-    radius = _validate.positive_length("radius", radius)
-    n_around = _validate.count("n_around", n_around, minimum=3)
-    n_along = _validate.count("n_along", n_along)
-    cell = _validate.choice("cell", cell, _validate.CELLS)
-    order = _validate.choice("order", _validate.count("order", order), (1, 2))
-    mesh, cell_tags, facet_tags, names = mesh_from_gmsh(
-        lambda model: _build(model, length, radius, n_around, n_along, cell, order),
-        comm, 0, gdim=3, name="tube", ghost_mode=ghost_mode)
-    return FabricMesh(mesh=mesh, facet_tags=facet_tags, tags=names,
-                      warp=directions.constant((1.0, 0.0, 0.0)),
-                      normal=directions.radial_from_x_axis(), cell_tags=cell_tags)
+    return _cylinder(length, radius, n_around, n_along, cell, comm, order, ghost_mode, None, "tube")
 
 
 def cylindrical_panel(length: float, radius: float, angle: float, n_around: int, n_along: int,
@@ -112,18 +101,24 @@ def cylindrical_panel(length: float, radius: float, angle: float, n_around: int,
     panel, at least 3); edge tags ``end0`` (x = 0), ``end1`` (x = length), ``side0`` (the straight edge
     at the angle pi/2 - angle/2 from +y, i.e. y > 0) and ``side1`` (y < 0).
     """
-    length = _validate.positive_length("length", length)
-    radius = _validate.positive_length("radius", radius)
     if not (isinstance(angle, (int, float)) and 0.0 < angle < 2.0 * np.pi):
         raise ValueError(f"angle: must lie in (0, 2 pi) radians, got {angle!r}")
+    sector = (0.5 * np.pi - 0.5 * angle, 0.5 * np.pi + 0.5 * angle)
+    return _cylinder(length, radius, n_around, n_along, cell, comm, order, ghost_mode, sector, "cylindrical_panel")
+
+
+def _cylinder(length: float, radius: float, n_around: int, n_along: int, cell: str, comm: MPI.Comm, order: int,
+              ghost_mode: GhostMode, sector: tuple[float, float] | None, name: str) -> FabricMesh:
+    """Validated arguments -> the FabricMesh of the tube (sector None) or panel built by `_build`."""
+    length = _validate.positive_length("length", length)
+    radius = _validate.positive_length("radius", radius)
     n_around = _validate.count("n_around", n_around, minimum=3)
     n_along = _validate.count("n_along", n_along)
     cell = _validate.choice("cell", cell, _validate.CELLS)
     order = _validate.choice("order", _validate.count("order", order), (1, 2))
-    sector = (0.5 * np.pi - 0.5 * angle, 0.5 * np.pi + 0.5 * angle)
     mesh, cell_tags, facet_tags, names = mesh_from_gmsh(
         lambda model: _build(model, length, radius, n_around, n_along, cell, order, sector),
-        comm, 0, gdim=3, name="cylindrical_panel", ghost_mode=ghost_mode)
+        comm, 0, gdim=3, name=name, ghost_mode=ghost_mode)
     return FabricMesh(mesh=mesh, facet_tags=facet_tags, tags=names,
                       warp=directions.constant((1.0, 0.0, 0.0)),
                       normal=directions.radial_from_x_axis(), cell_tags=cell_tags)
