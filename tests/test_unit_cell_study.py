@@ -223,3 +223,30 @@ def test_recompute_stopped_selects_the_stopped_curves(tmp_path, monkeypatch, cap
     assert seen == [({coarse, fine}, None), ({coarse}, None), ({fine}, 1500.0), (set(), None)]
     assert main(["study", "unit-cell", "--out", str(tmp_path), "--budget", "-5"]) == 2
     assert "--budget" in capsys.readouterr().err
+
+
+def test_trends_ratios_from_synthetic_csvs(tmp_path):
+    """unit-cell-trends reads the study CSVs by key columns: on linear synthetic curves S = k E the
+    full/quarter and fine/coarse ratios are k_full / k_quarter and k_fine / k_coarse, taken at the last
+    strain both curves reached (interpolation of straight lines is exact, so 1e-12)."""
+    from fabricfem.study_unit_cell import Run, RunKey, _write_csv
+    from fabricfem.verify.unit_cell_trends import trends
+
+    def run(key, k, last):
+        E = np.linspace(0.02, last, 5)
+        return Run(key, [dict(E11=e, E22=e, E12=e, S11=k * e, S22=k * e, S12=k * e, normal_force=1.0) for e in E],
+                   "", 0.0, 0, "")
+    K = RunKey
+    _write_csv(str(tmp_path / "fig27.csv"), [run(K("ti", "biaxial"), 2.0, 0.22),
+                                             run(K("ti", "biaxial", option="full"), 1.5, 0.13)])
+    _write_csv(str(tmp_path / "fig32.csv"), [run(K("ti", "uniaxial"), 4.0, 0.22),
+                                             run(K("ti", "uniaxial", refinement="fine"), 4.4, 0.06)])
+    _write_csv(str(tmp_path / "fig33.csv"), [run(K("ti", "shear"), 1.0, 0.2),
+                                             run(K("ti", "shear", refinement="fine"), 1.25, 0.2)])
+    v = trends(str(tmp_path))
+    assert v["full_over_quarter"] == pytest.approx(0.75, rel=1e-12)
+    assert v["full_over_quarter_common_E11"] == pytest.approx(0.13, rel=1e-12)
+    assert v["fine_over_coarse_uniaxial"] == pytest.approx(1.1, rel=1e-12)
+    assert v["fine_over_coarse_uniaxial_common_E11"] == pytest.approx(0.06, rel=1e-12)
+    assert v["fine_over_coarse_shear"] == pytest.approx(1.25, rel=1e-12)
+    assert np.isnan(v["fine_over_coarse_biaxial"]) and np.isnan(v["iso_uniaxial_S22_S11"])  # curves missing

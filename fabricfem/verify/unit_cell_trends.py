@@ -153,6 +153,19 @@ def trends(study_dir: str, end_faces: str = "uz_fixed") -> dict[str, float]:
         e = min(Ef[-1], Eq[-1])
         out["full_over_quarter_shear"] = float(np.interp(e, Ef, Sf) / np.interp(e, Eq, Sq))
         out["full_over_quarter_shear_common_E12"] = float(e)
+    # printed only: fine / coarse mesh at the last common strain (thesis sec. 4.3.5.4: "the responses obtained
+    # with the finer mesh are generally stiffer")
+    for fig, load, x, y in (("fig32", "biaxial", "E11", "S11"), ("fig32", "uniaxial", "E11", "S11"),
+                            ("fig33", "shear", "E12", "S12")):
+        cs = curves(fig)
+        c, f = find_curve(cs, "ti", load, end_faces=ef), find_curve(cs, "ti", load, refinement="fine", end_faces=ef)
+        out[f"fine_over_coarse_{load}"] = out[f"fine_over_coarse_{load}_common_{x}"] = math.nan
+        if c and f:
+            Xc, Yc = _xy(c, x, y)
+            Xf, Yf = _xy(f, x, y)
+            e = min(Xc[-1], Xf[-1])
+            out[f"fine_over_coarse_{load}"] = float(np.interp(e, Xf, Yf) / np.interp(e, Xc, Yc))
+            out[f"fine_over_coarse_{load}_common_{x}"] = float(e)
     return out
 
 
