@@ -250,3 +250,15 @@ def test_trends_ratios_from_synthetic_csvs(tmp_path):
     assert v["fine_over_coarse_uniaxial_common_E11"] == pytest.approx(0.06, rel=1e-12)
     assert v["fine_over_coarse_shear"] == pytest.approx(1.25, rel=1e-12)
     assert np.isnan(v["fine_over_coarse_biaxial"]) and np.isnan(v["iso_uniaxial_S22_S11"])  # curves missing
+
+
+def test_quick_benchmark_writes_csv_with_ratio(tmp_path):
+    """`fabricfem bench unit-cell --quick`: one run of the coarse quarter cell, CSV + PNG + FE2 text; its time
+    ratio against the baseline (itself) is 1 and the times are positive."""
+    from fabricfem.benchmarks.unit_cell_perf import unit_cell_perf
+    rows = unit_cell_perf(str(tmp_path), quick=True)
+    assert len(rows) == 1 and rows[0]["step_over_baseline"] == 1.0 and rows[0]["step_s"] > 0.0
+    with open(tmp_path / "unit_cell_perf.csv") as f:
+        assert float(next(csv.DictReader(f))["step_over_baseline"]) == 1.0
+    assert os.path.getsize(tmp_path / "unit_cell_perf.png") > 0
+    assert "FE2 costing" in (tmp_path / "fe2_costing.txt").read_text()
