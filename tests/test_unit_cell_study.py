@@ -262,3 +262,32 @@ def test_quick_benchmark_writes_csv_with_ratio(tmp_path):
         assert float(next(csv.DictReader(f))["step_over_baseline"]) == 1.0
     assert os.path.getsize(tmp_path / "unit_cell_perf.png") > 0
     assert "FE2 costing" in (tmp_path / "fe2_costing.txt").read_text()
+
+
+def test_stop_probe_without_a_stop_tries_no_remedy(tmp_path):
+    """benchmarks.unit_cell_stop on a short path that converges (coarse quarter cell, 1/10 of the biaxial
+    strain in 2 steps): one row, converged, at the end strain E11 = ((1.02)^2 - 1) / 2 = 0.0202 exactly."""
+    from fabricfem.benchmarks.unit_cell_stop import probe_stop
+    rows = probe_stop("quarter", steps=2, scale=0.1, out=str(tmp_path))
+    assert [r["remedy"] for r in rows] == ["study settings"] and rows[0]["converged"] == 1
+    assert rows[0]["E11"] == pytest.approx(0.0202, rel=1e-12)
+    assert (tmp_path / "unit_cell_stop_quarter.csv").exists()
+
+
+def test_stop_probe_tries_remedies_until_one_converges(tmp_path, monkeypatch):
+    """The probe's control flow with a scripted stop: solves beyond Phi11 = 1.012 fail unless Newton may take
+    80 iterations. The study path stops there, the first remedy (max_it 80) converges, is kept, and the path
+    goes on to its end (E11 = 0.0202), so no further remedy is tried."""
+    import fabricfem.unit_cell_contact as ucc
+    from fabricfem.benchmarks.unit_cell_stop import probe_stop
+    from fabricfem.solvers.newton import SolverError
+    solve = ucc.ContactUnitCell.solve
+
+    def scripted(self, Phi, steps=1):
+        if Phi[0, 0] > 1.012 and self.problem.newton.max_it != 80:
+            raise SolverError("scripted stop", reason="SCRIPTED")
+        return solve(self, Phi, steps)
+    monkeypatch.setattr(ucc.ContactUnitCell, "solve", scripted)
+    rows = probe_stop("quarter", steps=2, scale=0.1, out=str(tmp_path))
+    assert [(r["remedy"], r["converged"]) for r in rows] == [("study settings", 0), ("max_it 80", 1)]
+    assert rows[0]["message"] == "scripted stop" and rows[1]["E11"] == pytest.approx(0.0202, rel=1e-12)
