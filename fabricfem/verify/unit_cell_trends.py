@@ -29,6 +29,8 @@ The trends (the brief's acceptance list), each turned into one number and a boun
      made. Reported separately, not a trend: the same ratio with the exact periodicity on both cells
      (the quarter cell then is an exact reduction of the full one under these loads, so the ratio is
      1 up to the solver tolerance; tests/test_unit_cell_study.py checks that equality without contact).
+Printed, not checked: the fine / coarse mesh ratio of S at the last common strain of Figs. 32/33 (thesis
+sec. 4.3.5.4 finds the finer mesh "generally stiffer"; the fine curves may stop at their time budget).
 Curves are found by their key columns (material, load, contact, option, refinement, end_faces), not
 by label. The geometry is PlainWeave.balanced (crimp 0.08 assumed: the thesis gives no crimp); the
 dependence of checks 1-2 on the crimp is mapped by study_unit_cell.geometry_sensitivity
