@@ -68,7 +68,7 @@ def fe2_paragraph(step_s: float, newton_shell: int = 5, load_steps: int = 20) ->
             f"core-hours per sleeve simulation, before the consistent macroscopic tangent (which needs the unit "
             f"cell's sensitivity, thesis sec. 4.3.6: 3 more linear solves per point) and with the coarsest "
             f"cell, whose stress differs from the fine one. The fitted membrane law (fabricfem/fitted_law.py) "
-            f"costs one polynomial evaluation per point (microseconds) after a one-off grid of a few dozen "
+            f"costs one closed-form evaluation per point (no solve) after a one-off grid of a few dozen "
             f"unit-cell load paths, so it is the practical path; FE2 would need ~{total / 3600 / 1000:.2g}k cores "
             f"for an hour per run.")
 
