@@ -291,3 +291,10 @@ def test_stop_probe_tries_remedies_until_one_converges(tmp_path, monkeypatch):
     rows = probe_stop("quarter", steps=2, scale=0.1, out=str(tmp_path))
     assert [(r["remedy"], r["converged"]) for r in rows] == [("study settings", 0), ("max_it 80", 1)]
     assert rows[0]["message"] == "scripted stop" and rows[1]["E11"] == pytest.approx(0.0202, rel=1e-12)
+
+
+def test_stop_probe_refuses_bad_steps(tmp_path):
+    from fabricfem.benchmarks.unit_cell_stop import probe_stop
+    for bad in (0, -3, 2.5, True):
+        with pytest.raises(ValueError, match="steps"):
+            probe_stop("quarter", steps=bad, out=str(tmp_path))

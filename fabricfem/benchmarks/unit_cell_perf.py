@@ -95,7 +95,8 @@ def unit_cell_perf(out: str = "results/unit_cell_perf", quick: bool = False, rep
         rows.append(row)
         if comm.rank == 0:
             print(f"{option:>7} {refinement:>6}: {row['ndofs']} dofs, {row['step_s']:.2f} s/increment, "
-                  f"{row['augmentation_s']:.2f} s/augmentation, x{row['step_over_baseline']:.1f} the coarse quarter cell, contact share {100 * row['contact_share']:.0f}%, "
+                  f"{row['augmentation_s']:.2f} s/augmentation, x{row['step_over_baseline']:.1f} the coarse quarter cell, "
+                  f"contact share {100 * row['contact_share']:.0f}%, "
                   f"peak RSS {row['peak_rss_MB']:.0f} MB" + (f" STOPPED {row['stopped']}" if row["stopped"] else ""),
                   flush=True)
     if comm.rank == 0:

@@ -18,7 +18,6 @@ try (remedy, converged, E11 reached, wall time [s], message) to `out`/unit_cell_
 from __future__ import annotations
 
 import argparse
-import csv
 import dataclasses
 import os
 import time
@@ -27,6 +26,7 @@ import numpy as np
 from mpi4py import MPI
 
 import fabricfem.unit_cell_contact as ucc
+from fabricfem.io import write_csv
 from fabricfem.meshes.unit_cell import unit_cell
 from fabricfem.meshes.yarn_geometry import PlainWeave
 from fabricfem.solvers.newton import SolverError
@@ -45,6 +45,8 @@ def probe_stop(option: str = "full", refinement: str = "coarse", steps: int = 10
     """Run the TI biaxial path on the `option`/`refinement` cell (`scale` shortens it, see load_targets)
     and, if it stops, try the remedies of the module docstring from its last converged state. Returns the
     rows written to the CSV: first the path itself (remedy "study settings"), then one per remedy tried."""
+    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
+        raise ValueError(f"steps: must be an integer >= 1, got {steps!r}")
     cell = unit_cell(PlainWeave.balanced(), option, refinement, comm)
     model = ucc.ContactUnitCell(cell, MATERIALS["ti"], contact=True, end_faces=THESIS_END_FACES)
     (target, _), = load_targets("biaxial", scale)
@@ -65,7 +67,7 @@ def probe_stop(option: str = "full", refinement: str = "coarse", steps: int = 10
                  else 0.0, wall_s=time.perf_counter() - t0, message=stopped[:400])]
     if stopped:
         c, newton = model.contact, model.problem.newton
-        base, cuts, max_it = c.params, ucc.MAX_CUTS, newton.max_it
+        base, cuts, max_it, active_set = c.params, ucc.MAX_CUTS, newton.max_it, model.active_set
 
         def with_params(**kw):
             return lambda: setattr(c, "params", dataclasses.replace(base, **kw))
@@ -84,7 +86,8 @@ def probe_stop(option: str = "full", refinement: str = "coarse", steps: int = 10
                 failed = ""
             except SolverError as exc:
                 failed = str(exc)
-            ucc.MAX_CUTS = cuts
+            finally:
+                ucc.MAX_CUTS = cuts
             if not failed:  # keep the remedy and go on along the study path
                 failed = path(model.Phi.copy(), max(1, int(np.ceil((target[0, 0] - model.Phi[0, 0]) / step[0, 0]))))
             rows.append(dict(remedy=name, converged=int(not failed), E11=model.steps[-1].E[0, 0],
@@ -92,13 +95,8 @@ def probe_stop(option: str = "full", refinement: str = "coarse", steps: int = 10
             _say(comm, f"[{name}] {'converged' if not failed else 'FAILED: ' + failed[:300]}")
             if not failed:
                 break
-            c.params, newton.max_it, model.active_set = base, max_it, True
-    if comm.rank == 0:
-        os.makedirs(out, exist_ok=True)
-        with open(os.path.join(out, f"unit_cell_stop_{option}.csv"), "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=list(rows[0]))
-            w.writeheader()
-            w.writerows(rows)
+            c.params, newton.max_it, model.active_set = base, max_it, active_set
+    write_csv(os.path.join(out, f"unit_cell_stop_{option}.csv"), list(rows[0]), [list(r.values()) for r in rows], comm)
     return rows
 
 

@@ -82,6 +82,19 @@ def tangent_ratio(rows: list[dict], x: str, y: str) -> tuple[float, float]:
     return float(t.max() / t[0]), float(t[-1] / t[0])
 
 
+def ratio_at_common_strain(out: dict[str, float], name: str, num: list[dict] | None, den: list[dict] | None,
+                           x: str, y: str) -> None:
+    """out[name] = y of curve `num` / y of curve `den` at the last strain x both reached (linear interpolation,
+    origin prepended) and out[name + "_common_" + x] = that strain; both nan when a curve is missing."""
+    out[name] = out[f"{name}_common_{x}"] = math.nan
+    if num and den:
+        Xn, Yn = _xy(num, x, y)
+        Xd, Yd = _xy(den, x, y)
+        e = min(Xn[-1], Xd[-1])
+        out[name] = float(np.interp(e, Xn, Yn) / np.interp(e, Xd, Yd))
+        out[f"{name}_common_{x}"] = float(e)
+
+
 def find_curve(curves: dict[str, list[dict]], material: str, load: str, contact: bool = True,
                option: str = "quarter", refinement: str = "coarse", end_faces: str = "uz_fixed") -> list[dict] | None:
     """Rows of the curve with these key columns (labels differ between study versions; CSVs without an
@@ -103,9 +116,7 @@ def trends(study_dir: str, end_faces: str = "uz_fixed") -> dict[str, float]:
         return read_curves(path) if os.path.exists(path) else {}
     out = {k: math.nan for k in ("iso_biaxial_secant_spread", "iso_uniaxial_secant_spread", "iso_uniaxial_S22_S11",
                                  "iso_uniaxial_last_E11", "ti_biaxial_tangent_rise", "ti_biaxial_contact_force",
-                                 "ti_biaxial_last_E11", "shear_tangent_last_first", "compression_over_extension",
-                                 "full_over_quarter", "full_over_quarter_periodic", "full_over_quarter_common_E11",
-                                 "full_over_quarter_periodic_common_E11")}
+                                 "ti_biaxial_last_E11", "shear_tangent_last_first", "compression_over_extension")}
     ef = end_faces
     f21 = curves("fig21")
     rows = find_curve(f21, "iso", "biaxial", end_faces=ef)
@@ -138,36 +149,18 @@ def trends(study_dir: str, end_faces: str = "uz_fixed") -> dict[str, float]:
             out["compression_over_extension"] = s_c / float(np.interp(e_c, E, S))
     f27 = curves("fig27")
     for name, ends in (("full_over_quarter", "uz_fixed"), ("full_over_quarter_periodic", "periodic")):
-        q = find_curve(f27, "ti", "biaxial", end_faces=ends)
-        f = find_curve(f27, "ti", "biaxial", option="full", end_faces=ends)
-        if q and f:
-            Eq, Sq = _xy(q, "E11", "S11")
-            Ef, Sf = _xy(f, "E11", "S11")
-            e = min(Ef[-1], Eq[-1])
-            out[name] = float(np.interp(e, Ef, Sf) / np.interp(e, Eq, Sq))
-            out[name + "_common_E11"] = float(e)
+        ratio_at_common_strain(out, name, find_curve(f27, "ti", "biaxial", option="full", end_faces=ends),
+                               find_curve(f27, "ti", "biaxial", end_faces=ends), "E11", "S11")
     f28 = curves("fig28")  # printed only: the thesis' "even more pronounced difference" in shear
-    q, f = find_curve(f28, "ti", "shear", end_faces=ef), find_curve(f28, "ti", "shear", option="full", end_faces=ef)
-    out["full_over_quarter_shear"] = out["full_over_quarter_shear_common_E12"] = math.nan
-    if q and f:
-        Eq, Sq = _xy(q, "E12", "S12")
-        Ef, Sf = _xy(f, "E12", "S12")
-        e = min(Ef[-1], Eq[-1])
-        out["full_over_quarter_shear"] = float(np.interp(e, Ef, Sf) / np.interp(e, Eq, Sq))
-        out["full_over_quarter_shear_common_E12"] = float(e)
+    ratio_at_common_strain(out, "full_over_quarter_shear", find_curve(f28, "ti", "shear", option="full", end_faces=ef),
+                           find_curve(f28, "ti", "shear", end_faces=ef), "E12", "S12")
     # printed only: fine / coarse mesh at the last common strain (thesis sec. 4.3.5.4: "the responses obtained
     # with the finer mesh are generally stiffer")
     for fig, load, x, y in (("fig32", "biaxial", "E11", "S11"), ("fig32", "uniaxial", "E11", "S11"),
                             ("fig33", "shear", "E12", "S12")):
         cs = curves(fig)
-        c, f = find_curve(cs, "ti", load, end_faces=ef), find_curve(cs, "ti", load, refinement="fine", end_faces=ef)
-        out[f"fine_over_coarse_{load}"] = out[f"fine_over_coarse_{load}_common_{x}"] = math.nan
-        if c and f:
-            Xc, Yc = _xy(c, x, y)
-            Xf, Yf = _xy(f, x, y)
-            e = min(Xc[-1], Xf[-1])
-            out[f"fine_over_coarse_{load}"] = float(np.interp(e, Xf, Yf) / np.interp(e, Xc, Yc))
-            out[f"fine_over_coarse_{load}_common_{x}"] = float(e)
+        ratio_at_common_strain(out, f"fine_over_coarse_{load}", find_curve(cs, "ti", load, refinement="fine", end_faces=ef),
+                               find_curve(cs, "ti", load, end_faces=ef), x, y)
     return out
 
 
