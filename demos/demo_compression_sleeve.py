@@ -6,7 +6,7 @@
 The same scene as a file: `fabricfem run scenes/compression_sleeve.toml`.
 
 Data flow: mesh (meshes.tube, relaxed radius 34 mm) -> forms (Naghdi shell, orthotropic St. Venant-Kirchhoff,
-weft around the limb) -> solver (fabricfem.compression.fit_sleeve: the forearm, an ellipsoid 88 x 72 mm
+weft around the limb) -> solver (fabricfem.wear.compression.fit_sleeve: the forearm, an ellipsoid 88 x 72 mm
 across at its widest, grows inside the tube; frictionless augmented Lagrangian) -> outputs
 (compression.pressure_report):
 
@@ -27,7 +27,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fabricfem.body.ellipsoid import Ellipsoid
-from fabricfem.compression import fit_sleeve, pressure_report
+from fabricfem.wear.compression import fit_sleeve, pressure_report
 from fabricfem.materials import Fabric
 from fabricfem.meshes import tube
 

@@ -15,6 +15,23 @@ import os
 import sys
 
 from mpi4py import MPI
+import datetime
+import platform
+from fabricfem.verify import load_cases
+from fabricfem.verify import CaseResult
+from fabricfem import scenes as scene_module
+from fabricfem.scenes.run import run_scene
+from fabricfem.demo import rollup_demo
+from fabricfem.studies.fabric_link import OUT_DIR, run_fabric_link
+from fabricfem.studies.sleeve_fit import DEFAULT_LONG_AXIS_FACTOR, FIT_SCALES, fit_configs, run_fit_study
+from fabricfem.studies.sleeve import run_methods
+from fabricfem.studies.unit_cell import previous_runs, run_study as run_unit_cell_study
+from fabricfem.studies.sleeve import run_study, variants
+from fabricfem.benchmarks.rollup_profile import rollup_profile
+from fabricfem.benchmarks.unit_cell_perf import unit_cell_perf
+from fabricfem.benchmarks import stability_map
+from fabricfem.benchmarks.speed_accuracy import speed_accuracy
+from fabricfem.benchmarks.sleeve_profile import sleeve_profile
 
 
 def _print(*args, **kw):
@@ -26,8 +43,6 @@ def write_markdown(path: str, results) -> None:
     """The verification table as Markdown (rank 0), e.g. docs/verification.md."""
     if MPI.COMM_WORLD.rank != 0:
         return
-    import datetime
-    import platform
     lines = ["# Verification results\n",
              f"Produced by `fabricfem verify --markdown {path}` on {datetime.date.today()} "
              f"({platform.node()}, {MPI.COMM_WORLD.size} rank(s)). A tolerance of inf marks a reported-only row.\n",
@@ -44,7 +59,6 @@ def write_markdown(path: str, results) -> None:
 
 
 def verify(names: list[str], as_json: bool, markdown: str | None = None) -> int:
-    from fabricfem.verify import load_cases
     cases = load_cases()
     unknown = [n for n in names if n not in cases]
     if unknown:
@@ -57,7 +71,6 @@ def verify(names: list[str], as_json: bool, markdown: str | None = None) -> int:
         try:
             results += cases[name]()
         except Exception as exc:  # a case that crashes fails, with its reason
-            from fabricfem.verify import CaseResult
             _print(f"  {name} raised {type(exc).__name__}: {exc}", file=sys.stderr)
             results.append(CaseResult(name, f"error: {type(exc).__name__}: {exc}", float("nan"), float("nan"),
                                       float("nan"), 0.0, False, 0, 0.0))
@@ -135,19 +148,16 @@ def main(argv: list[str] | None = None) -> int:
                             help="unit-cell: with --recompute-stopped, only the fine cells' curves")
     p_study.add_argument("--budget", type=float, default=None,
                          help="unit-cell: wall-time budget [s] of each solved load case (default: by cell, "
-                              "fabricfem.study_unit_cell.TIME_BUDGET)")
+                              "fabricfem.studies.unit_cell.TIME_BUDGET)")
     args = parser.parse_args(argv)
 
     if args.command == "verify":
         if args.list:
-            from fabricfem.verify import load_cases
             for name, fn in load_cases().items():
                 _print(f"{name:<26} {(fn.__doc__ or '').strip().splitlines()[0]}")
             return 0
         return verify(args.cases, args.json, args.markdown)
     if args.command == "run":
-        from fabricfem import scene as scene_module
-        from fabricfem.run import run_scene
         try:
             scene = scene_module.load(args.scene)
         except scene_module.SceneError as exc:
@@ -156,16 +166,13 @@ def main(argv: list[str] | None = None) -> int:
         run_scene(scene)
         return 0
     if args.command == "demo":
-        from fabricfem.demo import rollup_demo
         rollup_demo(args.out)
         return 0
     if args.command == "study" and args.name == "fabric-link":
-        from fabricfem.unit_cell_link import OUT_DIR, run_fabric_link
         meshes = ((10, 13),) if args.quick else ((10, 13), (20, 26))
         run_fabric_link(OUT_DIR if args.out == "results/sleeve_study" else args.out, sleeve_meshes=meshes)
         return 0
     if args.command == "study" and args.name == "sleeve-fit":
-        from fabricfem.sleeve_fit import DEFAULT_LONG_AXIS_FACTOR, FIT_SCALES, fit_configs, run_fit_study
         try:
             scales = FIT_SCALES if args.scales is None else tuple(float(s) for s in args.scales.split(",") if s.strip())
             factors = ((DEFAULT_LONG_AXIS_FACTOR,) if args.long_axis_factors is None else
@@ -190,9 +197,8 @@ def main(argv: list[str] | None = None) -> int:
                       scales=scales, docs=args.docs, long_axis_factors=factors, prefix=prefix, **overrides)
         return 0
     if args.command == "study" and args.name == "sleeve-methods":
-        # the three contact methods on the sleeve with gravity (fabricfem.study.run_methods); --mesh defaults to
+        # the three contact methods on the sleeve with gravity (fabricfem.studies.sleeve.run_methods); --mesh defaults to
         # III here (the sleeve-fit default is II)
-        from fabricfem.study import run_methods
         given = sys.argv[1:] if argv is None else argv
         mesh = args.mesh if any(a == "--mesh" or a.startswith("--mesh=") for a in given) else "III"
         methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
@@ -204,7 +210,6 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         return 0
     if args.command == "study" and args.name == "unit-cell":
-        from fabricfem.study_unit_cell import previous_runs, run_study as run_unit_cell_study
         out = "results/unit_cell" if args.out == "results/sleeve_study" else args.out
         # --recompute-stopped: solve again the curves of `out` that stopped early (after a solver change or with
         # a larger --budget); --coarse-only / --fine-only: only those on coarse / fine cells
@@ -218,7 +223,6 @@ def main(argv: list[str] | None = None) -> int:
         run_unit_cell_study(out, quick=args.quick, recompute=stopped, time_budget=args.budget)
         return 0
     if args.command == "study":
-        from fabricfem.study import run_study, variants
         options = dict(quick=args.quick, fine=args.fine,
                        meshes=tuple(m.strip() for m in args.meshes.split(",") if m.strip()),
                        fabrics=tuple(f.strip() for f in args.fabrics.split(",") if f.strip()))
@@ -239,22 +243,17 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if args.command == "bench":
         if args.name == "unit-cell":
-            from fabricfem.benchmarks.unit_cell_perf import unit_cell_perf
             unit_cell_perf("results/unit_cell_perf" if args.out == "results/bench" else args.out, quick=args.quick)
             return 0
         if args.name == "stability-map":
-            from fabricfem.benchmarks import stability_map
             stability_map(args.out, quick=args.quick)
             return 0
         if args.name == "speed-accuracy":
-            from fabricfem.benchmarks.speed_accuracy import speed_accuracy
             speed_accuracy(args.out, quick=args.quick)
             return 0
         if args.name == "sleeve-profile":
-            from fabricfem.benchmarks.sleeve_profile import sleeve_profile
             sleeve_profile(args.out, quick=args.quick)
             return 0
-        from fabricfem.bench import rollup_profile
         rollup_profile(args.out)
         return 0
     return 2

@@ -13,6 +13,8 @@ from typing import Sequence
 import numpy as np
 from dolfinx import fem, io
 from mpi4py import MPI
+import resource
+import json
 
 
 class SurfaceSeries:
@@ -90,7 +92,7 @@ def render_field(path: str | Path, surface: tuple[np.ndarray, np.ndarray], value
     """Render a gathered surface coloured by per-point `values` (viridis, from 0), with translucent body
     surfaces (points, cells) behind it, to a PNG off-screen (call on rank 0 with gathered data)."""
     os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")
-    import pyvista as pv
+    import pyvista as pv  # optional heavy package, loaded only when a render is made
     points, cells = surface
     cloth = pv.PolyData(points, np.hstack([np.full((len(cells), 1), cells.shape[1]), cells]).ravel())
     cloth.point_data["field"] = values
@@ -117,7 +119,7 @@ def render_surfaces(path: str | Path, surfaces: list[tuple[np.ndarray, np.ndarra
     if MPI.COMM_WORLD.rank != 0:
         return
     os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")
-    import pyvista as pv
+    import pyvista as pv  # optional heavy package, loaded only when a render is made
     pv.OFF_SCREEN = True
     plotter = pv.Plotter(off_screen=True, window_size=(1200, 800))
     for i, (points, cells) in enumerate(surfaces):
@@ -138,7 +140,6 @@ def peak_memory_mib(comm=MPI.COMM_WORLD) -> dict[str, float | list[float]]:
     """Peak resident memory of the processes: ru_maxrss (Linux: KiB) of each rank in MiB, gathered on all
     ranks: {"max_mib": max over ranks, "total_mib": sum, "per_rank_mib": [...]}. It includes what the
     process held before the run (interpreter, libraries, JIT-compiled forms)."""
-    import resource
     kib = float(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)
     per_rank = comm.allgather(kib / 1024.0)
     return {"max_mib": max(per_rank), "total_mib": sum(per_rank), "per_rank_mib": per_rank}
@@ -146,7 +147,6 @@ def peak_memory_mib(comm=MPI.COMM_WORLD) -> dict[str, float | list[float]]:
 
 def write_json(path: str | Path, data: dict, comm=MPI.COMM_WORLD):
     """JSON file written by rank 0 (numbers and strings; paths converted to str)."""
-    import json
     if comm.rank != 0:
         return
     Path(path).parent.mkdir(parents=True, exist_ok=True)
@@ -159,9 +159,9 @@ def plot_time_series(path: str | Path, time: Sequence[float], panels: dict[str, 
     """PNG of curves over time (rank 0): one panel per key of `panels` ({panel label: {curve: values}})."""
     if comm.rank != 0:
         return
-    import matplotlib
+    import matplotlib  # optional heavy package, loaded only when a plot is drawn
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
     n = max(1, len(panels))
     fig, axes = plt.subplots(n, 1, figsize=(8, 2.4 * n), sharex=True, squeeze=False)
     for ax, (label, curves) in zip(axes[:, 0], panels.items()):

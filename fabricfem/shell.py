@@ -115,7 +115,7 @@ class ShellModel:
         self.load_factor = fem.Constant(mesh, PETSc.ScalarType(0.0))
         membrane_density = None
         if fabric.membrane_law is not None:
-            # fitted membrane energy W(E11, E22, 2 E12) [J/m^2] (fabricfem.fitted_law) instead of 1/2 eps.A eps
+            # fitted membrane energy W(E11, E22, 2 E12) [J/m^2] (fabricfem.materials.fitted) instead of 1/2 eps.A eps
             # (any law with .parameters and .ufl_energy(eps, parameters): polynomial or convex-ridge)
             self.membrane_coefficients = fem.Constant(
                 mesh, PETSc.ScalarType(np.asarray(fabric.membrane_law.parameters, dtype=float)))

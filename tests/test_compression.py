@@ -1,4 +1,4 @@
-"""fabricfem.compression: Laplace's law in its small-strain limit, bad input, and a failed donning step
+"""fabricfem.wear.compression: Laplace's law in its small-strain limit, bad input, and a failed donning step
 leaving the last converged state (the physics check against the FE model is the verify case
 compression-laplace)."""
 import numpy as np
@@ -6,7 +6,7 @@ import pytest
 from mpi4py import MPI
 
 from fabricfem.body.ellipsoid import Ellipsoid
-from fabricfem.compression import don, grown, laplace_pressure
+from fabricfem.wear.compression import don, grown, laplace_pressure
 from fabricfem.contact.problem import ContactProblem
 from fabricfem.solvers.newton import SolverError
 from fabricfem.verify import compression as case

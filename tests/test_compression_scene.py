@@ -5,9 +5,9 @@ from pathlib import Path
 
 import pytest
 
-from fabricfem import scene as scene_module
+from fabricfem import scenes as scene_module
 from fabricfem.cli import main
-from fabricfem.scene import SceneError
+from fabricfem.scenes.schema import SceneError
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from fabricfem import scene as scene_module
+from fabricfem import scenes as scene_module
 from fabricfem.cli import main
-from fabricfem.run import run_dynamic_scene
-from fabricfem.scene import SceneError
+from fabricfem.scenes.run import run_dynamic_scene
+from fabricfem.scenes.schema import SceneError
 
 ROOT = Path(__file__).resolve().parents[1]
 GRAVITY = 9.81
@@ -120,7 +120,7 @@ def test_explicit_dt_above_critical_accepted_with_force():
 def test_critical_step_estimate_matches_the_mesh():
     """The pre-mesh estimate (h_min from the mesh spec) equals fabricfem.dynamics.stability's on the mesh."""
     from fabricfem.dynamics import critical_time_step
-    from fabricfem.run import build_model
+    from fabricfem.scenes.run import build_model
     data = scene_data("corner_pinned")
     scene = scene_module.validate(data)
     model = build_model(scene, MPI.COMM_WORLD)

@@ -171,9 +171,10 @@ def test_sleeve_flexion_with_gravity_is_converged_in_rate():
     the elbow) is alpha omega r / g = 13 % at 45 deg/s and 6.6 % at 22.5 deg/s, a difference of 6.6 %; the
     inertial force omega^2 r / g is 1 % at 45 deg/s. Their sum, 8 %, bounds the change between the two speeds
     (measured on mesh I, 1-57 deg: 6.4 % between 45 and 15 deg/s with gravity, 40 % without: without the
-    weight the forces on the floating sleeve are inertia and drag only, see fabricfem.sleeve; this test
+    weight the forces on the floating sleeve are inertia and drag only, see fabricfem.wear.sleeve; this test
     measured +5.2 %)."""
-    from fabricfem.sleeve import SleeveConfig, run_sleeve
+    from fabricfem.wear.run import run_sleeve
+    from fabricfem.wear.sleeve import SleeveConfig
     base = SleeveConfig(n_around=10, n_along=13, friction=0.5, final_angle=30.0)
     assert base.gravity and base.angular_velocity == 45.0
     fast = run_sleeve(base, MPI.COMM_SELF)

@@ -1,4 +1,4 @@
-"""Fitted membrane law (fabricfem.fitted_law, forms.fitted) against independent references.
+"""Fitted membrane law (fabricfem.materials.fitted, forms.fitted) against independent references.
 
 Serial:  python -m pytest -q tests/test_fitted_law.py
 MPI:     mpirun -n 2 python -m pytest -q -p no:cacheprovider -m mpi tests/test_fitted_law.py
@@ -6,7 +6,7 @@ MPI:     mpirun -n 2 python -m pytest -q -p no:cacheprovider -m mpi tests/test_f
 References: (a) samples of a known orthotropic St. Venant-Kirchhoff membrane and of a known cubic-stiffening
 law (resultants written out by hand below, not through the module's polynomial machinery); (b) the uniaxial
 response of the fitted W in closed form (N22 = 0 solved for E22 by scipy brentq); (c) the two-layer laminate
-unit cell (fabricfem.homogenize) evaluated directly at strain states not used in the fit.
+unit cell (fabricfem.weave.homogenize) evaluated directly at strain states not used in the fit.
 """
 from __future__ import annotations
 
@@ -19,15 +19,15 @@ from mpi4py import MPI
 
 import dolfinx.mesh as dmesh
 from fabricfem.fabrics import available_fabrics, fabric_from_dict, fabric_to_dict, load_fabric, save_fabric
-from fabricfem.fitted_law import (DEFAULT_DIRECTIONS, ConvexMembraneLaw, FittedMembraneLaw, MembraneSamples,
+from fabricfem.materials.fitted import (DEFAULT_DIRECTIONS, ConvexMembraneLaw, FittedMembraneLaw, MembraneSamples,
                                   default_convex_terms, energy_exponents, fit_convex_law, fit_membrane_law,
                                   fitted_fabric, membrane_state, sample_unit_cell)
-from fabricfem.homogenize import UnitCellProblem, box_periodic_pairs
+from fabricfem.weave.homogenize import UnitCellProblem, box_periodic_pairs
 from fabricfem.materials import Fabric, KawabataBending
 from fabricfem.meshes import plate
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.loadstep import solve_load_path
-from fabricfem.unit_cell_link import uniaxial_reference, uniaxial_strip
+from fabricfem.studies.fabric_link import uniaxial_reference, uniaxial_strip
 from fabricfem.verify.homogenization import box_cell, neo_hookean
 
 COMM = MPI.COMM_WORLD
@@ -177,7 +177,7 @@ def test_store_and_load(tmp_path):
 
 
 # ----------------------------------------------------- (b) shell strip, uniaxial tension
-# uniaxial_reference (closed form by brentq) and uniaxial_strip (membrane strip) live in fabricfem.unit_cell_link
+# uniaxial_reference (closed form by brentq) and uniaxial_strip (membrane strip) live in fabricfem.studies.fabric_link
 
 
 @pytest.mark.mpi
@@ -367,7 +367,7 @@ def test_convex_law_hessian_bounded_by_A0_everywhere(which):
     differences of the resultants (step 1e-6: truncation O(h^2) ~ 1e-12 relative away from the onsets of the
     cubic ramps, where phi'' has a kink and the error is O(h); 1e-5 relative covers both and the
     round-off 1e-16 |N| / h)."""
-    from fabricfem.unit_cell_link import FABRIC_NAME
+    from fabricfem.studies.fabric_link import FABRIC_NAME
     law = random_convex_law(7) if which == "random" else load_fabric(FABRIC_NAME).membrane_law
     assert isinstance(law, ConvexMembraneLaw)
     X = np.random.default_rng(8).uniform(-0.5, 0.5, size=(2000, 3))
@@ -404,7 +404,7 @@ def test_convex_law_ufl_energy_equals_numpy(which):
     1e-10 relative: the integrand is constant, so the quadrature is exact and only round-off remains.
     Then new coefficients through the Constant (no new form): the energy follows (same tolerance)."""
     from dolfinx import fem
-    from fabricfem.unit_cell_link import FABRIC_NAME
+    from fabricfem.studies.fabric_link import FABRIC_NAME
     law = random_convex_law(12) if which == "random" else load_fabric(FABRIC_NAME).membrane_law
     L, B = 0.1, 0.05
     model = ShellModel(plate(L, B, 3, 2, cell="quadrilateral", comm=COMM), fitted_fabric(law, 5e-4),

@@ -1,10 +1,10 @@
-"""Periodic unit-cell homogenization (fabricfem.homogenize) against closed forms and in parallel."""
+"""Periodic unit-cell homogenization (fabricfem.weave.homogenize) against closed forms and in parallel."""
 import numpy as np
 import pytest
 import dolfinx.mesh as dmesh
 from mpi4py import MPI
 
-from fabricfem.homogenize import PeriodicPair, UnitCellProblem, box_periodic_pairs, solve_unit_cell
+from fabricfem.weave.homogenize import PeriodicPair, UnitCellProblem, box_periodic_pairs, solve_unit_cell
 from fabricfem.verify import load_cases
 from fabricfem.verify.homogenization import (LAMBDA, MU, PHI_GENERAL, box_cell, laminate_problem, neo_hookean,
                                              neo_hookean_S)

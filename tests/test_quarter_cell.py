@@ -5,7 +5,7 @@ import pytest
 import dolfinx.mesh as dmesh
 from mpi4py import MPI
 
-from fabricfem.homogenize import PeriodicPair, UnitCellProblem
+from fabricfem.weave.homogenize import PeriodicPair, UnitCellProblem
 from fabricfem.verify.homogenization import LAMBDA, MU, neo_hookean, neo_hookean_S
 
 SIZE = np.array([2e-3, 1e-3, 1e-3])  # Lx, Ly, Lz [m]; z in [-Lz/2, Lz/2] so that z -> -z maps the cell onto itself

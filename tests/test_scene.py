@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fabricfem import scene as scene_module
+from fabricfem import scenes as scene_module
 from fabricfem.cli import main
-from fabricfem.run import build_model, run_scene
-from fabricfem.scene import SceneError
+from fabricfem.scenes.run import build_model, run_scene
+from fabricfem.scenes.schema import SceneError
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from fabricfem import scene as scene_module
+from fabricfem import scenes as scene_module
 from fabricfem.body.arm import DEFAULT_ARM
-from fabricfem.scene import SceneError
-from fabricfem.sleeve import ELBOW_AXIS, SleeveConfig, build_sleeve, run_quasistatic, run_sleeve
+from fabricfem.scenes.schema import SceneError
+from fabricfem.wear.run import run_sleeve
+from fabricfem.wear.sleeve import ELBOW_AXIS, SleeveConfig, build_sleeve, run_quasistatic
 
 ROOT = Path(__file__).resolve().parents[1]
 QUICK = SleeveConfig(n_around=10, n_along=13, final_angle=6.0, angle_steps=2, solver="quasistatic")
@@ -122,7 +123,7 @@ def test_sleeve_scene_run_writes_outputs(tmp_path):
     data = sleeve_data()
     data["motion"].update(final_angle=6.0, output_angle_step=3.0)
     data["output"] = {"dir": str(tmp_path), "render_angles": [6.0]}
-    from fabricfem.run import run_scene
+    from fabricfem.scenes.run import run_scene
     history = run_scene(scene_module.validate(data))
     assert history.completed
     for name in ("cloth.xdmf", "cloth.h5", "body.pvd", "body_0002.vtp", "torque.csv", "torque.png",
@@ -150,7 +151,7 @@ def test_explicit_run_reports_a_timing_breakdown():
     """The explicit history carries the per-part wall times of `step_breakdown`: every part >= 0 except
     `other` (the remainder, which can be slightly negative only by timer granularity: > -1 % of the loop), the
     parts add up to the loop time (by construction, to round-off) and ms/step = loop / steps."""
-    from fabricfem.sleeve import TIMING_PARTS, format_breakdown
+    from fabricfem.wear.sleeve import TIMING_PARTS, format_breakdown
     h = run_sleeve(QUICK_EXPLICIT.with_(final_angle=3.0), MPI.COMM_SELF)
     t = h.timings
     parts = [t[f"{p}_s"] for p in TIMING_PARTS]
@@ -166,7 +167,7 @@ def test_dynamic_similarity_scales_speed_and_damping_by_the_wave_speed():
     """flexion_speed = omega c / c_ref and damping = alpha c / c_ref with c = sqrt(E / rho) (closed form for
     fabrics II and III of the study: c_II / c_I = sqrt(350 / 1.2) = 17.08, c_III / c_I = sqrt(7200 / 1.2 x
     436 / 700) = 61.13); off by default (factor 1)."""
-    from fabricfem.study import variants
+    from fabricfem.studies.sleeve import variants
     fabrics = variants(quick=True)["fabrics"]
     assert fabrics["fabric I"].flexion_speed == pytest.approx(45.0, rel=1e-14)
     assert fabrics["fabric II"].flexion_speed == pytest.approx(45.0 * math.sqrt(350.0 / 1.2), rel=1e-14)
@@ -181,7 +182,7 @@ def test_torque_bounce_of_an_alternating_signal():
     """torque_bounce on tau_n = a n + b + A (-1)^n: the moving average over an even window w (entries n - w/2
     ... n + w/2 - 1) removes the alternation exactly and gives a (n - 1/2) + b for the linear part, so the
     deviation is A (-1)^n + a / 2 and its RMS sqrt(A^2 + a^2 / 4) (closed form); window 1 gives 0."""
-    from fabricfem.study import torque_bounce
+    from fabricfem.studies.sleeve import torque_bounce
     n = np.arange(400)
     tau = 1e-4 * n + 0.02 + 3e-3 * (-1.0) ** n
     angles = n * 0.1
@@ -295,7 +296,7 @@ def test_frozen_segment_gap_is_that_segments_gap():
 
 def test_step_limiter_scales_by_the_largest_increment():
     """s = min(1, max_rotation / |dtheta|_inf, max_displacement / |du|_inf) (closed form)."""
-    from fabricfem.sleeve import StepLimiter
+    from fabricfem.wear.sleeve import StepLimiter
     problem = build_sleeve(QUICK, MPI.COMM_SELF)
     limiter = StepLimiter(problem.model, max_rotation=0.1, max_displacement=5e-3)
     step = np.zeros(problem.model.w.vector.getLocalSize())
@@ -373,7 +374,7 @@ def test_fabric_name_uses_the_stored_fabric_everywhere(tmp_path):
     (c = 2 c_I exactly, so the similarity factor is 2 and the membrane-limited critical step halves)."""
     from fabricfem.fabrics import save_fabric
     from fabricfem.materials import Fabric
-    from fabricfem.sleeve import build_explicit
+    from fabricfem.wear.sleeve import build_explicit
     stored = Fabric(E1=4.8e6, E2=4.8e6, G12=4e5, nu12=0.0, thickness=1e-3, density=436.0, name="four-times")
     path = save_fabric(stored, tmp_path / "four-times.json")
     base = SleeveConfig(n_around=10, n_along=13, final_angle=2.0, dynamic_similarity=True,

@@ -1,5 +1,5 @@
-"""The arm of the sleeve study as a SleeveConfig field (fabricfem.sleeve) and the fit-sensitivity study
-(fabricfem.sleeve_fit): the arm reaches the ellipsoids and the fit check, scene girths reach the config,
+"""The arm of the sleeve study as a SleeveConfig field (fabricfem.wear.sleeve) and the fit-sensitivity study
+(fabricfem.studies.sleeve_fit): the arm reaches the ellipsoids and the fit check, scene girths reach the config,
 the summary-table arithmetic on synthetic curves, and the membrane / bending split of the strain energy
 against closed forms for an inflated tube."""
 import math
@@ -10,11 +10,11 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from fabricfem import scene as scene_module
+from fabricfem import scenes as scene_module
 from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
-from fabricfem.scene import SceneError
-from fabricfem.sleeve import SleeveConfig, build_sleeve, check_fit, config_from_scene
-from fabricfem.sleeve_fit import (FIT_CASES, energy_split, energy_split_forms, fit_configs, fit_ratio, scaled_arm,
+from fabricfem.scenes.schema import SceneError
+from fabricfem.wear.sleeve import SleeveConfig, build_sleeve, check_fit, config_from_scene
+from fabricfem.studies.sleeve_fit import (FIT_CASES, energy_split, energy_split_forms, fit_configs, fit_ratio, scaled_arm,
                                   summary_row, thickness_ratio)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -109,7 +109,7 @@ def test_energy_split_of_an_inflated_tube():
 
     Tolerance 1 %: the only error is the P2 interpolation of the circle and of n0 (20 elements around,
     node spacing pi / 20 rad: derivative error ~ (pi / 20)^2 / 12 = 2e-3, doubled in a quadratic energy)."""
-    from fabricfem.sleeve import sleeve_shell
+    from fabricfem.wear.sleeve import sleeve_shell
     R, L, t, E, delta = 0.06, 0.5, 1e-3, 1.2e6, 2e-3
     cfg = SleeveConfig(n_around=20, n_along=4, solver="quasistatic", gravity=False, E=E, G=E / 200,
                        thickness=t, radius=R, length=L)
@@ -202,7 +202,7 @@ def test_default_factor_gives_the_old_segments_and_checkpoints():
     name of the committed mesh II run (results/sleeve_fit/runs) of the ANSUR arm, R = 0.06 m, t = 1 mm, written
     before the factor existed; it changes whenever any SleeveConfig field is added (then old runs are rerun)."""
     from fabricfem.body.pose import Segment
-    from fabricfem.sleeve_fit import _checkpoint, _key
+    from fabricfem.studies.sleeve_fit import _checkpoint, _key
     r_u, r_f = 0.35 / (2 * math.pi), 0.30 / (2 * math.pi)
     old = (Segment("upper_arm", "shoulder", "elbow", "upper_arm_marker", (0.5 * 0.335, r_u, r_u)),
            Segment("forearm", "elbow", "wrist", "forearm_marker", (0.5 * 0.267, r_f, r_f)))

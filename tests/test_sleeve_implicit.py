@@ -1,4 +1,4 @@
-"""The implicit (backward-Euler + Newton, augmented Lagrangian) route of the sleeve, fabricfem.sleeve_implicit."""
+"""The implicit (backward-Euler + Newton, augmented Lagrangian) route of the sleeve, fabricfem.wear.sleeve_implicit."""
 import math
 
 import numpy as np
@@ -11,8 +11,9 @@ from fabricfem.dynamics.mass import lumped_mass
 from fabricfem.materials import Fabric
 from fabricfem.meshes import tube
 from fabricfem.shell import ShellModel
-from fabricfem.sleeve import SleeveConfig, run_sleeve
-from fabricfem.sleeve_implicit import InertiaDamping, build_implicit, run_implicit
+from fabricfem.wear.run import run_sleeve
+from fabricfem.wear.sleeve import SleeveConfig
+from fabricfem.wear.sleeve_implicit import InertiaDamping, build_implicit, run_implicit
 from fabricfem.solvers.newton import NewtonSolver
 
 G = 9.81           # m/s^2

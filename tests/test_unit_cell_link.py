@@ -1,4 +1,4 @@
-"""The unit-cell fabric with contact (fabricfem.unit_cell_link) against independent references.
+"""The unit-cell fabric with contact (fabricfem.studies.fabric_link) against independent references.
 
 Serial:  python -m pytest -q tests/test_unit_cell_link.py
 MPI:     mpirun -n 2 python -m pytest -q -p no:cacheprovider -m mpi tests/test_unit_cell_link.py
@@ -19,8 +19,8 @@ import pytest
 from mpi4py import MPI
 
 from fabricfem.fabrics import FABRICS_DIR, load_fabric
-from fabricfem.fitted_law import ConvexMembraneLaw, MembraneSamples, fit_membrane_law
-from fabricfem.unit_cell_link import (FABRIC_NAME, OUT_DIR, SAMPLES_CSV, SVK_NAME, load_samples,
+from fabricfem.materials.fitted import ConvexMembraneLaw, MembraneSamples, fit_membrane_law
+from fabricfem.studies.fabric_link import (FABRIC_NAME, OUT_DIR, SAMPLES_CSV, SVK_NAME, load_samples,
                                       measure_initial_stiffness, strip_against_unit_cell, uniaxial_reference)
 
 COMM = MPI.COMM_WORLD
@@ -97,7 +97,7 @@ def stored_law_and_samples():
 
 
 def test_stored_fabric_is_convex_and_fits_the_cell():
-    """The stored unit-cell fabric (the law convex by construction, fabricfem.fitted_law.ConvexMembraneLaw):
+    """The stored unit-cell fabric (the law convex by construction, fabricfem.materials.fitted.ConvexMembraneLaw):
     (1) strongly monotone gradient, (N(x) - N(y)).(x - y) >= (x - y).A0.(x - y) (convexity with Hessian
     >= A0, independent of the Hessian code) on every pair of the stored samples AND of 300 random states
     with |eps_i| <= 0.5, far outside the data (the sleeve buckles into compressive, sheared states);

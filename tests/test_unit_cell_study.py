@@ -1,4 +1,4 @@
-"""Woven unit cell with yarn contact (fabricfem.unit_cell_contact), the study driver and the benchmark."""
+"""Woven unit cell with yarn contact (fabricfem.weave.unit_cell), the study driver and the benchmark."""
 import csv
 import os
 
@@ -7,10 +7,10 @@ import pytest
 from mpi4py import MPI
 
 from fabricfem.contact.yarn import YarnContact
-from fabricfem.materials_yarn import THESIS_ISOTROPIC, THESIS_TRANSVERSELY_ISOTROPIC
+from fabricfem.materials.yarn import THESIS_ISOTROPIC, THESIS_TRANSVERSELY_ISOTROPIC
 from fabricfem.meshes.unit_cell import MeshResolution, unit_cell
 from fabricfem.meshes.yarn_geometry import PlainWeave
-from fabricfem.unit_cell_contact import ContactUnitCell, default_contact_parameters, symmetry_pins
+from fabricfem.weave.unit_cell import ContactUnitCell, default_contact_parameters, symmetry_pins
 
 WEAVE = PlainWeave.balanced()
 BIAXIAL = np.diag([1.04, 1.04, 1.0])
@@ -108,7 +108,7 @@ def test_quick_study_writes_figures(tmp_path):
 
     import pyvista
 
-    from fabricfem.study_unit_cell import RENDERS, RunKey, run_study
+    from fabricfem.studies.unit_cell import RENDERS, RunKey, run_study
     runs = run_study(str(tmp_path), quick=True)
     for fig in ("fig21", "fig24", "fig25", "fig26"):
         assert os.path.getsize(tmp_path / f"{fig}.png") > 0
@@ -138,7 +138,7 @@ def test_geometry_sensitivity_reports_infeasible_crimp(tmp_path):
     """crimp 0.04 with phi = 0.4 and section ratio 1.5 needs yarns that interpenetrate at the crossing
     (2 A < 2 b; PlainWeave.balanced raises): geometry_sensitivity records it as infeasible (nan checks,
     reason in `stopped`) instead of failing or dropping it, and still writes the CSV."""
-    from fabricfem.study_unit_cell import geometry_sensitivity
+    from fabricfem.studies.unit_cell import geometry_sensitivity
     rows = geometry_sensitivity(str(tmp_path), crimps=(0.04,), end_faces=("uz_fixed",))
     assert len(rows) == 2 and all(np.isnan(r["secant_spread"]) for r in rows)
     assert all(r["stopped"].startswith("geometry infeasible") for r in rows)
@@ -198,9 +198,9 @@ def test_recompute_stopped_selects_the_stopped_curves(tmp_path, monkeypatch, cap
     """`fabricfem study unit-cell --recompute-stopped [--coarse-only | --fine-only] [--budget S]` hands run_study
     the keys of the curves that stopped in --out's CSVs (a hand-written fig CSV: one finished, one stopped coarse,
     one stopped fine) and the budget; a non-positive budget is refused naming the option."""
-    import fabricfem.study_unit_cell as study
+    import fabricfem.studies.unit_cell as study
     from fabricfem.cli import main
-    from fabricfem.study_unit_cell import RunKey
+    from fabricfem.studies.unit_cell import RunKey
     columns = ["curve", "material", "load", "contact", "option", "refinement", "end_faces", "stopped", "E11", "S11",
                "wall_s"]
     rows = [("a", "ti", "uniaxial", 1, "quarter", "coarse", "uz_fixed", ""),
@@ -229,7 +229,7 @@ def test_trends_ratios_from_synthetic_csvs(tmp_path):
     """unit-cell-trends reads the study CSVs by key columns: on linear synthetic curves S = k E the
     full/quarter and fine/coarse ratios are k_full / k_quarter and k_fine / k_coarse, taken at the last
     strain both curves reached (interpolation of straight lines is exact, so 1e-12)."""
-    from fabricfem.study_unit_cell import Run, RunKey, _write_csv
+    from fabricfem.studies.unit_cell import Run, RunKey, _write_csv
     from fabricfem.verify.unit_cell_trends import trends
 
     def run(key, k, last):
@@ -278,7 +278,7 @@ def test_stop_probe_tries_remedies_until_one_converges(tmp_path, monkeypatch):
     """The probe's control flow with a scripted stop: solves beyond Phi11 = 1.012 fail unless Newton may take
     80 iterations. The study path stops there, the first remedy (max_it 80) converges, is kept, and the path
     goes on to its end (E11 = 0.0202), so no further remedy is tried."""
-    import fabricfem.unit_cell_contact as ucc
+    import fabricfem.weave.unit_cell as ucc
     from fabricfem.benchmarks.unit_cell_stop import probe_stop
     from fabricfem.solvers.newton import SolverError
     solve = ucc.ContactUnitCell.solve

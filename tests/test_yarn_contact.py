@@ -112,10 +112,10 @@ def test_case_yarn_contact_patch():
 
 # ------------------------------------------------------------------ crushed elements (issue 5)
 def _ti_cell_without_contact():
-    from fabricfem.materials_yarn import THESIS_TRANSVERSELY_ISOTROPIC
+    from fabricfem.materials.yarn import THESIS_TRANSVERSELY_ISOTROPIC
     from fabricfem.meshes.unit_cell import unit_cell
     from fabricfem.meshes.yarn_geometry import PlainWeave
-    from fabricfem.unit_cell_contact import ContactUnitCell
+    from fabricfem.weave.unit_cell import ContactUnitCell
     cell = unit_cell(PlainWeave.balanced(), "quarter", "coarse", MPI.COMM_SELF)
     return ContactUnitCell(cell, THESIS_TRANSVERSELY_ISOTROPIC, contact=None)
 
@@ -170,7 +170,7 @@ def test_admissible_backtrack_rejects_inverting_and_crushing_steps():
     with det F = 1 - 1.5 s (start 1) and ratio 0.5 that is s < 1/3, so s = 1/4 (closed form); the full
     step (det F = -0.5, inverted) and s = 1/2 (det F = 0.25, crushed by 75% in one iteration) are rejected."""
     from fabricfem.solvers.mpc_newton import backtrack
-    from fabricfem.unit_cell_contact import ADMISSIBLE_DET_RATIO, crush_guard
+    from fabricfem.weave.unit_cell import ADMISSIBLE_DET_RATIO, crush_guard
     assert ADMISSIBLE_DET_RATIO == 0.5  # the closed form above assumes it
     newton = _ScalarNewton()
     backtrack(newton, rnorm=1.0, admissible_step=lambda: crush_guard(_ScalarCheck(newton)))
@@ -216,7 +216,7 @@ def test_step_cutting_gives_up_with_clear_error():
     failed and last converged Phi and the most crushed element (det F and position), never NaN;
     the state stays the last converged one (Phi = 1, u* = 0)."""
     from fabricfem.solvers.newton import SolverError
-    from fabricfem.unit_cell_contact import MAX_CUTS
+    from fabricfem.weave.unit_cell import MAX_CUTS
     model = _ti_cell_without_contact()
     _refusing(model, 0.0)
     with pytest.raises(SolverError, match=rf"load step 1\) after {MAX_CUTS} cuts.*smallest det F there 1 in the "
@@ -235,7 +235,7 @@ def test_step_cutting_keeps_furthest_converged_state():
     the equilibrium of a direct solve at that Phi (path independence without contact; 1e-4 relative
     as in test_step_cutting_triggers_and_recovers)."""
     from fabricfem.solvers.newton import SolverError
-    from fabricfem.unit_cell_contact import MAX_CUTS
+    from fabricfem.weave.unit_cell import MAX_CUTS
     assert MAX_CUTS == 5  # the hand count above assumes it
     model = _ti_cell_without_contact()
     _refusing(model, 0.006, ceiling=1.012)

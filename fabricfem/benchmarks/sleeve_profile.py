@@ -4,7 +4,7 @@
 numbers; every rank runs the same flexion on the full communicator):
 
 * short flexions (to `short_angle` degrees, past the first contact at about 5 degrees) on meshes I and III,
-  `repeats` times each; every part of `fabricfem.sleeve.step_breakdown` (internal-force assembly, contact
+  `repeats` times each; every part of `fabricfem.wear.sleeve.step_breakdown` (internal-force assembly, contact
   search and corrections, pose and torque sums, output, other Python) is quoted as the MEDIAN over the
   repeats of its share of the loop's wall time, with the median ms per step in wall and in CPU time of the
   process (the machine is shared, so single timings scatter; ratios and CPU times scatter less than wall times);
@@ -27,7 +27,8 @@ from pathlib import Path
 
 from mpi4py import MPI
 
-from fabricfem.sleeve import TIMING_PARTS, SleeveConfig, build_explicit, run_explicit
+from fabricfem.wear.sleeve import TIMING_PARTS, SleeveConfig, build_explicit, run_explicit
+import numpy as np
 
 MESHES = {"I": (10, 13), "II": (15, 20), "III": (20, 26), "IV": (30, 39)}
 COLUMNS = ("case", "mesh", "ranks", "final_angle_deg", "runs", "steps", "ndofs", "ms_per_step", "cpu_ms_per_step",
@@ -87,10 +88,9 @@ def profile_flexion(mesh: str, final_angle: float, repeats: int, comm: MPI.Comm 
 
 def plot_shares(path: Path, rows: list[ProfileRow]):
     """Grouped bars: the median share of every part per case, with the 20 % target of the contact (rank 0)."""
-    import matplotlib
+    import matplotlib  # optional heavy package, loaded only when a plot is drawn
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
+    import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
     fig, ax = plt.subplots(figsize=(8, 4))
     width = 0.8 / max(len(rows), 1)
     x = np.arange(len(TIMING_PARTS))

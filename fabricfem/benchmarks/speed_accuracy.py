@@ -83,6 +83,17 @@ from typing import Callable, Sequence
 
 import numpy as np
 from mpi4py import MPI
+from fabricfem.verify.strain_limit import corner_pinned_cloth
+from fabricfem.particles import Problem, rectangular_grid
+from fabricfem.particles import critical_time_step, simulate
+from fabricfem.dynamics import CentralDifference
+from fabricfem.dynamics import critical_time_step as shell_critical_time_step
+from fabricfem.dynamics import NewmarkIntegrator
+from fabricfem.dynamics.strain_limit import FastProjection, attach
+from fabricfem import io
+from fabricfem.verify.particles_cases import particle_tablecloth_nodes
+from fabricfem.verify.drape import fe_tablecloth_nodes
+from fabricfem.verify.drape import CLOTH_L, fe_tablecloth_nodes
 
 PROBLEM = "corner-pinned"
 K_OVER_RHO = 1000.0  # k / rho [(m/s)^2], seed 002 sec. 4.1-4.2 range
@@ -203,14 +214,12 @@ def _check_time(name: str, value) -> float:
 
 def membrane_cloth(n: int, comm=MPI.COMM_WORLD):
     """The corner-pinned membrane cloth, n x n Q2 quadrilaterals (fabricfem.verify.strain_limit)."""
-    from fabricfem.verify.strain_limit import corner_pinned_cloth
     return corner_pinned_cloth(K_OVER_RHO, _check_cells(n), size=SIDE, comm=comm)
 
 
 def particle_cloth(n: int):
     """(n + 1) x (n + 1) particle grid of the same cloth: E h = k, nu = 0, k_shear = k / 2.5, drag eta / rho,
     pinned at (0, 0, 0) and (0, L, 0), gravity -z. Returns (Problem, index of the free corner (L, L))."""
-    from fabricfem.particles import Problem, rectangular_grid
     n = _check_cells(n)
     spacing = SIDE / n
     E = K_OVER_RHO * AREAL_DENSITY / THICKNESS  # E h = k = (k / rho) rho [N/m]
@@ -253,7 +262,6 @@ def _checked(u: np.ndarray, what: str) -> np.ndarray:
 
 def run_particles(n: int, t_end: float, repeats: int = 3, comm=MPI.COMM_WORLD) -> SpeedRow:
     """Velocity Verlet on the n x n-cell particle grid at 0.9 x its Gershgorin critical step."""
-    from fabricfem.particles import critical_time_step, simulate
     problem, corner = particle_cloth(n)
     n_steps, dt = _steps(t_end, EXPLICIT_SAFETY * critical_time_step(problem))
     x0 = problem.system.positions[corner].copy()
@@ -269,9 +277,8 @@ def run_particles(n: int, t_end: float, repeats: int = 3, comm=MPI.COMM_WORLD) -
 
 def run_explicit(n: int, t_end: float, repeats: int = 3, comm=MPI.COMM_WORLD) -> SpeedRow:
     """Central differences with lumped mass on the n x n Q2 membrane at 0.9 x the critical step."""
-    from fabricfem.dynamics import CentralDifference, critical_time_step
     model = membrane_cloth(n, comm)
-    n_steps, dt = _steps(t_end, EXPLICIT_SAFETY * critical_time_step(model))
+    n_steps, dt = _steps(t_end, EXPLICIT_SAFETY * shell_critical_time_step(model))
 
     def run() -> np.ndarray:
         model.w.x.array[:] = 0.0
@@ -291,8 +298,6 @@ def run_implicit(n: int, dt: float, t_end: float, strain_limit: float | None = N
                  comm=MPI.COMM_WORLD, model=None) -> SpeedRow:
     """Trapezoidal Newmark (consistent mass) on the n x n Q2 membrane with step dt (the largest step <= dt
     dividing t_end); with strain_limit, FastProjection after each step (seed 002 eqs. 33-36)."""
-    from fabricfem.dynamics import NewmarkIntegrator
-    from fabricfem.dynamics.strain_limit import FastProjection, attach
     _check_time("dt", dt)
     if strain_limit is not None:
         _check_time("strain_limit", strain_limit)  # a positive finite number (dimensionless)
@@ -358,9 +363,9 @@ def cheapest_meeting(rows: Sequence[SpeedRow], target: float) -> Conclusion:
 # ---------------------------------------------------------------------------------------- plot
 def plot_speed_accuracy(rows: Sequence[SpeedRow], reference: Reference, path: Path, t_end: float):
     """log-log error vs wall time, one line per method (rank 0 only)."""
-    import matplotlib
+    import matplotlib  # optional heavy package, loaded only when a plot is drawn
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
     colors = {"particles": "tab:red", "explicit": "tab:green", "implicit": "tab:blue", "implicit+SL": "tab:purple"}
     fig, ax = plt.subplots(figsize=(7.5, 5))
     for method in dict.fromkeys(r.method for r in rows):
@@ -436,7 +441,6 @@ def corner_pinned_benchmark(out: str | Path = "results/bench", quick: bool = Fal
         r.wall_vs_baseline = r.wall_s / baseline.wall_s
     conclusions = [cheapest_meeting(rows, target) for target in TARGETS]
 
-    from fabricfem import io
     io.write_csv(out / "speed_accuracy.csv", CSV_COLUMNS, [r.as_list() for r in rows], comm=comm)
     io.write_csv(out / "speed_accuracy_reference.csv",
                  ("level", "n", "dt", "u_x", "u_y", "u_z", "relative_difference_to_reference"),
@@ -531,7 +535,6 @@ def _check_drape_plan(plan: DrapePlan):
 def run_drape_particles(n: int, repeats: int = 3, comm=MPI.COMM_WORLD) -> DrapeRow:
     """Particle model, static relaxation (Newton from the flat sheet, 5 load steps, mirror planes):
     fabricfem.verify.particles_cases.particle_tablecloth_nodes (set-up included in the time)."""
-    from fabricfem.verify.particles_cases import particle_tablecloth_nodes
     wall, r = _timed(lambda: particle_tablecloth_nodes(n), repeats, comm)
     return DrapeRow(DRAPE_PROBLEM, "particles static", f"particles n={n}", n, r["iterations"], r["ndofs"], wall, None,
                     None, r["corner"], r["midside"], r["folds"], r["diagonal_asymmetry"])
@@ -541,7 +544,6 @@ def run_drape_shell(n: int, repeats: int = 3, comm=MPI.COMM_WORLD) -> DrapeRow:
     """Naghdi shell, static Newton with adaptive load steps on the weight (quarter model, mirror planes, no
     imperfection): fabricfem.verify.drape.fe_tablecloth_nodes (mesh, forms and contact set-up included in
     the time, FFCx compilation cached after the first call)."""
-    from fabricfem.verify.drape import fe_tablecloth_nodes
     wall, r = _timed(lambda: fe_tablecloth_nodes(n, comm=comm), repeats, comm)
     return DrapeRow(DRAPE_PROBLEM, "shell static", f"shell quarter n={n}", 2 * n, r["iterations"], r["ndofs"], wall,
                     None, None, r["corner"], r["midside"], r["folds"], r["diagonal_asymmetry"])
@@ -549,9 +551,9 @@ def run_drape_shell(n: int, repeats: int = 3, comm=MPI.COMM_WORLD) -> DrapeRow:
 
 def plot_drape(rows: Sequence[DrapeRow], reference_difference: float, path: Path):
     """log-log error vs wall time of the tablecloth benchmark (rank 0 only)."""
-    import matplotlib
+    import matplotlib  # optional heavy package, loaded only when a plot is drawn
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
     colors = {"particles static": "tab:red", "shell static": "tab:blue"}
     fig, ax = plt.subplots(figsize=(7.5, 5))
     for method in dict.fromkeys(r.method for r in rows):
@@ -585,7 +587,6 @@ def tablecloth_benchmark(out: str | Path = "results/bench", quick: bool = False,
     Returns {"rows", "reference", "reference_difference", "conclusions", "baseline_s"}."""
     plan = plan if plan is not None else (DRAPE_QUICK if quick else DRAPE_FULL)
     _check_drape_plan(plan)
-    from fabricfem.verify.drape import CLOTH_L, fe_tablecloth_nodes
     out = Path(out)
     say = (lambda *a: print(*a, flush=True)) if (verbose and comm.rank == 0) else (lambda *a: None)
     rows: list[DrapeRow] = []
@@ -618,7 +619,6 @@ def tablecloth_benchmark(out: str | Path = "results/bench", quick: bool = False,
     for r in rows:
         r.wall_vs_baseline = r.wall_s / baseline.wall_s
     conclusions = [cheapest_meeting([r for r in rows if r.same_branch], target) for target in TARGETS]
-    from fabricfem import io
     io.write_csv(out / "speed_accuracy_tablecloth.csv", DRAPE_CSV_COLUMNS,
                  [r.as_list() for r in rows] + [reference.as_list()], comm=comm)
     if comm.rank == 0:

@@ -47,6 +47,23 @@ from typing import Callable, Sequence
 
 import numpy as np
 from mpi4py import MPI
+from fabricfem.materials import Fabric
+from fabricfem.meshes import plate
+from fabricfem.shell import ShellModel
+from fabricfem.particles import Problem, rectangular_grid
+from fabricfem.dynamics.explicit import runs_stably
+from fabricfem.particles import DivergenceError, simulate
+from fabricfem.dynamics import measured_critical_time_step
+from fabricfem.dynamics import discrete_max_frequency
+from fabricfem.dynamics.stability import MEMBRANE_KAPPA, min_edge_length, plane_stress_wave_speed
+from fabricfem.dynamics import CentralDifference
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from fabricfem.particles import stiffness_matrix
+from fabricfem.particles import critical_time_step, simulate
+from fabricfem.dynamics import CentralDifference
+from fabricfem.dynamics import critical_time_step as shell_critical_time_step
+from fabricfem import io
 
 AREAL_DENSITY = 0.117  # rho [kg/m^2], seed 002 sec. 4.1
 THICKNESS = 0.001177  # h [m], seed 002 sec. 4.1
@@ -102,7 +119,6 @@ def youngs_modulus(k_over_rho: float) -> float:
 
 def shell_fabric(k_over_rho: float):
     """Fabric with E1 = E2 = k / h, G12 = G13 = E / 2.5, nu12 = 0 and areal density 0.117 kg/m^2."""
-    from fabricfem.materials import Fabric
     _check_inputs(k_over_rho, 2)
     E = youngs_modulus(k_over_rho)
     return Fabric(E1=E, E2=E, G12=E / STIFFNESS_OVER_SHEAR, nu12=0.0, thickness=THICKNESS,
@@ -111,8 +127,6 @@ def shell_fabric(k_over_rho: float):
 
 def shell_cloth(k_over_rho: float, n: int, model: str = "naghdi", comm=MPI.COMM_WORLD):
     """Square Q2 sheet (side 0.2 m, n x n elements) pinned at (0, 0.2, 0) and (0.2, 0.2, 0), under gravity."""
-    from fabricfem.meshes import plate
-    from fabricfem.shell import ShellModel
     _check_inputs(k_over_rho, n)
     sheet = ShellModel(plate(SIDE, SIDE, n, n, cell="quadrilateral", comm=comm), shell_fabric(k_over_rho),
                        model=model)
@@ -126,7 +140,6 @@ def shell_cloth(k_over_rho: float, n: int, model: str = "naghdi", comm=MPI.COMM_
 def particle_cloth(k_over_rho: float, n: int):
     """(n + 1) x (n + 1) particle grid (spacing 0.2 / n m) with the same E, nu = 0, h; k_shear = k / 2.5;
     pinned at the two corners on y = 0.2 m, under gravity."""
-    from fabricfem.particles import Problem, rectangular_grid
     _check_inputs(k_over_rho, n)
     spacing = SIDE / n
     # shear springs: B' E h / (2 (1 + nu)) = k / 2.5 with nu = 0 -> B' = 2 / 2.5 (seed 001 eq. 43, seed 002)
@@ -138,13 +151,11 @@ def particle_cloth(k_over_rho: float, n: int):
 # -------------------------------------------------------------------------- stability of one run
 def shell_run_is_stable(sheet, dt: float, n_steps: int) -> bool:
     """n_steps central-difference steps from rest; False if stopped by the blow-up check (DynamicsError)."""
-    from fabricfem.dynamics.explicit import runs_stably
     return runs_stably(sheet, dt, n_steps)
 
 
 def particle_run_is_stable(problem, dt: float, n_steps: int) -> bool:
     """n_steps velocity-Verlet steps from rest; False if stopped as diverged (DivergenceError)."""
-    from fabricfem.particles import DivergenceError, simulate
     try:
         simulate(problem, dt, n_steps, record_every=max(1, n_steps // 20))  # energy bound default 10
         return True
@@ -156,7 +167,6 @@ def bracketed_critical_time_step(run_is_stable: Callable[[float], bool], dt_gues
                                  low: float = 0.8, high: float = 1.6, max_expansions: int = 8) -> float:
     """Largest stable step near dt_guess [s]: widen [low, high] dt_guess by halving / doubling until low is
     stable and high is not, then bisect (stability.measured_critical_time_step). Runs are memoized."""
-    from fabricfem.dynamics import measured_critical_time_step
     if not (math.isfinite(dt_guess) and dt_guess > 0):
         raise ValueError(f"dt_guess must be positive and finite, got {dt_guess!r}")
     cache: dict[float, bool] = {}
@@ -185,20 +195,17 @@ def bracketed_critical_time_step(run_is_stable: Callable[[float], bool], dt_gues
 # ------------------------------------------------------------------------- linear stability limits
 def shell_eigen_time_step(sheet) -> float:
     """2 / omega_max of K vs M_L at the current state (thesis eq. 2.86 with the discrete omega_max, SLEPc)."""
-    from fabricfem.dynamics import discrete_max_frequency
     return 2.0 / discrete_max_frequency(sheet, iterations=2000)
 
 
 def shell_membrane_time_step(sheet) -> float:
     """2 / omega_membrane of the shell estimate (eq. 2.87 with the Q2 constant, no thickness shear) [s]."""
-    from fabricfem.dynamics.stability import MEMBRANE_KAPPA, min_edge_length, plane_stress_wave_speed
     kappa = MEMBRANE_KAPPA[sheet.mesh.ufl_cell().cellname()]
     return 2.0 * min_edge_length(sheet.mesh) / (kappa * plane_stress_wave_speed(sheet.fabric))
 
 
 def shell_end_state_eigen_time_step(sheet, dt: float, n_steps: int) -> float:
     """2 / omega_max of K(d) vs M_L at the end of n_steps central-difference steps of dt from rest [s]."""
-    from fabricfem.dynamics import CentralDifference
     sheet.w.x.array[:] = 0.0
     integrator = CentralDifference(sheet, dt, force=True)
     try:
@@ -212,10 +219,7 @@ def shell_end_state_eigen_time_step(sheet, dt: float, n_steps: int) -> float:
 def particle_eigen_time_step(problem, x: np.ndarray | None = None) -> float:
     """2 / omega_max of K(x) vs the particle masses on the free coordinates (scipy eigsh); x defaults to the
     reference positions. The exact Hessian (compressive geometric stiffness included) is used."""
-    import scipy.sparse as sp
-    import scipy.sparse.linalg as spla
 
-    from fabricfem.particles import stiffness_matrix
     system = problem.system
     free = problem.free.ravel()
     K = stiffness_matrix(system, system.positions if x is None else x, definite=False)[free][:, free]
@@ -254,7 +258,6 @@ def measure_case(method: str, k_over_rho: float, n: int, n_steps: int = 200, rel
     if not (math.isfinite(rel_tol) and 0 < rel_tol < 0.5):
         raise ValueError(f"rel_tol must lie in (0, 0.5), got {rel_tol!r}")
     if method == "particles":
-        from fabricfem.particles import critical_time_step, simulate
         problem = particle_cloth(k_over_rho, n)
         dt_predicted = critical_time_step(problem)
         dt_eigen = particle_eigen_time_step(problem)
@@ -268,9 +271,8 @@ def measure_case(method: str, k_over_rho: float, n: int, n_steps: int = 200, rel
             lambda: simulate(problem, 0.9 * dt_measured, timing_steps, record_every=timing_steps),
             timing_steps, repeats, comm)
     else:
-        from fabricfem.dynamics import CentralDifference, critical_time_step
         sheet = shell_cloth(k_over_rho, n, model="naghdi" if method == "shell" else "membrane", comm=comm)
-        dt_predicted = critical_time_step(sheet)
+        dt_predicted = shell_critical_time_step(sheet)
         dt_eigen = shell_eigen_time_step(sheet)
         dt_membrane = shell_membrane_time_step(sheet)
         ndofs = sheet.ndofs
@@ -303,9 +305,9 @@ def measure_case(method: str, k_over_rho: float, n: int, n_steps: int = 200, rel
 # ------------------------------------------------------------------------------------ the map
 def plot_map(rows: Sequence[StabilityRow], path: Path):
     """log-log dt vs k / rho: predicted steps as lines, measured as markers (rank 0 only)."""
-    import matplotlib
+    import matplotlib  # optional heavy package, loaded only when a plot is drawn
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
     colors = {"shell": "tab:blue", "membrane": "tab:green", "particles": "tab:red"}
     markers = {8: "o", 16: "s"}
     styles = {8: "-", 16: "--"}
@@ -374,7 +376,6 @@ def stability_map(out: str | Path = "results/bench", quick: bool = False,
     for r in rows:
         if (r.k_over_rho, r.n) in baseline:
             r.cost_vs_particles = r.wall_per_simulated_s / baseline[(r.k_over_rho, r.n)]
-    from fabricfem import io
     io.write_csv(out / "stability_map.csv", CSV_COLUMNS, [r.as_list() for r in rows], comm=comm)
     largest = max(rows, key=lambda r: r.ndofs)
     memory.append((f"peak after all cases; largest case {largest.method} n = {largest.n} ({largest.ndofs} dofs)",

@@ -20,11 +20,11 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from fabricfem.materials_yarn import THESIS_TRANSVERSELY_ISOTROPIC
+from fabricfem.materials.yarn import THESIS_TRANSVERSELY_ISOTROPIC
 from fabricfem.meshes.unit_cell import unit_cell
 from fabricfem.meshes.yarn_geometry import PlainWeave
 from fabricfem.solvers.newton import SolverError
-from fabricfem.unit_cell_contact import ContactUnitCell
+from fabricfem.weave.unit_cell import ContactUnitCell
 
 # sleeve mesh III of the garment study: 20 x 26 Q2 shell cells with 3 x 3 Gauss points
 SLEEVE_CELLS = 20 * 26
@@ -105,9 +105,9 @@ def unit_cell_perf(out: str = "results/unit_cell_perf", quick: bool = False, rep
             w = csv.DictWriter(f, fieldnames=list(rows[0]))
             w.writeheader()
             w.writerows(rows)
-        import matplotlib
+        import matplotlib  # optional heavy package, loaded only when a plot is drawn
         matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
         fig, ax = plt.subplots(figsize=(6, 4))
         labels = [f"{r['option']}\n{r['refinement']}\n{r['ndofs']} dofs" for r in rows]
         x = np.arange(len(rows))

@@ -25,12 +25,12 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-import fabricfem.unit_cell_contact as ucc
+import fabricfem.weave.unit_cell as ucc
 from fabricfem.io import write_csv
 from fabricfem.meshes.unit_cell import unit_cell
 from fabricfem.meshes.yarn_geometry import PlainWeave
 from fabricfem.solvers.newton import SolverError
-from fabricfem.study_unit_cell import MATERIALS, THESIS_END_FACES, load_targets
+from fabricfem.studies.unit_cell import MATERIALS, THESIS_END_FACES, load_targets
 
 TRY_CUTS = 2  # halvings of a remedy's 1/32 sub-increment (smallest 1/128 of a study step)
 

@@ -28,6 +28,8 @@ from pathlib import Path
 from typing import Callable, Mapping, Protocol, runtime_checkable
 
 import numpy as np
+from scipy.interpolate import CubicSpline
+from scipy.optimize import brentq
 
 
 @runtime_checkable
@@ -303,7 +305,6 @@ SWING_WINDOW = (0.60, 1.0)   # fraction of the cycle in which the foot is off th
 
 def periodic_curve(keypoints: tuple[tuple[float, float], ...]) -> Callable[[np.ndarray], np.ndarray]:
     """Periodic C2 cubic spline through (phase, degrees) key points -> function of phase returning rad."""
-    from scipy.interpolate import CubicSpline
 
     phase = np.array([p for p, _ in keypoints])
     value = np.radians([v for _, v in keypoints])
@@ -403,7 +404,6 @@ def stepping_over(obstacle_height: float = 0.5, strides: int = 4, crossing_strid
     base = walking(strides, cycle_time, **leg)
     hip_peak, knee_peak = crossing_angles(obstacle_height, base.thigh, base.shank, base.hip_height)
     knee, hip = periodic_curve(WALKING_KNEE_FLEXION_DEG), periodic_curve(WALKING_HIP_FLEXION_DEG)
-    from scipy.optimize import brentq
 
     lo, hi = SWING_WINDOW
     s = np.linspace(lo, hi, 801)

@@ -28,6 +28,13 @@ from mpi4py import MPI
 
 from fabricfem.body.ellipsoid import Ellipsoid, _ray_to_surface
 from fabricfem.contact.nodal import positive_parameter
+from fabricfem.contact import friction as friction_law
+from fabricfem.contact import nodal
+from fabricfem.contact.torque import contact_torque
+from dolfinx import fem
+from fabricfem.contact.nodal import CurrentAreas
+from fabricfem.contact.nodal import nearest_gap
+from fabricfem.contact.nodal import nearest_gap, normal_pressure
 
 MAX_PROJECTION_PASSES = 8
 MAX_CREASE_ITERATIONS = 20   # bisector pushes out of overlapping segments after the passes (project_with_segment)
@@ -311,8 +318,6 @@ class ExplicitBodyContact:
 
     def __init__(self, model, body, friction: float = 0.0, method: str = "lagrange",
                  penalty: float | None = None):
-        from fabricfem.contact import friction as friction_law
-        from fabricfem.contact import nodal
         if method not in EXPLICIT_METHODS:
             raise ValueError(f"method must be one of {EXPLICIT_METHODS}, got {method!r}")
         self.model = model
@@ -376,7 +381,6 @@ class ExplicitBodyContact:
 
     def torque(self, name: str) -> float:
         """The registered torque [N m] of the last step's forces (all ranks)."""
-        from fabricfem.contact.torque import contact_torque
         joint, axis, on_segments = self._monitors[name]
         return contact_torque(self.position, -self.force, self.segment, np.flatnonzero(on_segments),
                               self.poses.joint(joint, self.time), axis, self.comm)
@@ -408,8 +412,6 @@ class ExplicitBodyContact:
         """Contact pressure [Pa] as a Q2 scalar Function (held nodes: 0), time-averaged or the last step's,
         per unit current cloth area for the state in model.w (the pressure on the body) or per unit
         reference area (`per="reference"`, as `mean_pressure`)."""
-        from dolfinx import fem
-        from fabricfem.contact.nodal import CurrentAreas
         pressure = self.mean_pressure() if mean else self.normal_force / self.area
         if per == "current":
             if self._current_areas is None:
@@ -424,13 +426,11 @@ class ExplicitBodyContact:
 
     def max_penetration(self, d: np.ndarray, t: float) -> float:
         """max(0, -min g) [m] of the nodes at displacements `d` (local array of W) against the body at t, all ranks."""
-        from fabricfem.contact.nodal import nearest_gap
         g, _, _ = nearest_gap(self.reference + d[self.dofs], self.poses.ellipsoids(t))
         return float(self.comm.allreduce(float(np.max(-g, initial=0.0)), op=MPI.MAX))
 
     def min_gap(self, d: np.ndarray, t: float) -> float:
         """Smallest signed gap [m] of the nodes against the body at t (all ranks)."""
-        from fabricfem.contact.nodal import nearest_gap
         g, _, _ = nearest_gap(self.reference + d[self.dofs], self.poses.ellipsoids(t))
         return float(self.comm.allreduce(float(np.min(g, initial=np.inf)), op=MPI.MIN))
 
@@ -528,8 +528,6 @@ class ExplicitBodyContact:
         and forces are evaluated on those."""
         if self.method != "penalty":
             return
-        from fabricfem.contact import friction as friction_law
-        from fabricfem.contact.nodal import nearest_gap, normal_pressure
         self.time = float(t)
         ellipsoids = self._posed(t)
         d = integrator.d.getArray(readonly=True)

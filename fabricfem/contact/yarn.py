@@ -77,6 +77,9 @@ from fabricfem.meshes._validate import positive
 import scipy.sparse as sp
 from petsc4py import PETSc
 from scipy.spatial import cKDTree
+from fabricfem.solvers.newton import NewtonResult
+import dataclasses
+from fabricfem.solvers.newton import SolverError
 
 __all__ = ["ContactParameters", "ContactReport", "YarnContact", "closest_point_on_triangles",
            "project_onto_quads", "smooth_ramp", "symmetric_return_map", "solve_with_fixed_sets", "MAX_SET_UPDATES",
@@ -945,7 +948,6 @@ def solve_with_fixed_sets(solve_newton, contact: YarnContact, accept, max_update
     solves; reason DIVERGED_ACTIVE_SET if the set still changes after max_updates updates). The contact
     is left unfrozen; contact.set_updates lists the number of slaves whose facet changed at each update,
     contact.accepted_sets = (facet, triangle, why) the set of the accepted state."""
-    from fabricfem.solvers.newton import NewtonResult
     iterations, norms = 0, []
     contact.set_updates = []
     try:
@@ -1000,8 +1002,6 @@ def solve_with_contact(solve_newton, contact: YarnContact, step: int = 0) -> Con
     updates, from 1.1e-7 m to 8.6e-7 m, at E11 = 0.141 of the biaxial path). When max(penetration, stick slip)
     has grown in two successive augmentations, eps_N and eps_T are multiplied by `penalty_growth` before the
     next update (Box 7 allows eps to change between augmentations: the multipliers carry the pressure)."""
-    import dataclasses
-    from fabricfem.solvers.newton import SolverError
     p_ = contact.params
     iterations, violations, growths = [], [], 0
     for k in range(p_.max_augmentations + 1):

@@ -31,6 +31,7 @@ from dolfinx.fem import petsc as fem_petsc
 from fabricfem.dynamics import stability
 from fabricfem.dynamics.mass import InertiaDamping, rotary_scale
 from fabricfem.dynamics.newmark import LoadFactor, TimeIntegrator
+from fabricfem.dynamics.newmark import DynamicsError
 
 
 class CentralDifference(TimeIntegrator):
@@ -152,7 +153,6 @@ class CentralDifference(TimeIntegrator):
 def runs_stably(model, dt: float, n_steps: int, reset: bool = True, rotary_inertia_scale: float = 1.0) -> bool:
     """Run n_steps central-difference steps from rest (forced past the critical-step check); False if
     the blow-up check (DynamicsError) stopped the run. Used to measure stability limits by bisection."""
-    from fabricfem.dynamics.newmark import DynamicsError
     model.w.x.array[:] = 0.0
     # energy_bound "auto": 10 x the loads' work
     integrator = CentralDifference(model, dt, force=True, rotary_inertia_scale=rotary_inertia_scale)

@@ -39,6 +39,8 @@ from petsc4py import PETSc
 
 from fabricfem.dynamics.mass import InertiaDamping
 from fabricfem.solvers.newton import NewtonSolver, SolverError
+from fabricfem.io import SurfaceSeries
+from fabricfem.io import write_csv
 
 LoadFactor = Callable[[float], float] | float
 
@@ -265,7 +267,6 @@ class TimeIntegrator:
         history = History(monitors={name: [] for name in monitors})
         series = None
         if xdmf is not None:
-            from fabricfem.io import SurfaceSeries
             series = SurfaceSeries(xdmf, self.model.mesh)
         energy0 = self.kinetic_energy() + self.strain_energy()
         max_work = 0.0
@@ -306,7 +307,6 @@ class TimeIntegrator:
             if series is not None:
                 series.close()
         if csv is not None:
-            from fabricfem.io import write_csv
             header, rows = history.columns()
             write_csv(csv, header, rows, comm=self.model.comm)
         return history
@@ -398,7 +398,7 @@ class _EffectiveSystem:
         if self._diag is not None:
             A.setDiagonal(self._diag, addv=PETSc.InsertMode.ADD_VALUES)
         extra_tangent = getattr(self.model, "add_contact_tangent", None)  # models with terms outside jacobian_form
-        if extra_tangent is not None:  # (fabricfem.run.ObstacleShell); they see the state x set above
+        if extra_tangent is not None:  # (fabricfem.scenes.run.ObstacleShell); they see the state x set above
             extra_tangent(A)
 
 

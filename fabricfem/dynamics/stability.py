@@ -38,6 +38,9 @@ from typing import Callable
 
 import numpy as np
 from mpi4py import MPI
+from dolfinx.cpp.mesh import entities_to_geometry
+from fabricfem.dynamics.mass import rotary_scale
+from fabricfem.dynamics.mass import lumped_mass
 
 MEMBRANE_KAPPA = {"quadrilateral": 6.1, "triangle": 7.4}
 THICKNESS_SHEAR_CHI = {"quadrilateral": 1.01, "triangle": 1.1}
@@ -54,7 +57,6 @@ def plane_stress_wave_speed(fabric) -> float:
 
 def min_edge_length(mesh) -> float:
     """Smallest cell edge length h_min [m] over all ranks (straight edges between the end vertices)."""
-    from dolfinx.cpp.mesh import entities_to_geometry
     mesh.topology.create_entities(1)
     n_edges = mesh.topology.index_map(1).size_local
     nodes = entities_to_geometry(mesh._mesh, 1, np.arange(n_edges, dtype=np.int32), False)
@@ -66,7 +68,6 @@ def min_edge_length(mesh) -> float:
 def max_frequency_estimate(model, rotary_inertia_scale: float = 1.0) -> float:
     """omega_max^h [rad/s] from mesh size and material (eq. 2.87 extended, see the module docstring), for
     rotational lumped masses scaled by `rotary_inertia_scale` (>= 1)."""
-    from fabricfem.dynamics.mass import rotary_scale
     scale = rotary_scale(rotary_inertia_scale)
     cell = model.mesh.ufl_cell().cellname()
     c = plane_stress_wave_speed(model.fabric)
@@ -105,9 +106,8 @@ def critical_time_step(model, rayleigh: tuple[float, float] = (0.0, 0.0), omega_
 def discrete_max_frequency(model, iterations: int = 200, rtol: float = 1e-6, rotary_inertia_scale: float = 1.0) -> float:
     """Largest omega of K(d) phi = omega^2 M_L phi on the free dofs (current state, lumped mass with the
     rotational entries scaled by `rotary_inertia_scale`), by SLEPc."""
-    from slepc4py import SLEPc
+    from slepc4py import SLEPc  # optional package, loaded only for the eigenvalue estimate
 
-    from fabricfem.dynamics.mass import lumped_mass
     model.compile()
     K = model.create_matrix()
     model.jacobian(model.w.vector, K)  # Dirichlet rows: identity

@@ -53,6 +53,7 @@ from petsc4py import PETSc
 
 from fabricfem.dynamics.mass import lumped_mass
 from fabricfem.forms import shell as shell_forms
+from fabricfem.dynamics.explicit import CentralDifference
 
 
 class StrainLimitError(RuntimeError):
@@ -292,7 +293,6 @@ def project_step(projection: FastProjection, integrator) -> ProjectionResult:
     step into a (the rotational inertia rho t^3/12 is tiny): measured on the corner-pinned cloth, a 2e-4 m
     correction gave a next-step Newton residual 4000 x the usual and divergence.
     """
-    from fabricfem.dynamics.explicit import CentralDifference
     model = integrator.model
     integrator.d.copy(model.w.vector)
     result = projection.project(integrator.dt)

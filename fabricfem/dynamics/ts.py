@@ -157,7 +157,7 @@ class GeneralizedAlphaIntegrator(StepHalving, TimeIntegrator):
                 self._diag_key = key
             P.setDiagonal(self._diag, addv=PETSc.InsertMode.ADD_VALUES)
         extra_tangent = getattr(self.model, "add_contact_tangent", None)  # models with terms outside jacobian_form
-        if extra_tangent is not None:  # (fabricfem.run.ObstacleShell); they see the state x set above
+        if extra_tangent is not None:  # (fabricfem.scenes.run.ObstacleShell); they see the state x set above
             extra_tangent(P)
         if J != P:
             J.assemble()

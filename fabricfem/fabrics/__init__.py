@@ -7,11 +7,11 @@ A file holds one fabric:
      "membrane": {"type": "orthotropic-svk", "E1": Pa, "E2": Pa, "G12": Pa, "nu12": -}
               or {"type": "polynomial-even-shear", "exponents": [[a, b, p], ...],
                   "coefficients": [J/m^2, ...], "strain_min": [...], "strain_max": [...], ...}
-                  (fabricfem.fitted_law.FittedMembraneLaw.to_dict: W(E11, E22, 2 E12) fitted to
+                  (fabricfem.materials.fitted.FittedMembraneLaw.to_dict: W(E11, E22, 2 E12) fitted to
                    homogenized unit-cell data; N = dW/deps = t S, resultants in N/m)
               or {"type": "convex-ridge", "initial_stiffness": A0 [[N/m]], "directions": [[l1, l2, l3], ...],
                   "terms": [[direction index, "macaulay" | "even", power], ...], "coefficients": [J/m^2, >= 0],
-                  ...} (fabricfem.fitted_law.ConvexMembraneLaw.to_dict: W convex by construction),
+                  ...} (fabricfem.materials.fitted.ConvexMembraneLaw.to_dict: W convex by construction),
      "bending": {"rigidity": [B1, B2] N m (optional),
                  "law": {"type": "kawabata", "coefficients": [...]} or
                         {"type": "square-root", "B0": N m, "kappa0": 1/m} (optional)},
@@ -27,7 +27,7 @@ import math
 import re
 from pathlib import Path
 
-from fabricfem.fitted_law import MEMBRANE_LAW_TYPES, fitted_fabric, membrane_law_from_dict
+from fabricfem.materials.fitted import MEMBRANE_LAW_TYPES, fitted_fabric, membrane_law_from_dict
 from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
 
 FABRICS_DIR = Path(__file__).resolve().parent

@@ -8,6 +8,8 @@ from __future__ import annotations
 import time
 from dataclasses import asdict, dataclass
 from typing import Callable
+import importlib
+import pkgutil
 
 CASES: dict[str, Callable[[], list["CaseResult"]]] = {}
 
@@ -67,8 +69,6 @@ class Timer:
 
 def load_cases() -> dict[str, Callable[[], list[CaseResult]]]:
     """Import every module of this package (cases register themselves with @case on import)."""
-    import importlib
-    import pkgutil
     for module in pkgutil.iter_modules(__path__):
         importlib.import_module(f"{__name__}.{module.name}")
     return CASES

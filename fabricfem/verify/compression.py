@@ -1,5 +1,5 @@
 """`compression-laplace`: a compression sleeve pulled over a rigid cylinder presses on it with Laplace's
-pressure p = T / r (fabricfem.compression), for the axial stretch held and for the axial force free.
+pressure p = T / r (fabricfem.wear.compression), for the axial stretch held and for the axial force free.
 
 The tube (relaxed radius R0, Q2 on the quadratic circle: the uniform stretch is exactly representable) is
 put on by growing the cylinder from R0 (plus 4 um of interference, so that the contact holds the tube
@@ -13,7 +13,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fabricfem.body.ellipsoid import Ellipsoid
-from fabricfem.compression import don, laplace_pressure
+from fabricfem.wear.compression import don, laplace_pressure
 from fabricfem.contact.problem import ContactProblem
 from fabricfem.materials import Fabric
 from fabricfem.meshes import tube

@@ -7,7 +7,7 @@ from mpi4py import MPI
 from scipy.optimize import brentq
 
 import dolfinx.mesh as dmesh
-from fabricfem.homogenize import UnitCellProblem, box_periodic_pairs
+from fabricfem.weave.homogenize import UnitCellProblem, box_periodic_pairs
 from fabricfem.verify import Timer, case, result
 
 # A non-symmetric macroscopic deformation gradient with det = 1.146 > 0 (stretch, shear and rotation).

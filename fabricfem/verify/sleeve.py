@@ -9,7 +9,7 @@ otherwise runs the reduced quick study (mesh I, explicit flexion to 6 degrees) a
 * doubling the thickness multiplies the torque by 1.6 to 2.4 ("roughly double", membrane-dominated,
   sec. 5.3.4; the band is the task's reading of "roughly");
 * fabrics II and III give at least ten times fabric I's torque ("roughly proportional to the stiffness",
-  E ratios 292 and 6000, sec. 5.3.5). The study runs them with dynamic similarity (fabricfem.sleeve), under
+  E ratios 292 and 6000, sec. 5.3.5). The study runs them with dynamic similarity (fabricfem.wear.sleeve), under
   which torque / E would be the same for all three fabrics without gravity (all moduli scale with E,
   G = E / 200; case sleeve-similarity); with the sleeve's weight (on since issue 4) fabric I's torque is
   partly the weight the forearm carries, which does not scale with E, so the ratios fall below the E ratios;
@@ -27,6 +27,12 @@ from pathlib import Path
 import numpy as np
 
 from fabricfem.verify import CaseResult, Timer, case
+import tempfile
+from mpi4py import MPI
+from fabricfem.studies.sleeve import run_study
+from fabricfem.wear.run import run_sleeve
+from fabricfem.wear.sleeve import SleeveConfig
+from fabricfem.verify import result
 
 STUDY_DIRS = (Path("docs/figures/sleeve"), Path("results/sleeve_study"))   # committed study first, then a local one
 FIGURES = ("mesh_mu0.1", "mesh_mu0.5", "friction", "fit", "thickness", "fabrics")
@@ -125,9 +131,6 @@ def sleeve_trends() -> list[CaseResult]:
             first = readme.read_text().splitlines()[0] if readme.exists() else "study"
             figures, tag = _curves(found[0]), "[full study]" if first == "full study" else f"[{first}]"
         else:
-            import tempfile
-            from mpi4py import MPI
-            from fabricfem.study import run_study
             with tempfile.TemporaryDirectory() as tmp:
                 run_study(tmp, quick=True, comm=MPI.COMM_SELF)
                 figures = _curves(Path(tmp))
@@ -136,7 +139,7 @@ def sleeve_trends() -> list[CaseResult]:
 
 
 # ------------------------------------------------------------------------------------------------------------
-# dynamic similarity of the explicit flexion (fabricfem.sleeve.SleeveConfig.flexion_speed)
+# dynamic similarity of the explicit flexion (fabricfem.wear.sleeve.SleeveConfig.flexion_speed)
 # ------------------------------------------------------------------------------------------------------------
 SIMILARITY_ANGLE = 10.0      # deg: contact starts near 5 deg on mesh I
 
@@ -155,13 +158,10 @@ def sleeve_similarity() -> list[CaseResult]:
        rate independent and exactly proportional to E, so fabric I's T_qs / E serves): the E x 6.25 fabric
        WITHOUT similarity at 22.5 deg/s (5 times slower in units of its wave speed than the similar run, the
        same as fabric I at 9 deg/s) must lie within 5 % of it (the mass-damping drag at 45 deg/s is about 20 %
-       of the torque, fabricfem.sleeve docstring; a fifth of the dimensionless speed gives 4 %), and its
+       of the torque, fabricfem.wear.sleeve docstring; a fifth of the dimensionless speed gives 4 %), and its
        distance from it must be smaller than the similar run's (the flexion slowed approaches quasi-static).
     The similar run carries fabric I's own distance from quasi-static equilibrium (reported in the quantity).
     """
-    from mpi4py import MPI
-    from fabricfem.sleeve import SleeveConfig, run_sleeve
-    from fabricfem.verify import result
     name = "sleeve-similarity"
     with Timer() as timer:
         # gravity off: the weight rho t g does not scale with E, so the similarity is exact only without it

@@ -11,7 +11,7 @@ value nan.
 Yarn end faces: every trend uses the thesis' condition, u*_z = 0 on the yarn end faces with u*_x,
 u*_y periodic (study curves with end_faces "uz_fixed"): sec. 4.3.5.3 (seed 000 line 2207) says "In
 both unit cell models, the local vertical displacements on the end faces of a yarn are restricted",
-and the quarter model of that sentence is the one of all earlier figures (fabricfem.study_unit_cell
+and the quarter model of that sentence is the one of all earlier figures (fabricfem.studies.unit_cell
 docstring). The same numbers with the exact periodicity (the study's extra curves) are printed.
 
 The trends (the brief's acceptance list), each turned into one number and a bound:
@@ -44,7 +44,9 @@ import os
 
 import numpy as np
 
+from fabricfem.studies.unit_cell import curve_xy, secant_spread
 from fabricfem.verify import Timer, case, result
+from fabricfem.studies.unit_cell import run_study
 
 NAME = "unit-cell-trends"
 STUDY_DIRS = ("docs/figures/unit_cell", "results/unit_cell")   # committed study first, then a local one
@@ -63,21 +65,9 @@ def read_curves(path: str) -> dict[str, list[dict]]:
     return curves
 
 
-def _xy(rows: list[dict], x: str, y: str) -> tuple[np.ndarray, np.ndarray]:
-    """Curve with the origin prepended (the unloaded cell has S = 0 at E = 0)."""
-    return np.array([0.0] + [r[x] for r in rows]), np.array([0.0] + [r[y] for r in rows])
-
-
-def secant_spread(rows: list[dict]) -> float:
-    """max |S11/E11 / mean - 1| over the steps."""
-    E, S = _xy(rows, "E11", "S11")
-    sec = S[1:] / E[1:]
-    return float(np.max(np.abs(sec / sec.mean() - 1.0)))
-
-
 def tangent_ratio(rows: list[dict], x: str, y: str) -> tuple[float, float]:
     """(largest / first tangent, last / first tangent) of y(x) over the steps."""
-    X, Y = _xy(rows, x, y)
+    X, Y = curve_xy(rows, x, y)
     t = np.diff(Y) / np.diff(X)
     return float(t.max() / t[0]), float(t[-1] / t[0])
 
@@ -88,8 +78,8 @@ def ratio_at_common_strain(out: dict[str, float], name: str, num: list[dict] | N
     origin prepended) and out[name + "_common_" + x] = that strain; both nan when a curve is missing."""
     out[name] = out[f"{name}_common_{x}"] = math.nan
     if num and den:
-        Xn, Yn = _xy(num, x, y)
-        Xd, Yd = _xy(den, x, y)
+        Xn, Yn = curve_xy(num, x, y)
+        Xd, Yd = curve_xy(den, x, y)
         e = min(Xn[-1], Xd[-1])
         out[name] = float(np.interp(e, Xn, Yn) / np.interp(e, Xd, Yd))
         out[f"{name}_common_{x}"] = float(e)
@@ -143,7 +133,7 @@ def trends(study_dir: str, end_faces: str = "uz_fixed") -> dict[str, float]:
     f25 = {**curves("fig24"), **curves("fig25")}  # the extension curve may sit in either figure
     ext, comp = find_curve(f25, "ti", "biaxial", end_faces=ef), find_curve(f25, "ti", "compression", end_faces=ef)
     if ext and comp:
-        E, S = _xy(ext, "E11", "S11")
+        E, S = curve_xy(ext, "E11", "S11")
         e_c, s_c = abs(comp[-1]["E11"]), abs(comp[-1]["S11"])
         if e_c <= E[-1]:
             out["compression_over_extension"] = s_c / float(np.interp(e_c, E, S))
@@ -180,7 +170,6 @@ def unit_cell_trends() -> list:
     with Timer() as t:
         study_dir = next((d for d in STUDY_DIRS if os.path.exists(os.path.join(d, "fig21.csv"))), None)
         if study_dir is None:
-            from fabricfem.study_unit_cell import run_study
             run_study(QUICK_DIR, quick=True)
             study_dir = QUICK_DIR
         v = trends(study_dir)

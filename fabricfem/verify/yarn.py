@@ -11,7 +11,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fabricfem.forms import yarn as yarn_forms
-from fabricfem.materials_yarn import THESIS_TRANSVERSELY_ISOTROPIC, EngineeringConstants, YarnMaterial, unit_axis
+from fabricfem.materials.yarn import THESIS_TRANSVERSELY_ISOTROPIC, EngineeringConstants, YarnMaterial, unit_axis
 from fabricfem.verify import Timer, case, result
 
 REFERENCE_POINT = np.array([[0.25, 0.25, 0.25]])  # any point of the reference tetrahedron (fields are constant)

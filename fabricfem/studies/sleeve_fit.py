@@ -50,7 +50,10 @@ from mpi4py import MPI
 
 from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
 from fabricfem.materials import positive_number
-from fabricfem.sleeve import SleeveConfig, SleeveHistory, SleeveStep, build_explicit, check_fit, run_explicit
+from fabricfem.wear.sleeve import SleeveConfig, SleeveHistory, SleeveStep, build_explicit, check_fit, run_explicit
+import ufl
+from dolfinx import fem
+from fabricfem.forms import shell as sf
 
 FIT_SCALES = (1.0, 1.04, 1.0771)
 DEFAULT_LONG_AXIS_FACTOR = 0.5      # r1 = L / 2: the arm of fabricfem.body.arm (no girth at the elbow)
@@ -91,9 +94,6 @@ def energy_split_forms(model, degrees: tuple[int, int] = (4, 2)) -> dict:
     """Compiled rank-0 forms of the membrane, bending and transverse-shear energies [J] of a Naghdi
     ShellModel with a linear bending law, PSRI-weighted exactly as forms.shell.naghdi_energy (seed 001
     eqs. 3-5): bending on the full quadrature, membrane and shear split alpha / (1 - alpha), alpha = t^2 / h^2."""
-    import ufl
-    from dolfinx import fem
-    from fabricfem.forms import shell as sf
     if model.model != "naghdi" or model.fabric.bending_law is not None or model.fabric.membrane_law is not None:
         raise ValueError("model: the energy split needs a Naghdi shell with linear membrane and bending laws")
     F0 = ufl.grad(model.phi0)
@@ -117,7 +117,6 @@ def energy_split_forms(model, degrees: tuple[int, int] = (4, 2)) -> dict:
 def energy_split(model, forms: dict, state=None) -> dict[str, float]:
     """Membrane, bending, shear energies [J] (all ranks) of `state` (a PETSc vector of the model's layout;
     None: the model's current state), and bending_share = bending / (membrane + bending + shear)."""
-    from dolfinx import fem
     if state is not None:
         model.set_state(state)
     out = {name: float(model.comm.allreduce(fem.assemble_scalar(form), op=MPI.SUM)) for name, form in forms.items()}
@@ -317,9 +316,9 @@ def _write(out: Path, rows, run_rows, curve_rows, mesh: str, prefix: str | None 
 
 def plot_fit(path: Path, curve_rows, rows, mesh: str) -> None:
     """One panel per arm (summary row): resisting torque [N m] vs elbow angle [deg] of the three cases."""
-    import matplotlib
+    import matplotlib  # optional heavy package, loaded only when a plot is drawn
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
     fig, axes = plt.subplots(1, len(rows), figsize=(4.2 * len(rows), 3.8), sharey=True, squeeze=False)
     for ax, row in zip(axes[0], rows):
         for label in FIT_CASES:

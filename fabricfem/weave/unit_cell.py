@@ -2,7 +2,7 @@
 
 A UnitCellMesh (meshes.unit_cell: quarter cell = option B, full cell = option A) of separate yarn
 bodies is loaded by the macroscopic deformation gradient Phi (y = Phi Y + u*, eq. 4.52) through the
-periodic UnitCellProblem (fabricfem.homogenize); the yarns interact by node-to-surface frictional
+periodic UnitCellProblem (fabricfem.weave.homogenize); the yarns interact by node-to-surface frictional
 contact (fabricfem.contact.yarn.YarnContact, symmetrized augmented Lagrangian of Box 7, Coulomb
 friction), whose forces and stiffness are added to the MPC-condensed residual and Jacobian. In each
 load step Newton solves with fixed multipliers, then Uzawa augmentations follow until the
@@ -100,8 +100,8 @@ from petsc4py import PETSc
 from fabricfem.contact.yarn import (ContactParameters, ContactReport, YarnContact, solve_with_contact,
                                     solve_with_fixed_sets)
 from fabricfem.forms.yarn import yarn_energy
-from fabricfem.homogenize import PeriodicPair, UnitCellProblem, green_lagrange
-from fabricfem.materials_yarn import YarnMaterial
+from fabricfem.weave.homogenize import PeriodicPair, UnitCellProblem, green_lagrange
+from fabricfem.materials.yarn import YarnMaterial
 from fabricfem.meshes.unit_cell import UnitCellMesh
 from fabricfem.solvers.newton import SolverError
 

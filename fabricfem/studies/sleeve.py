@@ -1,8 +1,8 @@
 """`fabricfem study sleeve`: the arm-sleeve parameter study of thesis sec. 5.3 (Figs. 37, 39, 42, 44-46).
 
-Each variant is one flexion (fabricfem.sleeve, explicit dynamics by default) giving a resisting-torque-vs-angle curve;
+Each variant is one flexion (fabricfem.wear.sleeve, explicit dynamics by default) giving a resisting-torque-vs-angle curve;
 each figure gets <out>/<figure>.csv (variant, angle_deg, torque_Nm, ...) and <out>/<figure>.png. Variants
-that stop before the final angle (blow-up or Newton failure, see fabricfem.sleeve) keep their partial curve and the
+that stop before the final angle (blow-up or Newton failure, see fabricfem.wear.sleeve) keep their partial curve and the
 reason is written to <out>/failures.csv. Independent variants are shared over the MPI ranks (each rank
 runs its variants on COMM_SELF). `quick` runs mesh I only, to 6 degrees (records at 3 and 6; test suite):
 its numbers are a reduced study, not the thesis's. `fine` / `meshes` choose the mesh of the parameter
@@ -33,7 +33,13 @@ import numpy as np
 from mpi4py import MPI
 
 from fabricfem.materials import positive_number
-from fabricfem.sleeve import SleeveConfig, SleeveHistory, plot_torque, run_sleeve
+from fabricfem.wear.outputs import plot_torque
+from fabricfem.wear.run import run_sleeve
+from fabricfem.wear.sleeve import SleeveConfig, SleeveHistory
+import hashlib
+from fabricfem.wear.sleeve import SleeveStep
+from fabricfem.wear.sleeve import build_explicit, run_explicit
+from fabricfem.wear.sleeve_implicit import build_implicit, run_implicit
 
 MESHES = {"I": (10, 13), "II": (15, 20), "III": (20, 26), "IV": (30, 39)}
 FABRICS = {"I": dict(E=1.2e6, G=1.2e6 / 200, density=436.0),       # thesis sec. 5.3.5, G = E / 200
@@ -189,7 +195,6 @@ PROGRESS_TAG = 4711
 
 def _variant_path(out: Path, cfg: SleeveConfig) -> Path:
     """Checkpoint of one finished variant: <out>/variants/<sha1 of the configuration>.csv."""
-    import hashlib
     key = hashlib.sha1(repr(sorted(asdict(cfg).items())).encode()).hexdigest()[:16]
     return Path(out) / "variants" / f"{key}.csv"
 
@@ -208,7 +213,6 @@ def _save_variant(out: Path, cfg: SleeveConfig, h: SleeveHistory):
 
 def _load_variant(out: Path, cfg: SleeveConfig) -> SleeveHistory | None:
     """The history saved by `_save_variant` for exactly this configuration, or None."""
-    from fabricfem.sleeve import SleeveStep
     path = _variant_path(out, cfg)
     if not path.exists():
         return None
@@ -309,7 +313,6 @@ def torque_bounce(angles: np.ndarray, torque: np.ndarray, window: int, from_angl
 
 
 def _run_method(method: str, base: SleeveConfig, comm: MPI.Comm, al_budget: float) -> dict:
-    from fabricfem.sleeve import build_explicit, run_explicit
     row = {"method": method, "route": METHODS[method], "ranks": comm.size}
     # CPU time of this process besides wall time: on the shared, oversubscribed machine the wall time includes
     # other people's load, the CPU time is the work of this method alone
@@ -327,7 +330,6 @@ def _run_method(method: str, base: SleeveConfig, comm: MPI.Comm, al_budget: floa
                    note=f"penetration every step; {h.failure}" if h.failure else "penetration monitored every step")
         problem.integrator.destroy()
     else:
-        from fabricfem.sleeve_implicit import build_implicit, run_implicit
         steps_per_degree = IMPLICIT_STEPS_PER_DEGREE
         cfg = base.with_(solver="implicit", method="augmented",
                          angle_steps=int(round(steps_per_degree * base.final_angle)))
@@ -357,7 +359,7 @@ def run_methods(out: str | Path = "results/sleeve_methods.csv", mesh: str = "III
     maximum penetration, torque at the final angle, bounce of the per-step torque (`torque_bounce`), wall time.
     Methods are shared over the ranks (each runs on COMM_SELF, as the study's variants); all three run with
     gravity and the settle phase (SleeveConfig defaults). The augmented-Lagrangian row is the implicit route
-    (fabricfem.sleeve_implicit: backward Euler with the same lumped mass, mass damping and gravity as the
+    (fabricfem.wear.sleeve_implicit: backward Euler with the same lumped mass, mass damping and gravity as the
     explicit rows, IMPLICIT_STEPS_PER_DEGREE steps per degree); it stops where a step fails below the minimum
     step or after `al_budget` seconds, and the row says at which angle (a measured fact, not an error).
     Each row has the wall and the CPU time (time.process_time) of its process. Writes `out` (CSV, rank 0)
@@ -419,5 +421,5 @@ def methods_markdown(rows: list[dict] | None = None, path: str | Path = "results
                  f"(OMP_NUM_THREADS=1). Wall time measured on a shared, oversubscribed 2-core machine (it includes "
                  f"other processes' load); CPU time is that of the method's own process (time.process_time). "
                  f"Bounce: RMS of the per-step elbow torque minus its centred 1-degree moving average, "
-                 f"{BOUNCE_FROM:g}-57 deg (fabricfem.study.torque_bounce).")
+                 f"{BOUNCE_FROM:g}-57 deg (fabricfem.studies.sleeve.torque_bounce).")
     return "\n".join(lines)

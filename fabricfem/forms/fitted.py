@@ -8,9 +8,9 @@ reference area [J/m^2] is a polynomial of the Voigt membrane strain eps = (E11, 
     W(eps) = sum_k c_k E11^a_k E22^b_k gamma12^p_k,   p_k even, a_k + b_k + p_k >= 2,
 
 so that W(0) = 0, the resultant N = dW/deps (N11, N22, N12 in N/m) vanishes at eps = 0 and
-W(E11, E22, -gamma12) = W(E11, E22, gamma12). fabricfem.fitted_law fits and stores the c_k.
+W(E11, E22, -gamma12) = W(E11, E22, gamma12). fabricfem.materials.fitted fits and stores the c_k.
 
-convex_ridge_energy is the law that is convex by construction (fabricfem.fitted_law.ConvexMembraneLaw):
+convex_ridge_energy is the law that is convex by construction (fabricfem.materials.fitted.ConvexMembraneLaw):
 
     W(eps) = 1/2 eps.A0.eps + sum_k c_k sum_(l in L_k) phi_k(l.eps),   c_k >= 0,
 

@@ -20,44 +20,20 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fabricfem import io
-from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
-from fabricfem.meshes import plate, tube
-from fabricfem.scene import Scene, SceneError
+from fabricfem.body.ellipsoid import Ellipsoid
+from fabricfem.scenes.build import build_fabric, build_mesh
+from fabricfem.scenes.schema import Scene, SceneError, donning_start
+from fabricfem.wear.compression import fit_sleeve, pressure_report
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.loadstep import LoadStep, solve_load_path
 from fabricfem.solvers.newton import NewtonSolver
-
-
-def build_fabric(spec: dict) -> Fabric:
-    law = None
-    kind = spec.get("bending_law")
-    if kind == "kawabata":
-        if "kawabata_coefficients" not in spec:
-            raise SceneError("fabric: bending_law = 'kawabata' needs kawabata_coefficients")
-        law = KawabataBending(tuple(float(a) for a in spec["kawabata_coefficients"]))
-    elif kind == "square_root":
-        if "B0" not in spec or "kappa0" not in spec:
-            raise SceneError("fabric: bending_law = 'square_root' needs B0 and kappa0")
-        law = SquareRootBending(float(spec["B0"]), float(spec["kappa0"]))
-    elif kind is not None:
-        raise SceneError(f"fabric.bending_law: unknown law {kind!r}; allowed: 'kawabata', 'square_root'")
-    rigidity = spec.get("bending_rigidity")
-    try:
-        return Fabric(E1=float(spec["E1"]), E2=float(spec["E2"]), G12=float(spec["G12"]), nu12=float(spec["nu12"]),
-                      thickness=float(spec["thickness"]), density=float(spec.get("density", 0.0)),
-                      G13=spec.get("G13"), bending_rigidity=tuple(rigidity) if rigidity else None,
-                      bending_law=law, name=spec.get("name", "fabric"))
-    except ValueError as exc:
-        raise SceneError(f"fabric: {exc}") from None
-
-
-def build_mesh(spec: dict, comm):
-    kind = spec["type"]
-    if kind == "plate":
-        return plate(spec["lx"], spec["ly"], spec["nx"], spec["ny"], cell=spec.get("cell", "quadrilateral"),
-                     structured=spec.get("structured", True), comm=comm)
-    return tube(spec["length"], spec["radius"], spec["n_around"], spec["n_along"],
-                cell=spec.get("cell", "quadrilateral"), order=spec.get("order", 1), comm=comm)
+from fabricfem.wear.run import run_sleeve_scene
+from fabricfem.contact.obstacles import Plane, RoundedBox, table_top
+from fabricfem.dynamics import CentralDifference, NewmarkIntegrator, critical_time_step
+from fabricfem.dynamics.ts import GeneralizedAlphaIntegrator
+from fabricfem.dynamics import node_monitor
+from fabricfem.dynamics.strain_limit import FastProjection, attach
+from fabricfem.contact.problem import ContactProblem
 
 
 def _components(values, n: int, where: str):
@@ -132,16 +108,14 @@ def build_model(scene: Scene, comm=MPI.COMM_WORLD, model_class: type = ShellMode
 
 
 def run_scene(scene: Scene, comm=MPI.COMM_WORLD):
-    """Run a scene: sleeve scenes (with [body]/[motion]/[contact]) go to fabricfem.sleeve, dynamic ones to
-    run_dynamic_scene, compression scenes (with [limb]) to fabricfem.compression, others are static
+    """Run a scene: sleeve scenes (with [body]/[motion]/[contact]) go to fabricfem.wear.sleeve, dynamic ones to
+    run_dynamic_scene, compression scenes (with [limb]) to fabricfem.wear.compression, others are static
     load-stepping scenes (returns the list of LoadStep)."""
     if "body" in scene.data:
-        from fabricfem.sleeve import run_sleeve_scene
         return run_sleeve_scene(scene, comm)
     if "dynamics" in scene.data:
         return run_dynamic_scene(scene, comm)
     if "limb" in scene.data:
-        from fabricfem.compression import run_compression_scene
         return run_compression_scene(scene, comm)
     return run_static_scene(scene, comm)
 
@@ -211,7 +185,6 @@ class ObstacleShell(ShellModel):
     contact = None
 
     def set_obstacles(self, obstacles: list, penalty: float | None = None):
-        from fabricfem.contact.problem import ContactProblem
         self.compile()
         self.contact = ContactProblem(self, obstacles, penalty=penalty)
 
@@ -239,8 +212,7 @@ class ObstacleShell(ShellModel):
 
 
 def build_obstacles(spec: list[dict]) -> list:
-    """Plane / RoundedBox obstacles of [[dynamics.obstacles]] (validated by fabricfem.scene), SI units."""
-    from fabricfem.contact.obstacles import Plane, RoundedBox, table_top
+    """Plane / RoundedBox obstacles of [[dynamics.obstacles]] (validated by fabricfem.scenes.schema), SI units."""
     out = []
     for i, o in enumerate(spec):
         try:
@@ -278,7 +250,6 @@ def _load_function(ramp_time: float):
 
 def build_integrator(spec: dict, model: ShellModel):
     """(integrator, n_steps, dt [s], dt_crit [s] or None) for a [dynamics] section; dt is end_time / n_steps."""
-    from fabricfem.dynamics import CentralDifference, NewmarkIntegrator, critical_time_step
     kind = spec["integrator"]
     end_time = float(spec["end_time"])
     rayleigh = tuple(float(c) for c in spec.get("rayleigh", (0.0, 0.0)))
@@ -299,7 +270,6 @@ def build_integrator(spec: dict, model: ShellModel):
                                        gamma=float(spec.get("gamma", 0.5)), lumped=bool(spec.get("lumped", False)),
                                        **common)
     else:
-        from fabricfem.dynamics.ts import GeneralizedAlphaIntegrator  # lazily: written separately
         integrator = GeneralizedAlphaIntegrator(model, dt, rho_inf=float(spec.get("rho_inf", 1.0)),
                                                 lumped=bool(spec.get("lumped", False)), **common)
     return integrator, n_steps, dt, dt_crit
@@ -332,7 +302,6 @@ def _max_displacement(model: ShellModel) -> float:
 
 def build_monitors(spec: list[dict], model: ShellModel, meter: _StrainMeter) -> dict:
     """{name: callable} of [[dynamics.monitors]] (point values on all ranks, global quantities)."""
-    from fabricfem.dynamics import node_monitor
     quantities = {"max_warp_strain": lambda: meter.summary()["max_warp"],
                   "max_weft_strain": lambda: meter.summary()["max_weft"],
                   "mean_warp_strain": lambda: meter.summary()["mean_warp"],
@@ -367,7 +336,6 @@ def _progress(comm, n_steps: int, say):
 
 def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD) -> DynamicRun:
     """Integrate a [dynamics] scene from rest to end_time; write <name>.xdmf/.csv/.png/_summary.json."""
-    from fabricfem.dynamics.strain_limit import FastProjection, attach
     say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
     spec = scene["dynamics"]
     name = scene_name(scene)
@@ -431,3 +399,31 @@ def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD) -> DynamicRun:
     integrator.destroy()
     projection.destroy()
     return DynamicRun(history, n_steps, dt, dt_crit, wall, memory["max_mib"], summary, outputs)
+
+
+def run_compression_scene(scene, comm=MPI.COMM_WORLD) -> dict | None:
+    """`fabricfem run` for compression scenes ([limb], optional [donning], fabricfem.scenes.schema): don the tube onto the
+    limb with progress lines (rank 0) and write `pressure_report` into output.dir (default results/<name>)."""
+    say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
+    fabric = build_fabric(scene["fabric"])                       # before meshing: a bad fabric fails fast
+    limb = Ellipsoid(np.array(scene["limb"]["center"], dtype=float), np.eye(3),
+                     np.array(scene["limb"]["radii"], dtype=float))
+    donning = scene.get("donning", {})
+    name = scene.get("scene", {}).get("name", "compression")
+    out = Path(scene.get("output", {}).get("dir", f"results/{name}"))
+    fmesh = build_mesh(scene["mesh"], comm)
+    start, steps = donning_start(scene.data), int(donning.get("steps", 10))
+    say(f"{name}: tube R = {scene['mesh']['radius']} m on a limb of radii {limb.radii.tolist()} m, growing from "
+        f"{start:.3g} of its size in {steps} steps, {comm.size} rank(s)")
+    problem = fit_sleeve(fmesh, fabric, limb, start, steps, float(donning.get("tolerance", 1e-7)),
+                         on_step=lambda s: say(f"  limb at {s.factor:5.3f}: {s.augmentations} augmentations, "
+                                               f"{s.newton_iterations} Newton iterations, penetration "
+                                               f"{s.max_penetration:.1e} m"))
+    summary = pressure_report(problem, limb, out, name, render=scene.get("output", {}).get("render", True))
+    if summary is not None:
+        say(f"{name}: pressure on the skin {summary['min_mmHg']:.1f}-{summary['max_mmHg']:.1f} mmHg (ring means "
+            f"{summary['ring_min_mmHg']:.1f}-{summary['ring_max_mmHg']:.1f} mmHg); ring nearest the limb's centre: "
+            f"p = T kappa, T = {summary['hoop_tension']:.1f} N/m, largest deviation "
+            f"{100 * summary['laplace_deviation']:.2f}% of its peak; wrote {out}/sleeve.xdmf, pressure.png, "
+            f"pressure_profile.csv/.png")
+    return summary

@@ -60,9 +60,9 @@ def rollup_profile(out: str = "results/bench", meshes=(20, 40, 80, 160), repeats
     keys = list(rows[0])
     io.write_csv(out / "rollup_profile.csv", keys, [[r[k] for k in keys] for r in rows])
     if MPI.COMM_WORLD.rank == 0:
-        import matplotlib
+        import matplotlib  # optional heavy package, loaded only when a plot is drawn
         matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
+        import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
         fig, ax = plt.subplots(figsize=(7, 4))
         labels = [f"{int(r['ndofs'])}" for r in rows]
         bottom = np.zeros(len(rows))

@@ -240,7 +240,7 @@ class UnitCellProblem:
         pins: optional [(point (3,) [m], components), ...]: u*_c = 0 at the mesh vertex `point` for each
             component c in `components` (0, 1, 2), instead of the single fully pinned vertex nearest the
             cell centre. Needed for cells of several bodies (yarns without bonded contact): each body's
-            rigid modes left free by the periodicity must be removed (fabricfem.unit_cell_contact pins
+            rigid modes left free by the periodicity must be removed (fabricfem.weave.unit_cell pins
             them at points where the weave's symmetry makes that component of u* vanish anyway).
         fixed_facets: optional [(facet tag, components), ...]: u*_c = 0 on every vertex of the tagged
             facets for each c in `components` (e.g. u*_z = 0 on the yarn end faces, thesis sec. 4.3.5.3);

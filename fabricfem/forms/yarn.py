@@ -2,7 +2,7 @@
 
 Energies are per unit reference volume [Pa]; C = F^T F is the right Cauchy-Green tensor, A the unit
 yarn axis in the reference configuration, I4 = A.C A, I5 = A.C^2 A. Parameters (lmbda, mu, alpha,
-beta, gamma) are floats or fem.Constant in Pa; see fabricfem.materials_yarn for their validation
+beta, gamma) are floats or fem.Constant in Pa; see fabricfem.materials.yarn for their validation
 and for the conversion from engineering constants.
 
 Usage: C = ufl.variable(F.T * F); S = second_piola_kirchhoff(yarn_energy(C, A, params), C).

@@ -35,7 +35,7 @@ Solution routes (SleeveConfig.solver, scene key motion.solver):
   fails is undone and split in two (down to `min_angle_step`), otherwise `SleeveError` names the angle. It
   stalls where the tube buckles (20.25 deg at mu = 0.1, 17 deg at mu = 0.5 on mesh I) and is kept as the
   static reference of the explicit route at small angles and for the moment-balance test.
-* "implicit" (fabricfem.sleeve_implicit): the explicit route's equations (lumped mass, mass damping, gravity,
+* "implicit" (fabricfem.wear.sleeve_implicit): the explicit route's equations (lumped mass, mass damping, gravity,
   rest, flexion) by backward Euler, steps of angle_step / omega solved by Newton with the augmented Lagrangian
   (Uzawa updates, eq. 3.69) or penalty; the inertia and damping regularise the buckling steps (it reaches 57 deg).
 
@@ -94,6 +94,10 @@ from fabricfem.materials import Fabric
 from fabricfem.meshes import tube
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.newton import NewtonSolver, SolverError
+from fabricfem.body.motion import rotation_about
+from fabricfem.dynamics import stability
+from fabricfem.fabrics import load_fabric
+from fabricfem.dynamics.stability import plane_stress_wave_speed
 
 GRAVITY = 9.81                       # m/s^2
 ELBOW_AXIS = (0.0, 0.0, 1.0)          # flexion axis of the default arm
@@ -112,7 +116,7 @@ class Stabilized:
     Wraps a ContactProblem with the callback interface the NewtonSolver expects.
 
     General form (a nodal spring to an anchor): r_i = c w_i (x_i - a_i) with per-node `weights` w_i (default
-    the lumped areas [m^2]) and the anchor a_i set by `commit` (here x^n). fabricfem.sleeve_implicit subclasses it
+    the lumped areas [m^2]) and the anchor a_i set by `commit` (here x^n). fabricfem.wear.sleeve_implicit subclasses it
     for the backward-Euler inertia and mass damping (w_i = lumped mass [kg], a_i from x^n and v^n).
     """
 
@@ -252,7 +256,7 @@ class SleeveConfig:
     density: float = 436.0               # kg/m^3
     friction: float = 0.1                # Coulomb mu
     solver: str = "explicit"             # explicit (central differences, default) | quasistatic (Newton) |
-                                         # implicit (backward Euler + Newton, fabricfem.sleeve_implicit)
+                                         # implicit (backward Euler + Newton, fabricfem.wear.sleeve_implicit)
     method: str | None = None            # contact: explicit lagrange (default) | penalty; quasistatic penalty
                                          # (default) | augmented
     mass_damping: float = 10.0           # 1/s, explicit: Rayleigh alpha of C = alpha M (see run_explicit)
@@ -302,7 +306,7 @@ class SleeveConfig:
         if not (isinstance(self.friction, (int, float)) and math.isfinite(self.friction) and self.friction >= 0.0):
             raise ValueError(f"friction must be a number >= 0, got {self.friction!r}")
         methods = {"explicit": ("lagrange", "penalty"), "quasistatic": ("penalty", "augmented"),
-                   "implicit": ("augmented", "penalty")}   # implicit: fabricfem.sleeve_implicit (backward Euler)
+                   "implicit": ("augmented", "penalty")}   # implicit: fabricfem.wear.sleeve_implicit (backward Euler)
         if self.solver not in methods:
             raise ValueError(f"solver must be one of {tuple(methods)}, got {self.solver!r}")
         if self.method is None:
@@ -352,7 +356,6 @@ class SleeveConfig:
 
     def _load_stored_fabric(self) -> None:
         """Load `fabric_name` once (cached on the frozen instance); ValueError naming fabric_name otherwise."""
-        from fabricfem.fabrics import load_fabric
         if not (isinstance(self.fabric_name, str) and self.fabric_name):
             raise ValueError(f"fabric_name must be the name of a stored fabric (or a .json path) or None, "
                              f"got {self.fabric_name!r}")
@@ -369,7 +372,6 @@ class SleeveConfig:
     def wave_speed(self) -> float:
         """c = sqrt(E_max / (rho (1 - nu12 nu21))) [m/s], the membrane wave speed of the fabric (thesis eq. 2.87,
         sqrt(E / rho) for the study's nu12 = 0); for a stored fabric its (small-strain) moduli and density."""
-        from fabricfem.dynamics.stability import plane_stress_wave_speed
         fabric = self.fabric
         return plane_stress_wave_speed(fabric) if fabric.density > 0.0 else math.inf
 
@@ -416,7 +418,7 @@ class SleeveConfig:
     @property
     def fabric(self) -> Fabric:
         """The sleeve's fabric: the stored fabric `fabric_name` (fabricfem.fabrics.load_fabric; a fitted membrane
-        law keeps its small-strain E1, E2, G12 from fabricfem.fitted_law.fitted_fabric) when set, otherwise the
+        law keeps its small-strain E1, E2, G12 from fabricfem.materials.fitted.fitted_fabric) when set, otherwise the
         orthotropic St. Venant-Kirchhoff fabric of the fields E, G, nu12, thickness, density."""
         if self.fabric_name is not None:
             return self.__dict__["_stored_fabric"]
@@ -657,7 +659,6 @@ def _predict(problem: SleeveProblem, angle_from: float, angle_to: float, touchin
     moving = (s.segment == names.index("forearm")) & (s.gap < touching) & contact._free.all(axis=1)
     if not moving.any():
         return
-    from fabricfem.body.motion import rotation_about
     elbow = problem.body.joint_position("elbow", contact.time)
     rotation = rotation_about(ELBOW_AXIS, math.radians(angle_to - angle_from))
     x_new = elbow + (s.position[moving] - elbow) @ rotation.T
@@ -761,28 +762,6 @@ def run_quasistatic(problem: SleeveProblem, angles: np.ndarray | None = None,
     return history
 
 
-def run_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
-               on_step: Callable[[SleeveStep], None] | None = None, stop_on_failure: bool = True) -> SleeveHistory:
-    """Build and flex one sleeve configuration (config.solver: explicit, implicit or quasistatic); returns its
-    torque history."""
-    t0 = time.perf_counter()
-    if config.solver == "implicit":
-        from fabricfem.sleeve_implicit import build_implicit, run_implicit   # imports this module
-        problem = build_implicit(config, comm)
-        history = run_implicit(problem, on_step=on_step, stop_on_failure=stop_on_failure)
-        problem.solver.destroy()
-    elif config.solver == "explicit":
-        problem = build_explicit(config, comm)
-        history = run_explicit(problem, on_step=on_step, stop_on_failure=stop_on_failure)
-        problem.integrator.destroy()
-    else:
-        problem = build_sleeve(config, comm)
-        history = run_quasistatic(problem, on_step=on_step, stop_on_failure=stop_on_failure)
-        problem.solver.destroy()
-    history.wall = time.perf_counter() - t0
-    return history
-
-
 # ---------------------------------------------------------------------------------------- explicit route
 @dataclass
 class ExplicitSleeve:
@@ -813,7 +792,6 @@ def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> Exp
     with omega_shell from fabricfem.dynamics.stability for rotary-inertia scale s and omega_p the penalty
     spring's frequency (0 for Lagrange multipliers), reduced for the mass damping, then shortened so that
     every record interval (output_angle_step degrees) holds a whole number of steps."""
-    from fabricfem.dynamics import stability
     if config.fabric.density <= 0.0:
         raise ValueError("density: the explicit sleeve needs a positive fabric density [kg/m^3]")
     model = sleeve_shell(config, comm)
@@ -974,7 +952,7 @@ def config_dict(config: SleeveConfig) -> dict:
 
 
 def config_from_scene(scene) -> SleeveConfig:
-    """SleeveConfig of a validated sleeve scene (fabricfem.scene); ValueError naming the key otherwise."""
+    """SleeveConfig of a validated sleeve scene (fabricfem.scenes.schema); ValueError naming the key otherwise."""
     mesh, fabric = scene["mesh"], scene["fabric"]
     motion, contact, body = scene["motion"], scene["contact"], scene["body"]
     if fabric["E1"] != fabric["E2"]:
@@ -1003,156 +981,3 @@ def config_from_scene(scene) -> SleeveConfig:
     if "dynamic_similarity" in motion:
         kw["dynamic_similarity"] = bool(motion["dynamic_similarity"])
     return SleeveConfig(**kw)
-
-
-# ---------------------------------------------------------------------------------------------- outputs
-def body_surface(ellipsoids, samples: int = 24) -> tuple[np.ndarray, np.ndarray]:
-    """Triangulated surfaces of posed ellipsoids: (points (n, 3) [m], triangles (m, 3))."""
-    points, cells, offset = [], [], 0
-    n_theta, n_phi = samples, 2 * samples
-    for e in ellipsoids:
-        pts = e.surface_points(n_theta, n_phi)
-        i, j = np.meshgrid(np.arange(n_theta - 1), np.arange(n_phi), indexing="ij")
-        a = i * n_phi + j
-        b = i * n_phi + (j + 1) % n_phi
-        c, d = a + n_phi, b + n_phi
-        tri = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([b, d, c], -1).reshape(-1, 3)])
-        points.append(pts.reshape(-1, 3))
-        cells.append(tri + offset)
-        offset += len(points[-1])
-    return np.concatenate(points), np.concatenate(cells)
-
-
-def plot_torque(path, curves: dict[str, tuple[np.ndarray, np.ndarray]], title: str = ""):
-    """Resisting torque [N m] vs elbow angle [deg] for named curves (PNG, rank 0)."""
-    if MPI.COMM_WORLD.rank != 0:
-        return
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from pathlib import Path
-    fig, ax = plt.subplots(figsize=(6, 4))
-    for label, (angle, torque) in curves.items():
-        ax.plot(angle, torque, marker="o", ms=3, label=label)
-    ax.set_xlabel("elbow flexion angle [deg]")
-    ax.set_ylabel("resisting torque [N m]")
-    ax.set_title(title)
-    ax.grid(True, alpha=0.3)
-    ax.legend()
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
-
-
-def _posed(problem, angle: float) -> list:
-    """The arm's ellipsoids at elbow angle `angle` [deg]."""
-    t = problem.flexion.t_start + math.radians(angle) / problem.flexion.angular_velocity
-    return list(problem.body.pose(t).values())
-
-
-def _render_pressure(path, problem, title: str, angle: float):
-    """Deformed sleeve coloured by contact pressure [Pa] with the posed arm (pyvista, off-screen)."""
-    from fabricfem import io as fio
-    mesh = problem.model.mesh
-    surface = fio.gather_surface(mesh, problem.model.displacement())
-    values = fio.gather_field(mesh, problem.contact.pressure_field())
-    if problem.comm.rank == 0:
-        fio.render_field(path, surface, values, f"{title}, contact pressure [Pa]",
-                         bodies=[body_surface(_posed(problem, angle))])
-
-
-def run_sleeve_scene(scene, comm: MPI.Comm = MPI.COMM_WORLD) -> SleeveHistory:
-    """`fabricfem run` for sleeve scenes: flex the arm and write, under output.dir,
-    cloth.xdmf (sleeve displacement and contact pressure per angle), body_NNNN.vtp + body.pvd (arm surfaces
-    per angle), torque.csv (resisting elbow torque vs angle), torque.png and pressure_<angle>.png renders."""
-    from pathlib import Path
-    from dolfinx import fem as dfem
-    from dolfinx import io as dio
-    from fabricfem import io as fio
-    say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
-    config = config_from_scene(scene)
-    output = scene.get("output", {})
-    out = Path(output.get("dir", f"results/{config.name}"))
-    render = output.get("render", True)
-    render_angles = [float(a) for a in output.get("render_angles", [config.final_angle / 3,
-                                                                    2 * config.final_angle / 3,
-                                                                    config.final_angle])]
-    samples = int(output.get("body_samples", 24))
-    t0 = time.perf_counter()
-    explicit = config.solver == "explicit"
-    problem = build_explicit(config, comm) if explicit else build_sleeve(config, comm)
-    route = (f"explicit central differences, dt = {problem.dt:.3g} s (estimated critical step {problem.dt_estimate:.3g} s "
-             f"with rotary-inertia scale {config.rotary_inertia_scale:g}, {problem.dt_estimate_unscaled:.3g} s without), "
-             f"mass damping {config.damping:g} 1/s, records every {config.output_angle_step:g} deg"
-             + (f", dynamic similarity: flexion at {config.flexion_speed:.4g} deg/s (c / c_ref = "
-                f"{config.similarity_factor:.4g})" if config.dynamic_similarity else "")
-             if explicit else f"{config.angle_steps} quasi-static steps")
-    say(f"sleeve: {config.n_around} x {config.n_along} Q2 tube, {problem.model.ndofs} dofs, {comm.size} rank(s); "
-        f"mu = {config.friction}, {config.method} contact, gravity {'on' if config.gravity else 'off'}; "
-        f"flexion to {config.final_angle} deg by {route}")
-    if comm.rank == 0:
-        out.mkdir(parents=True, exist_ok=True)
-    comm.barrier()
-    V2 = problem.model.V2
-    u_out = dfem.Function(V2, name="displacement")
-    P = dfem.FunctionSpace(problem.model.mesh, ("Lagrange", 2))
-    p_out = dfem.Function(P, name="contact_pressure")
-    xdmf = dio.XDMFFile(comm, str(out / "cloth.xdmf"), "w")
-    xdmf.write_mesh(problem.model.mesh)
-    frames: list[tuple[float, str]] = []
-    pending = sorted(render_angles)
-
-    def on_step(step: SleeveStep):
-        u_out.interpolate(problem.model.displacement())
-        p_out.interpolate(problem.contact.pressure_field())   # explicit: time-averaged over the record
-        xdmf.write_function(u_out, step.angle)
-        xdmf.write_function(p_out, step.angle)
-        if comm.rank == 0:
-            import pyvista as pv
-            bp, bc = body_surface(_posed(problem, step.angle), samples)
-            name = f"body_{len(frames):04d}.vtp"
-            pv.PolyData(bp, np.hstack([np.full((len(bc), 1), 3), bc]).ravel()).save(str(out / name))
-            frames.append((step.angle, name))
-        while render and pending and step.angle >= pending[0] - 1e-9:
-            angle = pending.pop(0)
-            _render_pressure(out / f"pressure_{angle:04.1f}deg.png", problem,
-                             f"{config.name}: elbow {step.angle:.1f} deg, contact pressure [Pa]", step.angle)
-        done = step.angle / config.final_angle
-        elapsed = time.perf_counter() - t0
-        eta = elapsed * (1 - done) / max(done, 1e-12) if done > 0 else float("nan")
-        work = (f"steps {step.time_steps:5d}  KE/SE {step.kinetic_energy / step.strain_energy if step.strain_energy else 0:.1e}"
-                if explicit else f"Newton {step.newton_iterations:3d}")
-        say(f"  angle {step.angle:6.2f} deg  torque {step.torque:+.4e} N m  {work}  "
-            f"penetration {step.max_penetration:.1e} m  [{done:5.1%}, {elapsed:6.1f} s, about {eta:6.1f} s left]")
-
-    runner = run_explicit if explicit else run_quasistatic
-    history = runner(problem, on_step=on_step, stop_on_failure=False)
-    xdmf.close()
-    history.wall = time.perf_counter() - t0
-    fio.write_csv(out / "torque.csv", SleeveHistory.HEADER, history.rows(), comm)
-    if comm.rank == 0:
-        with open(out / "body.pvd", "w") as f:
-            f.write('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n<Collection>\n')
-            for angle, name in frames:
-                f.write(f'  <DataSet timestep="{angle}" file="{name}"/>\n')
-            f.write("</Collection>\n</VTKFile>\n")
-    plot_torque(out / "torque.png", {f"mu = {config.friction}": (history.angles, history.torques)},
-                f"{config.name}: elbow resisting torque")
-    if explicit:
-        problem.integrator.destroy()
-    else:
-        problem.solver.destroy()
-    last = history.steps[-1]
-    work = (f"{sum(s.time_steps for s in history.steps)} explicit steps, largest KE/SE {history.kinetic_ratio():.2e}"
-            if explicit else f"{sum(s.newton_iterations for s in history.steps)} Newton iterations")
-    say(f"done: {len(history.steps) - 1} records to {last.angle:.2f} deg, {work}, {history.wall:.1f} s; "
-        f"torque at {last.angle:.2f} deg: {last.torque:.4e} N m; largest penetration "
-        f"{max(s.max_penetration for s in history.steps):.2e} m; start clearance {history.initial_gap * 1e3:.2f} mm")
-    if explicit and "ms_per_step" in history.timings:
-        say(f"time per part: {format_breakdown(history.timings)}")
-    if history.failure:
-        say(f"STOPPED EARLY: {history.failure}")
-    say(f"wrote {out}/cloth.xdmf, body.pvd (+ body_*.vtp), torque.csv, torque.png"
-        + (", pressure_*.png" if render else ""))
-    return history

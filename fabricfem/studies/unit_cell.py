@@ -38,11 +38,14 @@ from dataclasses import dataclass
 import numpy as np
 from mpi4py import MPI
 
-from fabricfem.materials_yarn import THESIS_ISOTROPIC, THESIS_TRANSVERSELY_ISOTROPIC, YarnMaterial
+from fabricfem.materials.yarn import THESIS_ISOTROPIC, THESIS_TRANSVERSELY_ISOTROPIC, YarnMaterial
 from fabricfem.meshes.unit_cell import unit_cell
 from fabricfem.meshes.yarn_geometry import PlainWeave
 from fabricfem.solvers.newton import SolverError
-from fabricfem.unit_cell_contact import ContactUnitCell, contact_table
+from fabricfem.weave.unit_cell import ContactUnitCell, contact_table
+from dolfinx import fem, io, plot
+import glob
+import re
 
 MATERIALS: dict[str, YarnMaterial] = {"iso": THESIS_ISOTROPIC, "ti": THESIS_TRANSVERSELY_ISOTROPIC}
 PRESTRETCH = 1.02  # Phi11 = Phi22 before shear ("a small biaxial pre-stretching", sec. 4.3.5.1)
@@ -52,6 +55,18 @@ THESIS_END_FACES = "uz_fixed"  # sec. 4.3.5.3, see the module docstring
 # penalty growth of fabricfem.contact.yarn.solve_with_contact), 1200 s lets that path go on
 TIME_BUDGET = {("quarter", "coarse"): 600.0, ("full", "coarse"): 1200.0, ("quarter", "fine"): 300.0,
                ("full", "fine"): 300.0}
+
+
+def curve_xy(rows: list[dict], x: str, y: str) -> tuple[np.ndarray, np.ndarray]:
+    """Curve with the origin prepended (the unloaded cell has S = 0 at E = 0)."""
+    return np.array([0.0] + [r[x] for r in rows]), np.array([0.0] + [r[y] for r in rows])
+
+
+def secant_spread(rows: list[dict]) -> float:
+    """max |S11/E11 / mean - 1| over the steps."""
+    E, S = curve_xy(rows, "E11", "S11")
+    sec = S[1:] / E[1:]
+    return float(np.max(np.abs(sec / sec.mean() - 1.0)))
 
 
 def load_targets(load: str, scale: float = 1.0) -> list[tuple[np.ndarray, int]]:
@@ -107,7 +122,6 @@ def write_snapshot(model: ContactUnitCell, path: str) -> None:
     """Deformed state of a solved cell: `path`.xdmf (mesh, `displacement` = (Phi - I) X + u* [m] and
     the fluctuation u* [m]; collective) and, in serial runs, `path`.npz with the yarn boundary surface
     (reference points [m], displacement [m], VTK faces, yarn tag per face) for render_configuration."""
-    from dolfinx import fem, io, plot
     u = model.problem.u
     V = u.function_space
     Phi = np.asarray(model.Phi, dtype=float)
@@ -121,7 +135,7 @@ def write_snapshot(model: ContactUnitCell, path: str) -> None:
         xdmf.write_function(u)
     if mesh.comm.size > 1:
         return  # the surface render is serial only (no gather of the distributed surface)
-    import pyvista
+    import pyvista  # optional heavy package, loaded only when a render is made
     topology, cell_types, points = plot.create_vtk_mesh(V)
     grid = pyvista.UnstructuredGrid(topology, cell_types, points)
     n_cells = mesh.topology.index_map(3).size_local
@@ -146,7 +160,7 @@ def render_configuration(npz_path: str, png_path: str, title: str) -> str:
     Phi = data["Phi"]
     title = f"{title} (Phi11 = {Phi[0, 0]:.4f}, Phi22 = {Phi[1, 1]:.4f}, Phi12 = {Phi[0, 1]:.4f})"
     try:
-        import pyvista
+        import pyvista  # optional heavy package, loaded only when a render is made
         pyvista.OFF_SCREEN = True
         plotter = pyvista.Plotter(off_screen=True, shape=(1, 2), window_size=(1400, 650))
         for col, (name, pts) in enumerate((("undeformed", points), ("deformed", points + disp))):
@@ -165,10 +179,10 @@ def render_configuration(npz_path: str, png_path: str, title: str) -> str:
         return "pyvista"
     except Exception as exc:  # no rendering context: matplotlib fallback
         print(f"render_configuration: pyvista failed ({exc}); matplotlib fallback")
-    import matplotlib
+    import matplotlib  # optional heavy package, loaded only when a plot is drawn
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+    import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # optional heavy package, loaded only when a plot is drawn
     quads = faces.reshape(-1, 5)[:, 1:] if np.all(faces[::5] == 4) else None
     if quads is None:
         raise ValueError(f"npz_path: {npz_path} holds non-quadrilateral faces")
@@ -281,9 +295,9 @@ def _write_csv(path: str, runs: list[Run]) -> None:
 
 
 def _plot(path: str, title: str, x: str, ys: list[str], runs: list[Run]) -> None:
-    import matplotlib
+    import matplotlib  # optional heavy package, loaded only when a plot is drawn
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
     fig, ax = plt.subplots(figsize=(6.4, 4.6))
     colours = plt.cm.tab10.colors
     for k, run in enumerate(runs):  # one colour per load case; S11/S12 dots, S22 crosses
@@ -308,8 +322,6 @@ def previous_runs(folder: str) -> dict[RunKey, Run]:
     folder (rows, stopped reason, wall time, dofs and the report table as written then). Keys come from
     the CSV columns (end_faces missing = "periodic", the only condition of the oldest studies), so
     curves are found whatever label format wrote them."""
-    import glob
-    import re
     by_label: dict[str, Run] = {}
     fields = ("E11", "E22", "E12", "S11", "S22", "S12", "newton", "augmentations", "penetration", "normal_force",
               "tangential_force", "active", "wall_s", "contact_s", "pin_reaction", "min_det_F", "sub_increments")
@@ -416,7 +428,6 @@ def geometry_sensitivity(out: str = "docs/figures/unit_cell", crimps: tuple[floa
     and end-face condition. Writes out/geometry_sensitivity.csv (one row per run: geometry, checks,
     E11 at first contact) and .png; returns the rows. A map, not a calibration: the study keeps the
     default crimp."""
-    from fabricfem.verify.unit_cell_trends import secant_spread
     rows = []
     nan = math.nan
     for crimp in crimps:
@@ -468,9 +479,9 @@ def _plot_sensitivity(path: str, rows: list[dict]) -> None:
     """Checks 1-2 against the crimp (left, middle) and the S11(E11) curves (right: colour = crimp,
     solid = ends u_z = 0, dashed = periodic, circle = biaxial, square = uniaxial); infeasible crimps
     are named in the title."""
-    import matplotlib
+    import matplotlib  # optional heavy package, loaded only when a plot is drawn
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
     fig, axes = plt.subplots(1, 3, figsize=(14, 4.6))
     styles = {"uz_fixed": "-", "periodic": "--"}
     markers = {"biaxial": "o", "uniaxial": "s"}

@@ -42,6 +42,9 @@ from fabricfem.materials import Fabric
 from fabricfem.meshes._validate import choice, count, positive
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.newton import NewtonSolver, SolverError
+from dolfinx import io
+from fabricfem import io as fio
+from fabricfem.wear.outputs import body_surface
 
 PA_PER_MMHG = 133.322387415      # Pa
 
@@ -169,10 +172,7 @@ def pressure_report(problem: ContactProblem, limb: Ellipsoid, out: Path, title: 
     pressure_profile.csv / .png (ring-mean pressure along x; p against the section curvature at the ring
     nearest the limb's centre, with the least-squares Laplace fit p = T kappa). Returns on rank 0 the
     pressure range and ring means [mmHg], T [N/m] and the largest deviation from T kappa / the peak there."""
-    from dolfinx import io
 
-    from fabricfem import io as fio
-    from fabricfem.sleeve import body_surface
     comm, model = problem.comm, problem.model
     out = Path(out)
     if comm.rank == 0:
@@ -206,9 +206,9 @@ def pressure_report(problem: ContactProblem, limb: Ellipsoid, out: Path, title: 
     deviation = float(np.max(np.abs(p[widest] - tension * kappa)) / np.max(p[widest]))
     fio.write_csv(out / "pressure_profile.csv", ["x_m", "ring_mean_pressure_mmHg"],
                   np.column_stack([ring_x, ring_p]), MPI.COMM_SELF)
-    import matplotlib
+    import matplotlib  # optional heavy package, loaded only when a plot is drawn
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
     fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4))
     left.plot(ring_x * 1e3, ring_p, "o-")
     left.set(xlabel="x along the limb [mm]", ylabel="ring-mean pressure [mmHg]", title="along the limb")
@@ -224,33 +224,3 @@ def pressure_report(problem: ContactProblem, limb: Ellipsoid, out: Path, title: 
     return {"min_mmHg": float(p.min()), "max_mmHg": float(p.max()), "ring_min_mmHg": float(ring_p.min()),
             "ring_max_mmHg": float(ring_p.max()), "hoop_tension": tension * PA_PER_MMHG,
             "laplace_deviation": deviation}
-
-
-def run_compression_scene(scene, comm=MPI.COMM_WORLD) -> dict | None:
-    """`fabricfem run` for compression scenes ([limb], optional [donning], fabricfem.scene): don the tube onto the
-    limb with progress lines (rank 0) and write `pressure_report` into output.dir (default results/<name>)."""
-    from fabricfem.run import build_fabric, build_mesh
-    from fabricfem.scene import donning_start
-    say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
-    fabric = build_fabric(scene["fabric"])                       # before meshing: a bad fabric fails fast
-    limb = Ellipsoid(np.array(scene["limb"]["center"], dtype=float), np.eye(3),
-                     np.array(scene["limb"]["radii"], dtype=float))
-    donning = scene.get("donning", {})
-    name = scene.get("scene", {}).get("name", "compression")
-    out = Path(scene.get("output", {}).get("dir", f"results/{name}"))
-    fmesh = build_mesh(scene["mesh"], comm)
-    start, steps = donning_start(scene.data), int(donning.get("steps", 10))
-    say(f"{name}: tube R = {scene['mesh']['radius']} m on a limb of radii {limb.radii.tolist()} m, growing from "
-        f"{start:.3g} of its size in {steps} steps, {comm.size} rank(s)")
-    problem = fit_sleeve(fmesh, fabric, limb, start, steps, float(donning.get("tolerance", 1e-7)),
-                         on_step=lambda s: say(f"  limb at {s.factor:5.3f}: {s.augmentations} augmentations, "
-                                               f"{s.newton_iterations} Newton iterations, penetration "
-                                               f"{s.max_penetration:.1e} m"))
-    summary = pressure_report(problem, limb, out, name, render=scene.get("output", {}).get("render", True))
-    if summary is not None:
-        say(f"{name}: pressure on the skin {summary['min_mmHg']:.1f}-{summary['max_mmHg']:.1f} mmHg (ring means "
-            f"{summary['ring_min_mmHg']:.1f}-{summary['ring_max_mmHg']:.1f} mmHg); ring nearest the limb's centre: "
-            f"p = T kappa, T = {summary['hoop_tension']:.1f} N/m, largest deviation "
-            f"{100 * summary['laplace_deviation']:.2f}% of its peak; wrote {out}/sleeve.xdmf, pressure.png, "
-            f"pressure_profile.csv/.png")
-    return summary

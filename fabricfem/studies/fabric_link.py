@@ -15,7 +15,7 @@ torques N m, lengths m):
   2. samples: `contact_grid_paths` (biaxial ratios and shear at three pre-stretches), each path opened
      by a small first increment (a small-strain sample), every converged step a sample; fit
      (`fit_contact_law`: by default the law convex at every strain by construction,
-     fabricfem.fitted_law.ConvexMembraneLaw), store as fabricfem/fabrics/plain-weave-ti-contact.json.
+     fabricfem.materials.fitted.ConvexMembraneLaw), store as fabricfem/fabrics/plain-weave-ti-contact.json.
   3. strip comparison (`strip_against_unit_cell`): membrane strip in uniaxial tension with the fitted law,
      then the unit cell driven along the strip's strain path (E11, E22).
   4. sleeve flexion with the unit-cell fabric vs an orthotropic SVK fabric of the same small-strain
@@ -34,23 +34,30 @@ import numpy as np
 from mpi4py import MPI
 from scipy.optimize import brentq
 
-from fabricfem.fitted_law import ConvexMembraneLaw, FittedMembraneLaw, MembraneSamples, fit_convex_law, \
+from fabricfem.materials.fitted import ConvexMembraneLaw, FittedMembraneLaw, MembraneSamples, fit_convex_law, \
     fit_membrane_law, fitted_fabric, samples_from_steps
 from fabricfem.materials import Fabric
 from fabricfem.meshes.unit_cell import unit_cell
 from fabricfem.meshes.yarn_geometry import PlainWeave
-from fabricfem.study_unit_cell import MATERIALS, PRESTRETCH
-from fabricfem.unit_cell_contact import ContactUnitCell
+from fabricfem.studies.unit_cell import MATERIALS, PRESTRETCH
+from fabricfem.weave.unit_cell import ContactUnitCell
+from fabricfem.fabrics import FABRICS_DIR, save_fabric
+from fabricfem.meshes import plate
+from fabricfem.shell import ShellModel
+from fabricfem.solvers.loadstep import solve_load_path
+from fabricfem.wear.outputs import plot_torque
+from fabricfem.wear.run import run_sleeve
+from fabricfem.wear.sleeve import SleeveConfig
 
 FABRIC_NAME = "plain-weave-ti-contact"
 SVK_NAME = "plain-weave-ti-contact-svk"
-OUT_DIR = Path(__file__).resolve().parent.parent / "docs" / "figures" / "fabric_link"
+OUT_DIR = Path(__file__).resolve().parents[2] / "docs" / "figures" / "fabric_link"
 SAMPLES_CSV = "contact_samples.csv"
 SMALL_FIRST = 0.05  # share of the first increment of every path (a small-strain sample: 0.3 % of 6 %)
 
 
 def weave_thickness(weave: PlainWeave | None = None) -> float:
-    """Fabric thickness t = 2 (A + b) = cell height [m] (N = t S, fabricfem.fitted_law)."""
+    """Fabric thickness t = 2 (A + b) = cell height [m] (N = t S, fabricfem.materials.fitted)."""
     return 2.0 * (weave or PlainWeave.balanced()).half_thickness()
 
 
@@ -203,7 +210,7 @@ def fit_contact_law(samples: MembraneSamples, stiffness: InitialStiffness | np.n
                     degree: int = 5) -> FittedMembraneLaw | ConvexMembraneLaw:
     """W fitted to the samples with its Hessian at E = 0 held to A0 (stiffness.A0, or a 3x3 matrix [N/m]).
 
-    kind "convex" (default, stored): fabricfem.fitted_law.ConvexMembraneLaw, convex at every strain by
+    kind "convex" (default, stored): fabricfem.materials.fitted.ConvexMembraneLaw, convex at every strain by
     construction (NNLS fit); "polynomial": FittedMembraneLaw of `degree`, convex only on the data hull
     (convexity repair), not outside it (the sleeve buckles into compressive, sheared states outside)."""
     A0 = stiffness.A0 if isinstance(stiffness, InitialStiffness) else np.asarray(stiffness, dtype=float)
@@ -231,7 +238,6 @@ def save_contact_fabrics(law: FittedMembraneLaw | ConvexMembraneLaw, prestretch:
                          ) -> Fabric:
     """Store the unit-cell fabric of `law` as fabricfem/fabrics/plain-weave-ti-contact.json and its SVK
     counterpart (same small-strain constants) as plain-weave-ti-contact-svk.json; returns the fabric."""
-    from fabricfem.fabrics import FABRICS_DIR, save_fabric
     fabric = contact_fabric(law)
     A0 = law.initial_stiffness
     what = ("W(E11, E22, 2E12) = 1/2 eps.A0.eps + non-negative sums of convex C2 ridge functions <l.eps - s>^n, "
@@ -247,12 +253,12 @@ def save_contact_fabrics(law: FittedMembraneLaw | ConvexMembraneLaw, prestretch:
                     f"{A0[2, 2]:.6g} N/m is the tangent at the thesis' shear pre-stretch Phi11 = Phi22 = "
                     f"{prestretch} with the crossovers in contact. Data: 0 <= E11, E22 <= 0.067 (down to -0.015 "
                     f"laterally), |2E12| <= 0.21. Density nominal (thesis fabric I); bending t^3/12 Q0."),
-                source=(f"fabricfem.unit_cell_link.fit_contact_law: coarse quarter cell, contact, "
+                source=(f"fabricfem.studies.fabric_link.fit_contact_law: coarse quarter cell, contact, "
                         f"{law.n_samples} samples on {samples_note}; {law_summary(law)}"))
     save_fabric(svk_counterpart(fabric), FABRICS_DIR / f"{SVK_NAME}.json",
                 description=f"Orthotropic St. Venant-Kirchhoff fabric with the small-strain E1, E2, G12, nu12, "
                             f"thickness and density of {FABRIC_NAME} (the difference is the nonlinearity)",
-                source="fabricfem.unit_cell_link.svk_counterpart")
+                source="fabricfem.studies.fabric_link.svk_counterpart")
     return fabric
 
 
@@ -296,9 +302,6 @@ def uniaxial_strip(fabric: Fabric, tractions: Sequence[float], length: float = 0
     """Membrane strip [0, L] x [0, b] (4 x 2 quadrilaterals, in-plane), u_x = 0 on "left", u_y = 0 at the
     origin, dead traction (T, 0, 0) N/m on "right" raised through `tractions`; returns the measured
     (E11, E22) = ((lambda^2 - 1) / 2) from the displacement of the corner (L, b) at each traction, and the model."""
-    from fabricfem.meshes import plate
-    from fabricfem.shell import ShellModel
-    from fabricfem.solvers.loadstep import solve_load_path
     model = ShellModel(plate(length, width, 4, 2, cell="quadrilateral"), fabric, model="membrane")
     model.constrain("left", u=(0.0, None, None))
     model.constrain(lambda x: np.isclose(x[0], 0.0) & np.isclose(x[1], 0.0), u=(None, 0.0, None))
@@ -364,11 +367,10 @@ def strip_table(rows: Sequence[StripRow]) -> str:
 def sleeve_comparison(out_dir: str | Path = OUT_DIR, n_around: int = 10, n_along: int = 13, friction: float = 0.1,
                       fabrics: Sequence[str] = (FABRIC_NAME, SVK_NAME), comm: MPI.Comm = MPI.COMM_WORLD,
                       log: Callable[[str], None] | None = None) -> dict[str, "object"]:
-    """Explicit sleeve flexion to 57 degrees (fabricfem.sleeve, SleeveConfig(fabric_name=...)) for each stored
+    """Explicit sleeve flexion to 57 degrees (fabricfem.wear.sleeve, SleeveConfig(fabric_name=...)) for each stored
     fabric, with dynamic similarity (the unit-cell fabric is ~200 times stiffer than fabric I, E = 1.2 MPa,
     so at 45 deg/s it would need ~15 times the explicit steps; SleeveConfig.flexion_speed), friction mu.
     Writes sleeve_torque_<mesh>.csv (angle, torque per fabric) and .png to out_dir; returns the histories."""
-    from fabricfem.sleeve import SleeveConfig, plot_torque, run_sleeve
     out = Path(out_dir)
     histories = {}
     for name in fabrics:

@@ -38,7 +38,7 @@ typos). Units are SI. Example (scenes/rollup.toml):
     dir = "results/rollup"
     probe = [0.3, 0.0, 0.0]   # a node whose displacement is reported
 
-A sleeve scene (scenes/sleeve.toml, run by fabricfem.sleeve) has a tube [mesh], a [fabric], no
+A sleeve scene (scenes/sleeve.toml, run by fabricfem.wear.sleeve) has a tube [mesh], a [fabric], no
 [solver] and no [[support]] (the shoulder end end0 is held), and three more sections:
 
     [body]
@@ -114,6 +114,9 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+import math
+from fabricfem.body.arm import DEFAULT_ARM
+import importlib.util
 
 SCHEMA: dict[str, dict[str, tuple[type | tuple, bool]]] = {
     # section -> key -> (type(s), required)
@@ -136,7 +139,7 @@ SCHEMA: dict[str, dict[str, tuple[type | tuple, bool]]] = {
                "min_step": ((int, float), False), "petsc_options": (dict, False)},
     "output": {"dir": (str, False), "probe": (list, False), "render": (bool, False),
                "render_angles": (list, False), "body_samples": (int, False)},
-    # sleeve scenes (fabricfem.sleeve): the wearer, its motion and the contact
+    # sleeve scenes (fabricfem.wear.sleeve): the wearer, its motion and the contact
     "body": {"type": (str, True), "upper_arm_length": ((int, float), False), "forearm_length": ((int, float), False),
              "upper_arm_girth": ((int, float), False), "forearm_girth": ((int, float), False)},
     "motion": {"type": (str, True), "final_angle": ((int, float), False), "angular_velocity": ((int, float), False),
@@ -145,10 +148,10 @@ SCHEMA: dict[str, dict[str, tuple[type | tuple, bool]]] = {
                "dynamic_similarity": (bool, False), "settle_time": ((int, float), False)},
     "contact": {"method": (str, False), "friction": ((int, float), False), "penalty": ((int, float), False),
                 "stabilization": ((int, float), False), "gravity": (bool, False)},
-    # compression scenes (fabricfem.compression): a tube donned onto one limb ellipsoid
+    # compression scenes (fabricfem.wear.compression): a tube donned onto one limb ellipsoid
     "limb": {"center": (list, True), "radii": (list, True)},
     "donning": {"start": ((int, float), False), "steps": (int, False), "tolerance": ((int, float), False)},
-    # dynamic scenes (fabricfem.run.run_dynamic_scene)
+    # dynamic scenes (fabricfem.scenes.run.run_dynamic_scene)
     "dynamics": {"integrator": (str, True), "dt": ((int, float, str), True), "end_time": ((int, float), True),
                  "dt_fraction": ((int, float), False), "force": (bool, False), "beta": ((int, float), False),
                  "gamma": ((int, float), False), "lumped": (bool, False), "rayleigh": (list, False),
@@ -291,7 +294,6 @@ def _positive(where: str, value) -> None:
 def _check_sleeve(data: dict) -> None:
     """Sleeve scenes: a tube, a known body and motion, non-negative friction, and an arm that fits inside
     the sleeve (largest segment radius girth / (2 pi) below mesh.radius)."""
-    import math
     mesh, body, motion, contact = data["mesh"], data["body"], data["motion"], data["contact"]
     if mesh["type"] != "tube":
         raise SceneError(f"mesh.type: a sleeve scene needs a 'tube' mesh, got {mesh['type']!r}")
@@ -335,7 +337,6 @@ def _check_sleeve(data: dict) -> None:
             _positive(f"motion.{key}", motion[key])
     if "settle_time" in motion:
         _finite("motion.settle_time", motion["settle_time"], minimum=0.0, strict=False)
-    from fabricfem.body.arm import DEFAULT_ARM
     for key in ("upper_arm_girth", "forearm_girth"):
         girth = body.get(key, getattr(DEFAULT_ARM, key))
         if girth / (2.0 * math.pi) >= mesh["radius"]:
@@ -381,7 +382,6 @@ def _check_compression(data: dict) -> None:
 
 def _numbers(where: str, values, n: int | None = None, allow_inf: bool = False) -> list[float]:
     """A list of (n) real numbers (finite unless allow_inf), or SceneError naming `where`."""
-    import math
     if not isinstance(values, list) or (n is not None and len(values) != n):
         raise SceneError(f"{where}: expected a list of {n if n is not None else ''} numbers, got {values!r}")
     for v in values:
@@ -392,7 +392,6 @@ def _numbers(where: str, values, n: int | None = None, allow_inf: bool = False) 
 
 
 def _finite(where: str, value, minimum: float | None = None, strict: bool = True) -> float:
-    import math
     if not math.isfinite(value):
         raise SceneError(f"{where}: must be finite, got {value!r}")
     if minimum is not None and (value <= minimum if strict else value < minimum):
@@ -400,43 +399,9 @@ def _finite(where: str, value, minimum: float | None = None, strict: bool = True
     return float(value)
 
 
-def mesh_spacing(mesh: dict) -> float | None:
-    """Smallest edge length h_min [m] of a structured mesh from its spec (None when unknown before meshing):
-    plate min(lx / nx, ly / ny) (triangle diagonals are longer), tube min(chord 2 R sin(pi / n_around),
-    length / n_along)."""
-    import math
-    if mesh["type"] == "plate":
-        if not mesh.get("structured", True):
-            return None
-        return min(mesh["lx"] / mesh["nx"], mesh["ly"] / mesh["ny"])
-    return min(2.0 * mesh["radius"] * math.sin(math.pi / mesh["n_around"]), mesh["length"] / mesh["n_along"])
-
-
-def critical_time_step_estimate(data: dict) -> float | None:
-    """dt_crit [s] of central differences before meshing: fabricfem.dynamics.stability's estimate (thesis
-    eqs. 2.86-2.87 extended) with h_min from the mesh spec; None when h_min is unknown (unstructured)."""
-    import numpy as np
-
-    from fabricfem.dynamics import stability
-    from fabricfem.run import build_fabric
-    h_min = mesh_spacing(data["mesh"])
-    if h_min is None:
-        return None
-    fabric = build_fabric(data["fabric"])
-    cell = data["mesh"].get("cell", "quadrilateral")
-    omega = stability.MEMBRANE_KAPPA[cell] * stability.plane_stress_wave_speed(fabric) / h_min  # eq. 2.87
-    if data.get("model", {}).get("kind", "naghdi") == "naghdi":
-        omega_s = (stability.THICKNESS_SHEAR_CHI[cell] * np.sqrt(12.0 * fabric.shear_correction *
-                   fabric.transverse_shear_modulus / fabric.density) / fabric.thickness)
-        omega = float(np.hypot(omega, omega_s))
-    rayleigh = data["dynamics"].get("rayleigh", [0.0, 0.0])
-    return stability.critical_time_step(None, tuple(rayleigh), omega_max=omega)  # eq. 2.86
-
-
 def _check_dynamics(data: dict) -> None:
     """[dynamics]: integrator, positive times, damping >= 0, obstacles and monitors complete, and for the
     explicit integrator a numeric dt at most the critical time step unless force = true."""
-    import importlib.util
     dyn = data["dynamics"]
     integrator = dyn["integrator"]
     if integrator not in INTEGRATORS:
@@ -496,12 +461,6 @@ def _check_dynamics(data: dict) -> None:
             raise SceneError("dynamics.gravity: gravity is also a [[load]] of type 'gravity'; give it once")
     _check_obstacles(dyn)
     _check_monitors(data)
-    if explicit and not isinstance(dt, str) and not dyn.get("force", False):
-        dt_crit = critical_time_step_estimate(data)
-        if dt_crit is not None and dt > dt_crit:
-            raise SceneError(f"dynamics.dt: {dt:.6g} s exceeds the critical time step {dt_crit:.6g} s of the explicit "
-                             f"integrator (ratio {dt / dt_crit:.3g}, thesis eqs. 2.86-2.87); use a smaller dt, "
-                             f"dt = \"auto\", or force = true")
 
 
 def _array_of_tables(dyn: dict, key: str) -> list[tuple[str, dict]]:
@@ -578,6 +537,7 @@ def _check_monitors(data: dict) -> None:
 
 
 def load(path: str | Path) -> Scene:
+    """Read and validate the data of a scene file (checks that need objects: fabricfem.scenes.build.load)."""
     path = Path(path)
     if not path.exists():
         raise SceneError(f"scene file {str(path)!r} does not exist")

@@ -1,6 +1,6 @@
 """Implicit route of the arm-in-sleeve flexion (SleeveConfig.solver = "implicit"): backward Euler + Newton.
 
-The same equations as the explicit route (fabricfem.sleeve.build_explicit / run_explicit): the sleeve's lumped
+The same equations as the explicit route (fabricfem.wear.sleeve.build_explicit / run_explicit): the sleeve's lumped
 translational mass M (HRZ lumping, thesis eq. 2.82, fabricfem.dynamics.mass.lumped_mass), mass damping C = alpha M
 (alpha = SleeveConfig.damping [1/s]), gravity g along -y (on by default), the arm resting for `settle_time`
 while the sleeve settles on it, then the elbow flexion at `flexion_speed` [deg/s] to `final_angle`. Units: SI.
@@ -12,7 +12,7 @@ Time stepping: backward Euler with steps dt = (angle step) / omega (angle step =
 i.e. M a + C v + f_int = F_gravity + f_contact at t^{n+1} (thesis eq. 2.84 with the accelerations and velocities
 of backward Euler). The nodal terms are a spring k_i (x_i - a_i) to an anchor with k_i = m_i (1 + alpha dt) / dt^2
 and a_i = x_i^n + dt v_i^n / (1 + alpha dt) (`InertiaDamping`, the generalised nodal drag of
-fabricfem.sleeve.Stabilized, Jacobian k_i I on the free displacement components). The director rotations carry
+fabricfem.wear.sleeve.Stabilized, Jacobian k_i I on the free displacement components). The director rotations carry
 no inertia here (the explicit route's rotary inertia, scaled x100, is t^2 s / 12 = 8e-6 of the translational).
 
 Why backward Euler (not the trapezoidal Newmark rule): the flexion is meant to be quasi-static (damping time
@@ -57,7 +57,7 @@ from fabricfem.body.arm import default_arm, elbow_flexion
 from fabricfem.contact.problem import ContactProblem
 from fabricfem.dynamics.mass import lumped_mass
 from fabricfem.materials import positive_number
-from fabricfem.sleeve import (ELBOW_AXIS, SleeveConfig, SleeveError, SleeveHistory, SleeveProblem, SleeveStep,
+from fabricfem.wear.sleeve import (ELBOW_AXIS, SleeveConfig, SleeveError, SleeveHistory, SleeveProblem, SleeveStep,
                               Stabilized, StepLimiter, sleeve_shell)
 from fabricfem.solvers.newton import NewtonSolver, SolverError
 

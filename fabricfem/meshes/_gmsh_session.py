@@ -69,7 +69,7 @@ def gmsh_model(comm: MPI.Comm, rank: int = 0, name: str = "fabricfem",
     if comm.rank != rank:
         yield None
         return
-    import gmsh
+    import gmsh  # optional heavy package, loaded only when a mesh is generated
 
     owned = not gmsh_is_initialized(gmsh)
     if owned:

@@ -80,7 +80,7 @@ class Fabric:
         bending_rigidity: optional (B1, B2) [N m] overriding E t^3/12 (warp, weft)
         bending_law: optional nonlinear moment-curvature law per direction
         membrane_law: optional fitted membrane energy W(E11, E22, 2 E12) [J/m^2]
-            (fabricfem.fitted_law.FittedMembraneLaw or ConvexMembraneLaw, built with
+            (fabricfem.materials.fitted.FittedMembraneLaw or ConvexMembraneLaw, built with
             fitted_law.fitted_fabric); when given,
             ShellModel uses it instead of 1/2 eps.A eps and E1, E2, G12, nu12 describe its
             small-strain stiffness only
@@ -120,7 +120,7 @@ class Fabric:
             positive_number("bending_rigidity[1]", self.bending_rigidity[1])
         if self.membrane_law is not None and not (hasattr(self.membrane_law, "parameters")
                                                   and callable(getattr(self.membrane_law, "ufl_energy", None))):
-            raise ValueError("membrane_law must be a fitted membrane law (fabricfem.fitted_law.FittedMembraneLaw "
+            raise ValueError("membrane_law must be a fitted membrane law (fabricfem.materials.fitted.FittedMembraneLaw "
                              "or ConvexMembraneLaw: .parameters and .ufl_energy(eps, parameters)), got "
                              f"{type(self.membrane_law).__name__}")
 

@@ -42,6 +42,7 @@ from scipy.optimize import nnls
 from scipy.spatial import Delaunay, QhullError
 
 from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
+from fabricfem.forms import fitted as fitted_forms
 
 LAW_TYPE = "polynomial-even-shear"
 
@@ -83,7 +84,7 @@ def membrane_state(E: np.ndarray, S: np.ndarray, thickness: float) -> tuple[np.n
 
 
 def samples_from_steps(steps: Iterable, thickness: float) -> MembraneSamples:
-    """MembraneSamples of unit-cell steps (fabricfem.homogenize.UnitCellStep: Phi, E, S); N = thickness S.
+    """MembraneSamples of unit-cell steps (fabricfem.weave.homogenize.UnitCellStep: Phi, E, S); N = thickness S.
 
     Every Phi must be in-plane (Phi_13 = Phi_23 = Phi_31 = Phi_32 = 0): the membrane law knows
     nothing of transverse shear.
@@ -103,7 +104,7 @@ def samples_from_steps(steps: Iterable, thickness: float) -> MembraneSamples:
 
 
 def sample_unit_cell(problem, Phis: Sequence[np.ndarray], thickness: float, steps: int = 1) -> MembraneSamples:
-    """Run a fabricfem.homogenize.UnitCellProblem from the undeformed cell to each in-plane Phi in `steps`
+    """Run a fabricfem.weave.homogenize.UnitCellProblem from the undeformed cell to each in-plane Phi in `steps`
     increments (every converged increment is a sample) and return the MembraneSamples (N = thickness S)."""
     collected = []
     for Phi in Phis:
@@ -232,7 +233,6 @@ class FittedMembraneLaw:
     def ufl_energy(self, strain_voigt, parameters):
         """UFL W(eps) [J/m^2] of the Voigt strain (forms.fitted.polynomial_energy); `parameters` is a
         fem.Constant (or sequence) holding self.parameters, so new values do not recompile forms."""
-        from fabricfem.forms import fitted as fitted_forms
         return fitted_forms.polynomial_energy(strain_voigt, self.exponents, parameters)
 
     def to_dict(self) -> dict:
@@ -628,7 +628,6 @@ class ConvexMembraneLaw:
     def ufl_energy(self, strain_voigt, parameters):
         """UFL W(eps) [J/m^2] of the Voigt strain (forms.fitted.convex_ridge_energy); `parameters` is a
         fem.Constant (or sequence) holding self.parameters, so new values do not recompile forms."""
-        from fabricfem.forms import fitted as fitted_forms
         return fitted_forms.convex_ridge_energy(strain_voigt, [g.tolist() for g in self.groups()],
                                                 [(kind, power, shift) for _, kind, power, shift in self.terms],
                                                 parameters)

@@ -1,0 +1,101 @@
+"""From validated scene data to objects: fabric, mesh, and the checks that need them (the explicit
+critical time step before meshing). `load` and `validate` are the entry points of fabricfem.scenes."""
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from fabricfem.dynamics import stability
+from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
+from fabricfem.meshes import plate, tube
+from fabricfem.scenes import schema
+from fabricfem.scenes.schema import Scene, SceneError
+
+
+def build_fabric(spec: dict) -> Fabric:
+    law = None
+    kind = spec.get("bending_law")
+    if kind == "kawabata":
+        if "kawabata_coefficients" not in spec:
+            raise SceneError("fabric: bending_law = 'kawabata' needs kawabata_coefficients")
+        law = KawabataBending(tuple(float(a) for a in spec["kawabata_coefficients"]))
+    elif kind == "square_root":
+        if "B0" not in spec or "kappa0" not in spec:
+            raise SceneError("fabric: bending_law = 'square_root' needs B0 and kappa0")
+        law = SquareRootBending(float(spec["B0"]), float(spec["kappa0"]))
+    elif kind is not None:
+        raise SceneError(f"fabric.bending_law: unknown law {kind!r}; allowed: 'kawabata', 'square_root'")
+    rigidity = spec.get("bending_rigidity")
+    try:
+        return Fabric(E1=float(spec["E1"]), E2=float(spec["E2"]), G12=float(spec["G12"]), nu12=float(spec["nu12"]),
+                      thickness=float(spec["thickness"]), density=float(spec.get("density", 0.0)),
+                      G13=spec.get("G13"), bending_rigidity=tuple(rigidity) if rigidity else None,
+                      bending_law=law, name=spec.get("name", "fabric"))
+    except ValueError as exc:
+        raise SceneError(f"fabric: {exc}") from None
+
+
+def build_mesh(spec: dict, comm):
+    kind = spec["type"]
+    if kind == "plate":
+        return plate(spec["lx"], spec["ly"], spec["nx"], spec["ny"], cell=spec.get("cell", "quadrilateral"),
+                     structured=spec.get("structured", True), comm=comm)
+    return tube(spec["length"], spec["radius"], spec["n_around"], spec["n_along"],
+                cell=spec.get("cell", "quadrilateral"), order=spec.get("order", 1), comm=comm)
+
+
+def mesh_spacing(mesh: dict) -> float | None:
+    """Smallest edge length h_min [m] of a structured mesh from its spec (None when unknown before meshing):
+    plate min(lx / nx, ly / ny) (triangle diagonals are longer), tube min(chord 2 R sin(pi / n_around),
+    length / n_along)."""
+    if mesh["type"] == "plate":
+        if not mesh.get("structured", True):
+            return None
+        return min(mesh["lx"] / mesh["nx"], mesh["ly"] / mesh["ny"])
+    return min(2.0 * mesh["radius"] * math.sin(math.pi / mesh["n_around"]), mesh["length"] / mesh["n_along"])
+
+
+def critical_time_step_estimate(data: dict) -> float | None:
+    """dt_crit [s] of central differences before meshing: fabricfem.dynamics.stability's estimate (thesis
+    eqs. 2.86-2.87 extended) with h_min from the mesh spec; None when h_min is unknown (unstructured)."""
+    h_min = mesh_spacing(data["mesh"])
+    if h_min is None:
+        return None
+    fabric = build_fabric(data["fabric"])
+    cell = data["mesh"].get("cell", "quadrilateral")
+    omega = stability.MEMBRANE_KAPPA[cell] * stability.plane_stress_wave_speed(fabric) / h_min  # eq. 2.87
+    if data.get("model", {}).get("kind", "naghdi") == "naghdi":
+        omega_s = (stability.THICKNESS_SHEAR_CHI[cell] * np.sqrt(12.0 * fabric.shear_correction *
+                   fabric.transverse_shear_modulus / fabric.density) / fabric.thickness)
+        omega = float(np.hypot(omega, omega_s))
+    rayleigh = data["dynamics"].get("rayleigh", [0.0, 0.0])
+    return stability.critical_time_step(None, tuple(rayleigh), omega_max=omega)  # eq. 2.86
+
+
+def check_objects(data: dict) -> None:
+    """Checks that need objects: an explicit dynamic scene's numeric dt must not exceed the critical time step
+    (unless dynamics.force = true)."""
+    dyn = data.get("dynamics")
+    if not dyn or dyn["integrator"] != "explicit" or isinstance(dyn["dt"], str) or dyn.get("force", False):
+        return
+    dt, dt_crit = dyn["dt"], critical_time_step_estimate(data)
+    if dt_crit is not None and dt > dt_crit:
+        raise SceneError(f"dynamics.dt: {dt:.6g} s exceeds the critical time step {dt_crit:.6g} s of the explicit "
+                         f"integrator (ratio {dt / dt_crit:.3g}, thesis eqs. 2.86-2.87); use a smaller dt, "
+                         f"dt = \"auto\", or force = true")
+
+
+def validate(data: dict, source: str = "scene") -> Scene:
+    """schema.validate, then the object checks; SceneError names the key."""
+    scene = schema.validate(data, source)
+    check_objects(data)
+    return scene
+
+
+def load(path: str | Path) -> Scene:
+    """Read a scene file and validate it completely (data and objects) before anything is meshed."""
+    scene = schema.load(path)
+    check_objects(scene.data)
+    return scene

@@ -1,0 +1,1 @@
+"""A garment on a moving wearer: the arm-sleeve routes and the compression garment."""
