@@ -174,9 +174,9 @@ def test_sleeve_flexion_with_gravity_is_converged_in_rate():
     weight the forces on the floating sleeve are inertia and drag only, see fabricfem.wear.sleeve; this test
     measured +5.2 %)."""
     from fabricfem.wear.run import run_sleeve
-    from fabricfem.wear.sleeve import SleeveConfig
-    base = SleeveConfig(n_around=10, n_along=13, friction=0.5, final_angle=30.0)
-    assert base.gravity and base.angular_velocity == 45.0
+    from fabricfem.wear.config import SleeveConfig
+    base = SleeveConfig.of(n_around=10, n_along=13, friction=0.5, final_angle=30.0)
+    assert base.route.gravity and base.motion.angular_velocity == 45.0
     fast = run_sleeve(base, MPI.COMM_SELF)
     slow = run_sleeve(base.with_(angular_velocity=22.5), MPI.COMM_SELF)
     assert fast.completed and slow.completed

@@ -15,11 +15,12 @@ from fabricfem import scenes as scene_module
 from fabricfem.body.arm import DEFAULT_ARM
 from fabricfem.scenes.schema import SceneError
 from fabricfem.wear.run import run_sleeve
-from fabricfem.wear.sleeve import ELBOW_AXIS, SleeveConfig, build_sleeve, run_quasistatic
+from fabricfem.wear.config import SleeveConfig
+from fabricfem.wear.sleeve import ELBOW_AXIS, build_sleeve, run_quasistatic
 
 ROOT = Path(__file__).resolve().parents[1]
-QUICK = SleeveConfig(n_around=10, n_along=13, final_angle=6.0, angle_steps=2, solver="quasistatic")
-QUICK_EXPLICIT = SleeveConfig(n_around=10, n_along=13, final_angle=6.0, output_angle_step=1.0)
+QUICK = SleeveConfig.of(n_around=10, n_along=13, final_angle=6.0, angle_steps=2, solver="quasistatic")
+QUICK_EXPLICIT = SleeveConfig.of(n_around=10, n_along=13, final_angle=6.0, output_angle_step=1.0)
 
 
 def sleeve_data() -> dict:
@@ -36,15 +37,21 @@ def test_sleeve_scene_is_valid():
     (lambda d: d["body"].update(radius=0.05), r"body: unknown key 'radius'"),
     (lambda d: d.pop("fabric"), r"missing section \[fabric\]"),
     (lambda d: d["fabric"].pop("E1"), r"fabric: missing required key 'E1'"),
-    (lambda d: d["mesh"].update(radius=0.05), r"body.upper_arm_girth: .*does not fit inside a sleeve of mesh.radius"),
-    (lambda d: d["body"].update(forearm_girth=0.40), r"body.forearm_girth: .*does not fit"),
-    (lambda d: d["contact"].update(friction=-0.1), r"contact.friction: the Coulomb coefficient must be >= 0"),
+    (lambda d: d["mesh"].update(radius=0.05), r"mesh.radius: .*must exceed the arm's largest radius .*upper_arm_girth"),
+    (lambda d: d["body"].update(forearm_girth=0.40), r"mesh.radius: .*must exceed .*arm.forearm_girth"),
+    (lambda d: d["contact"].update(friction=-0.1), r"contact.friction: friction must be a number >= 0"),
     (lambda d: d["motion"].update(type="walking"), r"motion.type: unknown motion 'walking'"),
-    (lambda d: d["contact"].update(method="mortar"), r"contact.method: unknown method 'mortar'"),
-    (lambda d: d["motion"].update(solver="implicit"), r"motion.solver: unknown solver 'implicit'"),
-    (lambda d: d["contact"].update(method="augmented"), r"contact.method: unknown method 'augmented' for the explicit"),
-    (lambda d: d["motion"].update(rotary_inertia_scale=0.5), r"motion.rotary_inertia_scale: must be >= 1"),
-    (lambda d: d["motion"].update(settle_time=-0.1), r"motion.settle_time: must be >= 0"),
+    (lambda d: d["contact"].update(method="mortar"), r"contact.method: method must be one of .* got 'mortar'"),
+    (lambda d: d["motion"].update(solver="implicit"), r"motion.solver: this key has moved; write it as solver = "
+                                                      r"'implicit' in \[route\]"),
+    (lambda d: d["contact"].update(gravity=False), r"contact.gravity: this key has moved; .* in \[route\]"),
+    (lambda d: d["route"].update(solver="walking"), r"route.solver: solver must be one of"),
+    (lambda d: d["contact"].update(method="augmented"), r"contact.method: .* for solver 'explicit', got 'augmented'"),
+    (lambda d: d["route"].update(rotary_inertia_scale=0.5), r"route.rotary_inertia_scale: .* must be a number >= 1"),
+    (lambda d: d["motion"].update(settle_time=-0.1), r"motion.settle_time: settle_time must be a number >= 0"),
+    (lambda d: d["motion"].update(angle_steps=0), r"motion.angle_steps: angle_steps must be a positive integer"),
+    (lambda d: d["scene"].update(kind="static"), r"scene.kind: 'static' does not match the sections"),
+    (lambda d: d["scene"].update(kind="sleve"), r"scene.kind: unknown kind 'sleve' \(did you mean 'sleeve'\?\)"),
     (lambda d: d.pop("motion"), r"missing section \[motion\]"),
 ])
 def test_bad_sleeve_scene_fails_before_meshing(mutate, message, monkeypatch):
@@ -68,7 +75,7 @@ def test_bad_sleeve_scene_fails_before_meshing(mutate, message, monkeypatch):
 ])
 def test_bad_config_names_the_parameter(kwargs, message):
     with pytest.raises(ValueError, match=message):
-        SleeveConfig(**kwargs)
+        SleeveConfig.of(**kwargs)
 
 
 def test_start_clearance_and_first_contact():
@@ -172,10 +179,10 @@ def test_dynamic_similarity_scales_speed_and_damping_by_the_wave_speed():
     assert fabrics["fabric I"].flexion_speed == pytest.approx(45.0, rel=1e-14)
     assert fabrics["fabric II"].flexion_speed == pytest.approx(45.0 * math.sqrt(350.0 / 1.2), rel=1e-14)
     assert fabrics["fabric III"].damping == pytest.approx(10.0 * math.sqrt(7200.0 / 1.2 * 436.0 / 700.0), rel=1e-14)
-    plain = SleeveConfig(E=350e6)
+    plain = SleeveConfig.of(E=350e6)
     assert plain.flexion_speed == 45.0 and plain.damping == 10.0
     with pytest.raises(ValueError, match="similarity_reference"):
-        SleeveConfig(similarity_reference=(0.0, 436.0))
+        SleeveConfig.of(similarity_reference=(0.0, 436.0))
 
 
 def test_torque_bounce_of_an_alternating_signal():
@@ -363,7 +370,7 @@ def test_bad_active_set_cap_names_the_parameter():
     with pytest.raises(ValueError, match="crease_width"):
         type(problem)(problem.model, [cases.sphere()], crease_width=-1e-3)
     with pytest.raises(ValueError, match="max_rotation_step"):
-        SleeveConfig(max_rotation_step=0.0)
+        SleeveConfig.of(max_rotation_step=0.0)
 
 
 # ----------------------------------------------------------------------------- stored fabric (fabric_name)
@@ -377,7 +384,7 @@ def test_fabric_name_uses_the_stored_fabric_everywhere(tmp_path):
     from fabricfem.wear.sleeve import build_explicit
     stored = Fabric(E1=4.8e6, E2=4.8e6, G12=4e5, nu12=0.0, thickness=1e-3, density=436.0, name="four-times")
     path = save_fabric(stored, tmp_path / "four-times.json")
-    base = SleeveConfig(n_around=10, n_along=13, final_angle=2.0, dynamic_similarity=True,
+    base = SleeveConfig.of(n_around=10, n_along=13, final_angle=2.0, dynamic_similarity=True,
                         method="penalty")
     named = base.with_(fabric_name=str(path))
     assert named.fabric.E1 == 4.8e6 and named.fabric.name == "four-times"
@@ -402,7 +409,7 @@ def test_fabric_name_uses_the_stored_fabric_everywhere(tmp_path):
 def test_fabric_field_given_with_fabric_name_is_refused(key, value):
     """A fabric field next to fabric_name would be ignored (the stored fabric sets it): refused, naming it."""
     with pytest.raises(ValueError, match=rf"^{key}: given together with fabric_name"):
-        SleeveConfig(n_around=10, n_along=13, fabric_name="two-layer-laminate", **{key: value})
+        SleeveConfig.of(n_around=10, n_along=13, fabric_name="two-layer-laminate", **{key: value})
 
 
 def test_fabric_name_with_a_fitted_law_uses_its_small_strain_moduli():
@@ -410,7 +417,7 @@ def test_fabric_name_with_a_fitted_law_uses_its_small_strain_moduli():
     set, E1/E2/G12 = fitted_fabric's small-strain values), and the wave speed is the plane-stress one of those
     moduli (stability.plane_stress_wave_speed, eq. 2.87 with nu12)."""
     from fabricfem.fabrics import load_fabric
-    cfg = SleeveConfig(n_around=10, n_along=13, final_angle=2.0, fabric_name="two-layer-laminate")
+    cfg = SleeveConfig.of(n_around=10, n_along=13, final_angle=2.0, fabric_name="two-layer-laminate")
     ref = load_fabric("two-layer-laminate")
     f = cfg.fabric
     assert f.membrane_law is not None
@@ -424,7 +431,7 @@ def test_fabric_name_with_a_fitted_law_uses_its_small_strain_moduli():
 def test_fitted_fabric_sleeve_flexes_a_few_degrees():
     """Mesh I, stored laminate, 2 degrees explicit: the run completes with finite torques (smoke test of the
     fitted-law sleeve; the law itself is verified in tests/test_fitted_law.py)."""
-    cfg = SleeveConfig(n_around=10, n_along=13, final_angle=2.0, fabric_name="two-layer-laminate")
+    cfg = SleeveConfig.of(n_around=10, n_along=13, final_angle=2.0, fabric_name="two-layer-laminate")
     history = run_sleeve(cfg)
     assert history.completed and len(history.steps) == 3
     assert np.all(np.isfinite(history.torques))
@@ -433,7 +440,7 @@ def test_fitted_fabric_sleeve_flexes_a_few_degrees():
 @pytest.mark.parametrize("name", ["no-such-fabric", "", 3])
 def test_unknown_fabric_name_raises_naming_it(name):
     with pytest.raises(ValueError, match="fabric_name"):
-        SleeveConfig(fabric_name=name)
+        SleeveConfig.of(fabric_name=name)
 
 
 def test_sleeve_settles_on_the_resting_arm_before_the_flexion():
@@ -444,8 +451,8 @@ def test_sleeve_settles_on_the_resting_arm_before_the_flexion():
     exp(-alpha t / 2), by exp(-2) = 14 % between 0.4 and 0.8 s, and the transient left at 0.4 s is itself a
     small part of the state (kinetic / strain energy 0.016 measured on mesh I), so the difference is a few
     per cent at most (measured: 1.4 % torque, 0.2 % strain energy)."""
-    cfg = SleeveConfig(n_around=10, n_along=13, friction=0.5, final_angle=1.0)
-    assert cfg.gravity and cfg.settle_time == 0.4
+    cfg = SleeveConfig.of(n_around=10, n_along=13, friction=0.5, final_angle=1.0)
+    assert cfg.route.gravity and cfg.motion.settle_time == 0.4
     short = run_sleeve(cfg, MPI.COMM_SELF)
     long = run_sleeve(cfg.with_(settle_time=0.8), MPI.COMM_SELF)
     assert short.timings["settle_s"] == pytest.approx(0.4, rel=1e-12)
@@ -459,8 +466,8 @@ def test_gravity_default_depends_on_the_route():
     """gravity=None resolves to on for the explicit route and off for the quasi-static one; an explicit value
     is kept; changing the solver re-resolves an unnamed gravity."""
     assert SleeveConfig().gravity is True
-    assert SleeveConfig(solver="quasistatic").gravity is False
-    assert SleeveConfig(gravity=False).gravity is False
+    assert SleeveConfig.of(solver="quasistatic").gravity is False
+    assert SleeveConfig.of(gravity=False).gravity is False
     assert SleeveConfig().with_(solver="quasistatic").gravity is False
     with pytest.raises(ValueError, match="settle_time"):
-        SleeveConfig(settle_time=-1.0)
+        SleeveConfig.of(settle_time=-1.0)

@@ -13,7 +13,9 @@ from mpi4py import MPI
 from fabricfem import scenes as scene_module
 from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
 from fabricfem.scenes.schema import SceneError
-from fabricfem.wear.sleeve import SleeveConfig, build_sleeve, check_fit, config_from_scene
+from fabricfem.wear.config import SleeveConfig, check_fit
+from fabricfem.scenes.build import sleeve_config
+from fabricfem.wear.sleeve import build_sleeve
 from fabricfem.studies.sleeve_fit import (FIT_CASES, energy_split, energy_split_forms, fit_configs, fit_ratio, scaled_arm,
                                   summary_row, thickness_ratio)
 
@@ -27,7 +29,7 @@ def sleeve_data() -> dict:
 
 def test_arm_field_reaches_the_ellipsoids():
     """build_sleeve poses the config's arm: semi-axes (L / 2, C / (2 pi), C / (2 pi)) of each segment."""
-    cfg = SleeveConfig(n_around=6, n_along=4, solver="quasistatic", arm=THICK_ARM)
+    cfg = SleeveConfig.of(n_around=6, n_along=4, solver="quasistatic", arm=THICK_ARM)
     body = build_sleeve(cfg, MPI.COMM_SELF).body
     for name, length, girth in (("upper_arm", 0.335, 0.36), ("forearm", 0.267, 0.31)):
         radii = body.segments[name].radii
@@ -38,12 +40,12 @@ def test_arm_field_reaches_the_ellipsoids():
 
 def test_arm_field_is_validated_and_checked_for_fit():
     with pytest.raises(ValueError, match=r"arm must be a fabricfem.body.ArmDimensions"):
-        SleeveConfig(arm=(0.335, 0.267, 0.35, 0.30))
+        SleeveConfig.of(arm=(0.335, 0.267, 0.35, 0.30))
     # 0.40 / (2 pi) = 0.0637 m > R = 0.06 m: named parameter in the message
     with pytest.raises(ValueError, match=r"radius: .*arm.upper_arm_girth = 0.4 m"):
-        SleeveConfig(arm=ArmDimensions(upper_arm_girth=0.40))
+        SleeveConfig.of(arm=ArmDimensions(upper_arm_girth=0.40))
     with pytest.raises(ValueError, match=r"arm.forearm_girth"):
-        SleeveConfig(radius=0.06, arm=ArmDimensions(upper_arm_girth=0.30, forearm_girth=0.39))
+        SleeveConfig.of(radius=0.06, arm=ArmDimensions(upper_arm_girth=0.30, forearm_girth=0.39))
     # clearance = R - C / (2 pi) of the thickest segment
     assert check_fit(0.06, THICK_ARM) == pytest.approx(0.06 - 0.36 / (2 * math.pi), rel=1e-14)
     assert check_fit(0.06) == pytest.approx(0.06 - 0.35 / (2 * math.pi), rel=1e-14)
@@ -52,10 +54,10 @@ def test_arm_field_is_validated_and_checked_for_fit():
 def test_scene_girths_reach_the_config():
     data = sleeve_data()
     data["body"].update(upper_arm_girth=0.36, forearm_girth=0.31, forearm_length=0.25)
-    cfg = config_from_scene(scene_module.validate(data))
+    cfg = sleeve_config(scene_module.validate(data).data)
     assert cfg.arm == ArmDimensions(upper_arm_length=DEFAULT_ARM.upper_arm_length, forearm_length=0.25,
                                     upper_arm_girth=0.36, forearm_girth=0.31)
-    assert config_from_scene(scene_module.validate(sleeve_data())).arm == DEFAULT_ARM
+    assert sleeve_config(scene_module.validate(sleeve_data()).data).arm == DEFAULT_ARM
     data = sleeve_data()
     data["body"].update(upper_arm_girth=0.40)
     with pytest.raises(SceneError, match=r"body.upper_arm_girth: .*does not fit"):
@@ -111,7 +113,7 @@ def test_energy_split_of_an_inflated_tube():
     node spacing pi / 20 rad: derivative error ~ (pi / 20)^2 / 12 = 2e-3, doubled in a quadratic energy)."""
     from fabricfem.wear.sleeve import sleeve_shell
     R, L, t, E, delta = 0.06, 0.5, 1e-3, 1.2e6, 2e-3
-    cfg = SleeveConfig(n_around=20, n_along=4, solver="quasistatic", gravity=False, E=E, G=E / 200,
+    cfg = SleeveConfig.of(n_around=20, n_along=4, solver="quasistatic", gravity=False, E=E, G=E / 200,
                        thickness=t, radius=R, length=L)
     model = sleeve_shell(cfg, MPI.COMM_WORLD)
     V = model.W.sub(0).collapse()
@@ -120,7 +122,7 @@ def test_energy_split_of_an_inflated_tube():
     n = np.zeros_like(x)
     n[:, 1:] = x[:, 1:] / np.linalg.norm(x[:, 1:], axis=1, keepdims=True)
     model.w.x.array[np.asarray(u_dofs)] = (delta * n).reshape(-1)
-    parts = energy_split(model, energy_split_forms(model, cfg.quadrature))
+    parts = energy_split(model, energy_split_forms(model, cfg.tube.quadrature))
     area = 2 * math.pi * R * L
     E22 = ((R + delta) ** 2 / R ** 2 - 1) / 2
     assert parts["membrane"] == pytest.approx(0.5 * E * t * E22 ** 2 * area, rel=1e-2)

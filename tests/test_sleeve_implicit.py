@@ -12,7 +12,7 @@ from fabricfem.materials import Fabric
 from fabricfem.meshes import tube
 from fabricfem.shell import ShellModel
 from fabricfem.wear.run import run_sleeve
-from fabricfem.wear.sleeve import SleeveConfig
+from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.sleeve_implicit import InertiaDamping, build_implicit, run_implicit
 from fabricfem.solvers.newton import NewtonSolver
 
@@ -75,7 +75,7 @@ def settled_pair():
     """Mesh I, mu = 0.1 (the study's), gravity, 0.4 s of rest then 2 degrees of flexion: (implicit problem,
     implicit history, explicit history). The implicit route takes 2-degree steps (dt = 0.044 s, 9 steps of rest):
     the test is about the state at rest, which backward Euler reaches whatever the step (L-stable)."""
-    cfg = SleeveConfig(n_around=10, n_along=13, friction=0.1, final_angle=2.0, output_angle_step=2.0)
+    cfg = SleeveConfig.of(n_around=10, n_along=13, friction=0.1, final_angle=2.0, output_angle_step=2.0)
     implicit_cfg = cfg.with_(solver="implicit", angle_steps=1)
     problem = build_implicit(implicit_cfg, MPI.COMM_SELF)
     implicit = run_implicit(problem)
@@ -91,7 +91,7 @@ def test_implicit_route_keeps_the_penetration_below_the_augmentation_tolerance(s
     stored per-step penetrations), and the run reaches its final angle."""
     problem, implicit, _ = settled_pair
     trace = problem.trace_array()
-    tol = problem.config.augmentation_tolerance
+    tol = problem.config.contact.augmentation_tolerance
     print(f"{len(trace)} steps, largest penetration {trace[:, 3].max():.3e} m (tolerance {tol:g} m)")
     assert implicit.completed and implicit.angles[-1] == pytest.approx(2.0)
     assert len(trace) >= problem.settle_steps + 1
@@ -126,17 +126,17 @@ def test_settled_torque_matches_the_explicit_route(settled_pair):
 ])
 def test_bad_implicit_config_names_the_parameter(kwargs, message):
     with pytest.raises(ValueError, match=message):
-        SleeveConfig(**kwargs)
+        SleeveConfig.of(**kwargs)
 
 
 def test_implicit_defaults_and_bad_time_step():
     """solver="implicit" resolves to the augmented Lagrangian with gravity on; a non-positive time step of the
     inertia terms and a non-implicit configuration given to build_implicit raise ValueError naming them."""
-    cfg = SleeveConfig(solver="implicit")
-    assert cfg.method == "augmented" and cfg.gravity is True
+    cfg = SleeveConfig.of(solver="implicit")
+    assert cfg.contact.method == "augmented" and cfg.route.gravity is True
     assert SleeveConfig().with_(solver="implicit").method == "augmented"
     with pytest.raises(ValueError, match="solver"):
-        build_implicit(SleeveConfig(n_around=10, n_along=13), MPI.COMM_SELF)
+        build_implicit(SleeveConfig.of(n_around=10, n_along=13), MPI.COMM_SELF)
     fabric = Fabric.isotropic(1.2e6, 0.0, 1e-3, density=436.0)
     model = ShellModel(tube(0.5, 0.06, 4, 2, cell="quadrilateral", order=1, comm=MPI.COMM_SELF), fabric)
     far = Ellipsoid(center=np.array([0.25, -10.0, 0.0]), rotation=np.eye(3), radii=np.array([0.1, 0.1, 0.1]))
@@ -163,7 +163,7 @@ def test_implicit_torque_history_same_on_one_and_two_ranks():
     order of the assembly differs (round-off 1e-16, measured: equal to the 8 printed digits). On mesh I at 4 degrees
     no node lies in the crease band (both segment gaps within 1 cm, measured), so the blend only enters through its
     exponentially small far-field terms; the blend itself is per-node arithmetic (tests/test_body.py)."""
-    cfg = SleeveConfig(n_around=10, n_along=13, friction=0.1, final_angle=4.0, output_angle_step=2.0,
+    cfg = SleeveConfig.of(n_around=10, n_along=13, friction=0.1, final_angle=4.0, output_angle_step=2.0,
                        solver="implicit", angle_steps=2)
     problem = build_implicit(cfg, MPI.COMM_WORLD)
     parallel = run_implicit(problem)

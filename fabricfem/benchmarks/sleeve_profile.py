@@ -27,7 +27,9 @@ from pathlib import Path
 
 from mpi4py import MPI
 
-from fabricfem.wear.sleeve import TIMING_PARTS, SleeveConfig, build_explicit, run_explicit
+from fabricfem.wear.run import build_run
+from fabricfem.wear.config import SleeveConfig
+from fabricfem.wear.sleeve import TIMING_PARTS
 import numpy as np
 
 MESHES = {"I": (10, 13), "II": (15, 20), "III": (20, 26), "IV": (30, 39)}
@@ -67,16 +69,16 @@ def profile_flexion(mesh: str, final_angle: float, repeats: int, comm: MPI.Comm 
     if int(repeats) < 1:
         raise ValueError(f"repeats must be >= 1, got {repeats!r}")
     n_around, n_along = MESHES[mesh]
-    config = SleeveConfig(n_around=n_around, n_along=n_along, final_angle=float(final_angle))
+    config = SleeveConfig.of(n_around=n_around, n_along=n_along, final_angle=float(final_angle))
     timings, walls = [], []
     history = problem = None
     for k in range(int(repeats)):
-        problem = build_explicit(config, comm)
+        problem = build_run(config, comm)
         t0 = time.perf_counter()
-        history = run_explicit(problem)
+        history = problem.run()
         walls.append(time.perf_counter() - t0)
         timings.append(history.timings)
-        problem.integrator.destroy()
+        problem.destroy()
         say(f"  mesh {mesh} to {final_angle:g} deg, run {k + 1}/{repeats}: {walls[-1]:.1f} s, "
             f"{history.timings['ms_per_step']:.2f} ms/step, contact {history.timings['contact_share']:.1%}")
     shares = {p: statistics.median(t[f"{p}_share"] for t in timings) for p in TIMING_PARTS}

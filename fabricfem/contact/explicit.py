@@ -30,11 +30,10 @@ from fabricfem.body.ellipsoid import Ellipsoid, _ray_to_surface
 from fabricfem.contact.nodal import positive_parameter
 from fabricfem.contact import friction as friction_law
 from fabricfem.contact import nodal
-from fabricfem.contact.torque import contact_torque
+from fabricfem.contact.torque import TorqueMonitor
 from dolfinx import fem
-from fabricfem.contact.nodal import CurrentAreas
-from fabricfem.contact.nodal import nearest_gap
-from fabricfem.contact.nodal import nearest_gap, normal_pressure
+from fabricfem.contact.nodal import (CurrentAreas, nearest_gap, normal_pressure, pressure_function,
+                                     pressure_on_body)
 
 MAX_PROJECTION_PASSES = 8
 MAX_CREASE_ITERATIONS = 20   # bisector pushes out of overlapping segments after the passes (project_with_segment)
@@ -346,7 +345,7 @@ class ExplicitBodyContact:
         self.active = np.zeros(M, dtype=bool)
         self.slip = np.zeros(M, dtype=bool)
         self.time = 0.0
-        self._monitors: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
+        self._monitors: dict[str, TorqueMonitor] = {}
         self._torque_impulse: dict[str, float] = {}
         self._normal_impulse = np.zeros(M)
         self._elapsed = 0.0
@@ -367,23 +366,15 @@ class ExplicitBodyContact:
 
     def track_torque(self, name: str, joint: str, axis, segments: Sequence[str]):
         """Accumulate the torque [N m] about `joint` along `axis` of the forces the cloth exerts on
-        `segments` (fabricfem.contact.torque sign convention) under `name`."""
-        unknown = [s for s in segments if s not in self.names]
-        if unknown:
-            raise ValueError(f"segments: unknown segment names {unknown} (known: {self.names})")
-        a = np.asarray(axis, dtype=float)
-        if a.shape != (3,) or not np.linalg.norm(a) > 0:
-            raise ValueError(f"axis must be a non-zero 3-vector, got {axis!r}")
-        on_segments = np.zeros(len(self.names), dtype=bool)     # lookup table segment index -> tracked
-        on_segments[[self.names.index(s) for s in segments]] = True
-        self._monitors[name] = (joint, a / np.linalg.norm(a), on_segments)
+        `segments` (fabricfem.contact.torque.TorqueMonitor) under `name`."""
+        self._monitors[name] = TorqueMonitor.build(self.names, joint, axis, segments)
         self._torque_impulse[name] = 0.0
 
     def torque(self, name: str) -> float:
         """The registered torque [N m] of the last step's forces (all ranks)."""
-        joint, axis, on_segments = self._monitors[name]
-        return contact_torque(self.position, -self.force, self.segment, np.flatnonzero(on_segments),
-                              self.poses.joint(joint, self.time), axis, self.comm)
+        monitor = self._monitors[name]
+        return monitor.value(self.position, self.force, self.segment, self.poses.joint(monitor.joint, self.time),
+                             self.comm)
 
     def reset_means(self):
         for name in self._torque_impulse:
@@ -412,17 +403,12 @@ class ExplicitBodyContact:
         """Contact pressure [Pa] as a Q2 scalar Function (held nodes: 0), time-averaged or the last step's,
         per unit current cloth area for the state in model.w (the pressure on the body) or per unit
         reference area (`per="reference"`, as `mean_pressure`)."""
-        pressure = self.mean_pressure() if mean else self.normal_force / self.area
-        if per == "current":
-            if self._current_areas is None:
-                self._current_areas = CurrentAreas(self.model, self.nodes)
-            pressure = pressure * self.area / self._current_areas()[self.moving]
-        elif per != "reference":
-            raise ValueError(f"per must be 'current' or 'reference', got {per!r}")
-        f = fem.Function(self.nodes.scalar_space, name="contact_pressure")
-        f.x.array[self.nodes.node_index[self.moving]] = pressure
-        f.x.scatter_forward()
-        return f
+        if self._current_areas is None and per == "current":
+            self._current_areas = CurrentAreas(self.model, self.nodes)
+        current = None if self._current_areas is None else (lambda: self._current_areas()[self.moving])
+        pressure = pressure_on_body(self.mean_pressure() if mean else self.normal_force / self.area, self.area,
+                                    current, per)
+        return pressure_function(self.nodes.scalar_space, self.nodes.node_index[self.moving], pressure)
 
     def max_penetration(self, d: np.ndarray, t: float) -> float:
         """max(0, -min g) [m] of the nodes at displacements `d` (local array of W) against the body at t, all ranks."""
@@ -477,14 +463,9 @@ class ExplicitBodyContact:
         cloth, segments and normal forces) to the interval's impulses."""
         tic = time.perf_counter()
         step_torques = []
-        for name, (joint, axis, on_segments) in self._monitors.items():
-            mask = on_segments[segment]
-            tau = 0.0
-            if mask.any():
-                # tau = a . sum_i (x_i - J) x f_i, f_i = -force (on the body), as fabricfem.body.motion.joint_torque
-                arm = position[mask] - self.poses.joint(joint, self.time)
-                tau = float(np.dot(_cross(arm, -force[mask]).sum(axis=0), axis))
-                self._torque_impulse[name] += dt * tau
+        for name, monitor in self._monitors.items():
+            tau = monitor.value(position, force, segment, self.poses.joint(monitor.joint, self.time), None)
+            self._torque_impulse[name] += dt * tau
             step_torques.append(tau)
         if self.trace is not None:
             self.trace.append((self.time, *step_torques, float(normal_force.sum())))
@@ -661,15 +642,6 @@ class PoseCache:
         if name not in self.body.kinematics.names:
             raise ValueError(f"name: unknown joint or marker {name!r}")
         return np.asarray(self.positions(t)[name], dtype=float)
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise a x b of (N, 3) arrays (the products and differences of np.cross, without its axis handling)."""
-    out = np.empty_like(a)
-    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
-    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
-    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
-    return out
 
 
 def _posed_segment(segment, positions) -> Ellipsoid:

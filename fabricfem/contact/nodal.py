@@ -28,7 +28,7 @@ the Jacobian grows only by a factor ~c.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 import ufl
@@ -106,6 +106,28 @@ class CurrentAreas:
         areas = vec.array[self._index].copy()
         vec.destroy()
         return areas
+
+
+def pressure_on_body(pressure: np.ndarray, reference_area: np.ndarray, current_area: Callable[[], np.ndarray] | None,
+                     per: str) -> np.ndarray:
+    """Nodal contact pressure [Pa] from the contact law's p_i (per reference area w_i [m^2]): per unit current
+    cloth area, p_i w_i / a_i, the pressure on the body (`per="current"`; `current_area()` gives a_i [m^2]), or
+    p_i itself (`per="reference"`)."""
+    if per == "reference":
+        return pressure
+    if per != "current":
+        raise ValueError(f"per must be 'current' or 'reference', got {per!r}")
+    return pressure * reference_area / current_area()
+
+
+def pressure_function(space, node_index: np.ndarray, pressure: np.ndarray) -> fem.Function:
+    """The contact pressure field [Pa]: a scalar Function on `space` (the contact nodes' Q2 space) with
+    `pressure` at the local nodes `node_index` and 0 elsewhere, ghosts updated. The one pressure field of
+    every contact formulation (output, renders)."""
+    f = fem.Function(space, name="contact_pressure")
+    f.x.array[node_index] = pressure
+    f.x.scatter_forward()
+    return f
 
 
 def contact_nodes(model) -> ContactNodes:

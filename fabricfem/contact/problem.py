@@ -48,7 +48,7 @@ from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.body.pose import Body
 from fabricfem.contact import friction as friction_law
 from fabricfem.contact import nodal
-from fabricfem.contact.torque import adjacent_segments, contact_torque
+from fabricfem.contact.torque import TorqueMonitor, adjacent_segments
 from fabricfem.meshes._validate import non_negative
 from fabricfem.solvers.newton import NewtonResult, NewtonSolver, SolverError
 
@@ -113,6 +113,7 @@ class ContactProblem:
         self.active_set_updates: list[int] = []   # set changes per update in the last `solve`
         self.model = model
         self.method = method
+        self.torque_monitors: dict[str, TorqueMonitor] = {}
         self.mu = friction_law.friction_coefficient(friction)
         self.body: Body | None = obstacles if isinstance(obstacles, Body) else None
         self.time = float(time)
@@ -372,30 +373,34 @@ class ContactProblem:
         """(N,) normal contact pressure at the owned nodes [Pa]: per unit current (deformed) cloth area, the
         pressure on the body (`per="current"`), or per unit reference area, the p of the contact law
         (`per="reference"`); they differ by the area stretch a_i / w_i."""
-        pressure = self.evaluate().pressure
-        if per == "reference":
-            return pressure
-        if per != "current":
-            raise ValueError(f"per must be 'current' or 'reference', got {per!r}")
-        if self._current_areas is None:
+        if self._current_areas is None and per == "current":
             self._current_areas = nodal.CurrentAreas(self.model, self.nodes)
-        return pressure * self.nodes.area / self._current_areas()
+        return nodal.pressure_on_body(self.evaluate().pressure, self.nodes.area, self._current_areas, per)
 
     def pressure_field(self, per: str = "current") -> fem.Function:
         """Contact pressure [Pa] (`contact_pressure`) as a Q2 scalar Function (for output)."""
-        f = fem.Function(self.nodes.scalar_space, name="contact_pressure")
-        f.x.array[self.nodes.node_index] = self.contact_pressure(per)
-        f.x.scatter_forward()
-        return f
+        return nodal.pressure_function(self.nodes.scalar_space, self.nodes.node_index, self.contact_pressure(per))
 
     def joint_torque(self, joint: str, axis: Sequence[float]) -> float:
         """Torque [N m] about `joint` along `axis` of the contact forces that the cloth exerts on the
         segments adjacent to the joint (fabricfem.body.motion.joint_torque convention), all ranks."""
         if self.body is None:
             raise ValueError("joint_torque needs a Body as obstacles")
+        return self._torque(TorqueMonitor.build(list(self.body.segments), joint, axis,
+                                                adjacent_segments(self.body, joint)))
+
+    def track_torque(self, name: str, joint: str, axis, segments: Sequence[str]):
+        """Register the torque [N m] about `joint` along `axis` of the forces the cloth exerts on `segments`
+        (fabricfem.contact.torque.TorqueMonitor) under `name`, read by `torque(name)`."""
+        if self.body is None:
+            raise ValueError("track_torque needs a Body as obstacles")
+        self.torque_monitors[name] = TorqueMonitor.build(list(self.body.segments), joint, axis, segments)
+
+    def torque(self, name: str) -> float:
+        """The registered torque `name` [N m] at the current state (all ranks)."""
+        return self._torque(self.torque_monitors[name])
+
+    def _torque(self, monitor: TorqueMonitor) -> float:
         s = self.evaluate()
-        names = list(self.body.segments)
-        segments = adjacent_segments(self.body, joint)
-        centre = self.body.joint_position(joint, self.time)
-        return contact_torque(s.position, -s.force, s.segment, [names.index(n) for n in segments],
-                              centre, axis, self.comm)
+        return monitor.value(s.position, s.force, s.segment, self.body.joint_position(monitor.joint, self.time),
+                             self.comm)

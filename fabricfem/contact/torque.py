@@ -8,6 +8,7 @@ the clothing exerts on the body at x_i [m] (the opposite of the forces on the cl
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -42,3 +43,33 @@ def contact_torque(points: np.ndarray, forces_on_body: np.ndarray, segment: np.n
     if comm is None:
         return float(local)
     return float(comm.allreduce(local, op=MPI.SUM))
+
+
+@dataclass(frozen=True)
+class TorqueMonitor:
+    """The resisting-torque monitor of a wear run: the torque [N m] about `joint` along the unit `axis` of the
+    forces the cloth exerts on the body segments `segments` (indices into the contact's segment names), by
+    `contact_torque` [Man2006, ch. 5 intro]. Every contact formulation (implicit ContactProblem, explicit
+    ExplicitBodyContact) evaluates its torques through this one path."""
+
+    joint: str
+    axis: np.ndarray
+    segments: np.ndarray
+
+    @classmethod
+    def build(cls, names: Sequence[str], joint: str, axis, segments: Sequence[str]) -> "TorqueMonitor":
+        """Validated monitor; ValueError naming `segments` (unknown names) or `axis` (not a non-zero 3-vector)."""
+        unknown = [s for s in segments if s not in names]
+        if unknown or not len(segments):
+            raise ValueError(f"segments: unknown or no segment names {list(segments)} (known: {list(names)})")
+        a = np.asarray(axis, dtype=float)
+        if a.shape != (3,) or not np.all(np.isfinite(a)) or not np.linalg.norm(a) > 0:
+            raise ValueError(f"axis must be a finite non-zero 3-vector, got {axis!r}")
+        on_segments = np.zeros(len(names), dtype=bool)
+        on_segments[[list(names).index(s) for s in segments]] = True
+        return cls(joint, a / np.linalg.norm(a), np.flatnonzero(on_segments))
+
+    def value(self, position: np.ndarray, force_on_cloth: np.ndarray, segment: np.ndarray, joint_position,
+              comm: MPI.Comm | None) -> float:
+        """tau [N m] of the nodal forces on the cloth `force_on_cloth` (the body takes -f) at `position`."""
+        return contact_torque(position, -force_on_cloth, segment, self.segments, joint_position, self.axis, comm)

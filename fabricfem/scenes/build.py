@@ -10,8 +10,11 @@ import numpy as np
 from fabricfem.dynamics import stability
 from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
 from fabricfem.meshes import plate, tube
+from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
 from fabricfem.scenes import schema
 from fabricfem.scenes.schema import Scene, SceneError
+from fabricfem.scenes.sections import from_table
+from fabricfem.wear.config import SECTIONS, ContactSpec, FabricSpec, FlexionSpec, RouteSpec, SleeveConfig, TubeSpec
 
 
 def build_fabric(spec: dict) -> Fabric:
@@ -74,9 +77,40 @@ def critical_time_step_estimate(data: dict) -> float | None:
     return stability.critical_time_step(None, tuple(rayleigh), omega_max=omega)  # eq. 2.86
 
 
+# the part of SleeveConfig each parameter belongs to -> the scene section that sets it
+_SLEEVE_SECTION_OF = {"tube": "mesh", "material": "fabric", "motion": "motion", "contact": "contact", "route": "route"}
+
+
+def sleeve_config(data: dict) -> SleeveConfig:
+    """The SleeveConfig of a sleeve scene's data ([mesh], [fabric], [body], [motion], [contact], [route]); its
+    checks (fabricfem.wear.config) become SceneErrors naming the section and key."""
+    fabric, name = data["fabric"], data.get("scene", {}).get("name", "sleeve")
+    try:
+        return SleeveConfig(
+            tube=from_table(TubeSpec, data["mesh"], exclude=("type", "cell", "order")),
+            material=FabricSpec(E=fabric["E1"], G=fabric["G12"], nu12=fabric["nu12"], thickness=fabric["thickness"],
+                                density=fabric.get("density", 0.0)),
+            motion=from_table(FlexionSpec, data["motion"], exclude=("type",)),
+            contact=from_table(ContactSpec, data.get("contact", {})),
+            route=from_table(RouteSpec, data.get("route", {})),
+            arm=from_table(ArmDimensions, {**vars(DEFAULT_ARM), **{k: v for k, v in data["body"].items()
+                                                                   if k != "type"}}),
+            name=name)
+    except ValueError as exc:
+        message = str(exc)
+        key = message.split(" ")[0].rstrip(":")
+        part = next((p for p, cls in SECTIONS.items() if key in cls.__dataclass_fields__), None)
+        where = (f"{_SLEEVE_SECTION_OF[part]}.{key}" if part else
+                 f"body.{key.split('.')[-1]}" if key.startswith("arm.") or key in ArmDimensions.__dataclass_fields__
+                 else "body" if "arm" in message else "scene")
+        raise SceneError(f"{where}: {message}") from None
+
+
 def check_objects(data: dict) -> None:
     """Checks that need objects: an explicit dynamic scene's numeric dt must not exceed the critical time step
     (unless dynamics.force = true)."""
+    if schema.SLEEVE_SECTIONS & set(data):
+        sleeve_config(data)
     dyn = data.get("dynamics")
     if not dyn or dyn["integrator"] != "explicit" or isinstance(dyn["dt"], str) or dyn.get("force", False):
         return

@@ -21,7 +21,7 @@ from petsc4py import PETSc
 
 from fabricfem import io
 from fabricfem.body.ellipsoid import Ellipsoid
-from fabricfem.scenes.build import build_fabric, build_mesh
+from fabricfem.scenes.build import build_fabric, build_mesh, sleeve_config
 from fabricfem.scenes.schema import Scene, SceneError, donning_start
 from fabricfem.wear.compression import fit_sleeve, pressure_report
 from fabricfem.shell import ShellModel
@@ -112,7 +112,7 @@ def run_scene(scene: Scene, comm=MPI.COMM_WORLD):
     run_dynamic_scene, compression scenes (with [limb]) to fabricfem.wear.compression, others are static
     load-stepping scenes (returns the list of LoadStep)."""
     if "body" in scene.data:
-        return run_sleeve_scene(scene, comm)
+        return run_sleeve_scene(sleeve_config(scene.data), scene.get("output", {}), comm)
     if "dynamics" in scene.data:
         return run_dynamic_scene(scene, comm)
     if "limb" in scene.data:

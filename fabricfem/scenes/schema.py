@@ -38,28 +38,14 @@ typos). Units are SI. Example (scenes/rollup.toml):
     dir = "results/rollup"
     probe = [0.3, 0.0, 0.0]   # a node whose displacement is reported
 
-A sleeve scene (scenes/sleeve.toml, run by fabricfem.wear.sleeve) has a tube [mesh], a [fabric], no
-[solver] and no [[support]] (the shoulder end end0 is held), and three more sections:
-
-    [body]
-    type = "default_arm"          # upper arm + forearm ellipsoids (fabricfem.body.default_arm)
-    upper_arm_girth = 0.35        # m, optional (also forearm_girth, upper_arm_length, forearm_length);
-                                  # girth / (2 pi) must stay below mesh.radius
-    [motion]
-    type = "elbow_flexion"
-    final_angle = 57.0            # deg, in (0, 180)
-    angular_velocity = 45.0       # deg/s
-    solver = "explicit"           # explicit (central differences, default) | quasistatic (Newton per angle)
-    mass_damping = 10.0           # 1/s, explicit: Rayleigh alpha of C = alpha M (optional)
-    rotary_inertia_scale = 100.0  # explicit: factor >= 1 on the rotational lumped masses (optional)
-    output_angle_step = 1.0       # deg, explicit: torque averaged and recorded per interval (optional)
-    steps = 19                    # quasistatic: angle steps
-    [contact]
-    method = "lagrange"           # explicit: lagrange (Box 5, default) | penalty; quasistatic: penalty | augmented
-    friction = 0.1                # Coulomb mu >= 0
-    penalty = 1e7                 # Pa/m, optional (default 10 E t / h^2)
-    stabilization = 0.01          # viscous regularisation c / (E t / R^2), optional
-    gravity = false               # sleeve weight along -y
+A sleeve scene (kind = "sleeve", scenes/sleeve.toml, run by fabricfem.wear) has a tube [mesh], a [fabric] with
+E1 = E2, no [solver] and no [[support]] (the shoulder end end0 is held), and [body], [motion], optional [contact]
+and [route]. Their keys, types and defaults are the fields of the dataclasses of fabricfem.wear.config
+(`fabricfem scenes` documents them; units in the field comments): [mesh] adds TubeSpec's quadrature and
+hold_rotations; [body] (type = "default_arm") ArmDimensions; [motion] (type = "elbow_flexion") FlexionSpec;
+[contact] ContactSpec; [route] RouteSpec. Older files that set motion.steps, motion.solver, motion.mass_damping,
+motion.rotary_inertia_scale, motion.dynamic_similarity or contact.gravity are refused with the new place
+of the key (MOVED_KEYS).
 
 [output] may add render_angles = [19.0, 38.0, 57.0] (deg) and body_samples (points per ellipsoid ring).
 
@@ -114,17 +100,20 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
-import math
-from fabricfem.body.arm import DEFAULT_ARM
 import importlib.util
+import math
+
+from fabricfem.body.arm import ArmDimensions
+from fabricfem.scenes.sections import schema_of
+from fabricfem.wear.config import ContactSpec, FlexionSpec, RouteSpec, TubeSpec
 
 SCHEMA: dict[str, dict[str, tuple[type | tuple, bool]]] = {
     # section -> key -> (type(s), required)
-    "scene": {"name": (str, False), "description": (str, False)},
+    "scene": {"name": (str, False), "description": (str, False), "kind": (str, False)},
     "mesh": {"type": (str, True), "lx": ((int, float), False), "ly": ((int, float), False),
              "nx": (int, False), "ny": (int, False), "cell": (str, False), "structured": (bool, False),
              "length": ((int, float), False), "radius": ((int, float), False), "n_around": (int, False),
-             "n_along": (int, False), "order": (int, False)},
+             "n_along": (int, False), "order": (int, False), **schema_of(TubeSpec)},
     "fabric": {"name": (str, False), "E1": ((int, float), True), "E2": ((int, float), True),
                "G12": ((int, float), True), "nu12": ((int, float), True), "thickness": ((int, float), True),
                "density": ((int, float), False), "G13": ((int, float), False),
@@ -139,15 +128,12 @@ SCHEMA: dict[str, dict[str, tuple[type | tuple, bool]]] = {
                "min_step": ((int, float), False), "petsc_options": (dict, False)},
     "output": {"dir": (str, False), "probe": (list, False), "render": (bool, False),
                "render_angles": (list, False), "body_samples": (int, False)},
-    # sleeve scenes (fabricfem.wear.sleeve): the wearer, its motion and the contact
-    "body": {"type": (str, True), "upper_arm_length": ((int, float), False), "forearm_length": ((int, float), False),
-             "upper_arm_girth": ((int, float), False), "forearm_girth": ((int, float), False)},
-    "motion": {"type": (str, True), "final_angle": ((int, float), False), "angular_velocity": ((int, float), False),
-               "steps": (int, False), "solver": (str, False), "mass_damping": ((int, float), False),
-               "rotary_inertia_scale": ((int, float), False), "output_angle_step": ((int, float), False),
-               "dynamic_similarity": (bool, False), "settle_time": ((int, float), False)},
-    "contact": {"method": (str, False), "friction": ((int, float), False), "penalty": ((int, float), False),
-                "stabilization": ((int, float), False), "gravity": (bool, False)},
+    # sleeve scenes (fabricfem.wear): the wearer, its motion, the contact and the route; keys and defaults are
+    # the fields of fabricfem.wear.config (ArmDimensions, FlexionSpec, ContactSpec, RouteSpec)
+    "body": {"type": (str, True), **schema_of(ArmDimensions)},
+    "motion": {"type": (str, True), **schema_of(FlexionSpec)},
+    "contact": schema_of(ContactSpec),
+    "route": schema_of(RouteSpec),
     # compression scenes (fabricfem.wear.compression): a tube donned onto one limb ellipsoid
     "limb": {"center": (list, True), "radii": (list, True)},
     "donning": {"start": ((int, float), False), "steps": (int, False), "tolerance": ((int, float), False)},
@@ -179,11 +165,16 @@ STANDARD_COLUMNS = {"time", "kinetic", "strain", "external_work", "dissipated", 
                     "newton_iterations"}
 LIST_SECTIONS = {"support", "load"}
 REQUIRED_SECTIONS = {"mesh", "fabric", "solver"}
-SLEEVE_SECTIONS = {"body", "motion", "contact"}     # a scene with any of them is a sleeve scene
+SLEEVE_SECTIONS = {"body", "motion", "contact", "route"}   # a scene with any of them is a sleeve scene
+SLEEVE_MESH_KEYS = set(schema_of(TubeSpec)) - {"length", "radius", "n_around", "n_along"}   # sleeve-only [mesh] keys
+KINDS = ("static", "dynamic", "sleeve", "compression")
+# keys of older scene files that moved: old -> new (refused with the new name)
+MOVED_KEYS = {"motion.steps": "motion.angle_steps", "motion.solver": "route.solver",
+              "motion.mass_damping": "route.mass_damping", "motion.rotary_inertia_scale": "route.rotary_inertia_scale",
+              "motion.dynamic_similarity": "route.dynamic_similarity", "contact.gravity": "route.gravity"}
 COMPRESSION_SECTIONS = {"limb", "donning"}           # a scene with any of them is a compression scene
 BODY_TYPES = {"default_arm"}
 MOTION_TYPES = {"elbow_flexion"}
-CONTACT_METHODS = {"explicit": {"lagrange", "penalty"}, "quasistatic": {"penalty", "augmented"}}
 MESH_KEYS = {"plate": {"lx", "ly", "nx", "ny"}, "tube": {"length", "radius", "n_around", "n_along"}}
 LOAD_TYPES = {"gravity", "body_force", "edge_traction", "pressure", "edge_moment", "point"}
 
@@ -200,6 +191,10 @@ def _suggest(name: str, options) -> str:
 def _check_table(section: str, table: dict, where: str):
     schema = SCHEMA[section] if section in SCHEMA else SUB_SCHEMA[section]
     for key, value in table.items():
+        if f"{section}.{key}" in MOVED_KEYS:
+            new_section, new_key = MOVED_KEYS[f"{section}.{key}"].split(".")
+            raise SceneError(f"{where}.{key}: this key has moved; write it as {new_key} = {value!r} in "
+                             f"[{new_section}]")
         if key not in schema:
             raise SceneError(f"{where}: unknown key {key!r}{_suggest(key, schema)}; allowed: {sorted(schema)}")
         types, _ = schema[key]
@@ -214,8 +209,11 @@ def _check_table(section: str, table: dict, where: str):
 
 @dataclass
 class Scene:
+    """A validated scene: its TOML data and its kind (static, dynamic, sleeve, compression)."""
+
     data: dict[str, Any]
     path: Path | None = None
+    kind: str = "static"
 
     def __getitem__(self, key):
         return self.data[key]
@@ -233,6 +231,10 @@ def validate(data: dict, source: str = "scene") -> Scene:
     sleeve = bool(SLEEVE_SECTIONS & set(data))
     dynamic = "dynamics" in data
     compression = bool(COMPRESSION_SECTIONS & set(data))
+    inferred = "sleeve" if sleeve else "compression" if compression else "dynamic" if dynamic else "static"
+    kind = data.get("scene", {}).get("kind", inferred)
+    if kind not in KINDS:
+        raise SceneError(f"scene.kind: unknown kind {kind!r}{_suggest(str(kind), KINDS)}; allowed: {list(KINDS)}")
     if dynamic and (sleeve or "solver" in data):
         other = "[solver]" if "solver" in data else "[body]/[motion]/[contact]"
         raise SceneError(f"{source}: [dynamics] and {other} given: a scene is either dynamic (time integration "
@@ -242,7 +244,7 @@ def validate(data: dict, source: str = "scene") -> Scene:
         raise SceneError(f"{source}: [limb]/[donning] (a compression scene) and {other} given: a compression "
                          f"scene has [mesh], [fabric], [limb], optional [donning] and [output]")
     if sleeve:
-        required = (REQUIRED_SECTIONS - {"solver"}) | SLEEVE_SECTIONS
+        required = (REQUIRED_SECTIONS - {"solver"}) | {"body", "motion"}     # [contact], [route]: defaults
     elif compression:
         required = (REQUIRED_SECTIONS - {"solver"}) | {"limb"}
     elif dynamic:
@@ -277,13 +279,17 @@ def validate(data: dict, source: str = "scene") -> Scene:
             raise SceneError(f"support[{i}]: give exactly one of 'edge' (an edge name) or 'point' = [x, y, z]")
         if "point" in support:
             _numbers(f"support[{i}].point", support["point"], 3)
+    if kind != inferred:
+        raise SceneError(f"scene.kind: {kind!r} does not match the sections given, which make a {inferred!r} scene")
+    if not sleeve and SLEEVE_MESH_KEYS & set(mesh):
+        raise SceneError(f"mesh: {sorted(SLEEVE_MESH_KEYS & set(mesh))} are keys of a sleeve scene's tube only")
     if sleeve:
         _check_sleeve(data)
     if compression:
         _check_compression(data)
     if dynamic:
         _check_dynamics(data)
-    return Scene(data)
+    return Scene(data, kind=kind)
 
 
 def _positive(where: str, value) -> None:
@@ -292,9 +298,9 @@ def _positive(where: str, value) -> None:
 
 
 def _check_sleeve(data: dict) -> None:
-    """Sleeve scenes: a tube, a known body and motion, non-negative friction, and an arm that fits inside
-    the sleeve (largest segment radius girth / (2 pi) below mesh.radius)."""
-    mesh, body, motion, contact = data["mesh"], data["body"], data["motion"], data["contact"]
+    """Sleeve scenes: a tube, a known body and motion, E1 = E2; the parameters themselves are checked by
+    fabricfem.wear.config.SleeveConfig (scenes.build.sleeve_config)."""
+    mesh, body, motion, fabric = data["mesh"], data["body"], data["motion"], data["fabric"]
     if mesh["type"] != "tube":
         raise SceneError(f"mesh.type: a sleeve scene needs a 'tube' mesh, got {mesh['type']!r}")
     if body["type"] not in BODY_TYPES:
@@ -303,46 +309,8 @@ def _check_sleeve(data: dict) -> None:
     if motion["type"] not in MOTION_TYPES:
         raise SceneError(f"motion.type: unknown motion {motion['type']!r}{_suggest(motion['type'], MOTION_TYPES)}; "
                          f"allowed: {sorted(MOTION_TYPES)}")
-    solver = motion.get("solver", "explicit")
-    if solver not in CONTACT_METHODS:
-        raise SceneError(f"motion.solver: unknown solver {solver!r}{_suggest(solver, CONTACT_METHODS)}; "
-                         f"allowed: {sorted(CONTACT_METHODS)}")
-    methods = CONTACT_METHODS[solver]
-    method = contact.get("method", sorted(methods)[0])
-    if method not in methods:
-        raise SceneError(f"contact.method: unknown method {method!r} for the {solver} solver"
-                         f"{_suggest(method, methods)}; allowed: {sorted(methods)}")
-    for key in ("output_angle_step",):
-        if key in motion:
-            _positive(f"motion.{key}", motion[key])
-    if "mass_damping" in motion and not motion["mass_damping"] >= 0:
-        raise SceneError(f"motion.mass_damping: must be >= 0 [1/s], got {motion['mass_damping']!r}")
-    if "rotary_inertia_scale" in motion and not motion["rotary_inertia_scale"] >= 1:
-        raise SceneError(f"motion.rotary_inertia_scale: must be >= 1, got {motion['rotary_inertia_scale']!r}")
-    friction = contact.get("friction", 0.1)
-    if not (math.isfinite(friction) and friction >= 0.0):
-        raise SceneError(f"contact.friction: the Coulomb coefficient must be >= 0, got {friction!r}")
-    for key in ("penalty", "stabilization"):
-        if key in contact:
-            _positive(f"contact.{key}", contact[key])
-    for key in ("length", "radius"):
-        _positive(f"mesh.{key}", mesh[key])
-    for key in ("upper_arm_length", "forearm_length", "upper_arm_girth", "forearm_girth"):
-        if key in body:
-            _positive(f"body.{key}", body[key])
-    if "final_angle" in motion and not 0 < motion["final_angle"] < 180:
-        raise SceneError(f"motion.final_angle: must lie in (0, 180) degrees, got {motion['final_angle']!r}")
-    for key in ("angular_velocity", "steps"):
-        if key in motion:
-            _positive(f"motion.{key}", motion[key])
-    if "settle_time" in motion:
-        _finite("motion.settle_time", motion["settle_time"], minimum=0.0, strict=False)
-    for key in ("upper_arm_girth", "forearm_girth"):
-        girth = body.get(key, getattr(DEFAULT_ARM, key))
-        if girth / (2.0 * math.pi) >= mesh["radius"]:
-            raise SceneError(f"body.{key}: an arm of girth {girth} m (radius {girth / (2 * math.pi):.4f} m) does not "
-                             f"fit inside a sleeve of mesh.radius {mesh['radius']} m; the arm must start inside "
-                             f"the sleeve without penetration")
+    if fabric["E1"] != fabric["E2"]:
+        raise SceneError("fabric.E2: the sleeve uses E1 = E2 (thesis sec. 5.3)")
 
 
 def donning_start(data: dict) -> float:

@@ -47,7 +47,7 @@ from fabricfem.shell import ShellModel
 from fabricfem.solvers.loadstep import solve_load_path
 from fabricfem.wear.outputs import plot_torque
 from fabricfem.wear.run import run_sleeve
-from fabricfem.wear.sleeve import SleeveConfig
+from fabricfem.wear.config import SleeveConfig
 
 FABRIC_NAME = "plain-weave-ti-contact"
 SVK_NAME = "plain-weave-ti-contact-svk"
@@ -367,14 +367,14 @@ def strip_table(rows: Sequence[StripRow]) -> str:
 def sleeve_comparison(out_dir: str | Path = OUT_DIR, n_around: int = 10, n_along: int = 13, friction: float = 0.1,
                       fabrics: Sequence[str] = (FABRIC_NAME, SVK_NAME), comm: MPI.Comm = MPI.COMM_WORLD,
                       log: Callable[[str], None] | None = None) -> dict[str, "object"]:
-    """Explicit sleeve flexion to 57 degrees (fabricfem.wear.sleeve, SleeveConfig(fabric_name=...)) for each stored
+    """Explicit sleeve flexion to 57 degrees (fabricfem.wear.sleeve, SleeveConfig.of(fabric_name=...)) for each stored
     fabric, with dynamic similarity (the unit-cell fabric is ~200 times stiffer than fabric I, E = 1.2 MPa,
     so at 45 deg/s it would need ~15 times the explicit steps; SleeveConfig.flexion_speed), friction mu.
     Writes sleeve_torque_<mesh>.csv (angle, torque per fabric) and .png to out_dir; returns the histories."""
     out = Path(out_dir)
     histories = {}
     for name in fabrics:
-        config = SleeveConfig(n_around=n_around, n_along=n_along, friction=friction, fabric_name=name,
+        config = SleeveConfig.of(n_around=n_around, n_along=n_along, friction=friction, fabric_name=name,
                               dynamic_similarity=True, name=name)
         t0 = time.perf_counter()
         history = run_sleeve(config, comm, stop_on_failure=False)

@@ -34,12 +34,12 @@ from mpi4py import MPI
 
 from fabricfem.materials import positive_number
 from fabricfem.wear.outputs import plot_torque
-from fabricfem.wear.run import run_sleeve
-from fabricfem.wear.sleeve import SleeveConfig, SleeveHistory
+from fabricfem.wear.run import build_run, run_sleeve
+from fabricfem.wear.config import SleeveConfig
+from fabricfem.wear.sleeve import SleeveHistory
 import hashlib
 from fabricfem.wear.sleeve import SleeveStep
-from fabricfem.wear.sleeve import build_explicit, run_explicit
-from fabricfem.wear.sleeve_implicit import build_implicit, run_implicit
+from fabricfem.wear.sleeve_implicit import run_implicit
 
 MESHES = {"I": (10, 13), "II": (15, 20), "III": (20, 26), "IV": (30, 39)}
 FABRICS = {"I": dict(E=1.2e6, G=1.2e6 / 200, density=436.0),       # thesis sec. 5.3.5, G = E / 200
@@ -98,7 +98,7 @@ def variants(quick: bool = False, fine: str = "III", meshes: tuple[str, ...] = (
 def relative_cost(config: SleeveConfig) -> float:
     """Estimated cost of a flexion relative to others: nodes x steps ~ (n_around n_along) x (1 / h) (the
     explicit step scales with the element size h; dynamic similarity keeps the steps of fabric I)."""
-    return (config.n_around * config.n_along) ** 1.5
+    return (config.tube.n_around * config.tube.n_along) ** 1.5
 
 
 def schedule(configs: list[SleeveConfig], ranks: int) -> list[int]:
@@ -231,14 +231,14 @@ def _load_variant(out: Path, cfg: SleeveConfig) -> SleeveHistory | None:
 
 def base_description(cfg: SleeveConfig) -> str:
     """One line: the flexion settings common to the study's variants."""
-    return (f"at {cfg.angular_velocity:g} deg/s, mass damping {cfg.mass_damping:g} 1/s, rotary-inertia scale "
-            f"{cfg.rotary_inertia_scale:g}, gravity {'on (-y, ' + format(cfg.settle_time, 'g') + ' s rest before the flexion)' if cfg.gravity else 'off'}, "
-            f"{cfg.method} contact, records every {cfg.output_angle_step:g} deg")
+    return (f"at {cfg.motion.angular_velocity:g} deg/s, mass damping {cfg.route.mass_damping:g} 1/s, rotary-inertia scale "
+            f"{cfg.route.rotary_inertia_scale:g}, gravity {'on (-y, ' + format(cfg.motion.settle_time, 'g') + ' s rest before the flexion)' if cfg.route.gravity else 'off'}, "
+            f"{cfg.contact.method} contact, records every {cfg.motion.output_angle_step:g} deg")
 
 
 def _describe(cfg: SleeveConfig) -> str:
-    return (f"{cfg.n_around}x{cfg.n_along} mu={cfg.friction} R={cfg.radius} t={cfg.thickness} E={cfg.E:.3g}"
-            + (f" (similarity: {cfg.flexion_speed:.4g} deg/s)" if cfg.dynamic_similarity and
+    return (f"{cfg.tube.n_around}x{cfg.tube.n_along} mu={cfg.contact.friction} R={cfg.tube.radius} t={cfg.material.thickness} E={cfg.material.E:.3g}"
+            + (f" (similarity: {cfg.flexion_speed:.4g} deg/s)" if cfg.route.dynamic_similarity and
                cfg.similarity_factor != 1.0 else ""))
 
 
@@ -318,36 +318,35 @@ def _run_method(method: str, base: SleeveConfig, comm: MPI.Comm, al_budget: floa
     # other people's load, the CPU time is the work of this method alone
     cpu_start = time.process_time()
     if method in ("lagrange", "penalty"):
-        problem = build_explicit(base.with_(solver="explicit", method=method), comm)
+        problem = build_run(base.with_(solver="explicit", method=method), comm)
         problem.contact.monitor_penetration = True
         problem.contact.start_trace()
-        h = run_explicit(problem, stop_on_failure=False)
+        h = problem.run(stop_on_failure=False)
         trace = problem.contact.trace_array()
         angles = np.degrees([problem.flexion.angle(t) for t in trace[:, 0]])
         rms, rel = torque_bounce(angles, -trace[:, 1], problem.steps_per_record)
         row.update(max_penetration_m=problem.contact.max_penetration_all(), bounce_rms_Nm=rms, bounce_relative=rel,
                    work=f"{sum(s.time_steps for s in h.steps)} steps of {problem.dt:.3g} s",
                    note=f"penetration every step; {h.failure}" if h.failure else "penetration monitored every step")
-        problem.integrator.destroy()
     else:
         steps_per_degree = IMPLICIT_STEPS_PER_DEGREE
         cfg = base.with_(solver="implicit", method="augmented",
-                         angle_steps=int(round(steps_per_degree * base.final_angle)))
-        problem = build_implicit(cfg, comm)
-        h = run_implicit(problem, stop_on_failure=False, max_wall_time=al_budget)
+                         angle_steps=int(round(steps_per_degree * base.motion.final_angle)))
+        problem = build_run(cfg, comm)
+        h = run_implicit(problem, stop_on_failure=False, max_wall_time=al_budget)   # with a wall-time budget
         trace = problem.trace_array()
         rms, rel = torque_bounce(trace[:, 1], trace[:, 2], steps_per_degree)
         n_steps = int(np.count_nonzero(trace[:, 0] > 0.0))
         row.update(max_penetration_m=float(np.max(trace[:, 3], initial=0.0)), bounce_rms_Nm=rms, bounce_relative=rel,
                    work=(f"{n_steps} steps of {problem.dt:.3g} s (settle {problem.settle_steps}), "
                          f"{sum(s.newton_iterations for s in h.steps)} Newton iterations"),
-                   note=("penetration after every step (Uzawa to " f"{cfg.augmentation_tolerance:g} m)"
+                   note=("penetration after every step (Uzawa to " f"{cfg.contact.augmentation_tolerance:g} m)"
                          + (f"; STOPPED: {h.failure}" if h.failure else "")))
-        problem.solver.destroy()
+    problem.destroy()
     reached = float(h.angles[-1])
-    row.update(mesh=f"{base.n_around}x{base.n_along}", ndofs=h.ndofs, reached_deg=reached,
-               gravity="on" if problem.config.gravity else "off",
-               torque_57_Nm=h.torque_at(base.final_angle) if reached >= base.final_angle - 1e-9 else math.nan,
+    row.update(mesh=f"{base.tube.n_around}x{base.tube.n_along}", ndofs=h.ndofs, reached_deg=reached,
+               gravity="on" if problem.config.route.gravity else "off",
+               torque_57_Nm=h.torque_at(base.motion.final_angle) if reached >= base.motion.final_angle - 1e-9 else math.nan,
                wall_s=h.wall, cpu_s=time.process_time() - cpu_start)
     return row
 
@@ -371,7 +370,7 @@ def run_methods(out: str | Path = "results/sleeve_methods.csv", mesh: str = "III
     if mesh not in MESHES:
         raise ValueError(f"mesh: unknown mesh {mesh!r}, expected one of {sorted(MESHES)}")
     n_around, n_along = MESHES[mesh]
-    base = SleeveConfig(n_around=n_around, n_along=n_along, friction=friction, final_angle=final_angle)
+    base = SleeveConfig.of(n_around=n_around, n_along=n_along, friction=friction, final_angle=final_angle)
     mine = {}
     for i, method in enumerate(methods):
         if i % comm.size == comm.rank:

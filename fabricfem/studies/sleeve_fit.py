@@ -50,7 +50,9 @@ from mpi4py import MPI
 
 from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
 from fabricfem.materials import positive_number
-from fabricfem.wear.sleeve import SleeveConfig, SleeveHistory, SleeveStep, build_explicit, check_fit, run_explicit
+from fabricfem.wear.run import build_run
+from fabricfem.wear.config import SleeveConfig, check_fit
+from fabricfem.wear.sleeve import SleeveHistory, SleeveStep
 import ufl
 from dolfinx import fem
 from fabricfem.forms import shell as sf
@@ -83,7 +85,7 @@ def fit_configs(scales=FIT_SCALES, mesh: str = "II", final_angle: float = 57.0,
     if mesh not in MESHES:
         raise ValueError(f"mesh: unknown mesh {mesh!r}, expected one of {sorted(MESHES)}")
     n_around, n_along = MESHES[mesh]
-    base = SleeveConfig(n_around=n_around, n_along=n_along, friction=FRICTION, solver="explicit",
+    base = SleeveConfig.of(n_around=n_around, n_along=n_along, friction=FRICTION, solver="explicit",
                         final_angle=final_angle, **overrides)
     return {float(s): {label: base.with_(arm=scaled_arm(s, arm), **case) for label, case in FIT_CASES.items()}
             for s in scales}
@@ -130,13 +132,13 @@ def run_case(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_SELF, split_angles:
              on_step=None) -> tuple[SleeveHistory, dict[float, dict[str, float]]]:
     """One explicit flexion; returns its history and the strain-energy split at the records of
     `split_angles` [deg] (default: rest and the final angle) plus the process's CPU time in history.timings."""
-    if config.solver != "explicit":
-        raise ValueError(f"config.solver: the fit study runs the explicit route, got {config.solver!r}")
-    angles = (0.0, config.final_angle) if split_angles is None else tuple(float(a) for a in split_angles)
+    if config.route.solver != "explicit":
+        raise ValueError(f"config.route.solver: the fit study runs the explicit route, got {config.route.solver!r}")
+    angles = (0.0, config.motion.final_angle) if split_angles is None else tuple(float(a) for a in split_angles)
     cpu0 = time.process_time()
     t0 = time.perf_counter()
-    problem = build_explicit(config, comm)
-    forms = energy_split_forms(problem.model, config.quadrature)
+    problem = build_run(config, comm)
+    forms = energy_split_forms(problem.model, config.tube.quadrature)
     splits: dict[float, dict[str, float]] = {}
 
     def record(step: SleeveStep):
@@ -148,8 +150,8 @@ def run_case(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_SELF, split_angles:
         if on_step:
             on_step(step)
 
-    history = run_explicit(problem, on_step=record, stop_on_failure=False)
-    problem.integrator.destroy()
+    history = problem.run(on_step=record, stop_on_failure=False)
+    problem.destroy()
     history.wall = time.perf_counter() - t0
     history.timings["run_cpu_s"] = time.process_time() - cpu0
     return history, splits
@@ -263,7 +265,7 @@ def run_fit_study(out: str | Path = "results/sleeve_fit", mesh: str = "II", scal
                 saved = _load(out, cfg)
                 if saved is None:
                     print(f"  [{time.perf_counter() - t0:6.0f} s] run {k}/{total}: arm scale {scale:g}, r1 = "
-                          f"{factor:g} L (clearance {check_fit(cfg.radius, cfg.arm) * 1e3:.3f} mm, elbow radius "
+                          f"{factor:g} L (clearance {check_fit(cfg.tube.radius, cfg.arm) * 1e3:.3f} mm, elbow radius "
                           f"{cfg.arm.elbow_radius * 1e3:.1f} mm), {label} ...", flush=True)
                     history, splits = run_case(cfg)
                     cpu = history.timings["run_cpu_s"]
@@ -275,7 +277,7 @@ def run_fit_study(out: str | Path = "results/sleeve_fit", mesh: str = "II", scal
                           flush=True)
                 curves[label] = (history.angles, history.torques)
                 rest, end = splits.get(0.0, {}), splits.get(float(final_angle), {})
-                run_rows.append({"scale": scale, "long_axis_factor": factor, "case": label, "radius_m": cfg.radius, "thickness_m": cfg.thickness,
+                run_rows.append({"scale": scale, "long_axis_factor": factor, "case": label, "radius_m": cfg.tube.radius, "thickness_m": cfg.material.thickness,
                                  "ndofs": history.ndofs, "reached_deg": float(history.angles[-1]),
                                  "torque_rest_Nm": float(history.torques[0]),
                                  "torque_57_Nm": history.torque_at(final_angle) if not history.failure else math.nan,

@@ -31,7 +31,7 @@ import tempfile
 from mpi4py import MPI
 from fabricfem.studies.sleeve import run_study
 from fabricfem.wear.run import run_sleeve
-from fabricfem.wear.sleeve import SleeveConfig
+from fabricfem.wear.config import SleeveConfig
 from fabricfem.verify import result
 
 STUDY_DIRS = (Path("docs/figures/sleeve"), Path("results/sleeve_study"))   # committed study first, then a local one
@@ -167,14 +167,14 @@ def sleeve_similarity() -> list[CaseResult]:
         # gravity off: the weight rho t g does not scale with E, so the similarity is exact only without it
         # (the study's fabrics runs have gravity on: there torque / E differs between the fabrics by the
         # weight's share, which is physics, not a scaling error)
-        base = SleeveConfig(n_around=10, n_along=13, final_angle=SIMILARITY_ANGLE, E=1.2e6, G=1.2e6 / 200,
+        base = SleeveConfig.of(n_around=10, n_along=13, final_angle=SIMILARITY_ANGLE, E=1.2e6, G=1.2e6 / 200,
                             density=436.0, gravity=False)
         stiff = base.with_(E=7.5e6, G=7.5e6 / 200)
         a = SIMILARITY_ANGLE
 
         def torque_over_E(cfg: SleeveConfig) -> tuple[float, int]:
             h = run_sleeve(cfg, MPI.COMM_SELF)
-            return h.torque_at(a) / cfg.E, h.ndofs
+            return h.torque_at(a) / cfg.material.E, h.ndofs
 
         t_ref, ndofs = torque_over_E(base.with_(dynamic_similarity=True))
         t_similar, _ = torque_over_E(stiff.with_(dynamic_similarity=True))

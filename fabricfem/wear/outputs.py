@@ -1,7 +1,6 @@
 """Outputs of a wear run: posed body surfaces, torque plots, pressure renders."""
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
 import numpy as np
@@ -48,17 +47,11 @@ def plot_torque(path, curves: dict[str, tuple[np.ndarray, np.ndarray]], title: s
     plt.close(fig)
 
 
-def posed_bodies(problem, angle: float) -> list:
-    """The arm's ellipsoids at elbow angle `angle` [deg]."""
-    t = problem.flexion.t_start + math.radians(angle) / problem.flexion.angular_velocity
-    return list(problem.body.pose(t).values())
-
-
-def render_pressure(path, problem, title: str, angle: float):
-    """Deformed sleeve coloured by contact pressure [Pa] with the posed arm (pyvista, off-screen)."""
-    mesh = problem.model.mesh
-    surface = fio.gather_surface(mesh, problem.model.displacement())
-    values = fio.gather_field(mesh, problem.contact.pressure_field())
-    if problem.comm.rank == 0:
+def render_pressure(path, run, title: str, angle: float):
+    """Deformed garment of a WearRun coloured by contact pressure [Pa] with the posed body (pyvista, off-screen)."""
+    mesh = run.model.mesh
+    surface = fio.gather_surface(mesh, run.model.displacement())
+    values = fio.gather_field(mesh, run.pressure_field())
+    if run.comm.rank == 0:
         fio.render_field(path, surface, values, f"{title}, contact pressure [Pa]",
-                         bodies=[body_surface(posed_bodies(problem, angle))])
+                         bodies=[body_surface(run.posed_bodies(angle))])

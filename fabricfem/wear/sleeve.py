@@ -76,28 +76,26 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions, default_arm, elbow_flexion
+from fabricfem.body.arm import default_arm, elbow_flexion
 from fabricfem.body.motion import ElbowFlexion
 from fabricfem.body.pose import Body
 from fabricfem.dynamics.explicit import CentralDifference
 from fabricfem.contact.explicit import ExplicitBodyContact
 from fabricfem.contact.problem import ContactProblem
-from fabricfem.contact.torque import contact_torque
 from fabricfem.materials import Fabric
 from fabricfem.meshes import tube
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.newton import NewtonSolver, SolverError
 from fabricfem.body.motion import rotation_about
 from fabricfem.dynamics import stability
-from fabricfem.fabrics import load_fabric
-from fabricfem.dynamics.stability import plane_stress_wave_speed
+from fabricfem.wear.config import SleeveConfig
 
 GRAVITY = 9.81                       # m/s^2
 ELBOW_AXIS = (0.0, 0.0, 1.0)          # flexion axis of the default arm
@@ -237,218 +235,6 @@ class SleeveError(SolverError):
     """The quasi-static flexion could not proceed (Newton failed below the minimum angle step)."""
 
 
-@dataclass(frozen=True)
-class SleeveConfig:
-    """All parameters of one sleeve computation (SI units; angles in degrees for readability).
-
-    Defaults: thesis sec. 5.3 (L = 0.5 m, R = 0.06 m, t = 1 mm, E = 1.2 MPa, G = 0.1 MPa, rho = 436 kg/m^3,
-    mu = 0.1, 57 degrees). nu12 = 0 (the thesis gives none). Mesh III (20 x 26) by default.
-    """
-
-    length: float = 0.5                  # m
-    radius: float = 0.06                 # m
-    n_around: int = 20
-    n_along: int = 26
-    thickness: float = 1e-3              # m
-    E: float = 1.2e6                     # Pa, E1 = E2
-    G: float = 1e5                       # Pa, G12 (and G13)
-    nu12: float = 0.0
-    density: float = 436.0               # kg/m^3
-    friction: float = 0.1                # Coulomb mu
-    solver: str = "explicit"             # explicit (central differences, default) | quasistatic (Newton) |
-                                         # implicit (backward Euler + Newton, fabricfem.wear.sleeve_implicit)
-    method: str | None = None            # contact: explicit lagrange (default) | penalty; quasistatic penalty
-                                         # (default) | augmented
-    mass_damping: float = 10.0           # 1/s, explicit: Rayleigh alpha of C = alpha M (see run_explicit)
-    rotary_inertia_scale: float = 100.0  # explicit: factor on the rotational lumped masses (dynamics.mass)
-    time_step_safety: float = 0.8        # explicit: dt = safety x estimated critical step
-    output_angle_step: float = 1.0       # deg, explicit: torque averaged and recorded every this many degrees
-    penalty: float | None = None         # k_N [Pa/m]; default 10 E t / h^2
-    augmentation_tolerance: float = 1e-5  # m, largest penetration after Uzawa updates (augmented)
-    active_set: bool = True              # fixed contact set per Newton solve, updated until stable (ContactProblem)
-    max_rotation_step: float = 0.3       # rad, largest director-angle change per Newton iteration (StepLimiter)
-    max_displacement_step: float = 5e-3  # m, largest displacement change per Newton iteration (StepLimiter)
-    newton_max_iterations: int = 60      # per Newton solve (damped steps need more than full ones)
-    gravity: bool | None = None          # g along -y; None: on for the explicit and implicit routes, off for
-                                         # quasistatic
-    settle_time: float = 0.4             # s, explicit with gravity: the arm rests this long before the flexion
-                                         # starts while the sleeve settles on it (rounded up to whole records)
-    final_angle: float = 57.0            # deg
-    angle_steps: int = 57                # equal steps to the final angle (1 deg: larger steps need many more
-                                         # damped Newton iterations and step halvings on mesh I)
-    angular_velocity: float = 45.0       # deg/s (sets the body time t = alpha / omega only)
-    min_angle_step: float = 0.05         # deg
-    hold_rotations: bool = False         # also clamp the director rotations at the shoulder
-    quadrature: tuple[int, int] = (4, 2)  # (full, reduced) PSRI degrees of ShellModel; (4, 4) = no reduction
-    stabilization: float = 1e-2          # c / (E t / R^2): viscous regularisation of unstable steps (Stabilized)
-    predictor: bool = True               # forearm contact nodes follow the forearm's rotation (_predict)
-    relaxation_steps: int = 40           # pseudo-time relaxations at one angle after a stabilised solve
-    drag_tolerance: float = 1e-3         # accept a relaxed state when sum|drag| < this * sum|contact force|
-    dynamic_similarity: bool = False     # explicit: flex at omega c / c_ref with damping alpha c / c_ref (below)
-    similarity_reference: tuple[float, float] = (1.2e6, 436.0)   # (E_ref [Pa], rho_ref [kg/m^3]): fabric I
-    arm: ArmDimensions = DEFAULT_ARM     # arm lengths and girths [m] (default: ANSUR II medians, body.arm)
-    name: str = "sleeve"
-    fabric_name: str | None = None       # a stored fabric (fabricfem.fabrics.load_fabric) replacing E, G, nu12,
-                                         # thickness and density (see `fabric`)
-
-    def __post_init__(self):
-        for key in ("length", "radius", "thickness", "E", "G", "final_angle", "angular_velocity",
-                    "min_angle_step", "augmentation_tolerance", "max_rotation_step", "max_displacement_step"):
-            v = getattr(self, key)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
-                raise ValueError(f"{key} must be a positive number, got {v!r}")
-        q = self.quadrature
-        if not (isinstance(q, tuple) and len(q) == 2 and all(isinstance(d, int) and d >= 1 for d in q) and q[0] >= q[1]):
-            raise ValueError(f"quadrature must be (full, reduced) positive integer degrees with full >= reduced, "
-                             f"got {q!r}")
-        if not (isinstance(self.density, (int, float)) and self.density >= 0.0):
-            raise ValueError(f"density must be >= 0 [kg/m^3], got {self.density!r}")
-        if not (isinstance(self.friction, (int, float)) and math.isfinite(self.friction) and self.friction >= 0.0):
-            raise ValueError(f"friction must be a number >= 0, got {self.friction!r}")
-        methods = {"explicit": ("lagrange", "penalty"), "quasistatic": ("penalty", "augmented"),
-                   "implicit": ("augmented", "penalty")}   # implicit: fabricfem.wear.sleeve_implicit (backward Euler)
-        if self.solver not in methods:
-            raise ValueError(f"solver must be one of {tuple(methods)}, got {self.solver!r}")
-        if self.method is None:
-            object.__setattr__(self, "method", methods[self.solver][0])
-        if self.gravity is None:
-            object.__setattr__(self, "gravity", self.solver in ("explicit", "implicit"))
-        if self.method not in methods[self.solver]:
-            raise ValueError(f"method must be one of {methods[self.solver]} for solver {self.solver!r}, "
-                             f"got {self.method!r}")
-        for key in ("time_step_safety", "output_angle_step"):
-            v = getattr(self, key)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
-                raise ValueError(f"{key} must be a positive number, got {v!r}")
-        if self.time_step_safety >= 1.0:
-            raise ValueError(f"time_step_safety must lie in (0, 1), got {self.time_step_safety!r}")
-        if not (isinstance(self.mass_damping, (int, float)) and math.isfinite(self.mass_damping)
-                and self.mass_damping >= 0.0):
-            raise ValueError(f"mass_damping must be a number >= 0 [1/s], got {self.mass_damping!r}")
-        if not (isinstance(self.settle_time, (int, float)) and math.isfinite(self.settle_time)
-                and self.settle_time >= 0.0):
-            raise ValueError(f"settle_time must be a number >= 0 [s], got {self.settle_time!r}")
-        if not (isinstance(self.rotary_inertia_scale, (int, float)) and self.rotary_inertia_scale >= 1.0):
-            raise ValueError(f"rotary_inertia_scale must be a number >= 1, got {self.rotary_inertia_scale!r}")
-        if self.penalty is not None and not (math.isfinite(self.penalty) and self.penalty > 0.0):
-            raise ValueError(f"penalty must be positive [Pa/m], got {self.penalty!r}")
-        for key in ("n_around", "n_along", "angle_steps", "newton_max_iterations"):
-            v = getattr(self, key)
-            if not (isinstance(v, int) and v >= 1):
-                raise ValueError(f"{key} must be a positive integer, got {v!r}")
-        if self.final_angle >= 180.0:
-            raise ValueError(f"final_angle must be below 180 degrees, got {self.final_angle!r}")
-        if not isinstance(self.arm, ArmDimensions):
-            raise ValueError(f"arm must be a fabricfem.body.ArmDimensions, got {type(self.arm).__name__}")
-        check_fit(self.radius, self.arm)
-        if self.fabric_name is not None:
-            for key in ("E", "G", "nu12", "thickness", "density"):   # the stored fabric gives them: not silently ignored
-                if getattr(self, key) != type(self).__dataclass_fields__[key].default:
-                    raise ValueError(f"{key}: given together with fabric_name {self.fabric_name!r}, whose stored "
-                                     f"fabric sets it; give one or the other")
-            self._load_stored_fabric()
-        E_ref, rho_ref = self.similarity_reference
-        if not (math.isfinite(E_ref) and E_ref > 0.0 and math.isfinite(rho_ref) and rho_ref > 0.0):
-            raise ValueError(f"similarity_reference must be (E_ref > 0 [Pa], rho_ref > 0 [kg/m^3]), "
-                             f"got {self.similarity_reference!r}")
-        if self.dynamic_similarity and self.fabric.density <= 0.0:
-            raise ValueError("dynamic_similarity needs a positive density (c = sqrt(E / rho))")
-
-    def _load_stored_fabric(self) -> None:
-        """Load `fabric_name` once (cached on the frozen instance); ValueError naming fabric_name otherwise."""
-        if not (isinstance(self.fabric_name, str) and self.fabric_name):
-            raise ValueError(f"fabric_name must be the name of a stored fabric (or a .json path) or None, "
-                             f"got {self.fabric_name!r}")
-        try:
-            stored = load_fabric(self.fabric_name)
-        except (ValueError, OSError, KeyError, TypeError) as exc:
-            raise ValueError(f"fabric_name: cannot load the stored fabric {self.fabric_name!r} ({exc})") from exc
-        if stored.density <= 0.0 and self.solver == "explicit":
-            raise ValueError(f"fabric_name: the stored fabric {self.fabric_name!r} has no positive density, which "
-                             f"the explicit sleeve needs")
-        object.__setattr__(self, "_stored_fabric", stored)
-
-    @property
-    def wave_speed(self) -> float:
-        """c = sqrt(E_max / (rho (1 - nu12 nu21))) [m/s], the membrane wave speed of the fabric (thesis eq. 2.87,
-        sqrt(E / rho) for the study's nu12 = 0); for a stored fabric its (small-strain) moduli and density."""
-        fabric = self.fabric
-        return plane_stress_wave_speed(fabric) if fabric.density > 0.0 else math.inf
-
-    @property
-    def membrane_modulus(self) -> float:
-        """max(E1, E2) [Pa] of the fabric used (the stored fabric's small-strain value when fabric_name is set)."""
-        fabric = self.fabric
-        return max(fabric.E1, fabric.E2)
-
-    @property
-    def similarity_factor(self) -> float:
-        """c / c_ref with dynamic similarity, 1 without (see `flexion_speed`)."""
-        if not self.dynamic_similarity:
-            return 1.0
-        E_ref, rho_ref = self.similarity_reference
-        return self.wave_speed / math.sqrt(E_ref / rho_ref)
-
-    @property
-    def flexion_speed(self) -> float:
-        """Angular velocity [deg/s] of the flexion actually run: omega c / c_ref with dynamic similarity.
-
-        Dynamic similarity (explicit route; for stiff fabrics, whose explicit step shrinks like h / c): with
-        all moduli proportional to E (G = E / 200 in the study), the sleeve's equation of motion written in
-        the flexion angle a = omega t,
-
-            rho t omega^2 u'' + alpha rho t omega u' + E f(u) = f_c(u),   f(u) = f_int(u) / E,
-
-        divided by E reads (omega / c)^2 t u'' + (alpha omega / c^2) t u' + f(u) = f_c / E (c^2 = E / rho).
-        Running fabric k at omega_k = omega c_k / c_ref with damping alpha_k = alpha c_k / c_ref keeps both
-        coefficients those of the reference fabric at omega, so u(a) is the same and the contact forces and the
-        torque scale with E exactly (the Lagrange-multiplier contact is a kinematic projection, Coulomb friction
-        is rate independent and proportional to the normal force, the rigid arm's pose depends on a only). The
-        central-difference step dt ~ h / c shrinks by c_ref / c_k, the record time by the same factor: the
-        number of steps per degree, and the relative inertia and damping errors, stay those of fabric I. The
-        quasi-static answer being rate independent, this is the reference run's (fabric I at omega) distance
-        from quasi-static equilibrium carried over to fabric k (see fabricfem.verify.sleeve_similarity)."""
-        return self.angular_velocity * self.similarity_factor
-
-    @property
-    def damping(self) -> float:
-        """Mass damping alpha [1/s] actually used: alpha c / c_ref with dynamic similarity (`flexion_speed`)."""
-        return self.mass_damping * self.similarity_factor
-
-    @property
-    def fabric(self) -> Fabric:
-        """The sleeve's fabric: the stored fabric `fabric_name` (fabricfem.fabrics.load_fabric; a fitted membrane
-        law keeps its small-strain E1, E2, G12 from fabricfem.materials.fitted.fitted_fabric) when set, otherwise the
-        orthotropic St. Venant-Kirchhoff fabric of the fields E, G, nu12, thickness, density."""
-        if self.fabric_name is not None:
-            return self.__dict__["_stored_fabric"]
-        return Fabric(E1=self.E, E2=self.E, G12=self.G, nu12=self.nu12, thickness=self.thickness,
-                      density=self.density, name=self.name)
-
-    def with_(self, **changes) -> "SleeveConfig":
-        """A copy with `changes`; changing the solver without naming a method takes that solver's default
-        contact method (the resolved method of the other solver would be refused)."""
-        if "solver" in changes and "method" not in changes and changes["solver"] != self.solver:
-            changes["method"] = None
-        if "solver" in changes and "gravity" not in changes and changes["solver"] != self.solver:
-            changes["gravity"] = None      # that solver's default (on for explicit, off for quasistatic)
-        return replace(self, **changes)
-
-
-def check_fit(radius: float, arm: ArmDimensions = DEFAULT_ARM) -> float:
-    """Clearance [m] between the sleeve radius and the thickest arm segment (circle-equivalent radius
-    girth / (2 pi), ArmDimensions); ValueError naming `radius` and the girth (arm.upper_arm_girth or
-    arm.forearm_girth) when the arm does not fit inside the undeformed sleeve (it must start without
-    penetration)."""
-    key, thickest = max((("upper_arm_girth", arm.upper_arm_radius), ("forearm_girth", arm.forearm_radius)),
-                        key=lambda item: item[1])
-    if radius <= thickest:
-        raise ValueError(f"radius: the sleeve radius {radius} m must exceed the arm's largest radius "
-                         f"{thickest:.4f} m = arm.{key} / (2 pi) (arm.{key} = {getattr(arm, key)} m; the arm must "
-                         f"start inside the sleeve without penetration)")
-    return radius - thickest
-
-
 @dataclass
 class SleeveProblem:
     """The assembled sleeve problem."""
@@ -471,12 +257,30 @@ class SleeveProblem:
 
     def resisting_torque(self) -> float:
         """-tau [N m] about the elbow along +z of the forces the sleeve exerts on the forearm (all ranks)."""
-        s = self.contact.evaluate()
-        names = list(self.body.segments)
-        elbow = self.body.joint_position("elbow", self.contact.time)
-        tau = contact_torque(s.position, -s.force, s.segment, [names.index("forearm")], elbow, ELBOW_AXIS,
-                             self.comm)
-        return -tau
+        return -self.contact.torque("forearm")
+
+    def resisting_torque_all(self) -> float:
+        """-tau [N m] about the elbow of the forces the sleeve exerts on both arm segments (all ranks)."""
+        return -self.contact.torque("both")
+
+    # the wearer contract (fabricfem.wear.contract.WearRun)
+    def describe(self) -> str:
+        return f"{self.config.motion.angle_steps} quasi-static steps"
+
+    def run(self, on_step: Callable[[SleeveStep], None] | None = None,
+            stop_on_failure: bool = True) -> "SleeveHistory":
+        return run_quasistatic(self, on_step=on_step, stop_on_failure=stop_on_failure)
+
+    def pressure_field(self):
+        """Contact pressure on the body [Pa] per unit deformed cloth area, a Q2 Function."""
+        return self.contact.pressure_field()
+
+    def posed_bodies(self, angle: float) -> list:
+        """The arm's ellipsoids at elbow angle `angle` [deg]."""
+        return list(self.body.pose(self.time_at(angle)).values())
+
+    def destroy(self) -> None:
+        self.solver.destroy()
 
     def min_gap(self) -> float:
         """Smallest signed gap [m] over all nodes and ranks (negative: penetration)."""
@@ -484,18 +288,25 @@ class SleeveProblem:
         return self.comm.allreduce(float(np.min(s.gap, initial=np.inf)), op=MPI.MIN)
 
 
+def track_elbow_torques(contact, body: Body) -> None:
+    """Register the sleeve's two torque monitors about the elbow (+z): "forearm" (the thesis's resisting
+    torque) and "both" (both arm segments)."""
+    contact.track_torque("forearm", "elbow", ELBOW_AXIS, ["forearm"])
+    contact.track_torque("both", "elbow", ELBOW_AXIS, list(body.segments))
+
+
 def sleeve_shell(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> ShellModel:
     """The sleeve's tube shell: shoulder end (end0) held, optional gravity along -y."""
     # second-order geometry: the Q2 mid-side nodes lie on the circle (on a first-order mesh they sit on the
     # chords, at R cos(pi / n_around): 1.4 mm closer to the arm on mesh I, a third of the 4.3 mm clearance)
-    fmesh = tube(config.length, config.radius, config.n_around, config.n_along, cell="quadrilateral", order=2,
+    fmesh = tube(config.tube.length, config.tube.radius, config.tube.n_around, config.tube.n_along, cell="quadrilateral", order=2,
                  comm=comm)
     # no director re-basing: re-basing moves the discrete equilibrium by O(h^2) between steps (measured on
     # mesh I: a residual of 10% of the contact forces after every step); the rotations stay far from the
     # two-angle singularity (|theta1| = pi/2) during a 57-degree flexion
-    model = ShellModel(fmesh, config.fabric, rebase=False, psri_degrees=config.quadrature)
-    model.constrain("end0", u=(0.0, 0.0, 0.0), theta=(0.0, 0.0) if config.hold_rotations else None)
-    if config.gravity:
+    model = ShellModel(fmesh, config.fabric, rebase=False, psri_degrees=config.tube.quadrature)
+    model.constrain("end0", u=(0.0, 0.0, 0.0), theta=(0.0, 0.0) if config.tube.hold_rotations else None)
+    if config.route.gravity:
         model.add_gravity((0.0, -GRAVITY, 0.0))
     return model
 
@@ -504,20 +315,21 @@ def build_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                  petsc_options: dict | None = None) -> SleeveProblem:
     """Mesh, fabric, shoulder support, arm body and contact of a sleeve computation."""
     model = sleeve_shell(config, comm)
-    flexion = elbow_flexion(config.arm, angular_velocity=math.radians(config.angular_velocity),
-                            final_angle=math.radians(config.final_angle))
+    flexion = elbow_flexion(config.arm, angular_velocity=math.radians(config.motion.angular_velocity),
+                            final_angle=math.radians(config.motion.final_angle))
     body = default_arm(flexion, config.arm)
-    contact = ContactProblem(model, body, method=config.method, penalty=config.penalty, friction=config.friction,
-                             time=flexion.t_start, active_set=config.active_set)
+    contact = ContactProblem(model, body, method=config.contact.method, penalty=config.contact.penalty, friction=config.contact.friction,
+                             time=flexion.t_start, active_set=config.contact.active_set)
+    track_elbow_torques(contact, body)
     system = Stabilized(contact, 0.0)
-    options = {"snes_max_it": config.newton_max_iterations}
+    options = {"snes_max_it": config.route.newton_max_iterations}
     options.update(petsc_options or {})
     solver = NewtonSolver(system, options)
-    solver.snes.setLineSearchPreCheck(StepLimiter(model, config.max_rotation_step, config.max_displacement_step))
-    if not config.gravity:
+    solver.snes.setLineSearchPreCheck(StepLimiter(model, config.route.max_rotation_step, config.route.max_displacement_step))
+    if not config.route.gravity:
         # no dead load: F_ref = 0, the absolute tolerance would be 1e-12 N; use the scale of the contact
         # forces instead (1e-10 of E t L, a force unit of the sleeve)
-        solver.snes.setTolerances(atol=1e-10 * config.membrane_modulus * config.fabric.thickness * config.length)
+        solver.snes.setTolerances(atol=1e-10 * config.membrane_modulus * config.fabric.thickness * config.tube.length)
     return SleeveProblem(config, model, contact, body, flexion, solver, system)
 
 
@@ -534,6 +346,14 @@ class SleeveStep:
     time_steps: int = 0      # explicit: central-difference steps since the previous record
     kinetic_energy: float = 0.0   # J, explicit: 1/2 v.M v (with the scaled rotary inertia)
     strain_energy: float = 0.0    # J, explicit
+
+    def work(self) -> str:
+        """The solver work of this record for a progress line: time steps and KE/SE of a time-stepping record,
+        Newton iterations of a quasi-static one."""
+        if self.time_steps:
+            ratio = self.kinetic_energy / self.strain_energy if self.strain_energy else 0.0
+            return f"steps {self.time_steps:5d}  KE/SE {ratio:.1e}"
+        return f"Newton {self.newton_iterations:3d}"
 
 
 @dataclass
@@ -569,6 +389,14 @@ class SleeveHistory:
         return [[s.angle, s.torque, s.torque_all, s.newton_iterations, s.max_penetration, s.contact_force, s.wall,
                  s.drag_ratio, s.time_steps, s.kinetic_energy, s.strain_energy] for s in self.steps]
 
+    def work(self) -> str:
+        """The solver work of the whole run for a summary line."""
+        steps = sum(s.time_steps for s in self.steps)
+        newton = sum(s.newton_iterations for s in self.steps)
+        if steps and not newton:
+            return f"{steps} explicit steps, largest KE/SE {self.kinetic_ratio():.2e}"
+        return f"{newton} Newton iterations" + (f" in {steps} time steps" if steps else "")
+
     def kinetic_ratio(self) -> float:
         """Largest kinetic / strain energy over the records with strain energy (explicit runs; 0 otherwise)."""
         ratios = [s.kinetic_energy / s.strain_energy for s in self.steps if s.strain_energy > 0.0]
@@ -578,9 +406,9 @@ class SleeveHistory:
 def _solve_once(problem: SleeveProblem) -> tuple[bool, int, str]:
     """One Newton solve (augmented: Newton + Uzawa updates) at the current pose and drag coefficient."""
     contact, cfg = problem.contact, problem.config
-    if cfg.method == "augmented":
+    if cfg.contact.method == "augmented":
         try:
-            report = contact.solve_augmented(problem.solver, tolerance=cfg.augmentation_tolerance)
+            report = contact.solve_augmented(problem.solver, tolerance=cfg.contact.augmentation_tolerance)
         except SolverError as exc:
             return False, 0, str(exc)
         return True, sum(report.newton_iterations), "augmented"
@@ -615,13 +443,13 @@ def _equilibrate(problem: SleeveProblem) -> tuple[bool, int, str, float]:
     saved_multiplier = problem.contact.multiplier.copy()
     system.coefficient = 0.0
     ok, total, reason = _solve_once(problem)
-    if ok or cfg.stabilization == 0.0:
+    if ok or cfg.contact.stabilization == 0.0:
         return ok, total, reason, 0.0
     system.w.x.array[:] = saved
     problem.contact.multiplier = saved_multiplier.copy()
-    coefficient = cfg.stabilization * cfg.membrane_modulus * cfg.fabric.thickness / cfg.radius ** 2
+    coefficient = cfg.contact.stabilization * cfg.membrane_modulus * cfg.fabric.thickness / cfg.tube.radius ** 2
     ratio = math.inf
-    for _ in range(cfg.relaxation_steps):
+    for _ in range(cfg.contact.relaxation_steps):
         system.coefficient = coefficient
         ok, its, reason = _solve_once(problem)
         total += its
@@ -639,14 +467,14 @@ def _equilibrate(problem: SleeveProblem) -> tuple[bool, int, str, float]:
             return True, total, reason, 0.0
         system.w.x.array[:] = relaxed
         problem.contact.multiplier = relaxed_multiplier
-        if ratio < cfg.drag_tolerance:
+        if ratio < cfg.contact.drag_tolerance:
             # accept the relaxed state: its fictitious drag is below the tolerance (reported)
             system.coefficient = coefficient
             system.commit()
             system.coefficient = 0.0
             return True, total, "relaxed", ratio
     system.coefficient = 0.0
-    return False, total, f"no equilibrium after {cfg.relaxation_steps} relaxations (drag ratio {ratio:.2e})", ratio
+    return False, total, f"no equilibrium after {cfg.contact.relaxation_steps} relaxations (drag ratio {ratio:.2e})", ratio
 
 
 def _predict(problem: SleeveProblem, angle_from: float, angle_to: float, touching: float = 1e-3):
@@ -669,8 +497,7 @@ def _predict(problem: SleeveProblem, angle_from: float, angle_to: float, touchin
 
 def _record(problem: SleeveProblem, angle: float, iterations: int, t0: float, drag_ratio: float) -> SleeveStep:
     contact = problem.contact
-    all_torque = -contact.joint_torque("elbow", ELBOW_AXIS)
-    return SleeveStep(angle=angle, torque=problem.resisting_torque(), torque_all=all_torque,
+    return SleeveStep(angle=angle, torque=problem.resisting_torque(), torque_all=problem.resisting_torque_all(),
                       newton_iterations=iterations, max_penetration=contact.max_penetration(),
                       contact_force=float(np.linalg.norm(contact.total_force())), wall=time.perf_counter() - t0,
                       drag_ratio=drag_ratio)
@@ -683,16 +510,16 @@ def run_quasistatic(problem: SleeveProblem, angles: np.ndarray | None = None,
     Newton solves at the posed body; returns the torque history (the first entry is the start pose).
 
     `on_step(step)` is called after every requested angle (progress, output). Failed steps are halved
-    down to `config.min_angle_step`; then SleeveError, or, with stop_on_failure=False, the history up to
+    down to `config.motion.min_angle_step`; then SleeveError, or, with stop_on_failure=False, the history up to
     the last converged angle with `history.failure` set (the model stays in that last converged state).
     `max_wall_time` [s]: stop the same way (SleeveError / failure) once the flexion has run that long.
     """
     cfg, contact, system = problem.config, problem.contact, problem.system
     if angles is None:
-        angles = np.linspace(0.0, cfg.final_angle, cfg.angle_steps + 1)[1:]
+        angles = np.linspace(0.0, cfg.motion.final_angle, cfg.motion.angle_steps + 1)[1:]
     angles = np.asarray(angles, dtype=float)
-    if np.any(np.diff(angles) <= 0.0) or angles[0] <= 0.0 or angles[-1] > cfg.final_angle + 1e-9:
-        raise ValueError(f"angles must increase strictly within (0, {cfg.final_angle}] deg, got {angles}")
+    if np.any(np.diff(angles) <= 0.0) or angles[0] <= 0.0 or angles[-1] > cfg.motion.final_angle + 1e-9:
+        raise ValueError(f"angles must increase strictly within (0, {cfg.motion.final_angle}] deg, got {angles}")
     t0 = time.perf_counter()
     history = SleeveHistory(cfg, ndofs=problem.model.ndofs)
     contact.set_time(problem.time_at(0.0))
@@ -728,7 +555,7 @@ def run_quasistatic(problem: SleeveProblem, angles: np.ndarray | None = None,
             trial = min(current + step, target)
             saved = system.w.x.array.copy()
             saved_multiplier = contact.multiplier.copy()
-            if cfg.predictor:
+            if cfg.contact.predictor:
                 _predict(problem, current, trial)
             contact.set_time(problem.time_at(trial))
             ok, its, reason, ratio = _equilibrate(problem)
@@ -742,9 +569,9 @@ def run_quasistatic(problem: SleeveProblem, angles: np.ndarray | None = None,
             contact.multiplier = saved_multiplier
             contact.set_time(problem.time_at(current))
             step *= 0.5
-            if step < cfg.min_angle_step:
+            if step < cfg.motion.min_angle_step:
                 message = (f"sleeve: Newton failed at elbow angle {trial:.4g} deg ({reason}); the angle step fell "
-                           f"below min_angle_step = {cfg.min_angle_step} deg; last converged angle {current:.4g} deg")
+                           f"below min_angle_step = {cfg.motion.min_angle_step} deg; last converged angle {current:.4g} deg")
                 if stop_on_failure:
                     raise SleeveError(message, last_converged_load_factor=current, reason=reason)
                 if current > history.steps[-1].angle:
@@ -783,6 +610,31 @@ class ExplicitSleeve:
     def comm(self):
         return self.model.comm
 
+    # the wearer contract (fabricfem.wear.contract.WearRun)
+    def describe(self) -> str:
+        config = self.config
+        return (f"explicit central differences, dt = {self.dt:.3g} s (estimated critical step {self.dt_estimate:.3g} s "
+                f"with rotary-inertia scale {config.route.rotary_inertia_scale:g}, {self.dt_estimate_unscaled:.3g} s "
+                f"without), mass damping {config.damping:g} 1/s, records every {config.motion.output_angle_step:g} deg"
+                + (f", dynamic similarity: flexion at {config.flexion_speed:.4g} deg/s (c / c_ref = "
+                   f"{config.similarity_factor:.4g})" if config.route.dynamic_similarity else ""))
+
+    def run(self, on_step: Callable[[SleeveStep], None] | None = None,
+            stop_on_failure: bool = True) -> SleeveHistory:
+        return run_explicit(self, on_step=on_step, stop_on_failure=stop_on_failure)
+
+    def pressure_field(self):
+        """Contact pressure on the body [Pa] per unit deformed cloth area, time-averaged over the last record."""
+        return self.contact.pressure_field()
+
+    def posed_bodies(self, angle: float) -> list:
+        """The arm's ellipsoids at elbow angle `angle` [deg]."""
+        t = self.flexion.t_start + math.radians(angle) / self.flexion.angular_velocity
+        return list(self.body.pose(t).values())
+
+    def destroy(self) -> None:
+        self.integrator.destroy()
+
 
 def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> ExplicitSleeve:
     """Sleeve, arm and explicit contact for `run_explicit`; the time step is
@@ -796,27 +648,26 @@ def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> Exp
         raise ValueError("density: the explicit sleeve needs a positive fabric density [kg/m^3]")
     model = sleeve_shell(config, comm)
     model.compile()
-    record_time = math.radians(config.output_angle_step) / math.radians(config.flexion_speed)
+    record_time = math.radians(config.motion.output_angle_step) / math.radians(config.flexion_speed)
     # rest before the flexion: settle_time in fabric I's time units under dynamic similarity (x c_ref / c)
-    settle_records = (math.ceil(config.settle_time / config.similarity_factor / record_time - 1e-9)
-                      if config.gravity else 0)
+    settle_records = (math.ceil(config.motion.settle_time / config.similarity_factor / record_time - 1e-9)
+                      if config.route.gravity else 0)
     flexion = elbow_flexion(config.arm, angular_velocity=math.radians(config.flexion_speed),
-                            final_angle=math.radians(config.final_angle), t_start=settle_records * record_time)
+                            final_angle=math.radians(config.motion.final_angle), t_start=settle_records * record_time)
     body = default_arm(flexion, config.arm)
-    contact = ExplicitBodyContact(model, body, friction=config.friction, method=config.method,
-                                  penalty=config.penalty)
-    contact.track_torque("forearm", "elbow", ELBOW_AXIS, ["forearm"])
-    contact.track_torque("both", "elbow", ELBOW_AXIS, list(body.segments))
+    contact = ExplicitBodyContact(model, body, friction=config.contact.friction, method=config.contact.method,
+                                  penalty=config.contact.penalty)
+    track_elbow_torques(contact, body)
     rayleigh = (config.damping, 0.0)
     omega_p = contact.penalty_frequency()
-    omega = math.hypot(stability.max_frequency_estimate(model, config.rotary_inertia_scale), omega_p)
+    omega = math.hypot(stability.max_frequency_estimate(model, config.route.rotary_inertia_scale), omega_p)
     omega_1 = math.hypot(stability.max_frequency_estimate(model, 1.0), omega_p)
     dt_estimate = stability.critical_time_step(model, rayleigh, omega_max=omega)
     dt_unscaled = stability.critical_time_step(model, rayleigh, omega_max=omega_1)
-    steps_per_record = math.ceil(record_time / (config.time_step_safety * dt_estimate))
+    steps_per_record = math.ceil(record_time / (config.route.time_step_safety * dt_estimate))
     dt = record_time / steps_per_record
     integrator = CentralDifference(model, dt, rayleigh=rayleigh, dt_crit=dt_estimate, energy_bound=None,
-                                   rotary_inertia_scale=config.rotary_inertia_scale, contact=contact)
+                                   rotary_inertia_scale=config.route.rotary_inertia_scale, contact=contact)
     return ExplicitSleeve(config, model, contact, body, flexion, integrator, dt, dt_estimate, dt_unscaled,
                           steps_per_record, settle_records)
 
@@ -826,7 +677,7 @@ def run_explicit(problem: ExplicitSleeve, on_step: Callable[[SleeveStep], None] 
     """Flex the elbow at constant angular velocity by explicit central differences (thesis ch. 5: the
     sleeve's own mass, explicit Lagrange-multiplier contact, Box 5).
 
-    Damping: mass-proportional C = alpha M (alpha = config.mass_damping [1/s]; on the translations a drag
+    Damping: mass-proportional C = alpha M (alpha = config.route.mass_damping [1/s]; on the translations a drag
     alpha rho t v per unit area, like air drag) so that the flexion is quasi-static; each record reports the
     kinetic and strain energies (SleeveStep) so that this can be checked. The torque of a record is the
     time average of the contact torque over the record interval (ExplicitBodyContact: the impulse of the
@@ -883,9 +734,9 @@ def run_explicit(problem: ExplicitSleeve, on_step: Callable[[SleeveStep], None] 
     history.steps.append(start)
     if on_step:
         on_step(start)
-    n_records = round(cfg.final_angle / cfg.output_angle_step)
-    if not math.isclose(n_records * cfg.output_angle_step, cfg.final_angle, rel_tol=1e-9):
-        n_records = math.ceil(cfg.final_angle / cfg.output_angle_step)
+    n_records = round(cfg.motion.final_angle / cfg.motion.output_angle_step)
+    if not math.isclose(n_records * cfg.motion.output_angle_step, cfg.motion.final_angle, rel_tol=1e-9):
+        n_records = math.ceil(cfg.motion.final_angle / cfg.motion.output_angle_step)
     integrator_base = dict(integ.timings)
     contact_base = dict(contact.timings)
     loop_start, cpu_start = time.perf_counter(), time.process_time()
@@ -901,7 +752,7 @@ def run_explicit(problem: ExplicitSleeve, on_step: Callable[[SleeveStep], None] 
                                   reason="EXPLICIT_BLOW_UP") from exc
             history.failure = message
             break
-        step = record(problem.steps_per_record, min((k + 1) * cfg.output_angle_step, cfg.final_angle))
+        step = record(problem.steps_per_record, min((k + 1) * cfg.motion.output_angle_step, cfg.motion.final_angle))
         history.steps.append(step)
         if on_step:
             tic = time.perf_counter()
@@ -945,39 +796,3 @@ def format_breakdown(timings: dict) -> str:
     """One line: ms per step and the shares of the parts of `step_breakdown`."""
     shares = ", ".join(f"{name.replace('_', ' ')} {timings[name + '_share']:.0%}" for name in TIMING_PARTS)
     return f"{timings['ms_per_step']:.2f} ms/step over {timings['steps']} steps ({shares})"
-
-
-def config_dict(config: SleeveConfig) -> dict:
-    return asdict(config)
-
-
-def config_from_scene(scene) -> SleeveConfig:
-    """SleeveConfig of a validated sleeve scene (fabricfem.scenes.schema); ValueError naming the key otherwise."""
-    mesh, fabric = scene["mesh"], scene["fabric"]
-    motion, contact, body = scene["motion"], scene["contact"], scene["body"]
-    if fabric["E1"] != fabric["E2"]:
-        raise ValueError("fabric.E2: the sleeve study uses E1 = E2 (thesis sec. 5.3)")
-    # body.* lengths and girths [m] replace those of the default arm (ANSUR II medians, fabricfem.body.arm)
-    dims = {k: float(body[k]) for k in ("upper_arm_length", "forearm_length", "upper_arm_girth", "forearm_girth")
-            if k in body}
-    try:
-        arm = replace(DEFAULT_ARM, **dims)
-    except ValueError as exc:
-        raise ValueError(f"body: {exc}") from exc
-    kw = dict(length=float(mesh["length"]), radius=float(mesh["radius"]), n_around=mesh["n_around"],
-              n_along=mesh["n_along"], thickness=float(fabric["thickness"]), E=float(fabric["E1"]),
-              G=float(fabric["G12"]), nu12=float(fabric["nu12"]), density=float(fabric.get("density", 0.0)),
-              friction=float(contact.get("friction", 0.1)), solver=motion.get("solver", "explicit"),
-              method=contact.get("method"),
-              penalty=None if "penalty" not in contact else float(contact["penalty"]),
-              gravity=None if "gravity" not in contact else bool(contact["gravity"]), final_angle=float(motion.get("final_angle", 57.0)),
-              angle_steps=int(motion.get("steps", 57)), angular_velocity=float(motion.get("angular_velocity", 45.0)),
-              name=scene.get("scene", {}).get("name", "sleeve"), arm=arm)
-    if "stabilization" in contact:
-        kw["stabilization"] = float(contact["stabilization"])
-    for key in ("mass_damping", "rotary_inertia_scale", "output_angle_step", "settle_time"):
-        if key in motion:
-            kw[key] = float(motion[key])
-    if "dynamic_similarity" in motion:
-        kw["dynamic_similarity"] = bool(motion["dynamic_similarity"])
-    return SleeveConfig(**kw)

@@ -57,9 +57,9 @@ from fabricfem.body.arm import default_arm, elbow_flexion
 from fabricfem.contact.problem import ContactProblem
 from fabricfem.dynamics.mass import lumped_mass
 from fabricfem.materials import positive_number
-from fabricfem.wear.sleeve import (ELBOW_AXIS, SleeveConfig, SleeveError, SleeveHistory, SleeveProblem, SleeveStep,
-                              Stabilized, StepLimiter, sleeve_shell)
 from fabricfem.solvers.newton import NewtonSolver, SolverError
+from fabricfem.wear.config import SleeveConfig
+from fabricfem.wear.sleeve import SleeveError, SleeveHistory, SleeveProblem, SleeveStep, Stabilized, StepLimiter, sleeve_shell, track_elbow_torques
 
 # active-set ties (ContactProblem.tie_tolerance) = this x augmentation_tolerance: a node on the contact switch keeps
 # its status within a gap of 1e-6 m (default tolerance 1e-5 m), an order below what the Uzawa loop accepts
@@ -183,6 +183,14 @@ class ImplicitSleeve(SleeveProblem):
         """Strain energy [J] of the current state (all ranks)."""
         return float(self.comm.allreduce(fem.assemble_scalar(self.energy_form), op=MPI.SUM))
 
+    def describe(self) -> str:
+        return (f"backward Euler, dt = {self.dt:.3g} s, {self.settle_steps} settling steps, records every "
+                f"{self.config.motion.output_angle_step:g} deg")
+
+    def run(self, on_step: Callable[[SleeveStep], None] | None = None,
+            stop_on_failure: bool = True) -> SleeveHistory:
+        return run_implicit(self, on_step=on_step, stop_on_failure=stop_on_failure)
+
 
 def build_implicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                    petsc_options: dict | None = None) -> ImplicitSleeve:
@@ -190,23 +198,24 @@ def build_implicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
 
     Raises ValueError naming the parameter: solver not "implicit", density not positive, final_angle /
     angle_steps / angular_velocity giving a non-positive step."""
-    if config.solver != "implicit":
-        raise ValueError(f"solver: build_implicit needs solver='implicit', got {config.solver!r}")
+    if config.route.solver != "implicit":
+        raise ValueError(f"solver: build_implicit needs solver='implicit', got {config.route.solver!r}")
     if config.fabric.density <= 0.0:
         raise ValueError("density: the implicit sleeve needs a positive fabric density [kg/m^3] (its inertia)")
     omega = math.radians(config.flexion_speed)                 # rad/s
-    angle_step = config.final_angle / config.angle_steps       # deg
+    angle_step = config.motion.final_angle / config.motion.angle_steps       # deg
     dt = positive_number("dt (angle step / angular_velocity)", math.radians(angle_step) / omega)
-    record_time = math.radians(config.output_angle_step) / omega
+    record_time = math.radians(config.motion.output_angle_step) / omega
     # rest before the flexion: settle_time (in fabric I's time units under dynamic similarity), whole steps
-    settle_steps = (math.ceil(config.settle_time / config.similarity_factor / dt - 1e-9) if config.gravity else 0)
+    settle_steps = (math.ceil(config.motion.settle_time / config.similarity_factor / dt - 1e-9) if config.route.gravity else 0)
     model = sleeve_shell(config, comm)
-    flexion = elbow_flexion(config.arm, angular_velocity=omega, final_angle=math.radians(config.final_angle),
+    flexion = elbow_flexion(config.arm, angular_velocity=omega, final_angle=math.radians(config.motion.final_angle),
                             t_start=settle_steps * dt)
     body = default_arm(flexion, config.arm)
-    contact = ReturnMapContact(model, body, method=config.method, penalty=config.penalty, friction=config.friction,
-                               time=0.0, active_set=config.active_set,
-                               tie_tolerance=TIE_FRACTION * config.augmentation_tolerance, crease_width=CREASE_WIDTH)
+    contact = ReturnMapContact(model, body, method=config.contact.method, penalty=config.contact.penalty, friction=config.contact.friction,
+                               time=0.0, active_set=config.contact.active_set,
+                               tie_tolerance=TIE_FRACTION * config.contact.augmentation_tolerance, crease_width=CREASE_WIDTH)
+    track_elbow_torques(contact, body)
     model.compile()
     masses = lumped_mass(model, rotational=False)
     mass = masses.array[contact.nodes.dofs[:, 0]].copy()     # the same on the three components of a node
@@ -216,13 +225,13 @@ def build_implicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
     # 1.2e-2 and 1.4e-2 N for 60 iterations) on nodes switching between stick and slip while the sleeve settles on
     # the arm (mesh I, 4 steps per degree), and the steps were halved below min_angle_step; with it the settling
     # and the flexion converge (measured: 459 Newton iterations for the 72 steps of the rest on mesh I)
-    options = {"snes_max_it": config.newton_max_iterations, "snes_linesearch_type": "bt"}
-    if not config.gravity:
+    options = {"snes_max_it": config.route.newton_max_iterations, "snes_linesearch_type": "bt"}
+    if not config.route.gravity:
         # no dead load: F_ref = 0; absolute tolerance on the scale of the contact forces as build_sleeve does
-        options["snes_atol"] = 1e-10 * config.membrane_modulus * config.fabric.thickness * config.length
+        options["snes_atol"] = 1e-10 * config.membrane_modulus * config.fabric.thickness * config.tube.length
     options.update(petsc_options or {})
     solver = NewtonSolver(system, options)
-    solver.snes.setLineSearchPreCheck(StepLimiter(model, config.max_rotation_step, config.max_displacement_step))
+    solver.snes.setLineSearchPreCheck(StepLimiter(model, config.route.max_rotation_step, config.route.max_displacement_step))
     return ImplicitSleeve(config, model, contact, body, flexion, solver, system, dt=dt, settle_steps=settle_steps,
                           record_time=record_time, energy_form=fem.form(model.energy))
 
@@ -231,8 +240,8 @@ def _solve_once(problem: ImplicitSleeve) -> tuple[bool, int, str]:
     """Newton (+ Uzawa updates for method augmented) at the current pose and step; (converged, its, reason)."""
     contact, cfg = problem.contact, problem.config
     try:
-        if cfg.method == "augmented":
-            report = contact.solve_augmented(problem.solver, tolerance=cfg.augmentation_tolerance)
+        if cfg.contact.method == "augmented":
+            report = contact.solve_augmented(problem.solver, tolerance=cfg.contact.augmentation_tolerance)
             return True, sum(report.newton_iterations), "augmented"
         result = contact.solve(problem.solver)
     except SolverError as exc:
@@ -251,11 +260,11 @@ def _solve_step(problem: ImplicitSleeve) -> tuple[bool, int, str]:
     start, multiplier = problem.system.w.x.array.copy(), contact.multiplier.copy()
     # the converged active-set solves of the settling sleeve took <= 22 iterations (mesh I); a stalled one is
     # cut at ACTIVE_SET_MAX_ITERATIONS instead of newton_max_iterations (a stall costs that per sequence)
-    snes.setTolerances(max_it=min(ACTIVE_SET_MAX_ITERATIONS, problem.config.newton_max_iterations))
+    snes.setTolerances(max_it=min(ACTIVE_SET_MAX_ITERATIONS, problem.config.route.newton_max_iterations))
     try:
         ok, its, reason = _solve_once(problem)
     finally:
-        snes.setTolerances(max_it=problem.config.newton_max_iterations)
+        snes.setTolerances(max_it=problem.config.route.newton_max_iterations)
     if ok:
         return ok, its, reason
     # restart from the step's start (measured on mesh I: continuing from the stalled iterate took more
@@ -287,7 +296,7 @@ def run_implicit(problem: ImplicitSleeve, on_step: Callable[[SleeveStep], None] 
         raise ValueError(f"radius: the arm penetrates the undeformed sleeve (min gap {gap0:.3e} m)")
     history.initial_gap = gap0
     contact.set_load_factor(1.0)            # gravity (the dead load) on
-    min_dt = math.radians(cfg.min_angle_step) / math.radians(cfg.flexion_speed)
+    min_dt = math.radians(cfg.motion.min_angle_step) / math.radians(cfg.flexion_speed)
     state = {"t": 0.0}
 
     def angle_at(t: float) -> float:
@@ -329,7 +338,7 @@ def run_implicit(problem: ImplicitSleeve, on_step: Callable[[SleeveStep], None] 
             if h < min_dt * (1.0 - 1e-9):
                 raise SleeveError(f"sleeve: backward-Euler step failed at t = {state['t'] + trial:.4g} s, elbow angle "
                                   f"{angle_at(state['t'] + trial):.4g} deg ({reason}); the step fell below "
-                                  f"min_angle_step = {cfg.min_angle_step} deg; last converged angle "
+                                  f"min_angle_step = {cfg.motion.min_angle_step} deg; last converged angle "
                                   f"{angle_at(state['t']):.4g} deg", last_converged_load_factor=angle_at(state["t"]),
                                   reason="STEP_TOO_SMALL")
         return total
@@ -344,15 +353,15 @@ def run_implicit(problem: ImplicitSleeve, on_step: Callable[[SleeveStep], None] 
             torque, penetration = problem.resisting_torque(), contact.max_penetration()
         if not math.isfinite(torque):
             raise SleeveError(f"sleeve: the torque is not finite at {angle} deg")
-        return SleeveStep(angle=angle, torque=torque, torque_all=-contact.joint_torque("elbow", ELBOW_AXIS),
+        return SleeveStep(angle=angle, torque=torque, torque_all=problem.resisting_torque_all(),
                           newton_iterations=iterations, max_penetration=penetration,
                           contact_force=float(np.linalg.norm(contact.total_force())), wall=time.perf_counter() - t0,
                           time_steps=len(window), kinetic_energy=system.kinetic_energy(),
                           strain_energy=problem.strain_energy())
 
-    n_records = round(cfg.final_angle / cfg.output_angle_step)
-    if not math.isclose(n_records * cfg.output_angle_step, cfg.final_angle, rel_tol=1e-9):
-        n_records = math.ceil(cfg.final_angle / cfg.output_angle_step)
+    n_records = round(cfg.motion.final_angle / cfg.motion.output_angle_step)
+    if not math.isclose(n_records * cfg.motion.output_angle_step, cfg.motion.final_angle, rel_tol=1e-9):
+        n_records = math.ceil(cfg.motion.final_angle / cfg.motion.output_angle_step)
     try:
         its = advance_to(flexion.t_start)
         if problem.settle_steps:
@@ -362,7 +371,7 @@ def run_implicit(problem: ImplicitSleeve, on_step: Callable[[SleeveStep], None] 
         if on_step:
             on_step(start)
         for k in range(n_records):
-            angle = min((k + 1) * cfg.output_angle_step, cfg.final_angle)
+            angle = min((k + 1) * cfg.motion.output_angle_step, cfg.motion.final_angle)
             since = state["t"]
             its = advance_to(problem.time_at(angle))
             step = record(angle, its, since)

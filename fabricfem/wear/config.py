@@ -1,0 +1,320 @@
+"""The configuration of an arm-in-sleeve run [Man2006, sec. 5.3]: one frozen, self-validating dataclass per
+part of the scene, each parameter and its default declared once (the scene schema of fabricfem.scenes derives
+the keys of [mesh], [fabric], [motion], [contact] and [route] of a sleeve scene from these fields).
+
+SI units; angles in degrees for readability. Defaults: thesis sec. 5.3 (L = 0.5 m, R = 0.06 m, t = 1 mm,
+E = 1.2 MPa, G = 0.1 MPa, rho = 436 kg/m^3, mu = 0.1, 57 degrees); nu12 = 0 (the thesis gives none); mesh III
+(20 x 26). Every ValueError names the parameter.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field, fields, replace
+
+from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
+from fabricfem.dynamics.stability import plane_stress_wave_speed
+from fabricfem.fabrics import load_fabric
+from fabricfem.materials import Fabric
+
+# route -> its contact methods, the first the default
+ROUTE_METHODS = {"explicit": ("lagrange", "penalty"), "quasistatic": ("penalty", "augmented"),
+                 "implicit": ("augmented", "penalty")}
+
+
+def _positive(obj, *keys: str) -> None:
+    for key in keys:
+        v = getattr(obj, key)
+        if isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
+            raise ValueError(f"{key} must be a positive number, got {v!r}")
+
+
+def _non_negative(obj, unit: str, *keys: str) -> None:
+    for key in keys:
+        v = getattr(obj, key)
+        if isinstance(v, bool) or not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0.0):
+            raise ValueError(f"{key} must be a number >= 0{unit}, got {v!r}")
+
+
+def _positive_int(obj, *keys: str) -> None:
+    for key in keys:
+        v = getattr(obj, key)
+        if isinstance(v, bool) or not (isinstance(v, int) and v >= 1):
+            raise ValueError(f"{key} must be a positive integer, got {v!r}")
+
+
+@dataclass(frozen=True)
+class TubeSpec:
+    """The sleeve: a tube along +x, shoulder end (end0) held; Q2 quadrilaterals."""
+
+    length: float = 0.5                  # m
+    radius: float = 0.06                 # m
+    n_around: int = 20
+    n_along: int = 26
+    quadrature: tuple[int, int] = (4, 2)  # (full, reduced) PSRI degrees of ShellModel; (4, 4) = no reduction
+    hold_rotations: bool = False         # also clamp the director rotations at the shoulder
+
+    def __post_init__(self):
+        _positive(self, "length", "radius")
+        _positive_int(self, "n_around", "n_along")
+        q = self.quadrature
+        if not (isinstance(q, tuple) and len(q) == 2 and all(isinstance(d, int) and d >= 1 for d in q) and q[0] >= q[1]):
+            raise ValueError(f"quadrature must be (full, reduced) positive integer degrees with full >= reduced, "
+                             f"got {q!r}")
+
+
+@dataclass(frozen=True)
+class FabricSpec:
+    """The sleeve's fabric: orthotropic St. Venant-Kirchhoff with E1 = E2 = E, or a stored fabric `fabric_name`
+    (fabricfem.fabrics.load_fabric) replacing E, G, nu12, thickness and density."""
+
+    E: float = 1.2e6                     # Pa, E1 = E2
+    G: float = 1e5                       # Pa, G12 (and G13)
+    nu12: float = 0.0
+    thickness: float = 1e-3              # m
+    density: float = 436.0               # kg/m^3
+    fabric_name: str | None = None
+
+    def __post_init__(self):
+        _positive(self, "E", "G", "thickness")
+        _non_negative(self, " [kg/m^3]", "density")
+        if self.fabric_name is not None:
+            for key in ("E", "G", "nu12", "thickness", "density"):   # the stored fabric gives them: not silently ignored
+                if getattr(self, key) != type(self).__dataclass_fields__[key].default:
+                    raise ValueError(f"{key}: given together with fabric_name {self.fabric_name!r}, whose stored "
+                                     f"fabric sets it; give one or the other")
+            if not (isinstance(self.fabric_name, str) and self.fabric_name):
+                raise ValueError(f"fabric_name must be the name of a stored fabric (or a .json path) or None, "
+                                 f"got {self.fabric_name!r}")
+            try:
+                stored = load_fabric(self.fabric_name)
+            except (ValueError, OSError, KeyError, TypeError) as exc:
+                raise ValueError(f"fabric_name: cannot load the stored fabric {self.fabric_name!r} ({exc})") from exc
+            object.__setattr__(self, "_stored_fabric", stored)      # loaded once, cached on the frozen instance
+
+    def fabric(self, name: str) -> Fabric:
+        """The Fabric: the stored one (a fitted membrane law keeps its small-strain E1, E2, G12) or the SVK fabric
+        of the fields."""
+        if self.fabric_name is not None:
+            return self.__dict__["_stored_fabric"]
+        return Fabric(E1=self.E, E2=self.E, G12=self.G, nu12=self.nu12, thickness=self.thickness,
+                      density=self.density, name=name)
+
+
+@dataclass(frozen=True)
+class FlexionSpec:
+    """Elbow flexion at constant angular velocity from rest (after settle_time) to final_angle."""
+
+    final_angle: float = 57.0            # deg, in (0, 180)
+    angular_velocity: float = 45.0       # deg/s (sets the body time t = alpha / omega)
+    settle_time: float = 0.4             # s, with gravity: the arm rests this long while the sleeve settles on it
+                                         # (rounded up to whole records)
+    output_angle_step: float = 1.0       # deg: a record (torque averaged over the interval) every this many degrees
+    angle_steps: int = 57                # quasistatic / implicit: equal steps to the final angle
+    min_angle_step: float = 0.05         # deg: a failed step is halved down to this
+
+    def __post_init__(self):
+        _positive(self, "final_angle", "angular_velocity", "output_angle_step", "min_angle_step")
+        _non_negative(self, " [s]", "settle_time")
+        _positive_int(self, "angle_steps")
+        if self.final_angle >= 180.0:
+            raise ValueError(f"final_angle must be below 180 degrees, got {self.final_angle!r}")
+
+
+@dataclass(frozen=True)
+class ContactSpec:
+    """Contact of the sleeve with the arm and the Newton devices of the implicit routes."""
+
+    method: str | None = None            # explicit: lagrange (default) | penalty; quasistatic: penalty (default) |
+                                         # augmented; implicit: augmented (default) | penalty
+    friction: float = 0.1                # Coulomb mu
+    penalty: float | None = None         # k_N [Pa/m]; default 10 E t / h^2
+    augmentation_tolerance: float = 1e-5  # m, largest penetration after Uzawa updates (augmented)
+    active_set: bool = True              # fixed contact set per Newton solve, updated until stable
+    stabilization: float = 1e-2          # c / (E t / R^2): viscous regularisation of unstable steps (Stabilized)
+    predictor: bool = True               # forearm contact nodes follow the forearm's rotation
+    relaxation_steps: int = 40           # pseudo-time relaxations at one angle after a stabilised solve
+    drag_tolerance: float = 1e-3         # accept a relaxed state when sum|drag| < this * sum|contact force|
+
+    def __post_init__(self):
+        _non_negative(self, "", "friction")
+        _positive(self, "augmentation_tolerance")
+        if self.penalty is not None:
+            _positive(self, "penalty")
+
+
+@dataclass(frozen=True)
+class RouteSpec:
+    """How the flexion is integrated: the route and its numerical parameters."""
+
+    solver: str = "explicit"             # explicit (central differences) | quasistatic (Newton) | implicit
+                                         # (backward Euler + Newton, fabricfem.wear.sleeve_implicit)
+    gravity: bool | None = None          # the sleeve's weight along -y; None: on for explicit and implicit,
+                                         # off for quasistatic
+    mass_damping: float = 10.0           # 1/s: Rayleigh alpha of C = alpha M
+    rotary_inertia_scale: float = 100.0  # explicit: factor >= 1 on the rotational lumped masses
+    time_step_safety: float = 0.8        # explicit: dt = safety x estimated critical step, in (0, 1)
+    dynamic_similarity: bool = False     # explicit: flex at omega c / c_ref with damping alpha c / c_ref
+    similarity_reference: tuple[float, float] = (1.2e6, 436.0)   # (E_ref [Pa], rho_ref [kg/m^3]): fabric I
+    newton_max_iterations: int = 60      # per Newton solve
+    max_rotation_step: float = 0.3       # rad, largest director-angle change per Newton iteration (StepLimiter)
+    max_displacement_step: float = 5e-3  # m, largest displacement change per Newton iteration (StepLimiter)
+
+    def __post_init__(self):
+        if self.solver not in ROUTE_METHODS:
+            raise ValueError(f"solver must be one of {tuple(ROUTE_METHODS)}, got {self.solver!r}")
+        if self.gravity is None:
+            object.__setattr__(self, "gravity", self.solver in ("explicit", "implicit"))
+        _positive(self, "time_step_safety", "max_rotation_step", "max_displacement_step")
+        if self.time_step_safety >= 1.0:
+            raise ValueError(f"time_step_safety must lie in (0, 1), got {self.time_step_safety!r}")
+        _non_negative(self, " [1/s]", "mass_damping")
+        if isinstance(self.rotary_inertia_scale, bool) or not (isinstance(self.rotary_inertia_scale, (int, float))
+                                                              and self.rotary_inertia_scale >= 1.0):
+            raise ValueError(f"rotary_inertia_scale must be a number >= 1, got {self.rotary_inertia_scale!r}")
+        _positive_int(self, "newton_max_iterations")
+        E_ref, rho_ref = self.similarity_reference
+        if not (math.isfinite(E_ref) and E_ref > 0.0 and math.isfinite(rho_ref) and rho_ref > 0.0):
+            raise ValueError(f"similarity_reference must be (E_ref > 0 [Pa], rho_ref > 0 [kg/m^3]), "
+                             f"got {self.similarity_reference!r}")
+
+
+SECTIONS = {"tube": TubeSpec, "material": FabricSpec, "motion": FlexionSpec, "contact": ContactSpec,
+            "route": RouteSpec}
+
+
+def check_fit(radius: float, arm: ArmDimensions = DEFAULT_ARM) -> float:
+    """Clearance [m] between the sleeve radius and the thickest arm segment (circle-equivalent radius
+    girth / (2 pi), ArmDimensions); ValueError naming `radius` and the girth (arm.upper_arm_girth or
+    arm.forearm_girth) when the arm does not fit inside the undeformed sleeve (it must start without
+    penetration)."""
+    key, thickest = max((("upper_arm_girth", arm.upper_arm_radius), ("forearm_girth", arm.forearm_radius)),
+                        key=lambda item: item[1])
+    if radius <= thickest:
+        raise ValueError(f"radius: the sleeve radius {radius} m must exceed the arm's largest radius "
+                         f"{thickest:.4f} m = arm.{key} / (2 pi) (arm.{key} = {getattr(arm, key)} m; the arm must "
+                         f"start inside the sleeve without penetration)")
+    return radius - thickest
+
+
+@dataclass(frozen=True)
+class SleeveConfig:
+    """All parameters of one sleeve computation, by part: `tube`, `material` (the fabric's parameters; `fabric` is
+    the Fabric built from them), `motion`, `contact`, `route`, the
+    wearer's `arm` (lengths and girths [m], default ANSUR II medians) and a `name`. Cross-part checks: the contact
+    method must suit the route (its default when None), the arm must fit inside the sleeve, the explicit route and
+    dynamic similarity need a positive density. `SleeveConfig.of(n_around=10, friction=0.5)` builds one from
+    parameter names (each routed to the part that declares it)."""
+
+    tube: TubeSpec = field(default_factory=TubeSpec)
+    material: FabricSpec = field(default_factory=FabricSpec)
+    motion: FlexionSpec = field(default_factory=FlexionSpec)
+    contact: ContactSpec = field(default_factory=ContactSpec)
+    route: RouteSpec = field(default_factory=RouteSpec)
+    arm: ArmDimensions = DEFAULT_ARM
+    name: str = "sleeve"
+
+    def __post_init__(self):
+        for key, cls in SECTIONS.items():
+            if not isinstance(getattr(self, key), cls):
+                raise ValueError(f"{key} must be a {cls.__name__}, got {type(getattr(self, key)).__name__}")
+        methods = ROUTE_METHODS[self.route.solver]
+        if self.contact.method is None:
+            object.__setattr__(self, "contact", replace(self.contact, method=methods[0]))
+        if self.contact.method not in methods:
+            raise ValueError(f"method must be one of {methods} for solver {self.route.solver!r}, "
+                             f"got {self.contact.method!r}")
+        if not isinstance(self.arm, ArmDimensions):
+            raise ValueError(f"arm must be a fabricfem.body.ArmDimensions, got {type(self.arm).__name__}")
+        check_fit(self.tube.radius, self.arm)
+        if self.material.fabric_name is not None and self.route.solver == "explicit" and self.fabric.density <= 0.0:
+            raise ValueError(f"fabric_name: the stored fabric {self.material.fabric_name!r} has no positive density, "
+                             f"which the explicit sleeve needs")
+        if self.route.dynamic_similarity and self.fabric.density <= 0.0:
+            raise ValueError("dynamic_similarity needs a positive density (c = sqrt(E / rho))")
+
+    # ---------------------------------------------------------------------------- building from names
+    @staticmethod
+    def _split(changes: dict) -> tuple[dict[str, dict], dict]:
+        """{part: {field: value}} of parameter names and the top-level ones (arm, name); ValueError naming an
+        unknown parameter."""
+        owner = {f.name: part for part, cls in SECTIONS.items() for f in fields(cls)}
+        top = {f.name for f in fields(SleeveConfig)} - set(SECTIONS)
+        parts: dict[str, dict] = {}
+        rest = {}
+        for key, value in changes.items():
+            if key in owner:
+                parts.setdefault(owner[key], {})[key] = value
+            elif key in top:
+                rest[key] = value
+            else:
+                raise ValueError(f"{key}: not a sleeve parameter (known: {sorted(owner) + sorted(top)})")
+        return parts, rest
+
+    @classmethod
+    def of(cls, **parameters) -> "SleeveConfig":
+        """A configuration from parameter names (defaults for the rest)."""
+        parts, rest = cls._split(parameters)
+        return cls(**{part: SECTIONS[part](**values) for part, values in parts.items()}, **rest)
+
+    def with_(self, **changes) -> "SleeveConfig":
+        """A copy with the named parameters changed; changing the solver without naming a method (or gravity)
+        takes that solver's default contact method (and gravity)."""
+        if "solver" in changes and changes["solver"] != self.route.solver:
+            changes.setdefault("method", None)
+            changes.setdefault("gravity", None)
+        parts, rest = self._split(changes)
+        return replace(self, **{part: replace(getattr(self, part), **values) for part, values in parts.items()},
+                       **rest)
+
+    def flat(self) -> dict:
+        """{parameter: value} of every part (the keys of `of`), for tables and checkpoint keys."""
+        out = {}
+        for part in SECTIONS:
+            out.update(dataclasses.asdict(getattr(self, part)))
+        out.update(arm=dataclasses.asdict(self.arm), name=self.name)
+        return out
+
+    # ---------------------------------------------------------------------------- derived quantities
+    @property
+    def fabric(self) -> Fabric:
+        """The sleeve's Fabric (FabricSpec.fabric): the stored fabric or the SVK fabric of `material`."""
+        return self.material.fabric(self.name)
+
+    @property
+    def wave_speed(self) -> float:
+        """c = sqrt(E_max / (rho (1 - nu12 nu21))) [m/s], the membrane wave speed of the fabric [Man2006, eq. 2.87]."""
+        fabric = self.fabric
+        return plane_stress_wave_speed(fabric) if fabric.density > 0.0 else math.inf
+
+    @property
+    def membrane_modulus(self) -> float:
+        """max(E1, E2) [Pa] of the fabric used (the stored fabric's small-strain value when fabric_name is set)."""
+        fabric = self.fabric
+        return max(fabric.E1, fabric.E2)
+
+    @property
+    def similarity_factor(self) -> float:
+        """c / c_ref with dynamic similarity, 1 without (see `flexion_speed`)."""
+        if not self.route.dynamic_similarity:
+            return 1.0
+        E_ref, rho_ref = self.route.similarity_reference
+        return self.wave_speed / math.sqrt(E_ref / rho_ref)
+
+    @property
+    def flexion_speed(self) -> float:
+        """Angular velocity [deg/s] of the flexion actually run: omega c / c_ref with dynamic similarity.
+
+        Dynamic similarity (explicit route; for stiff fabrics, whose explicit step shrinks like h / c): with all
+        moduli proportional to E, the sleeve's equation of motion in the flexion angle a = omega t,
+        rho t omega^2 u'' + alpha rho t omega u' + E f(u) = f_c(u), divided by E reads
+        (omega / c)^2 t u'' + (alpha omega / c^2) t u' + f(u) = f_c / E (c^2 = E / rho). Running fabric k at
+        omega_k = omega c_k / c_ref with damping alpha_k = alpha c_k / c_ref keeps both coefficients those of the
+        reference fabric at omega, so u(a) is the same and the torque scales with E exactly (verify case
+        sleeve-similarity)."""
+        return self.motion.angular_velocity * self.similarity_factor
+
+    @property
+    def damping(self) -> float:
+        """Mass damping alpha [1/s] actually used: alpha c / c_ref with dynamic similarity (`flexion_speed`)."""
+        return self.route.mass_damping * self.similarity_factor
