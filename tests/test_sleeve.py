@@ -86,7 +86,7 @@ def test_start_clearance_and_first_contact():
     which is tilted by ~0.01 rad from the radial direction there, changing a 4.3 mm gap by ~3e-7 m."""
     problem = build_sleeve(QUICK, MPI.COMM_SELF)
     a, r_u = DEFAULT_ARM.upper_arm_length / 2, DEFAULT_ARM.upper_arm_girth / (2 * math.pi)
-    rings = np.arange(2 * QUICK.n_along + 1) * QUICK.length / (2 * QUICK.n_along)   # Q2 node rings
+    rings = np.arange(2 * QUICK.tube.n_along + 1) * QUICK.tube.length / (2 * QUICK.tube.n_along)   # Q2 node rings
     x_k = rings[np.argmin(abs(rings - a))]
     reference = 0.06 - r_u * math.sqrt(1 - ((x_k - a) / a) ** 2)
     assert abs(problem.min_gap() - reference) < 1e-6
@@ -119,7 +119,7 @@ def test_elbow_torque_balances_the_shoulder_reactions():
     resisting_all = -contact.joint_torque("elbow", ELBOW_AXIS)   # both segments
     r = problem.system.create_vector()
     problem.system.residual(model.w.vector, r)
-    bound = math.sqrt(r.getSize()) * r.norm() * (QUICK.length + 1.0)
+    bound = math.sqrt(r.getSize()) * r.norm() * (QUICK.tube.length + 1.0)
     assert abs(resisting_all) > 1e-4 and bound < 1e-2 * abs(resisting_all)
     assert abs(resisting_all - (-tau_reactions)) < bound + 4e-3 * abs(resisting_all)
     # at 6 degrees only the forearm touches: the forearm torque is the whole torque
@@ -465,9 +465,9 @@ def test_sleeve_settles_on_the_resting_arm_before_the_flexion():
 def test_gravity_default_depends_on_the_route():
     """gravity=None resolves to on for the explicit route and off for the quasi-static one; an explicit value
     is kept; changing the solver re-resolves an unnamed gravity."""
-    assert SleeveConfig().gravity is True
-    assert SleeveConfig.of(solver="quasistatic").gravity is False
-    assert SleeveConfig.of(gravity=False).gravity is False
-    assert SleeveConfig().with_(solver="quasistatic").gravity is False
+    assert SleeveConfig().route.gravity is True
+    assert SleeveConfig.of(solver="quasistatic").route.gravity is False
+    assert SleeveConfig.of(gravity=False).route.gravity is False
+    assert SleeveConfig().with_(solver="quasistatic").route.gravity is False
     with pytest.raises(ValueError, match="settle_time"):
         SleeveConfig.of(settle_time=-1.0)

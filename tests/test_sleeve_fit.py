@@ -60,7 +60,7 @@ def test_scene_girths_reach_the_config():
     assert sleeve_config(scene_module.validate(sleeve_data()).data).arm == DEFAULT_ARM
     data = sleeve_data()
     data["body"].update(upper_arm_girth=0.40)
-    with pytest.raises(SceneError, match=r"body.upper_arm_girth: .*does not fit"):
+    with pytest.raises(SceneError, match=r"mesh.radius: .*must exceed .*arm.upper_arm_girth"):
         scene_module.validate(data)
 
 
@@ -74,7 +74,7 @@ def test_fit_study_arms():
     assert arm.upper_arm_girth == pytest.approx(0.35 * 1.0771, rel=1e-14)
     assert 0.0 < check_fit(0.06, arm) == pytest.approx(9.74e-7, rel=1e-2)
     assert check_fit(0.06, scaled_arm(1.04)) == pytest.approx(2.07e-3, rel=1e-2)
-    assert {(c.radius, c.thickness, c.friction, c.gravity) for c in configs[1.0].values()} == {
+    assert {(c.tube.radius, c.material.thickness, c.contact.friction, c.route.gravity) for c in configs[1.0].values()} == {
         (0.06, 1e-3, 0.5, True), (0.07, 1e-3, 0.5, True), (0.06, 2e-3, 0.5, True)}
     with pytest.raises(ValueError, match="scale"):
         scaled_arm(-1.0)

@@ -26,7 +26,6 @@ from __future__ import annotations
 import csv
 import math
 import time
-from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -195,7 +194,7 @@ PROGRESS_TAG = 4711
 
 def _variant_path(out: Path, cfg: SleeveConfig) -> Path:
     """Checkpoint of one finished variant: <out>/variants/<sha1 of the configuration>.csv."""
-    key = hashlib.sha1(repr(sorted(asdict(cfg).items())).encode()).hexdigest()[:16]
+    key = hashlib.sha1(repr(sorted(cfg.flat().items())).encode()).hexdigest()[:16]
     return Path(out) / "variants" / f"{key}.csv"
 
 
@@ -205,7 +204,7 @@ def _save_variant(out: Path, cfg: SleeveConfig, h: SleeveHistory):
     path = _variant_path(out, cfg)
     path.parent.mkdir(parents=True, exist_ok=True)
     with open(path, "w", newline="") as f:
-        f.write(f"# {repr(sorted(asdict(cfg).items()))} | wall {h.wall:.1f} | failure {h.failure}\n")
+        f.write(f"# {repr(sorted(cfg.flat().items()))} | wall {h.wall:.1f} | failure {h.failure}\n")
         w = csv.writer(f)
         w.writerow(SleeveHistory.HEADER)
         w.writerows(h.rows())
@@ -218,7 +217,7 @@ def _load_variant(out: Path, cfg: SleeveConfig) -> SleeveHistory | None:
         return None
     with open(path) as f:
         first = f.readline()
-        if not first.startswith(f"# {repr(sorted(asdict(cfg).items()))} |"):
+        if not first.startswith(f"# {repr(sorted(cfg.flat().items()))} |"):
             return None
         rows = list(csv.DictReader(f))
     h = SleeveHistory(cfg)
