@@ -13,40 +13,39 @@ from fabricfem.meshes import plate, tube
 from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
 from fabricfem.scenes import schema
 from fabricfem.scenes.schema import Scene, SceneError
-from fabricfem.scenes.sections import from_table
+from fabricfem.scenes.sections import FabricSection, MeshSection, from_table, section
 from fabricfem.wear.config import SECTIONS, ContactSpec, FabricSpec, FlexionSpec, RouteSpec, SleeveConfig, TubeSpec
 
 
 def build_fabric(spec: dict) -> Fabric:
+    """The Fabric of a [fabric] table (FabricSection); SceneError naming the key."""
+    f = section(FabricSection, spec)
     law = None
-    kind = spec.get("bending_law")
-    if kind == "kawabata":
-        if "kawabata_coefficients" not in spec:
+    if f.bending_law == "kawabata":
+        if f.kawabata_coefficients is None:
             raise SceneError("fabric: bending_law = 'kawabata' needs kawabata_coefficients")
-        law = KawabataBending(tuple(float(a) for a in spec["kawabata_coefficients"]))
-    elif kind == "square_root":
-        if "B0" not in spec or "kappa0" not in spec:
+        law = KawabataBending(tuple(float(a) for a in f.kawabata_coefficients))
+    elif f.bending_law == "square_root":
+        if f.B0 is None or f.kappa0 is None:
             raise SceneError("fabric: bending_law = 'square_root' needs B0 and kappa0")
-        law = SquareRootBending(float(spec["B0"]), float(spec["kappa0"]))
-    elif kind is not None:
-        raise SceneError(f"fabric.bending_law: unknown law {kind!r}; allowed: 'kawabata', 'square_root'")
-    rigidity = spec.get("bending_rigidity")
+        law = SquareRootBending(float(f.B0), float(f.kappa0))
+    elif f.bending_law is not None:
+        raise SceneError(f"fabric.bending_law: unknown law {f.bending_law!r}; allowed: 'kawabata', 'square_root'")
     try:
-        return Fabric(E1=float(spec["E1"]), E2=float(spec["E2"]), G12=float(spec["G12"]), nu12=float(spec["nu12"]),
-                      thickness=float(spec["thickness"]), density=float(spec.get("density", 0.0)),
-                      G13=spec.get("G13"), bending_rigidity=tuple(rigidity) if rigidity else None,
-                      bending_law=law, name=spec.get("name", "fabric"))
+        return Fabric(E1=float(f.E1), E2=float(f.E2), G12=float(f.G12), nu12=float(f.nu12),
+                      thickness=float(f.thickness), density=float(f.density), G13=f.G13,
+                      bending_rigidity=tuple(f.bending_rigidity) if f.bending_rigidity else None,
+                      bending_law=law, name=f.name)
     except ValueError as exc:
         raise SceneError(f"fabric: {exc}") from None
 
 
 def build_mesh(spec: dict, comm):
-    kind = spec["type"]
-    if kind == "plate":
-        return plate(spec["lx"], spec["ly"], spec["nx"], spec["ny"], cell=spec.get("cell", "quadrilateral"),
-                     structured=spec.get("structured", True), comm=comm)
-    return tube(spec["length"], spec["radius"], spec["n_around"], spec["n_along"],
-                cell=spec.get("cell", "quadrilateral"), order=spec.get("order", 1), comm=comm)
+    """The FabricMesh of a [mesh] table (MeshSection): a plate or a tube."""
+    m = section(MeshSection, {k: v for k, v in spec.items() if k in MeshSection.__dataclass_fields__})
+    if m.type == "plate":
+        return plate(m.lx, m.ly, m.nx, m.ny, cell=m.cell, structured=m.structured, comm=comm)
+    return tube(m.length, m.radius, m.n_around, m.n_along, cell=m.cell, order=m.order, comm=comm)
 
 
 def mesh_spacing(mesh: dict) -> float | None:
@@ -54,7 +53,7 @@ def mesh_spacing(mesh: dict) -> float | None:
     plate min(lx / nx, ly / ny) (triangle diagonals are longer), tube min(chord 2 R sin(pi / n_around),
     length / n_along)."""
     if mesh["type"] == "plate":
-        if not mesh.get("structured", True):
+        if not mesh.get("structured", MeshSection.structured):
             return None
         return min(mesh["lx"] / mesh["nx"], mesh["ly"] / mesh["ny"])
     return min(2.0 * mesh["radius"] * math.sin(math.pi / mesh["n_around"]), mesh["length"] / mesh["n_along"])

@@ -23,6 +23,8 @@ from fabricfem import io
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.scenes.build import build_fabric, build_mesh, sleeve_config
 from fabricfem.scenes.schema import Scene, SceneError, donning_start
+from fabricfem.scenes.sections import (DonningSection, DynamicsSection, ModelSection, MonitorSection, OutputSection,
+                                       SceneSection, SolverSection, section)
 from fabricfem.wear.compression import fit_sleeve, pressure_report
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.loadstep import LoadStep, solve_load_path
@@ -64,10 +66,10 @@ def _node_locator(model: ShellModel, point, where: str):
 
 def build_model(scene: Scene, comm=MPI.COMM_WORLD, model_class: type = ShellModel) -> ShellModel:
     fabric = build_fabric(scene["fabric"])
-    model_spec = scene.get("model", {})
-    kind = model_spec.get("kind", "naghdi")
+    model_spec = section(ModelSection, scene.get("model"))
+    kind = model_spec.kind
     fmesh = build_mesh(scene["mesh"], comm)
-    model = model_class(fmesh, fabric, model=kind, rebase=model_spec.get("rebase", True))
+    model = model_class(fmesh, fabric, model=kind, rebase=model_spec.rebase)
     for i, support in enumerate(scene.get("support", [])):
         if "point" in support:
             where = _node_locator(model, support["point"], f"support[{i}].point")
@@ -112,7 +114,10 @@ def run_scene(scene: Scene, comm=MPI.COMM_WORLD):
     run_dynamic_scene, compression scenes (with [limb]) to fabricfem.wear.compression, others are static
     load-stepping scenes (returns the list of LoadStep)."""
     if "body" in scene.data:
-        return run_sleeve_scene(sleeve_config(scene.data), scene.get("output", {}), comm)
+        config = sleeve_config(scene.data)
+        output = section(OutputSection, scene.get("output"))
+        return run_sleeve_scene(config, Path(output.dir or f"results/{config.name}"), output.render,
+                                output.render_angles, output.body_samples, comm)
     if "dynamics" in scene.data:
         return run_dynamic_scene(scene, comm)
     if "limb" in scene.data:
@@ -122,14 +127,15 @@ def run_scene(scene: Scene, comm=MPI.COMM_WORLD):
 
 def run_static_scene(scene: Scene, comm=MPI.COMM_WORLD) -> list[LoadStep]:
     say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
-    out = Path(scene.get("output", {}).get("dir", f"results/{scene_name(scene)}"))
-    probe = scene.get("output", {}).get("probe")
-    solver_spec = scene["solver"]
-    targets = list(np.atleast_1d(solver_spec["targets"]).astype(float))
+    out = output_dir(scene)
+    output = section(OutputSection, scene.get("output"))
+    probe = output.probe
+    solver_spec = section(SolverSection, scene["solver"])
+    targets = list(np.atleast_1d(solver_spec.targets).astype(float))
     t0 = time.perf_counter()
     model = build_model(scene, comm)
     say(f"{model.model} shell, {model.ndofs} dofs, {model.comm.size} rank(s); solving to load factor {targets[-1]:g}")
-    solver = NewtonSolver(model, solver_spec.get("petsc_options"))
+    solver = NewtonSolver(model, solver_spec.petsc_options)
     series = io.SurfaceSeries(out / "solution.xdmf", model.mesh)
     series.write(model.displacement(), 0.0)
     rows = []
@@ -143,15 +149,15 @@ def run_static_scene(scene: Scene, comm=MPI.COMM_WORLD) -> list[LoadStep]:
         say(f"  load factor {step.load_factor:8.4f}  Newton {step.iterations:2d}  [{done:5.1%}, "
             f"{elapsed:6.1f} s, about {eta:5.1f} s left]")
 
-    history = solve_load_path(model, targets, solver=solver, initial_step=solver_spec.get("initial_step"),
-                              min_step=solver_spec.get("min_step", 1e-6), progress=progress,
+    history = solve_load_path(model, targets, solver=solver, initial_step=solver_spec.initial_step,
+                              min_step=solver_spec.min_step, progress=progress,
                               on_target=lambda lam: series.write(model.displacement(), lam))
     series.close()
     io.write_csv(out / "history.csv", ["load_factor", "newton_iterations", "probe_ux_m", "probe_uy_m", "probe_uz_m"],
                  rows, comm)
-    if scene.get("output", {}).get("render", True):
+    if output.render:
         surfaces = [io.gather_surface(model.mesh), io.gather_surface(model.mesh, model.displacement())]
-        io.render_surfaces(out / "final.png", surfaces, title=scene.get("scene", {}).get("name", ""),
+        io.render_surfaces(out / "final.png", surfaces, title=scene_name(scene),
                            colors=["lightgray", "steelblue"], camera="iso")
     wall = time.perf_counter() - t0
     memory = io.peak_memory_mib(comm)
@@ -166,13 +172,18 @@ def run_static_scene(scene: Scene, comm=MPI.COMM_WORLD) -> list[LoadStep]:
         say(f"probe {tuple(probe)}: displacement {value} m")
     io.write_json(out / "summary.json", summary, comm)
     say(f"wrote {out}/solution.xdmf, history.csv, summary.json" +
-        (", final.png" if scene.get("output", {}).get("render", True) else ""))
+        (", final.png" if output.render else ""))
     return history
 
 
 def scene_name(scene: Scene) -> str:
     """[scene] name, else the file's stem, else "scene"."""
-    return scene.get("scene", {}).get("name") or (scene.path.stem if scene.path is not None else "scene")
+    return section(SceneSection, scene.get("scene")).name or (scene.path.stem if scene.path is not None else "scene")
+
+
+def output_dir(scene: Scene) -> Path:
+    """[output] dir, else results/<scene name>."""
+    return Path(section(OutputSection, scene.get("output")).dir or f"results/{scene_name(scene)}")
 
 
 # ---------------------------------------------------------------------------------------- dynamic scenes
@@ -250,28 +261,26 @@ def _load_function(ramp_time: float):
 
 def build_integrator(spec: dict, model: ShellModel):
     """(integrator, n_steps, dt [s], dt_crit [s] or None) for a [dynamics] section; dt is end_time / n_steps."""
-    kind = spec["integrator"]
-    end_time = float(spec["end_time"])
-    rayleigh = tuple(float(c) for c in spec.get("rayleigh", (0.0, 0.0)))
-    common = dict(load_factor=_load_function(float(spec.get("ramp_time", 0.0))), rayleigh=rayleigh,
-                  air_drag=float(spec.get("air_drag", 0.0)))
+    d = section(DynamicsSection, spec)
+    kind = d.integrator
+    end_time = float(d.end_time)
+    rayleigh = tuple(float(c) for c in d.rayleigh)
+    common = dict(load_factor=_load_function(float(d.ramp_time)), rayleigh=rayleigh, air_drag=float(d.air_drag))
     dt_crit = critical_time_step(model, rayleigh) if kind == "explicit" else None
-    dt = float(spec.get("dt_fraction", 0.9)) * dt_crit if spec["dt"] == "auto" else float(spec["dt"])
+    dt = float(d.dt_fraction) * dt_crit if d.dt == "auto" else float(d.dt)
     n_steps = max(1, math.ceil(end_time / dt * (1.0 - 1e-12)))
     dt = end_time / n_steps
     if kind == "explicit":
-        force = bool(spec.get("force", False))
+        force = bool(d.force)
         if dt > dt_crit and not force:
             raise SceneError(f"dynamics.dt: {dt:.6g} s exceeds the critical time step {dt_crit:.6g} s of this mesh "
                              f"(ratio {dt / dt_crit:.3g}, thesis eqs. 2.86-2.87); use a smaller dt or force = true")
         integrator = CentralDifference(model, dt, force=force, dt_crit=dt_crit, **common)
     elif kind == "newmark":
-        integrator = NewmarkIntegrator(model, dt, beta=float(spec.get("beta", 0.25)),
-                                       gamma=float(spec.get("gamma", 0.5)), lumped=bool(spec.get("lumped", False)),
+        integrator = NewmarkIntegrator(model, dt, beta=float(d.beta), gamma=float(d.gamma), lumped=bool(d.lumped),
                                        **common)
     else:
-        integrator = GeneralizedAlphaIntegrator(model, dt, rho_inf=float(spec.get("rho_inf", 1.0)),
-                                                lumped=bool(spec.get("lumped", False)), **common)
+        integrator = GeneralizedAlphaIntegrator(model, dt, rho_inf=float(d.rho_inf), lumped=bool(d.lumped), **common)
     return integrator, n_steps, dt, dt_crit
 
 
@@ -308,14 +317,14 @@ def build_monitors(spec: list[dict], model: ShellModel, meter: _StrainMeter) -> 
                   "mean_weft_strain": lambda: meter.summary()["mean_weft"],
                   "max_displacement": lambda: _max_displacement(model)}
     monitors = {}
-    for i, m in enumerate(spec):
-        if "quantity" in m:
-            monitors[m["name"]] = quantities[m["quantity"]]
+    for i, table in enumerate(spec):
+        m = section(MonitorSection, table)
+        if m.quantity is not None:
+            monitors[m.name] = quantities[m.quantity]
             continue
-        field_name = m.get("field", "u")
         try:
-            monitors[m["name"]] = node_monitor(model, m["point"], field_name,
-                                               m.get("component", 2 if field_name == "u" else 0))
+            monitors[m.name] = node_monitor(model, m.point, m.field,
+                                            m.component if m.component is not None else 2 if m.field == "u" else 0)
         except ValueError as exc:
             raise SceneError(f"dynamics.monitors[{i}].point: {exc}") from None
     return monitors
@@ -338,26 +347,27 @@ def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD) -> DynamicRun:
     """Integrate a [dynamics] scene from rest to end_time; write <name>.xdmf/.csv/.png/_summary.json."""
     say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
     spec = scene["dynamics"]
+    d = section(DynamicsSection, spec)
     name = scene_name(scene)
-    out = Path(scene.get("output", {}).get("dir", f"results/{name}"))
+    out = output_dir(scene)
     t0 = time.perf_counter()
-    obstacles = build_obstacles(spec.get("obstacles", []))
+    obstacles = build_obstacles(d.obstacles)
     model = build_model(scene, comm, ObstacleShell if obstacles else ShellModel)
     if obstacles:
-        model.set_obstacles(obstacles, spec.get("contact_penalty"))
+        model.set_obstacles(obstacles, d.contact_penalty)
     integrator, n_steps, dt, dt_crit = build_integrator(spec, model)
-    limit = spec.get("strain_limit")
+    limit = d.strain_limit
     # the projection's strain form also measures the strains (limit 1 when nothing is limited, as in
     # fabricfem.verify.strain_limit)
-    projection = FastProjection(model, float(limit) if limit else 1.0, tol=float(spec.get("strain_limit_tol", 1e-4)))
+    projection = FastProjection(model, float(limit) if limit else 1.0, tol=float(d.strain_limit_tol))
     log = attach(projection, integrator) if limit else []
     meter = _StrainMeter(projection, integrator)
-    monitors = build_monitors(spec.get("monitors", []), model, meter)
+    monitors = build_monitors(d.monitors, model, meter)
     monitors["max_strain"] = meter.max_strain
-    output_every = int(spec.get("output_every", max(1, n_steps // 100)))
-    say(f"{name}: {model.model} model, {model.ndofs} dofs, {comm.size} rank(s); {spec['integrator']} "
+    output_every = int(d.output_every if d.output_every is not None else max(1, n_steps // 100))
+    say(f"{name}: {model.model} model, {model.ndofs} dofs, {comm.size} rank(s); {d.integrator} "
         f"dt = {dt:.4g} s" + (f" (critical {dt_crit:.4g} s)" if dt_crit else "") +
-        f", {n_steps} steps to t = {float(spec['end_time']):g} s" + (f", strain limit {limit:g}" if limit else "")
+        f", {n_steps} steps to t = {float(d.end_time):g} s" + (f", strain limit {limit:g}" if limit else "")
         + (f", {len(obstacles)} obstacle(s)" if obstacles else ""))
     xdmf = out / f"{name}.xdmf"
     start = time.perf_counter()
@@ -368,7 +378,7 @@ def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD) -> DynamicRun:
     header.append("newton_iterations")
     rows = [row + [its] for row, its in zip(rows, history.newton_iterations)]
     io.write_csv(out / f"{name}.csv", header, rows, comm)
-    user = [m["name"] for m in spec.get("monitors", [])]
+    user = [m["name"] for m in d.monitors]
     panels = {m: {m: history.monitors[m]} for m in user}
     panels["energy [J]"] = {"kinetic": history.kinetic, "strain": history.strain, "total": list(history.total)}
     panels["max strain [-]"] = {"max vertex Green strain": history.monitors["max_strain"]}
@@ -376,7 +386,7 @@ def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD) -> DynamicRun:
     wall = time.perf_counter() - t0
     memory = io.peak_memory_mib(comm)
     iterations = [r.iterations for r in log]
-    summary = {"scene": name, "kind": "dynamic", "integrator": spec["integrator"], "ranks": comm.size,
+    summary = {"scene": name, "kind": "dynamic", "integrator": d.integrator, "ranks": comm.size,
                "ndofs": model.ndofs, "steps": n_steps, "dt_s": dt, "dt_crit_s": dt_crit,
                "end_time_s": history.time[-1], "wall_s": wall, "time_integration_wall_s": run_wall,
                "kinetic_J": history.kinetic[-1], "strain_J": history.strain[-1],
@@ -408,18 +418,18 @@ def run_compression_scene(scene, comm=MPI.COMM_WORLD) -> dict | None:
     fabric = build_fabric(scene["fabric"])                       # before meshing: a bad fabric fails fast
     limb = Ellipsoid(np.array(scene["limb"]["center"], dtype=float), np.eye(3),
                      np.array(scene["limb"]["radii"], dtype=float))
-    donning = scene.get("donning", {})
-    name = scene.get("scene", {}).get("name", "compression")
-    out = Path(scene.get("output", {}).get("dir", f"results/{name}"))
+    donning = section(DonningSection, scene.get("donning"))
+    name = section(SceneSection, scene.get("scene")).name or "compression"
+    out = Path(section(OutputSection, scene.get("output")).dir or f"results/{name}")
     fmesh = build_mesh(scene["mesh"], comm)
-    start, steps = donning_start(scene.data), int(donning.get("steps", 10))
+    start, steps = donning_start(scene.data), int(donning.steps)
     say(f"{name}: tube R = {scene['mesh']['radius']} m on a limb of radii {limb.radii.tolist()} m, growing from "
         f"{start:.3g} of its size in {steps} steps, {comm.size} rank(s)")
-    problem = fit_sleeve(fmesh, fabric, limb, start, steps, float(donning.get("tolerance", 1e-7)),
+    problem = fit_sleeve(fmesh, fabric, limb, start, steps, float(donning.tolerance),
                          on_step=lambda s: say(f"  limb at {s.factor:5.3f}: {s.augmentations} augmentations, "
                                                f"{s.newton_iterations} Newton iterations, penetration "
                                                f"{s.max_penetration:.1e} m"))
-    summary = pressure_report(problem, limb, out, name, render=scene.get("output", {}).get("render", True))
+    summary = pressure_report(problem, limb, out, name, render=section(OutputSection, scene.get("output")).render)
     if summary is not None:
         say(f"{name}: pressure on the skin {summary['min_mmHg']:.1f}-{summary['max_mmHg']:.1f} mmHg (ring means "
             f"{summary['ring_min_mmHg']:.1f}-{summary['ring_max_mmHg']:.1f} mmHg); ring nearest the limb's centre: "

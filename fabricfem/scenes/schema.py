@@ -104,57 +104,37 @@ import importlib.util
 import math
 
 from fabricfem.body.arm import ArmDimensions
-from fabricfem.scenes.sections import schema_of
+from fabricfem.scenes.sections import (DonningSection, DynamicsSection, FabricSection, LimbSection, LoadSection,
+                                       MeshSection, ModelSection, MonitorSection, ObstacleSection, OutputSection,
+                                       SceneSection, SolverSection, SupportSection, schema_of)
 from fabricfem.wear.config import ContactSpec, FlexionSpec, RouteSpec, TubeSpec
 
+# section -> key -> (TOML types, required): read from the section dataclasses (fabricfem.scenes.sections, and
+# fabricfem.wear.config for a sleeve's), where each parameter, its default and its unit are declared once
 SCHEMA: dict[str, dict[str, tuple[type | tuple, bool]]] = {
-    # section -> key -> (type(s), required)
-    "scene": {"name": (str, False), "description": (str, False), "kind": (str, False)},
-    "mesh": {"type": (str, True), "lx": ((int, float), False), "ly": ((int, float), False),
-             "nx": (int, False), "ny": (int, False), "cell": (str, False), "structured": (bool, False),
-             "length": ((int, float), False), "radius": ((int, float), False), "n_around": (int, False),
-             "n_along": (int, False), "order": (int, False), **schema_of(TubeSpec)},
-    "fabric": {"name": (str, False), "E1": ((int, float), True), "E2": ((int, float), True),
-               "G12": ((int, float), True), "nu12": ((int, float), True), "thickness": ((int, float), True),
-               "density": ((int, float), False), "G13": ((int, float), False),
-               "bending_rigidity": (list, False), "bending_law": (str, False),
-               "kawabata_coefficients": (list, False), "B0": ((int, float), False),
-               "kappa0": ((int, float), False)},
-    "model": {"kind": (str, False), "rebase": (bool, False)},
-    "support": {"edge": (str, False), "point": (list, False), "u": (list, False), "theta": (list, False)},
-    "load": {"type": (str, True), "edge": (str, False), "value": ((list, int, float), False),
-             "point": (list, False)},
-    "solver": {"targets": ((list, int, float), True), "initial_step": ((int, float), False),
-               "min_step": ((int, float), False), "petsc_options": (dict, False)},
-    "output": {"dir": (str, False), "probe": (list, False), "render": (bool, False),
-               "render_angles": (list, False), "body_samples": (int, False)},
-    # sleeve scenes (fabricfem.wear): the wearer, its motion, the contact and the route; keys and defaults are
-    # the fields of fabricfem.wear.config (ArmDimensions, FlexionSpec, ContactSpec, RouteSpec)
+    "scene": schema_of(SceneSection),
+    "mesh": {**schema_of(MeshSection), **schema_of(TubeSpec)},
+    "fabric": schema_of(FabricSection),
+    "model": schema_of(ModelSection),
+    "support": schema_of(SupportSection),
+    "load": schema_of(LoadSection),
+    "solver": schema_of(SolverSection),
+    "output": schema_of(OutputSection),
+    # sleeve scenes (fabricfem.wear): the wearer, its motion, the contact and the route
     "body": {"type": (str, True), **schema_of(ArmDimensions)},
     "motion": {"type": (str, True), **schema_of(FlexionSpec)},
     "contact": schema_of(ContactSpec),
     "route": schema_of(RouteSpec),
     # compression scenes (fabricfem.wear.compression): a tube donned onto one limb ellipsoid
-    "limb": {"center": (list, True), "radii": (list, True)},
-    "donning": {"start": ((int, float), False), "steps": (int, False), "tolerance": ((int, float), False)},
+    "limb": schema_of(LimbSection),
+    "donning": schema_of(DonningSection),
     # dynamic scenes (fabricfem.scenes.run.run_dynamic_scene)
-    "dynamics": {"integrator": (str, True), "dt": ((int, float, str), True), "end_time": ((int, float), True),
-                 "dt_fraction": ((int, float), False), "force": (bool, False), "beta": ((int, float), False),
-                 "gamma": ((int, float), False), "lumped": (bool, False), "rayleigh": (list, False),
-                 "air_drag": ((int, float), False), "strain_limit": ((int, float), False),
-                 "strain_limit_tol": ((int, float), False), "gravity": (list, False),
-                 "ramp_time": ((int, float), False), "output_every": (int, False), "obstacles": (list, False),
-                 "monitors": (list, False), "contact_penalty": ((int, float), False),
-                 "rho_inf": ((int, float), False)},
+    "dynamics": schema_of(DynamicsSection),
 }
 # arrays of tables inside [dynamics]
 SUB_SCHEMA: dict[str, dict[str, tuple[type | tuple, bool]]] = {
-    "dynamics.obstacles": {"type": (str, True), "point": (list, False), "normal": (list, False),
-                           "lower": (list, False), "upper": (list, False), "radius": ((int, float), False),
-                           "center": (list, False), "half_x": ((int, float), False), "half_y": ((int, float), False),
-                           "height": ((int, float), False), "fillet_radius": ((int, float), False)},
-    "dynamics.monitors": {"name": (str, True), "point": (list, False), "field": (str, False),
-                          "component": (int, False), "quantity": (str, False)},
+    "dynamics.obstacles": schema_of(ObstacleSection),
+    "dynamics.monitors": schema_of(MonitorSection),
 }
 INTEGRATORS = {"newmark", "explicit", "generalized-alpha"}
 OBSTACLE_KEYS = {"plane": {"point", "normal"}, "box": {"lower", "upper", "radius"},

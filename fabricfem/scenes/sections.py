@@ -3,17 +3,26 @@ the dataclass; the schema of the TOML section that sets it is read from `datacla
 from __future__ import annotations
 
 import dataclasses
+import types
 import typing
 
 # annotation -> the TOML value types it accepts (TOML has no None: an optional parameter is simply left out)
 _TOML_TYPES = {float: (int, float), int: int, bool: bool, str: str, tuple: list, list: list, dict: dict}
 
 
+def _is_union(annotation) -> bool:
+    return typing.get_origin(annotation) in (typing.Union, types.UnionType)
+
+
 def _toml_types(annotation) -> type | tuple:
+    if _is_union(annotation):
+        accepted: tuple = ()
+        for arg in typing.get_args(annotation):
+            if arg is not type(None):
+                t = _toml_types(arg)
+                accepted += t if isinstance(t, tuple) else (t,)
+        return accepted[0] if len(accepted) == 1 else tuple(dict.fromkeys(accepted))
     origin = typing.get_origin(annotation)
-    if origin in (typing.Union, getattr(__import__("types"), "UnionType", None)):
-        args = [a for a in typing.get_args(annotation) if a is not type(None)]
-        return _toml_types(args[0])
     return _TOML_TYPES[origin or annotation]
 
 
@@ -34,8 +43,188 @@ def from_table(cls, table: dict, exclude: tuple[str, ...] = ()):
         if key in exclude:
             continue
         annotation = hints[key]
+        if _is_union(annotation):
+            annotation = typing.get_args(annotation)[0]
         target = typing.get_origin(annotation) or annotation
-        if typing.get_origin(annotation) in (typing.Union, getattr(__import__("types"), "UnionType", None)):
-            target = typing.get_origin(typing.get_args(annotation)[0]) or typing.get_args(annotation)[0]
         values[key] = tuple(value) if target is tuple and isinstance(value, list) else value
     return cls(**values)
+
+
+def doc(text: str, default=dataclasses.MISSING, **kw):
+    """A dataclass field with its documentation (meaning and unit) in the metadata, for the scene reference."""
+    if default is dataclasses.MISSING and "default_factory" not in kw:
+        return dataclasses.field(metadata={"doc": text}, **kw)
+    return dataclasses.field(default=default, metadata={"doc": text}, **kw)
+
+
+# ------------------------------------------------------------------------------------------ the sections
+@dataclasses.dataclass(frozen=True)
+class SceneSection:
+    """[scene]: what the scene is."""
+
+    name: str | None = doc("name of the run (default: the file's stem); outputs go to results/<name>", None)
+    description: str | None = doc("free text", None)
+    kind: str | None = doc("static | dynamic | sleeve | compression (default: inferred from the sections)", None)
+
+
+@dataclasses.dataclass(frozen=True)
+class MeshSection:
+    """[mesh]: a structured plate or a tube (fabricfem.meshes)."""
+
+    type: str = doc("plate | tube")
+    lx: float | None = doc("plate length along x [m]", None)
+    ly: float | None = doc("plate width along y [m]", None)
+    nx: int | None = doc("plate cells along x", None)
+    ny: int | None = doc("plate cells along y", None)
+    structured: bool = doc("plate: structured grid", True)
+    length: float | None = doc("tube length along x [m]", None)
+    radius: float | None = doc("tube radius [m]", None)
+    n_around: int | None = doc("tube cells around", None)
+    n_along: int | None = doc("tube cells along", None)
+    cell: str = doc("quadrilateral | triangle", "quadrilateral")
+    order: int = doc("geometry order of the tube (1 or 2)", 1)
+
+
+@dataclasses.dataclass(frozen=True)
+class FabricSection:
+    """[fabric]: orthotropic St. Venant-Kirchhoff membrane in the warp/weft frame, optional bending laws."""
+
+    E1: float = doc("warp Young's modulus [Pa]")
+    E2: float = doc("weft Young's modulus [Pa]")
+    G12: float = doc("in-plane shear modulus [Pa]")
+    nu12: float = doc("Poisson ratio [-]")
+    thickness: float = doc("thickness t [m]")
+    density: float = doc("density [kg/m^3] (areal density = density x thickness)", 0.0)
+    G13: float | None = doc("transverse shear modulus [Pa] (default G12)", None)
+    name: str = doc("label", "fabric")
+    bending_rigidity: list | None = doc("[B1, B2] bending rigidities [N m] (default E t^3 / 12 per direction)", None)
+    bending_law: str | None = doc("kawabata | square_root (nonlinear bending)", None)
+    kawabata_coefficients: list | None = doc("coefficients of the Kawabata law", None)
+    B0: float | None = doc("square-root law: B0 [N m]", None)
+    kappa0: float | None = doc("square-root law: kappa0 [1/m]", None)
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelSection:
+    """[model]: which fabric model."""
+
+    kind: str = doc("naghdi (shell) | membrane", "naghdi")
+    rebase: bool = doc("re-base the director after converged steps", True)
+
+
+@dataclasses.dataclass(frozen=True)
+class SupportSection:
+    """[[support]]: a held edge or node."""
+
+    edge: str | None = doc("edge tag of the mesh", None)
+    point: list | None = doc("[x, y, z] of a mesh node [m] (instead of edge)", None)
+    u: list | None = doc("[ux, uy, uz] [m] or \"free\" per component", None)
+    theta: list | None = doc("[theta1, theta2] [rad] or \"free\"", None)
+
+
+@dataclasses.dataclass(frozen=True)
+class LoadSection:
+    """[[load]]: a load scaled by the load factor."""
+
+    type: str = doc("gravity | body_force | edge_traction | pressure | edge_moment | point")
+    edge: str | None = doc("edge tag (edge loads)", None)
+    value: float | list | None = doc("N/m^3, N/m, Pa, N m/m or N by type", None)
+    point: list | None = doc("[x, y, z] [m] of a point load", None)
+
+
+@dataclasses.dataclass(frozen=True)
+class SolverSection:
+    """[solver]: load stepping of a static scene."""
+
+    targets: float | list = doc("load factors to reach and write")
+    initial_step: float | None = doc("first load step (default: the first target)", None)
+    min_step: float = doc("smallest load step before giving up", 1e-6)
+    petsc_options: dict | None = doc("PETSc options of the Newton solver", None)
+
+
+@dataclasses.dataclass(frozen=True)
+class OutputSection:
+    """[output]: where and what to write."""
+
+    dir: str | None = doc("output folder (default results/<name>)", None)
+    probe: list | None = doc("[x, y, z] [m] of a node whose displacement is reported", None)
+    render: bool = doc("write PNG renders", True)
+    render_angles: list | None = doc("sleeve: elbow angles [deg] of the pressure renders (default: thirds)", None)
+    body_samples: int = doc("sleeve: points per ellipsoid ring of the body surfaces", 24)
+
+
+@dataclasses.dataclass(frozen=True)
+class LimbSection:
+    """[limb]: the limb ellipsoid of a compression scene."""
+
+    center: list = doc("[x, 0, 0] centre [m] on the tube axis")
+    radii: list = doc("[r1, r2, r3] semi-axes [m]")
+
+
+@dataclasses.dataclass(frozen=True)
+class DonningSection:
+    """[donning]: the limb grows from `start` x its size to full size inside the tube."""
+
+    start: float | None = doc("starting size (default 0.95 R / max(r2, r3))", None)
+    steps: int = doc("growth increments", 10)
+    tolerance: float = doc("penetration tolerance of the augmented Lagrangian [m]", 1e-7)
+
+
+@dataclasses.dataclass(frozen=True)
+class DynamicsSection:
+    """[dynamics]: time integration from rest."""
+
+    integrator: str = doc("newmark | explicit | generalized-alpha")
+    dt: float | str = doc("time step [s], or \"auto\" (explicit): dt_fraction x the critical step")
+    end_time: float = doc("end time [s]")
+    dt_fraction: float = doc("fraction of the critical step for dt = \"auto\", in (0, 1]", 0.9)
+    force: bool = doc("explicit: allow dt above the critical step", False)
+    beta: float = doc("Newmark beta", 0.25)
+    gamma: float = doc("Newmark gamma", 0.5)
+    rho_inf: float = doc("generalized-alpha spectral radius at infinite step, in [0, 1]", 1.0)
+    lumped: bool = doc("lumped mass (newmark / generalized-alpha; explicit always lumps)", False)
+    rayleigh: list = doc("[a [1/s], b [s]] of C = a M + b K", dataclasses.MISSING, default_factory=lambda: [0.0, 0.0])
+    air_drag: float = doc("eta [kg/(m^2 s)], drag -eta v per unit area", 0.0)
+    strain_limit: float | None = doc("max warp/weft Green strain (fast projection)", None)
+    strain_limit_tol: float = doc("projection tolerance [-]", 1e-4)
+    gravity: list | None = doc("[gx, gy, gz] [m/s^2]", None)
+    ramp_time: float = doc("load factor min(t / ramp_time, 1) [s]", 0.0)
+    output_every: int | None = doc("record every N steps (default n_steps / 100)", None)
+    obstacles: list = doc("[[dynamics.obstacles]] rigid obstacles", dataclasses.MISSING, default_factory=list)
+    monitors: list = doc("[[dynamics.monitors]] CSV columns", dataclasses.MISSING, default_factory=list)
+    contact_penalty: float | None = doc("obstacle penalty [Pa/m] (default 10 E t / h^2)", None)
+
+
+@dataclasses.dataclass(frozen=True)
+class ObstacleSection:
+    """[[dynamics.obstacles]]: plane (point, normal), box (lower, upper, radius) or table (center, half_x, half_y,
+    height, fillet_radius)."""
+
+    type: str = doc("plane | box | table")
+    point: list | None = doc("plane: a point [m]", None)
+    normal: list | None = doc("plane: outward normal", None)
+    lower: list | None = doc("box: lower corner [m] (bounds may be inf)", None)
+    upper: list | None = doc("box: upper corner [m]", None)
+    radius: float | None = doc("box: edge rounding [m]", None)
+    center: list | None = doc("table: [cx, cy] [m]", None)
+    half_x: float | None = doc("table: half length [m]", None)
+    half_y: float | None = doc("table: half width [m]", None)
+    height: float | None = doc("table: top height [m]", None)
+    fillet_radius: float | None = doc("table: edge fillet [m]", None)
+
+
+@dataclasses.dataclass(frozen=True)
+class MonitorSection:
+    """[[dynamics.monitors]]: a node value or a strain/displacement summary as a CSV column."""
+
+    name: str = doc("column name")
+    point: list | None = doc("[x, y, z] [m] of a mesh node", None)
+    field: str = doc("u [m] | theta [rad]", "u")
+    component: int | None = doc("component index (default 2 for u, 0 for theta)", None)
+    quantity: str | None = doc("max_warp_strain | max_weft_strain | mean_warp_strain | mean_weft_strain | "
+                               "max_displacement", None)
+
+
+def section(cls, table: dict | None):
+    """The section dataclass of a validated table (None or {} gives the defaults)."""
+    return from_table(cls, table or {})

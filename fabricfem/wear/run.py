@@ -34,21 +34,20 @@ def run_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
     return history
 
 
-def run_sleeve_scene(config: SleeveConfig, output: dict, comm: MPI.Comm = MPI.COMM_WORLD) -> SleeveHistory:
-    """`fabricfem run` for sleeve scenes: flex the arm and write the WearRecorder's outputs under output["dir"]
-    (default results/<name>; also "render", "render_angles" [deg], "body_samples"), with progress lines
+def run_sleeve_scene(config: SleeveConfig, out: Path, render: bool = True, render_angles: list[float] | None = None,
+                     body_samples: int = 24, comm: MPI.Comm = MPI.COMM_WORLD) -> SleeveHistory:
+    """`fabricfem run` for sleeve scenes: flex the arm and write the WearRecorder's outputs under `out`
+    (pressure renders at `render_angles` [deg], default the thirds of the flexion), with progress lines
     (rank 0) and a closing summary."""
     say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
-    out = Path(output.get("dir", f"results/{config.name}"))
-    render = output.get("render", True)
-    default_angles = [config.motion.final_angle / 3, 2 * config.motion.final_angle / 3, config.motion.final_angle]
-    render_angles = [float(a) for a in output.get("render_angles", default_angles)]
+    final = config.motion.final_angle
+    render_angles = [final / 3, 2 * final / 3, final] if render_angles is None else [float(a) for a in render_angles]
     t0 = time.perf_counter()
     run = build_run(config, comm)
     say(f"sleeve: {config.tube.n_around} x {config.tube.n_along} Q2 tube, {run.model.ndofs} dofs, {comm.size} rank(s); "
         f"mu = {config.contact.friction}, {config.contact.method} contact, gravity {'on' if config.route.gravity else 'off'}; "
         f"flexion to {config.motion.final_angle} deg by {run.describe()}")
-    recorder = WearRecorder(run, out, render_angles, render, int(output.get("body_samples", 24)))
+    recorder = WearRecorder(run, out, render_angles, render, body_samples)
 
     def on_step(step: SleeveStep):
         recorder.record(step)
