@@ -27,9 +27,9 @@ import numpy as np
 from mpi4py import MPI
 
 from fabricfem.body.ellipsoid import Ellipsoid
-from fabricfem.wear.compression import fit_sleeve, pressure_report
 from fabricfem.materials import Fabric
 from fabricfem.meshes import tube
+from fabricfem.wear.compression import fit_sleeve, pressure_report
 
 LENGTH, RELAXED_RADIUS = 0.24, 0.034                     # m
 FOREARM = Ellipsoid(np.array([0.12, 0.0, 0.0]), np.eye(3), np.array([0.32, 0.044, 0.036]))   # m

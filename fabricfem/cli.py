@@ -9,29 +9,30 @@
 from __future__ import annotations
 
 import argparse
+import datetime
 import json
 import math
 import os
+import platform
 import sys
+from pathlib import Path
 
 from mpi4py import MPI
-import datetime
-import platform
-from fabricfem.verify import load_cases
-from fabricfem.verify import CaseResult
+
 from fabricfem import scenes as scene_module
-from fabricfem.scenes.run import run_scene
-from fabricfem.demo import rollup_demo
-from fabricfem.studies.fabric_link import OUT_DIR, run_fabric_link
-from fabricfem.studies.sleeve_fit import DEFAULT_LONG_AXIS_FACTOR, FIT_SCALES, fit_configs, run_fit_study
-from fabricfem.studies.sleeve import run_methods
-from fabricfem.studies.unit_cell import previous_runs, run_study as run_unit_cell_study
-from fabricfem.studies.sleeve import run_study, variants
-from fabricfem.benchmarks.rollup_profile import rollup_profile
-from fabricfem.benchmarks.unit_cell_perf import unit_cell_perf
 from fabricfem.benchmarks import stability_map
-from fabricfem.benchmarks.speed_accuracy import speed_accuracy
+from fabricfem.benchmarks.rollup_profile import rollup_profile
 from fabricfem.benchmarks.sleeve_profile import sleeve_profile
+from fabricfem.benchmarks.speed_accuracy import speed_accuracy
+from fabricfem.benchmarks.unit_cell_perf import unit_cell_perf
+from fabricfem.demo import rollup_demo
+from fabricfem.scenes.run import run_scene
+from fabricfem.studies.fabric_link import OUT_DIR, run_fabric_link
+from fabricfem.studies.sleeve import run_methods, run_study, variants
+from fabricfem.studies.sleeve_fit import DEFAULT_LONG_AXIS_FACTOR, FIT_SCALES, fit_configs, run_fit_study
+from fabricfem.studies.unit_cell import previous_runs
+from fabricfem.studies.unit_cell import run_study as run_unit_cell_study
+from fabricfem.verify import CaseResult, load_cases
 
 
 def _print(*args, **kw):
@@ -101,6 +102,8 @@ def main(argv: list[str] | None = None) -> int:
     p_verify.add_argument("--markdown", metavar="PATH", help="also write the table as Markdown to PATH")
     p_run = sub.add_parser("run", help="run a scene file (TOML), e.g. scenes/rollup.toml")
     p_run.add_argument("scene", help="path of the scene file")
+    p_scenes = sub.add_parser("scenes", help="the scene-file reference: every section and key with type, default, unit")
+    p_scenes.add_argument("--markdown", metavar="PATH", help="write it to PATH (docs/scenes.md) instead of printing")
     p_demo = sub.add_parser("demo", help="the default demo: a fabric strip rolled up by an end moment")
     p_demo.add_argument("--out", default="results/demo", help="output folder (XDMF, PNG, CSV)")
     p_bench = sub.add_parser("bench", help="benchmarks (results/ CSV and PNG)")
@@ -164,6 +167,13 @@ def main(argv: list[str] | None = None) -> int:
             _print(f"fabricfem run: {exc}", file=sys.stderr)
             return 2
         run_scene(scene)
+        return 0
+    if args.command == "scenes":
+        text = scene_module.schema.reference_markdown()
+        if args.markdown:
+            Path(args.markdown).write_text(text + "\n")
+        else:
+            _print(text)
         return 0
     if args.command == "demo":
         rollup_demo(args.out)

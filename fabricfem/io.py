@@ -6,15 +6,15 @@ owned cells to rank 0.
 from __future__ import annotations
 
 import csv
+import json
 import os
+import resource
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 from dolfinx import fem, io
 from mpi4py import MPI
-import resource
-import json
 
 
 class SurfaceSeries:

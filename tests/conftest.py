@@ -1,4 +1,5 @@
 import os
+from pathlib import Path
 
 import pytest
 from mpi4py import MPI
@@ -6,8 +7,17 @@ from mpi4py import MPI
 os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")
 
 
+SLOW_TESTS = {line.split("#")[0].strip() for line in (Path(__file__).parent / "tiers.txt").read_text().splitlines()
+              if line.split("#")[0].strip()}
+
+
 def pytest_collection_modifyitems(config, items):
-    """Under mpirun only the tests marked `mpi` make sense (the others are serial by design)."""
+    """Tests listed in tests/tiers.txt (a test file, file::test or file::test[param]) are marked `slow`: `make test-fast` leaves
+    them out. Under mpirun only the tests marked `mpi` make sense (the others are serial by design)."""
+    for item in items:
+        file, test = item.nodeid.split("::")[0].split("/")[-1], item.nodeid.split("::", 1)[-1]
+        if {file, f"{file}::{test}", f"{file}::{test.split('[')[0]}"} & SLOW_TESTS:
+            item.add_marker(pytest.mark.slow)
     if MPI.COMM_WORLD.size > 1:
         skip = pytest.mark.skip(reason="serial test (run without mpirun)")
         for item in items:

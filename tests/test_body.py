@@ -5,9 +5,22 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from fabricfem.body import (DEFAULT_ARM, Body, ElbowFlexion, Ellipsoid, JointTrajectory, Segment, default_arm,
-                            elbow_flexion, joint_torque, read_marker_csv, read_trc, segment_frame, stepping_over,
-                            walking)
+from fabricfem.body import (
+    DEFAULT_ARM,
+    Body,
+    ElbowFlexion,
+    Ellipsoid,
+    JointTrajectory,
+    Segment,
+    default_arm,
+    elbow_flexion,
+    joint_torque,
+    read_marker_csv,
+    read_trc,
+    segment_frame,
+    stepping_over,
+    walking,
+)
 from fabricfem.body.motion import crossing_angles, rotation_about
 
 

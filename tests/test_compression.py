@@ -6,10 +6,10 @@ import pytest
 from mpi4py import MPI
 
 from fabricfem.body.ellipsoid import Ellipsoid
-from fabricfem.wear.compression import don, grown, laplace_pressure
 from fabricfem.contact.problem import ContactProblem
 from fabricfem.solvers.newton import SolverError
 from fabricfem.verify import compression as case
+from fabricfem.wear.compression import don, grown, laplace_pressure
 
 
 def test_laplace_small_strain_limit():

@@ -3,18 +3,27 @@ import csv
 
 import numpy as np
 import pytest
+from modal import first_mode
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fabricfem.dynamics import (CentralDifference, DynamicsError, NewmarkIntegrator, consistent_mass,
-                                critical_time_step, discrete_max_frequency, lumped_mass, material_stiffness_form,
-                                max_frequency_estimate, node_monitor)
+from fabricfem.dynamics import (
+    CentralDifference,
+    DynamicsError,
+    NewmarkIntegrator,
+    consistent_mass,
+    critical_time_step,
+    discrete_max_frequency,
+    lumped_mass,
+    material_stiffness_form,
+    max_frequency_estimate,
+    node_monitor,
+)
 from fabricfem.dynamics.mass import assemble_matrix
 from fabricfem.materials import Fabric
 from fabricfem.meshes import plate
 from fabricfem.shell import ShellModel
 from fabricfem.verify.dynamics import STRIP, cantilever_strip, crossing_frequency, euler_bernoulli_f1
-from modal import first_mode
 
 
 def _component_indicator(model, field, i):

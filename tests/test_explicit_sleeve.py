@@ -6,8 +6,14 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from fabricfem.dynamics import CentralDifference, critical_time_step, discrete_max_frequency, lumped_mass
-from fabricfem.dynamics import max_frequency_estimate, measured_critical_time_step
+from fabricfem.dynamics import (
+    CentralDifference,
+    critical_time_step,
+    discrete_max_frequency,
+    lumped_mass,
+    max_frequency_estimate,
+    measured_critical_time_step,
+)
 from fabricfem.dynamics.explicit import runs_stably
 from fabricfem.materials import Fabric
 from fabricfem.meshes import plate
@@ -173,8 +179,8 @@ def test_sleeve_flexion_with_gravity_is_converged_in_rate():
     (measured on mesh I, 1-57 deg: 6.4 % between 45 and 15 deg/s with gravity, 40 % without: without the
     weight the forces on the floating sleeve are inertia and drag only, see fabricfem.wear.sleeve; this test
     measured +5.2 %)."""
-    from fabricfem.wear.run import run_sleeve
     from fabricfem.wear.config import SleeveConfig
+    from fabricfem.wear.run import run_sleeve
     base = SleeveConfig.of(n_around=10, n_along=13, friction=0.5, final_angle=30.0)
     assert base.route.gravity and base.motion.angular_velocity == 45.0
     fast = run_sleeve(base, MPI.COMM_SELF)

@@ -13,22 +13,32 @@ from __future__ import annotations
 import dataclasses
 import json
 
+import dolfinx.mesh as dmesh
 import numpy as np
 import pytest
 from mpi4py import MPI
 
-import dolfinx.mesh as dmesh
 from fabricfem.fabrics import available_fabrics, fabric_from_dict, fabric_to_dict, load_fabric, save_fabric
-from fabricfem.materials.fitted import (DEFAULT_DIRECTIONS, ConvexMembraneLaw, FittedMembraneLaw, MembraneSamples,
-                                  default_convex_terms, energy_exponents, fit_convex_law, fit_membrane_law,
-                                  fitted_fabric, membrane_state, sample_unit_cell)
-from fabricfem.weave.homogenize import UnitCellProblem, box_periodic_pairs
 from fabricfem.materials import Fabric, KawabataBending
+from fabricfem.materials.fitted import (
+    DEFAULT_DIRECTIONS,
+    ConvexMembraneLaw,
+    FittedMembraneLaw,
+    MembraneSamples,
+    default_convex_terms,
+    energy_exponents,
+    fit_convex_law,
+    fit_membrane_law,
+    fitted_fabric,
+    membrane_state,
+    sample_unit_cell,
+)
 from fabricfem.meshes import plate
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.loadstep import solve_load_path
 from fabricfem.studies.fabric_link import uniaxial_reference, uniaxial_strip
 from fabricfem.verify.homogenization import box_cell, neo_hookean
+from fabricfem.weave.homogenize import UnitCellProblem, box_periodic_pairs
 
 COMM = MPI.COMM_WORLD
 
@@ -404,6 +414,7 @@ def test_convex_law_ufl_energy_equals_numpy(which):
     1e-10 relative: the integrand is constant, so the quadrature is exact and only round-off remains.
     Then new coefficients through the Constant (no new form): the energy follows (same tolerance)."""
     from dolfinx import fem
+
     from fabricfem.studies.fabric_link import FABRIC_NAME
     law = random_convex_law(12) if which == "random" else load_fabric(FABRIC_NAME).membrane_law
     L, B = 0.1, 0.05

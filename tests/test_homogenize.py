@@ -1,13 +1,20 @@
 """Periodic unit-cell homogenization (fabricfem.weave.homogenize) against closed forms and in parallel."""
+import dolfinx.mesh as dmesh
 import numpy as np
 import pytest
-import dolfinx.mesh as dmesh
 from mpi4py import MPI
 
-from fabricfem.weave.homogenize import PeriodicPair, UnitCellProblem, box_periodic_pairs, solve_unit_cell
 from fabricfem.verify import load_cases
-from fabricfem.verify.homogenization import (LAMBDA, MU, PHI_GENERAL, box_cell, laminate_problem, neo_hookean,
-                                             neo_hookean_S)
+from fabricfem.verify.homogenization import (
+    LAMBDA,
+    MU,
+    PHI_GENERAL,
+    box_cell,
+    laminate_problem,
+    neo_hookean,
+    neo_hookean_S,
+)
+from fabricfem.weave.homogenize import PeriodicPair, UnitCellProblem, box_periodic_pairs, solve_unit_cell
 
 CASES = load_cases()
 # A finite, non-symmetric deformation of the laminate: the fluctuation is far from zero.

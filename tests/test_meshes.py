@@ -335,6 +335,7 @@ def test_model_to_mesh_bad_gdim():
 @serial_only
 def test_user_gmsh_session_is_preserved():
     import gmsh
+
     from fabricfem.meshes._gmsh_session import gmsh_is_initialized
     gmsh.initialize()
     try:

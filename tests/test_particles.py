@@ -2,11 +2,25 @@
 import numpy as np
 import pytest
 
-from fabricfem.particles import (STANDARD_GRAVITY, DivergenceError, Problem, chain, critical_time_step,
-                                 provot_correction, rectangular_grid, relax_newton, relax_seed, simulate, strains)
+from fabricfem.particles import (
+    STANDARD_GRAVITY,
+    DivergenceError,
+    Problem,
+    chain,
+    critical_time_step,
+    provot_correction,
+    rectangular_grid,
+    relax_newton,
+    relax_seed,
+    simulate,
+    strains,
+)
 from fabricfem.particles.springs import elastic_energy, internal_forces, stiffness_matrix
-from fabricfem.verify.particles_cases import (particle_overhanging_beam, particle_tablecloth,
-                                              particle_tip_loaded_cantilever)
+from fabricfem.verify.particles_cases import (
+    particle_overhanging_beam,
+    particle_tablecloth,
+    particle_tip_loaded_cantilever,
+)
 
 
 def test_spring_constants_follow_seed_equations():

@@ -1,12 +1,12 @@
 """Anti-symmetric periodicity of the quarter unit cell (thesis 000 sec. 4.3.3, Fig. 19 option B):
 PeriodicPair with a point map (x, y, z) -> (x - Lx, y, -z) and component signs (1, 1, -1)."""
+import dolfinx.mesh as dmesh
 import numpy as np
 import pytest
-import dolfinx.mesh as dmesh
 from mpi4py import MPI
 
-from fabricfem.weave.homogenize import PeriodicPair, UnitCellProblem
 from fabricfem.verify.homogenization import LAMBDA, MU, neo_hookean, neo_hookean_S
+from fabricfem.weave.homogenize import PeriodicPair, UnitCellProblem
 
 SIZE = np.array([2e-3, 1e-3, 1e-3])  # Lx, Ly, Lz [m]; z in [-Lz/2, Lz/2] so that z -> -z maps the cell onto itself
 TOL = 1e-9 * SIZE.max()  # geometric tolerance [m] for face membership

@@ -92,3 +92,13 @@ def test_point_support_clamps_a_node(tmp_path):
     run_scene(scene)
     rows = list(csv.reader(open(tmp_path / "history.csv")))
     assert abs(float(rows[-1][4])) > 1e-3  # the tip moved (m)
+
+
+def test_scene_reference_is_generated_from_the_section_dataclasses():
+    """docs/scenes.md is the output of `fabricfem scenes --markdown` (regenerate it after changing a section), and
+    every key of every section's schema appears in it."""
+    text = scene_module.schema.reference_markdown()
+    assert (ROOT / "docs" / "scenes.md").read_text() == text + "\n"
+    for section, keys in {**scene_module.schema.SCHEMA, **scene_module.schema.SUB_SCHEMA}.items():
+        for key in keys:
+            assert f"| {key} |" in text, (section, key)

@@ -14,8 +14,8 @@ from mpi4py import MPI
 from fabricfem import scenes as scene_module
 from fabricfem.body.arm import DEFAULT_ARM
 from fabricfem.scenes.schema import SceneError
-from fabricfem.wear.run import run_sleeve
 from fabricfem.wear.config import SleeveConfig
+from fabricfem.wear.run import run_sleeve
 from fabricfem.wear.sleeve import ELBOW_AXIS, build_sleeve, run_quasistatic
 
 ROOT = Path(__file__).resolve().parents[1]

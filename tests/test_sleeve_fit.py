@@ -12,12 +12,20 @@ from mpi4py import MPI
 
 from fabricfem import scenes as scene_module
 from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
-from fabricfem.scenes.schema import SceneError
-from fabricfem.wear.config import SleeveConfig, check_fit
 from fabricfem.scenes.build import sleeve_config
+from fabricfem.scenes.schema import SceneError
+from fabricfem.studies.sleeve_fit import (
+    FIT_CASES,
+    energy_split,
+    energy_split_forms,
+    fit_configs,
+    fit_ratio,
+    scaled_arm,
+    summary_row,
+    thickness_ratio,
+)
+from fabricfem.wear.config import SleeveConfig, check_fit
 from fabricfem.wear.sleeve import build_sleeve
-from fabricfem.studies.sleeve_fit import (FIT_CASES, energy_split, energy_split_forms, fit_configs, fit_ratio, scaled_arm,
-                                  summary_row, thickness_ratio)
 
 ROOT = Path(__file__).resolve().parents[1]
 THICK_ARM = ArmDimensions(upper_arm_girth=0.36, forearm_girth=0.31)   # radii 0.0573 m, 0.0493 m: fits R = 0.06 m
@@ -160,6 +168,7 @@ def test_elbow_radius_against_the_ellipsoid_surface(factor):
     the posed ellipsoids' implicit function f(x_elbow, y, 0) = 0 (thesis eq. 3.61), largest over the two
     segments, found by bisection (brentq, xtol 1e-13 m: the 1e-9 relative tolerance is its resolution)."""
     from scipy.optimize import brentq
+
     from fabricfem.body.arm import default_arm
     arm = ArmDimensions(long_axis_factor=factor)
     posed = default_arm(dimensions=arm).pose(0.0)

@@ -11,10 +11,10 @@ from fabricfem.dynamics.mass import lumped_mass
 from fabricfem.materials import Fabric
 from fabricfem.meshes import tube
 from fabricfem.shell import ShellModel
-from fabricfem.wear.run import run_sleeve
-from fabricfem.wear.config import SleeveConfig
-from fabricfem.wear.sleeve_implicit import InertiaDamping, build_implicit, run_implicit
 from fabricfem.solvers.newton import NewtonSolver
+from fabricfem.wear.config import SleeveConfig
+from fabricfem.wear.run import run_sleeve
+from fabricfem.wear.sleeve_implicit import InertiaDamping, build_implicit, run_implicit
 
 G = 9.81           # m/s^2
 ALPHA = 10.0       # 1/s, the study's mass damping

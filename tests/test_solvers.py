@@ -7,7 +7,7 @@ from fabricfem.solvers.loadstep import solve_load_path
 from fabricfem.solvers.newton import NewtonSolver, SolverError
 from fabricfem.verify import references
 from fabricfem.verify.cantilevers import SEED_EI, SEED_L, SEED_WIDTH, seed_cantilever
-from fabricfem.verify.plates import E, NU, SIDE, THICKNESS, quarter_plate
+from fabricfem.verify.plates import NU, SIDE, THICKNESS, E, quarter_plate
 
 
 def test_newton_converges_quadratically():

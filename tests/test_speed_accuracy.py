@@ -13,10 +13,23 @@ import pytest
 from csv_checks import assert_positive_table
 from mpi4py import MPI
 
-from fabricfem.benchmarks.speed_accuracy import (AIR_DRAG, AREAL_DENSITY, CSV_COLUMNS, DRAPE_CSV_COLUMNS,
-                                                 DRAPE_METHODS, GRAVITY, METHODS, QUICK, DrapePlan,
-                                                 DrapeRow, SpeedRow, cheapest_meeting, same_branch, speed_accuracy,
-                                                 tablecloth_benchmark)
+from fabricfem.benchmarks.speed_accuracy import (
+    AIR_DRAG,
+    AREAL_DENSITY,
+    CSV_COLUMNS,
+    DRAPE_CSV_COLUMNS,
+    DRAPE_METHODS,
+    GRAVITY,
+    METHODS,
+    QUICK,
+    DrapePlan,
+    DrapeRow,
+    SpeedRow,
+    cheapest_meeting,
+    same_branch,
+    speed_accuracy,
+    tablecloth_benchmark,
+)
 
 
 def damped_free_fall(t: float) -> float:

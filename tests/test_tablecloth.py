@@ -6,10 +6,23 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from fabricfem.verify.drape import (CLOTH_L, CLOTH_WEIGHT, STANDARD_GRAVITY, TABLE_HALF, _BackwardEulerStep,
-                                    reading_admissibility, shortest_path_over_table, tablecloth_problem)
-from fabricfem.verify.particles_cases import (CLOTH_H, IMPERFECTION_AMPLITUDE, TABLECLOTH_EXPERIMENT,
-                                              flatness_imperfection, hem_folds)
+from fabricfem.verify.drape import (
+    CLOTH_L,
+    CLOTH_WEIGHT,
+    STANDARD_GRAVITY,
+    TABLE_HALF,
+    _BackwardEulerStep,
+    reading_admissibility,
+    shortest_path_over_table,
+    tablecloth_problem,
+)
+from fabricfem.verify.particles_cases import (
+    CLOTH_H,
+    IMPERFECTION_AMPLITUDE,
+    TABLECLOTH_EXPERIMENT,
+    flatness_imperfection,
+    hem_folds,
+)
 
 
 def test_shortest_path_closed_forms():

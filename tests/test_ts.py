@@ -2,13 +2,12 @@
 conservation laws."""
 import numpy as np
 import pytest
+from modal import first_mode
 from mpi4py import MPI
 
-from fabricfem.dynamics import (DynamicsError, GeneralizedAlphaIntegrator, NewmarkIntegrator,
-                                node_monitor)
+from fabricfem.dynamics import DynamicsError, GeneralizedAlphaIntegrator, NewmarkIntegrator, node_monitor
 from fabricfem.verify.dynamics import STRIP, cantilever_strip, crossing_frequency, euler_bernoulli_f1
 from fabricfem.verify.ts_cases import strip_free_vibration
-from modal import first_mode
 
 TIP = np.array([STRIP["L"], 0.0, 0.0])
 

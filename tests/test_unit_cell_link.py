@@ -20,8 +20,16 @@ from mpi4py import MPI
 
 from fabricfem.fabrics import FABRICS_DIR, load_fabric
 from fabricfem.materials.fitted import ConvexMembraneLaw, MembraneSamples, fit_membrane_law
-from fabricfem.studies.fabric_link import (FABRIC_NAME, OUT_DIR, SAMPLES_CSV, SVK_NAME, load_samples,
-                                      measure_initial_stiffness, strip_against_unit_cell, uniaxial_reference)
+from fabricfem.studies.fabric_link import (
+    FABRIC_NAME,
+    OUT_DIR,
+    SAMPLES_CSV,
+    SVK_NAME,
+    load_samples,
+    measure_initial_stiffness,
+    strip_against_unit_cell,
+    uniaxial_reference,
+)
 
 COMM = MPI.COMM_WORLD
 

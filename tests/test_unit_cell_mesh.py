@@ -17,8 +17,13 @@ from scipy import special
 from scipy.spatial import cKDTree
 
 from fabricfem.meshes.unit_cell import REFINEMENTS, MeshResolution, section_mesh, unit_cell
-from fabricfem.meshes.yarn_geometry import (PlainWeave, YarnFamily, amplitude_from_crimp, check_weave,
-                                            sinusoid_arc_length)
+from fabricfem.meshes.yarn_geometry import (
+    PlainWeave,
+    YarnFamily,
+    amplitude_from_crimp,
+    check_weave,
+    sinusoid_arc_length,
+)
 
 COMM = MPI.COMM_WORLD
 serial_only = pytest.mark.skipif(COMM.size > 1, reason="serial check of process-local data")

@@ -2,8 +2,7 @@
 import numpy as np
 import pytest
 
-from fabricfem.materials.yarn import (THESIS_ISOTROPIC, THESIS_TRANSVERSELY_ISOTROPIC, EngineeringConstants,
-                                      YarnMaterial)
+from fabricfem.materials.yarn import THESIS_ISOTROPIC, THESIS_TRANSVERSELY_ISOTROPIC, EngineeringConstants, YarnMaterial
 from fabricfem.verify.yarn import PointwiseYarnLaw, YarnBlock, bonet_burton_constants, bonet_burton_stress
 
 GPA = 1e9

@@ -4,8 +4,12 @@ import pytest
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fabricfem.contact.yarn import (ContactParameters, closest_point_on_triangles, project_onto_quads,
-                                    symmetric_return_map)
+from fabricfem.contact.yarn import (
+    ContactParameters,
+    closest_point_on_triangles,
+    project_onto_quads,
+    symmetric_return_map,
+)
 
 
 def test_projection_above_flat_quad_closed_form():
@@ -365,6 +369,7 @@ def test_friction_tangent_is_consistent_on_sliding_cylinders():
     consistent tangent; measured 6.6e-3 -> 6.4e-4). With the closed-form friction part (no rotation of
     P(n)) the error stalls instead (measured 6.8e-3 -> 1.8e-3 relative to K v): this test fails on it."""
     from petsc4py import PETSc as P
+
     from fabricfem.contact.yarn import solve_with_contact
     from fabricfem.verify.yarn_contact import APPROACH
     m = _cylinders_with_friction(1e-8)

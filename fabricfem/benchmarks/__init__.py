@@ -5,7 +5,6 @@
 
 Run from the command line: `fabricfem bench stability-map [--out results/bench] [--quick]`.
 """
-from fabricfem.benchmarks.stability_map import (StabilityRow, particle_cloth, shell_cloth, shell_fabric,
-                                                stability_map)
+from fabricfem.benchmarks.stability_map import StabilityRow, particle_cloth, shell_cloth, shell_fabric, stability_map
 
 __all__ = ["StabilityRow", "particle_cloth", "shell_cloth", "shell_fabric", "stability_map"]

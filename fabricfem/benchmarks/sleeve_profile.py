@@ -25,12 +25,12 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 from mpi4py import MPI
 
-from fabricfem.wear.run import build_run
 from fabricfem.wear.config import SleeveConfig
+from fabricfem.wear.run import build_run
 from fabricfem.wear.sleeve import TIMING_PARTS
-import numpy as np
 
 MESHES = {"I": (10, 13), "II": (15, 20), "III": (20, 26), "IV": (30, 39)}
 COLUMNS = ("case", "mesh", "ranks", "final_angle_deg", "runs", "steps", "ndofs", "ms_per_step", "cpu_ms_per_step",

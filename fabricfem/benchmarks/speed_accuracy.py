@@ -83,17 +83,15 @@ from typing import Callable, Sequence
 
 import numpy as np
 from mpi4py import MPI
-from fabricfem.verify.strain_limit import corner_pinned_cloth
-from fabricfem.particles import Problem, rectangular_grid
-from fabricfem.particles import critical_time_step, simulate
-from fabricfem.dynamics import CentralDifference
-from fabricfem.dynamics import critical_time_step as shell_critical_time_step
-from fabricfem.dynamics import NewmarkIntegrator
-from fabricfem.dynamics.strain_limit import FastProjection, attach
+
 from fabricfem import io
-from fabricfem.verify.particles_cases import particle_tablecloth_nodes
-from fabricfem.verify.drape import fe_tablecloth_nodes
+from fabricfem.dynamics import CentralDifference, NewmarkIntegrator
+from fabricfem.dynamics import critical_time_step as shell_critical_time_step
+from fabricfem.dynamics.strain_limit import FastProjection, attach
+from fabricfem.particles import Problem, critical_time_step, rectangular_grid, simulate
 from fabricfem.verify.drape import CLOTH_L, fe_tablecloth_nodes
+from fabricfem.verify.particles_cases import particle_tablecloth_nodes
+from fabricfem.verify.strain_limit import corner_pinned_cloth
 
 PROBLEM = "corner-pinned"
 K_OVER_RHO = 1000.0  # k / rho [(m/s)^2], seed 002 sec. 4.1-4.2 range

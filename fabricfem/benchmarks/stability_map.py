@@ -36,7 +36,6 @@ Writes stability_map.csv, stability_map.png and stability_map_memory.csv under `
 from __future__ import annotations
 
 import importlib
-
 import math
 import resource
 import statistics
@@ -46,24 +45,26 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
-from mpi4py import MPI
-from fabricfem.materials import Fabric
-from fabricfem.meshes import plate
-from fabricfem.shell import ShellModel
-from fabricfem.particles import Problem, rectangular_grid
-from fabricfem.dynamics.explicit import runs_stably
-from fabricfem.particles import DivergenceError, simulate
-from fabricfem.dynamics import measured_critical_time_step
-from fabricfem.dynamics import discrete_max_frequency
-from fabricfem.dynamics.stability import MEMBRANE_KAPPA, min_edge_length, plane_stress_wave_speed
-from fabricfem.dynamics import CentralDifference
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
-from fabricfem.particles import stiffness_matrix
-from fabricfem.particles import critical_time_step, simulate
-from fabricfem.dynamics import CentralDifference
-from fabricfem.dynamics import critical_time_step as shell_critical_time_step
+from mpi4py import MPI
+
 from fabricfem import io
+from fabricfem.dynamics import CentralDifference, discrete_max_frequency, measured_critical_time_step
+from fabricfem.dynamics import critical_time_step as shell_critical_time_step
+from fabricfem.dynamics.explicit import runs_stably
+from fabricfem.dynamics.stability import MEMBRANE_KAPPA, min_edge_length, plane_stress_wave_speed
+from fabricfem.materials import Fabric
+from fabricfem.meshes import plate
+from fabricfem.particles import (
+    DivergenceError,
+    Problem,
+    critical_time_step,
+    rectangular_grid,
+    simulate,
+    stiffness_matrix,
+)
+from fabricfem.shell import ShellModel
 
 AREAL_DENSITY = 0.117  # rho [kg/m^2], seed 002 sec. 4.1
 THICKNESS = 0.001177  # h [m], seed 002 sec. 4.1

@@ -6,8 +6,17 @@ readers, joint-torque convention), `arm` (the default arm of the sleeve study, s
 """
 from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions, default_arm, elbow_flexion
 from fabricfem.body.ellipsoid import Ellipsoid
-from fabricfem.body.motion import (ElbowFlexion, JointTrajectory, KinematicsSource, LegKinematics, joint_torque,
-                                   read_marker_csv, read_trc, stepping_over, walking)
+from fabricfem.body.motion import (
+                                   ElbowFlexion,
+                                   JointTrajectory,
+                                   KinematicsSource,
+                                   LegKinematics,
+                                   joint_torque,
+                                   read_marker_csv,
+                                   read_trc,
+                                   stepping_over,
+                                   walking,
+)
 from fabricfem.body.pose import Body, Segment, segment_frame
 
 __all__ = ["ArmDimensions", "Body", "DEFAULT_ARM", "ElbowFlexion", "Ellipsoid", "JointTrajectory",

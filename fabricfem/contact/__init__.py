@@ -6,8 +6,13 @@ law, eqs. 3.61, 3.69, Box 3), `friction` (regularised Coulomb friction with retu
 implicit solvers), `explicit` (forward-increment Lagrange multipliers, Box 5), `torque` (joint torque of
 the contact forces, ch. 5).
 """
-from fabricfem.contact.explicit import (ExplicitContact, box5_step, forward_increment_correction, initial_state,
-                                        project_along_gradient)
+from fabricfem.contact.explicit import (
+                                        ExplicitContact,
+                                        box5_step,
+                                        forward_increment_correction,
+                                        initial_state,
+                                        project_along_gradient,
+)
 from fabricfem.contact.friction import return_map
 from fabricfem.contact.nodal import ContactNodes, contact_nodes, default_penalty
 from fabricfem.contact.problem import AugmentationReport, ContactProblem, ContactState

@@ -24,16 +24,21 @@ from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
+from dolfinx import fem
 from mpi4py import MPI
 
 from fabricfem.body.ellipsoid import Ellipsoid, _ray_to_surface
-from fabricfem.contact.nodal import positive_parameter
 from fabricfem.contact import friction as friction_law
 from fabricfem.contact import nodal
+from fabricfem.contact.nodal import (
+    CurrentAreas,
+    nearest_gap,
+    normal_pressure,
+    positive_parameter,
+    pressure_function,
+    pressure_on_body,
+)
 from fabricfem.contact.torque import TorqueMonitor
-from dolfinx import fem
-from fabricfem.contact.nodal import (CurrentAreas, nearest_gap, normal_pressure, pressure_function,
-                                     pressure_on_body)
 
 MAX_PROJECTION_PASSES = 8
 MAX_CREASE_ITERATIONS = 20   # bisector pushes out of overlapping segments after the passes (project_with_segment)

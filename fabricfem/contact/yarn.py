@@ -66,20 +66,19 @@ or given by other dofs); `dropped_active` counts active contact nodes that touch
 """
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from dataclasses import dataclass, field
 from typing import Sequence
 
 import dolfinx.fem as fem
 import numpy as np
-
-from fabricfem.meshes._validate import positive
 import scipy.sparse as sp
 from petsc4py import PETSc
 from scipy.spatial import cKDTree
-from fabricfem.solvers.newton import NewtonResult
-import dataclasses
-from fabricfem.solvers.newton import SolverError
+
+from fabricfem.meshes._validate import positive
+from fabricfem.solvers.newton import NewtonResult, SolverError
 
 __all__ = ["ContactParameters", "ContactReport", "YarnContact", "closest_point_on_triangles",
            "project_onto_quads", "smooth_ramp", "symmetric_return_map", "solve_with_fixed_sets", "MAX_SET_UPDATES",

@@ -5,10 +5,22 @@
 """
 from fabricfem.dynamics.explicit import CentralDifference
 from fabricfem.dynamics.mass import InertiaDamping, consistent_mass, lumped_mass, mass_form, material_stiffness_form
-from fabricfem.dynamics.newmark import (DynamicsError, History, NewmarkIntegrator, StepHalving, TimeIntegrator,
-                                        node_monitor, progress_printer)
-from fabricfem.dynamics.stability import (critical_time_step, discrete_max_frequency, max_frequency_estimate,
-                                          measured_critical_time_step, plane_stress_wave_speed)
+from fabricfem.dynamics.newmark import (
+                                        DynamicsError,
+                                        History,
+                                        NewmarkIntegrator,
+                                        StepHalving,
+                                        TimeIntegrator,
+                                        node_monitor,
+                                        progress_printer,
+)
+from fabricfem.dynamics.stability import (
+                                        critical_time_step,
+                                        discrete_max_frequency,
+                                        max_frequency_estimate,
+                                        measured_critical_time_step,
+                                        plane_stress_wave_speed,
+)
 from fabricfem.dynamics.ts import GeneralizedAlphaIntegrator, generalized_alpha_parameters
 
 __all__ = ["CentralDifference", "DynamicsError", "GeneralizedAlphaIntegrator", "History", "InertiaDamping",

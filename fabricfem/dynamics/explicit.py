@@ -30,8 +30,7 @@ from dolfinx.fem import petsc as fem_petsc
 
 from fabricfem.dynamics import stability
 from fabricfem.dynamics.mass import InertiaDamping, rotary_scale
-from fabricfem.dynamics.newmark import LoadFactor, TimeIntegrator
-from fabricfem.dynamics.newmark import DynamicsError
+from fabricfem.dynamics.newmark import DynamicsError, LoadFactor, TimeIntegrator
 
 
 class CentralDifference(TimeIntegrator):

@@ -24,6 +24,7 @@ translational one, negligible for s t^2 << L^2). Used by CentralDifference(rotar
 """
 from __future__ import annotations
 
+import basix
 import numpy as np
 import ufl
 from dolfinx import fem
@@ -31,7 +32,6 @@ from dolfinx.fem import petsc as fem_petsc
 from ffcx.element_interface import create_element
 from petsc4py import PETSc
 
-import basix
 from fabricfem.forms import shell as shell_forms
 from fabricfem.materials import positive_number
 

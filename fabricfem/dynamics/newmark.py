@@ -38,9 +38,8 @@ from dolfinx.fem import petsc as fem_petsc
 from petsc4py import PETSc
 
 from fabricfem.dynamics.mass import InertiaDamping
+from fabricfem.io import SurfaceSeries, write_csv
 from fabricfem.solvers.newton import NewtonSolver, SolverError
-from fabricfem.io import SurfaceSeries
-from fabricfem.io import write_csv
 
 LoadFactor = Callable[[float], float] | float
 

@@ -37,10 +37,10 @@ from __future__ import annotations
 from typing import Callable
 
 import numpy as np
-from mpi4py import MPI
 from dolfinx.cpp.mesh import entities_to_geometry
-from fabricfem.dynamics.mass import rotary_scale
-from fabricfem.dynamics.mass import lumped_mass
+from mpi4py import MPI
+
+from fabricfem.dynamics.mass import lumped_mass, rotary_scale
 
 MEMBRANE_KAPPA = {"quadrilateral": 6.1, "triangle": 7.4}
 THICKNESS_SHEAR_CHI = {"quadrilateral": 1.01, "triangle": 1.1}

@@ -51,9 +51,9 @@ from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from fabricfem.dynamics.explicit import CentralDifference
 from fabricfem.dynamics.mass import lumped_mass
 from fabricfem.forms import shell as shell_forms
-from fabricfem.dynamics.explicit import CentralDifference
 
 
 class StrainLimitError(RuntimeError):

@@ -27,8 +27,8 @@ import math
 import re
 from pathlib import Path
 
-from fabricfem.materials.fitted import MEMBRANE_LAW_TYPES, fitted_fabric, membrane_law_from_dict
 from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
+from fabricfem.materials.fitted import MEMBRANE_LAW_TYPES, fitted_fabric, membrane_law_from_dict
 
 FABRICS_DIR = Path(__file__).resolve().parent
 SVK_TYPE = "orthotropic-svk"

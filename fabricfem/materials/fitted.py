@@ -41,8 +41,8 @@ import numpy as np
 from scipy.optimize import nnls
 from scipy.spatial import Delaunay, QhullError
 
-from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
 from fabricfem.forms import fitted as fitted_forms
+from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
 
 LAW_TYPE = "polynomial-even-shear"
 

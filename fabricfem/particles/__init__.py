@@ -5,12 +5,32 @@
 - obstacles: frictionless penalty planes (table top, table edge);
 - integrate: velocity Verlet with Provot's strain limit, static relaxation (seed's iteration and Newton).
 """
-from fabricfem.particles.integrate import (STANDARD_GRAVITY, DivergenceError, Problem, StaticResult, Trajectory,
-                                           critical_time_step, provot_correction, relax_newton, relax_seed,
-                                           simulate, strains, tangent_stiffness)
+from fabricfem.particles.integrate import (
+                                           STANDARD_GRAVITY,
+                                           DivergenceError,
+                                           Problem,
+                                           StaticResult,
+                                           Trajectory,
+                                           critical_time_step,
+                                           provot_correction,
+                                           relax_newton,
+                                           relax_seed,
+                                           simulate,
+                                           strains,
+                                           tangent_stiffness,
+)
 from fabricfem.particles.obstacles import TableTop, penalty_stiffness, table_edge, table_top
-from fabricfem.particles.springs import (BendingSet, ParticleSystem, SpringSet, beam_strip, chain, elastic_energy,
-                                         internal_forces, rectangular_grid, stiffness_matrix)
+from fabricfem.particles.springs import (
+                                           BendingSet,
+                                           ParticleSystem,
+                                           SpringSet,
+                                           beam_strip,
+                                           chain,
+                                           elastic_energy,
+                                           internal_forces,
+                                           rectangular_grid,
+                                           stiffness_matrix,
+)
 
 __all__ = ["STANDARD_GRAVITY", "DivergenceError", "Problem", "StaticResult", "Trajectory", "critical_time_step",
            "provot_correction", "relax_newton", "relax_seed", "simulate", "strains", "tangent_stiffness", "TableTop",

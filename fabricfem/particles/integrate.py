@@ -16,8 +16,14 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from fabricfem.particles.obstacles import TableTop
-from fabricfem.particles.springs import (ParticleSystem, SpringSet, elastic_energy, internal_forces, scatter_add,
-                                         stiffness_matrix)
+from fabricfem.particles.springs import (
+    ParticleSystem,
+    SpringSet,
+    elastic_energy,
+    internal_forces,
+    scatter_add,
+    stiffness_matrix,
+)
 
 STANDARD_GRAVITY = 9.80665  # m/s^2
 

@@ -7,10 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
+from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
 from fabricfem.dynamics import stability
 from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
 from fabricfem.meshes import plate, tube
-from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
 from fabricfem.scenes import schema
 from fabricfem.scenes.schema import Scene, SceneError
 from fabricfem.scenes.sections import FabricSection, MeshSection, from_table, section

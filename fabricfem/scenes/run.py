@@ -21,21 +21,28 @@ from petsc4py import PETSc
 
 from fabricfem import io
 from fabricfem.body.ellipsoid import Ellipsoid
+from fabricfem.contact.obstacles import Plane, RoundedBox, table_top
+from fabricfem.contact.problem import ContactProblem
+from fabricfem.dynamics import CentralDifference, NewmarkIntegrator, critical_time_step, node_monitor
+from fabricfem.dynamics.strain_limit import FastProjection, attach
+from fabricfem.dynamics.ts import GeneralizedAlphaIntegrator
 from fabricfem.scenes.build import build_fabric, build_mesh, sleeve_config
 from fabricfem.scenes.schema import Scene, SceneError, donning_start
-from fabricfem.scenes.sections import (DonningSection, DynamicsSection, ModelSection, MonitorSection, OutputSection,
-                                       SceneSection, SolverSection, section)
-from fabricfem.wear.compression import fit_sleeve, pressure_report
+from fabricfem.scenes.sections import (
+    DonningSection,
+    DynamicsSection,
+    ModelSection,
+    MonitorSection,
+    OutputSection,
+    SceneSection,
+    SolverSection,
+    section,
+)
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.loadstep import LoadStep, solve_load_path
 from fabricfem.solvers.newton import NewtonSolver
+from fabricfem.wear.compression import fit_sleeve, pressure_report
 from fabricfem.wear.run import run_sleeve_scene
-from fabricfem.contact.obstacles import Plane, RoundedBox, table_top
-from fabricfem.dynamics import CentralDifference, NewmarkIntegrator, critical_time_step
-from fabricfem.dynamics.ts import GeneralizedAlphaIntegrator
-from fabricfem.dynamics import node_monitor
-from fabricfem.dynamics.strain_limit import FastProjection, attach
-from fabricfem.contact.problem import ContactProblem
 
 
 def _components(values, n: int, where: str):

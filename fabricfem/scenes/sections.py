@@ -6,6 +6,8 @@ import dataclasses
 import types
 import typing
 
+from fabricfem.parameters import param as doc
+
 # annotation -> the TOML value types it accepts (TOML has no None: an optional parameter is simply left out)
 _TOML_TYPES = {float: (int, float), int: int, bool: bool, str: str, tuple: list, list: list, dict: dict}
 
@@ -48,13 +50,6 @@ def from_table(cls, table: dict, exclude: tuple[str, ...] = ()):
         target = typing.get_origin(annotation) or annotation
         values[key] = tuple(value) if target is tuple and isinstance(value, list) else value
     return cls(**values)
-
-
-def doc(text: str, default=dataclasses.MISSING, **kw):
-    """A dataclass field with its documentation (meaning and unit) in the metadata, for the scene reference."""
-    if default is dataclasses.MISSING and "default_factory" not in kw:
-        return dataclasses.field(metadata={"doc": text}, **kw)
-    return dataclasses.field(default=default, metadata={"doc": text}, **kw)
 
 
 # ------------------------------------------------------------------------------------------ the sections
@@ -183,15 +178,15 @@ class DynamicsSection:
     gamma: float = doc("Newmark gamma", 0.5)
     rho_inf: float = doc("generalized-alpha spectral radius at infinite step, in [0, 1]", 1.0)
     lumped: bool = doc("lumped mass (newmark / generalized-alpha; explicit always lumps)", False)
-    rayleigh: list = doc("[a [1/s], b [s]] of C = a M + b K", dataclasses.MISSING, default_factory=lambda: [0.0, 0.0])
+    rayleigh: list = doc("[a [1/s], b [s]] of C = a M + b K", default_factory=lambda: [0.0, 0.0])
     air_drag: float = doc("eta [kg/(m^2 s)], drag -eta v per unit area", 0.0)
     strain_limit: float | None = doc("max warp/weft Green strain (fast projection)", None)
     strain_limit_tol: float = doc("projection tolerance [-]", 1e-4)
     gravity: list | None = doc("[gx, gy, gz] [m/s^2]", None)
     ramp_time: float = doc("load factor min(t / ramp_time, 1) [s]", 0.0)
     output_every: int | None = doc("record every N steps (default n_steps / 100)", None)
-    obstacles: list = doc("[[dynamics.obstacles]] rigid obstacles", dataclasses.MISSING, default_factory=list)
-    monitors: list = doc("[[dynamics.monitors]] CSV columns", dataclasses.MISSING, default_factory=list)
+    obstacles: list = doc("[[dynamics.obstacles]] rigid obstacles", default_factory=list)
+    monitors: list = doc("[[dynamics.monitors]] CSV columns", default_factory=list)
     contact_penalty: float | None = doc("obstacle penalty [Pa/m] (default 10 E t / h^2)", None)
 
 

@@ -34,20 +34,27 @@ import numpy as np
 from mpi4py import MPI
 from scipy.optimize import brentq
 
-from fabricfem.materials.fitted import ConvexMembraneLaw, FittedMembraneLaw, MembraneSamples, fit_convex_law, \
-    fit_membrane_law, fitted_fabric, samples_from_steps
+from fabricfem.fabrics import FABRICS_DIR, save_fabric
 from fabricfem.materials import Fabric
+from fabricfem.materials.fitted import (
+    ConvexMembraneLaw,
+    FittedMembraneLaw,
+    MembraneSamples,
+    fit_convex_law,
+    fit_membrane_law,
+    fitted_fabric,
+    samples_from_steps,
+)
+from fabricfem.meshes import plate
 from fabricfem.meshes.unit_cell import unit_cell
 from fabricfem.meshes.yarn_geometry import PlainWeave
-from fabricfem.studies.unit_cell import MATERIALS, PRESTRETCH
-from fabricfem.weave.unit_cell import ContactUnitCell
-from fabricfem.fabrics import FABRICS_DIR, save_fabric
-from fabricfem.meshes import plate
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.loadstep import solve_load_path
+from fabricfem.studies.unit_cell import MATERIALS, PRESTRETCH
+from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.outputs import plot_torque
 from fabricfem.wear.run import run_sleeve
-from fabricfem.wear.config import SleeveConfig
+from fabricfem.weave.unit_cell import ContactUnitCell
 
 FABRIC_NAME = "plain-weave-ti-contact"
 SVK_NAME = "plain-weave-ti-contact-svk"

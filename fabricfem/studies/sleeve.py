@@ -24,6 +24,7 @@ point-to-point messages polled between its records, for the other ranks' variant
 from __future__ import annotations
 
 import csv
+import hashlib
 import math
 import time
 from pathlib import Path
@@ -32,12 +33,10 @@ import numpy as np
 from mpi4py import MPI
 
 from fabricfem.materials import positive_number
+from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.outputs import plot_torque
 from fabricfem.wear.run import build_run, run_sleeve
-from fabricfem.wear.config import SleeveConfig
-from fabricfem.wear.sleeve import SleeveHistory
-import hashlib
-from fabricfem.wear.sleeve import SleeveStep
+from fabricfem.wear.sleeve import SleeveHistory, SleeveStep
 from fabricfem.wear.sleeve_implicit import run_implicit
 
 MESHES = {"I": (10, 13), "II": (15, 20), "III": (20, 26), "IV": (30, 39)}

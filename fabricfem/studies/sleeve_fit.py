@@ -46,16 +46,16 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import ufl
+from dolfinx import fem
 from mpi4py import MPI
 
 from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
-from fabricfem.materials import positive_number
-from fabricfem.wear.run import build_run
-from fabricfem.wear.config import SleeveConfig, check_fit
-from fabricfem.wear.sleeve import SleeveHistory, SleeveStep
-import ufl
-from dolfinx import fem
 from fabricfem.forms import shell as sf
+from fabricfem.materials import positive_number
+from fabricfem.wear.config import SleeveConfig, check_fit
+from fabricfem.wear.run import build_run
+from fabricfem.wear.sleeve import SleeveHistory, SleeveStep
 
 FIT_SCALES = (1.0, 1.04, 1.0771)
 DEFAULT_LONG_AXIS_FACTOR = 0.5      # r1 = L / 2: the arm of fabricfem.body.arm (no girth at the elbow)

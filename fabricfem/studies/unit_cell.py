@@ -30,12 +30,15 @@ Units: S in Pa, E dimensionless, forces in N, lengths in m, times in s.
 from __future__ import annotations
 
 import csv
+import glob
 import math
 import os
+import re
 import time
 from dataclasses import dataclass
 
 import numpy as np
+from dolfinx import fem, io, plot
 from mpi4py import MPI
 
 from fabricfem.materials.yarn import THESIS_ISOTROPIC, THESIS_TRANSVERSELY_ISOTROPIC, YarnMaterial
@@ -43,9 +46,6 @@ from fabricfem.meshes.unit_cell import unit_cell
 from fabricfem.meshes.yarn_geometry import PlainWeave
 from fabricfem.solvers.newton import SolverError
 from fabricfem.weave.unit_cell import ContactUnitCell, contact_table
-from dolfinx import fem, io, plot
-import glob
-import re
 
 MATERIALS: dict[str, YarnMaterial] = {"iso": THESIS_ISOTROPIC, "ti": THESIS_TRANSVERSELY_ISOTROPIC}
 PRESTRETCH = 1.02  # Phi11 = Phi22 before shear ("a small biaxial pre-stretching", sec. 4.3.5.1)

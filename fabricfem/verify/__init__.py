@@ -5,11 +5,11 @@ run the same functions (registered in CASES by the @case decorator).
 """
 from __future__ import annotations
 
+import importlib
+import pkgutil
 import time
 from dataclasses import asdict, dataclass
 from typing import Callable
-import importlib
-import pkgutil
 
 CASES: dict[str, Callable[[], list["CaseResult"]]] = {}
 

@@ -13,12 +13,12 @@ import numpy as np
 from mpi4py import MPI
 
 from fabricfem.body.ellipsoid import Ellipsoid
-from fabricfem.wear.compression import don, laplace_pressure
 from fabricfem.contact.problem import ContactProblem
 from fabricfem.materials import Fabric
 from fabricfem.meshes import tube
 from fabricfem.shell import ShellModel
 from fabricfem.verify import Timer, case, result
+from fabricfem.wear.compression import don, laplace_pressure
 
 RELAXED_RADIUS = 0.04    # m
 TUBE_LENGTH = 0.1        # m

@@ -36,9 +36,17 @@ from fabricfem.shell import ShellModel
 from fabricfem.solvers.loadstep import solve_load_path
 from fabricfem.solvers.newton import NewtonResult, NewtonSolver, SolverError
 from fabricfem.verify import case, result
-from fabricfem.verify.particles_cases import (AIR_DRAG, OVERHANG_SEED_PARTICLE, TABLECLOTH_EXPERIMENT,
-                                              flatness_imperfection, hem_folds, particle_overhanging_beam,
-                                              particle_tablecloth, particle_tablecloth_drop, tablecloth_reading)
+from fabricfem.verify.particles_cases import (
+    AIR_DRAG,
+    OVERHANG_SEED_PARTICLE,
+    TABLECLOTH_EXPERIMENT,
+    flatness_imperfection,
+    hem_folds,
+    particle_overhanging_beam,
+    particle_tablecloth,
+    particle_tablecloth_drop,
+    tablecloth_reading,
+)
 
 STANDARD_GRAVITY = 9.80665            # m/s^2
 GF = STANDARD_GRAVITY * 1e-3          # one gram-force [N]

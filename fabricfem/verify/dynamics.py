@@ -4,8 +4,13 @@ from __future__ import annotations
 import numpy as np
 from mpi4py import MPI
 
-from fabricfem.dynamics import (CentralDifference, NewmarkIntegrator, critical_time_step,
-                                measured_critical_time_step, node_monitor)
+from fabricfem.dynamics import (
+    CentralDifference,
+    NewmarkIntegrator,
+    critical_time_step,
+    measured_critical_time_step,
+    node_monitor,
+)
 from fabricfem.dynamics.explicit import runs_stably
 from fabricfem.materials import Fabric
 from fabricfem.meshes import plate

@@ -1,14 +1,14 @@
 """Periodic unit-cell homogenization (thesis 000, sec. 4.2.2, 4.3.2-4.3.3) against closed forms."""
 from __future__ import annotations
 
+import dolfinx.mesh as dmesh
 import numpy as np
 import ufl
 from mpi4py import MPI
 from scipy.optimize import brentq
 
-import dolfinx.mesh as dmesh
-from fabricfem.weave.homogenize import UnitCellProblem, box_periodic_pairs
 from fabricfem.verify import Timer, case, result
+from fabricfem.weave.homogenize import UnitCellProblem, box_periodic_pairs
 
 # A non-symmetric macroscopic deformation gradient with det = 1.146 > 0 (stretch, shear and rotation).
 PHI_GENERAL = np.array([[1.20, 0.10, -0.05],

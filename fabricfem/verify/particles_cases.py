@@ -12,8 +12,19 @@ import time
 import numpy as np
 import scipy.sparse.linalg as spla
 
-from fabricfem.particles import (STANDARD_GRAVITY, Problem, TableTop, beam_strip, critical_time_step,
-                                 penalty_stiffness, rectangular_grid, relax_newton, simulate, table_edge, table_top)
+from fabricfem.particles import (
+    STANDARD_GRAVITY,
+    Problem,
+    TableTop,
+    beam_strip,
+    critical_time_step,
+    penalty_stiffness,
+    rectangular_grid,
+    relax_newton,
+    simulate,
+    table_edge,
+    table_top,
+)
 from fabricfem.particles.integrate import tangent_stiffness
 from fabricfem.verify.references import elastica_tip_load
 

@@ -21,18 +21,17 @@ reached, and the quantity names that angle; the model is not tuned to make a tre
 from __future__ import annotations
 
 import csv
+import tempfile
 from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
-
-from fabricfem.verify import CaseResult, Timer, case
-import tempfile
 from mpi4py import MPI
+
 from fabricfem.studies.sleeve import run_study
-from fabricfem.wear.run import run_sleeve
+from fabricfem.verify import CaseResult, Timer, case, result
 from fabricfem.wear.config import SleeveConfig
-from fabricfem.verify import result
+from fabricfem.wear.run import run_sleeve
 
 STUDY_DIRS = (Path("docs/figures/sleeve"), Path("results/sleeve_study"))   # committed study first, then a local one
 FIGURES = ("mesh_mu0.1", "mesh_mu0.5", "friction", "fit", "thickness", "fabrics")

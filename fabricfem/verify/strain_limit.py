@@ -92,8 +92,12 @@ from mpi4py import MPI
 
 from fabricfem.dynamics import CentralDifference, critical_time_step
 from fabricfem.dynamics.mass import rotary_scale
-from fabricfem.dynamics.stability import (MEMBRANE_KAPPA, discrete_max_frequency, min_edge_length,
-                                          plane_stress_wave_speed)
+from fabricfem.dynamics.stability import (
+    MEMBRANE_KAPPA,
+    discrete_max_frequency,
+    min_edge_length,
+    plane_stress_wave_speed,
+)
 from fabricfem.dynamics.strain_limit import FastProjection, attach
 from fabricfem.materials import Fabric, SquareRootBending
 from fabricfem.meshes import plate

@@ -5,8 +5,13 @@ import numpy as np
 
 from fabricfem.dynamics import GeneralizedAlphaIntegrator, node_monitor
 from fabricfem.verify import Timer, case, result
-from fabricfem.verify.dynamics import (STRIP, cantilever_strip, crossing_frequency, euler_bernoulli_f1,
-                                      static_tip_deflection)
+from fabricfem.verify.dynamics import (
+    STRIP,
+    cantilever_strip,
+    crossing_frequency,
+    euler_bernoulli_f1,
+    static_tip_deflection,
+)
 
 
 def strip_free_vibration(nx: int = 20, steps_per_period: int = 40, n_steps: int = 200, rho_inf: float = 1.0):

@@ -44,9 +44,8 @@ import os
 
 import numpy as np
 
-from fabricfem.studies.unit_cell import curve_xy, secant_spread
+from fabricfem.studies.unit_cell import curve_xy, run_study, secant_spread
 from fabricfem.verify import Timer, case, result
-from fabricfem.studies.unit_cell import run_study
 
 NAME = "unit-cell-trends"
 STUDY_DIRS = ("docs/figures/unit_cell", "results/unit_cell")   # committed study first, then a local one

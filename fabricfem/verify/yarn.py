@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import ufl
-from dolfinx import fem, mesh as dmesh
+from dolfinx import fem
+from dolfinx import mesh as dmesh
 from dolfinx.fem import petsc as fem_petsc
 from dolfinx.nls.petsc import NewtonSolver
 from mpi4py import MPI

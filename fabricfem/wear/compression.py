@@ -34,16 +34,16 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
+from dolfinx import io
 from mpi4py import MPI
 
+from fabricfem import io as fio
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.contact.problem import ContactProblem
 from fabricfem.materials import Fabric
 from fabricfem.meshes._validate import choice, count, positive
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.newton import NewtonSolver, SolverError
-from dolfinx import io
-from fabricfem import io as fio
 from fabricfem.wear.outputs import body_surface
 
 PA_PER_MMHG = 133.322387415      # Pa

@@ -16,6 +16,7 @@ from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
 from fabricfem.dynamics.stability import plane_stress_wave_speed
 from fabricfem.fabrics import load_fabric
 from fabricfem.materials import Fabric
+from fabricfem.parameters import param
 
 # route -> its contact methods, the first the default
 ROUTE_METHODS = {"explicit": ("lagrange", "penalty"), "quasistatic": ("penalty", "augmented"),
@@ -47,12 +48,12 @@ def _positive_int(obj, *keys: str) -> None:
 class TubeSpec:
     """The sleeve: a tube along +x, shoulder end (end0) held; Q2 quadrilaterals."""
 
-    length: float = 0.5                  # m
-    radius: float = 0.06                 # m
-    n_around: int = 20
-    n_along: int = 26
-    quadrature: tuple[int, int] = (4, 2)  # (full, reduced) PSRI degrees of ShellModel; (4, 4) = no reduction
-    hold_rotations: bool = False         # also clamp the director rotations at the shoulder
+    length: float = param("tube length along x [m]", 0.5)
+    radius: float = param("tube radius [m]", 0.06)
+    n_around: int = param("Q2 cells around (mesh I: 10, III: 20)", 20)
+    n_along: int = param("Q2 cells along (mesh I: 13, III: 26)", 26)
+    quadrature: tuple[int, int] = param("(full, reduced) PSRI quadrature degrees; (4, 4) = no reduction", (4, 2))
+    hold_rotations: bool = param("also clamp the director rotations at the shoulder", False)
 
     def __post_init__(self):
         _positive(self, "length", "radius")
@@ -68,12 +69,13 @@ class FabricSpec:
     """The sleeve's fabric: orthotropic St. Venant-Kirchhoff with E1 = E2 = E, or a stored fabric `fabric_name`
     (fabricfem.fabrics.load_fabric) replacing E, G, nu12, thickness and density."""
 
-    E: float = 1.2e6                     # Pa, E1 = E2
-    G: float = 1e5                       # Pa, G12 (and G13)
-    nu12: float = 0.0
-    thickness: float = 1e-3              # m
-    density: float = 436.0               # kg/m^3
-    fabric_name: str | None = None
+    E: float = param("Young's modulus E1 = E2 [Pa]", 1.2e6)
+    G: float = param("shear modulus G12 (and G13) [Pa]", 1e5)
+    nu12: float = param("Poisson ratio [-] (the thesis gives none)", 0.0)
+    thickness: float = param("thickness [m]", 1e-3)
+    density: float = param("density [kg/m^3]", 436.0)
+    fabric_name: str | None = param("a stored fabric (fabricfem.fabrics) replacing E, G, nu12, thickness, density",
+                                    None)
 
     def __post_init__(self):
         _positive(self, "E", "G", "thickness")
@@ -105,13 +107,13 @@ class FabricSpec:
 class FlexionSpec:
     """Elbow flexion at constant angular velocity from rest (after settle_time) to final_angle."""
 
-    final_angle: float = 57.0            # deg, in (0, 180)
-    angular_velocity: float = 45.0       # deg/s (sets the body time t = alpha / omega)
-    settle_time: float = 0.4             # s, with gravity: the arm rests this long while the sleeve settles on it
-                                         # (rounded up to whole records)
-    output_angle_step: float = 1.0       # deg: a record (torque averaged over the interval) every this many degrees
-    angle_steps: int = 57                # quasistatic / implicit: equal steps to the final angle
-    min_angle_step: float = 0.05         # deg: a failed step is halved down to this
+    final_angle: float = param("final elbow angle [deg], in (0, 180)", 57.0)
+    angular_velocity: float = param("flexion speed [deg/s] (body time t = alpha / omega)", 45.0)
+    settle_time: float = param("rest before the flexion while the sleeve settles under gravity [s] (whole records)",
+                               0.4)
+    output_angle_step: float = param("record interval [deg] (the torque is averaged over it)", 1.0)
+    angle_steps: int = param("quasistatic and implicit routes: equal steps to the final angle", 57)
+    min_angle_step: float = param("a failed step is halved down to this [deg]", 0.05)
 
     def __post_init__(self):
         _positive(self, "final_angle", "angular_velocity", "output_angle_step", "min_angle_step")
@@ -125,16 +127,16 @@ class FlexionSpec:
 class ContactSpec:
     """Contact of the sleeve with the arm and the Newton devices of the implicit routes."""
 
-    method: str | None = None            # explicit: lagrange (default) | penalty; quasistatic: penalty (default) |
-                                         # augmented; implicit: augmented (default) | penalty
-    friction: float = 0.1                # Coulomb mu
-    penalty: float | None = None         # k_N [Pa/m]; default 10 E t / h^2
-    augmentation_tolerance: float = 1e-5  # m, largest penetration after Uzawa updates (augmented)
-    active_set: bool = True              # fixed contact set per Newton solve, updated until stable
-    stabilization: float = 1e-2          # c / (E t / R^2): viscous regularisation of unstable steps (Stabilized)
-    predictor: bool = True               # forearm contact nodes follow the forearm's rotation
-    relaxation_steps: int = 40           # pseudo-time relaxations at one angle after a stabilised solve
-    drag_tolerance: float = 1e-3         # accept a relaxed state when sum|drag| < this * sum|contact force|
+    method: str | None = param("contact method; explicit: lagrange (default) | penalty; quasistatic: penalty (default)"
+                               " | augmented; implicit: augmented (default) | penalty", None)
+    friction: float = param("Coulomb coefficient mu [-]", 0.1)
+    penalty: float | None = param("k_N [Pa/m]; default 10 E t / h^2", None)
+    augmentation_tolerance: float = param("largest penetration after Uzawa updates (augmented) [m]", 1e-5)
+    active_set: bool = param("fixed contact set per Newton solve, updated until stable", True)
+    stabilization: float = param("c / (E t / R^2): viscous regularisation of unstable steps (Stabilized)", 1e-2)
+    predictor: bool = param("forearm contact nodes follow the forearm's rotation", True)
+    relaxation_steps: int = param("pseudo-time relaxations at one angle after a stabilised solve", 40)
+    drag_tolerance: float = param("accept a relaxed state when sum|drag| < this * sum|contact force|", 1e-3)
 
     def __post_init__(self):
         _non_negative(self, "", "friction")
@@ -147,18 +149,18 @@ class ContactSpec:
 class RouteSpec:
     """How the flexion is integrated: the route and its numerical parameters."""
 
-    solver: str = "explicit"             # explicit (central differences) | quasistatic (Newton) | implicit
-                                         # (backward Euler + Newton, fabricfem.wear.sleeve_implicit)
-    gravity: bool | None = None          # the sleeve's weight along -y; None: on for explicit and implicit,
-                                         # off for quasistatic
-    mass_damping: float = 10.0           # 1/s: Rayleigh alpha of C = alpha M
-    rotary_inertia_scale: float = 100.0  # explicit: factor >= 1 on the rotational lumped masses
-    time_step_safety: float = 0.8        # explicit: dt = safety x estimated critical step, in (0, 1)
-    dynamic_similarity: bool = False     # explicit: flex at omega c / c_ref with damping alpha c / c_ref
-    similarity_reference: tuple[float, float] = (1.2e6, 436.0)   # (E_ref [Pa], rho_ref [kg/m^3]): fabric I
-    newton_max_iterations: int = 60      # per Newton solve
-    max_rotation_step: float = 0.3       # rad, largest director-angle change per Newton iteration (StepLimiter)
-    max_displacement_step: float = 5e-3  # m, largest displacement change per Newton iteration (StepLimiter)
+    solver: str = param("explicit (central differences) | quasistatic (Newton per angle) | implicit (backward Euler"
+                        " + Newton)", "explicit")
+    gravity: bool | None = param("the sleeve's weight along -y (default: on for explicit and implicit, off for"
+                                 " quasistatic)", None)
+    mass_damping: float = param("Rayleigh alpha of C = alpha M [1/s]", 10.0)
+    rotary_inertia_scale: float = param("explicit: factor >= 1 on the rotational lumped masses", 100.0)
+    time_step_safety: float = param("explicit: dt = safety x estimated critical step, in (0, 1)", 0.8)
+    dynamic_similarity: bool = param("explicit: flex at omega c / c_ref with damping alpha c / c_ref", False)
+    similarity_reference: tuple[float, float] = param("(E_ref [Pa], rho_ref [kg/m^3]): fabric I", (1.2e6, 436.0))
+    newton_max_iterations: int = param("Newton iterations per solve", 60)
+    max_rotation_step: float = param("largest director-angle change per Newton iteration [rad]", 0.3)
+    max_displacement_step: float = param("largest displacement change per Newton iteration [m]", 5e-3)
 
     def __post_init__(self):
         if self.solver not in ROUTE_METHODS:

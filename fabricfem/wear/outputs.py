@@ -30,7 +30,7 @@ def plot_torque(path, curves: dict[str, tuple[np.ndarray, np.ndarray]], title: s
     """Resisting torque [N m] vs elbow angle [deg] for named curves (PNG, rank 0)."""
     if MPI.COMM_WORLD.rank != 0:
         return
-    import matplotlib                 # optional heavy package: only when a plot is written
+    import matplotlib  # optional heavy package: only when a plot is written
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
     fig, ax = plt.subplots(figsize=(6, 4))

@@ -7,9 +7,9 @@ from typing import Callable
 
 from mpi4py import MPI
 
+from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.contract import WearRun
 from fabricfem.wear.recorder import WearRecorder
-from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.sleeve import SleeveHistory, SleeveStep, build_explicit, build_sleeve, format_breakdown
 from fabricfem.wear.sleeve_implicit import build_implicit
 

@@ -84,17 +84,16 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fabricfem.body.arm import default_arm, elbow_flexion
-from fabricfem.body.motion import ElbowFlexion
+from fabricfem.body.motion import ElbowFlexion, rotation_about
 from fabricfem.body.pose import Body
-from fabricfem.dynamics.explicit import CentralDifference
 from fabricfem.contact.explicit import ExplicitBodyContact
 from fabricfem.contact.problem import ContactProblem
+from fabricfem.dynamics import stability
+from fabricfem.dynamics.explicit import CentralDifference
 from fabricfem.materials import Fabric
 from fabricfem.meshes import tube
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.newton import NewtonSolver, SolverError
-from fabricfem.body.motion import rotation_about
-from fabricfem.dynamics import stability
 from fabricfem.wear.config import SleeveConfig
 
 GRAVITY = 9.81                       # m/s^2

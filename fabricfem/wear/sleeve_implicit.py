@@ -59,7 +59,16 @@ from fabricfem.dynamics.mass import lumped_mass
 from fabricfem.materials import positive_number
 from fabricfem.solvers.newton import NewtonSolver, SolverError
 from fabricfem.wear.config import SleeveConfig
-from fabricfem.wear.sleeve import SleeveError, SleeveHistory, SleeveProblem, SleeveStep, Stabilized, StepLimiter, sleeve_shell, track_elbow_torques
+from fabricfem.wear.sleeve import (
+    SleeveError,
+    SleeveHistory,
+    SleeveProblem,
+    SleeveStep,
+    Stabilized,
+    StepLimiter,
+    sleeve_shell,
+    track_elbow_torques,
+)
 
 # active-set ties (ContactProblem.tie_tolerance) = this x augmentation_tolerance: a node on the contact switch keeps
 # its status within a gap of 1e-6 m (default tolerance 1e-5 m), an order below what the Uzawa loop accepts

@@ -97,13 +97,18 @@ import ufl
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fabricfem.contact.yarn import (ContactParameters, ContactReport, YarnContact, solve_with_contact,
-                                    solve_with_fixed_sets)
+from fabricfem.contact.yarn import (
+    ContactParameters,
+    ContactReport,
+    YarnContact,
+    solve_with_contact,
+    solve_with_fixed_sets,
+)
 from fabricfem.forms.yarn import yarn_energy
-from fabricfem.weave.homogenize import PeriodicPair, UnitCellProblem, green_lagrange
 from fabricfem.materials.yarn import YarnMaterial
 from fabricfem.meshes.unit_cell import UnitCellMesh
 from fabricfem.solvers.newton import SolverError
+from fabricfem.weave.homogenize import PeriodicPair, UnitCellProblem, green_lagrange
 
 __all__ = ["ContactUnitCell", "ContactUnitCellStep", "default_contact_parameters", "symmetry_pins",
            "DEFAULT_VOLUME_FRACTION", "DEFAULT_FRICTION", "DeformationCheck", "MAX_CUTS"]
