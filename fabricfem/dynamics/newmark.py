@@ -524,20 +524,20 @@ class NewmarkIntegrator(StepHalving, TimeIntegrator):
         self.beta, self.gamma = float(beta), float(gamma)
         self.d_pred = model.create_vector()
         self.v_pred = model.create_vector()
-        self.system = _EffectiveSystem(self)
+        self.effective = _EffectiveSystem(self)  # the step's residual and tangent, what Newton drives
         self._coefficient_dt = self.dt
-        self.system.set_coefficients(self.dt, self.beta, self.gamma)
+        self.effective.set_coefficients(self.dt, self.beta, self.gamma)
         # stol 1e-8: near round-off the residual of thin shells stagnates (ill-conditioned K) while the Newton
         # update is ~1e-9 of the solution; the full-step Newton only takes steps that small when converged.
         options = {"snes_atol": 1e-12 * max(model.F_ref.norm(), 1e-300), "snes_stol": 1e-8}
         options.update(newton_options or {})
-        self.solver = NewtonSolver(self.system, options)
+        self.solver = NewtonSolver(self.effective, options)
 
     def _substep(self, h: float) -> SubStep:
         """One Newmark step of size h from (t, d, v, a); on Newton failure nothing but model.w is changed."""
         beta, gamma = self.beta, self.gamma
         if h != self._coefficient_dt:
-            self.system.set_coefficients(h, beta, gamma)
+            self.effective.set_coefficients(h, beta, gamma)
             self._coefficient_dt = h
         t_new = self.t + h
         # predictors d~, v~ (eq. 2.76 with a* = 0)
