@@ -72,15 +72,15 @@ def test_contact_tangent_consistent_and_newton_quadratic():
     """Contact stiffness vs finite differences of the nodal forces (error bounded by the neglected curvature
     term |g| / R), and quadratic convergence of Newton on the plate-on-sphere problem."""
     problem = cases.signorini_problem()
-    problem.compile()
-    solver = NewtonSolver(problem)
+    problem.system.compile()
+    solver = NewtonSolver(problem.system)
     history = []
     for lam in (0.5, 1.0):
-        problem.set_load_factor(lam)
+        problem.system.set_load_factor(lam)
         res = solver.solve()
         assert res.converged
         history.append(res.residual_norms)
-        problem.after_converged_step()
+        problem.system.after_converged_step()
     norms = history[-1]
     # quadratic: the last reductions square the residual (ratio r_{k+1} / r_k^2 bounded, r drops by >1e4)
     assert len(norms) <= 10, norms

@@ -100,7 +100,7 @@ def test_shell_resting_on_obstacle_carries_its_weight(obstacle):
     top = 0.5 * q / k_N     # start in contact (interference) so that the vertical rigid mode is supported
     body = Plane((0, 0, top), (0, 0, 1)) if obstacle == "plane" else table_top((0, 0), 0.04, 0.04, top, 1e-3)
     problem = ContactProblem(model, [body])
-    solve_load_path(problem, 1.0, initial_step=0.5)
+    solve_load_path(problem.system, 1.0, initial_step=0.5)
     weight = q * side ** 2
     total = problem.total_force()
     assert math.isclose(total[2], weight, rel_tol=0.01)

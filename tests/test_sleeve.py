@@ -234,12 +234,12 @@ def test_active_set_gives_the_plain_penalty_solution_on_the_signorini_plate():
     for active_set in (False, True):
         problem = cases.signorini_problem(n=6, comm=MPI.COMM_SELF)
         problem.active_set = active_set
-        solver = NewtonSolver(problem, TIGHT)
+        solver = NewtonSolver(problem.system, TIGHT)
         for lam in (0.5, 1.0):
-            problem.set_load_factor(lam)
+            problem.system.set_load_factor(lam)
             result = problem.solve(solver)
             assert result.converged, result.reason
-            problem.after_converged_step()
+            problem.system.after_converged_step()
         states.append(problem.model.w.x.array.copy())
         contacts = int(np.sum(problem.evaluate().pressure > 0))
         solver.destroy()
@@ -260,9 +260,9 @@ def test_active_set_with_friction_gives_the_return_map_solution():
     from fabricfem.solvers.newton import NewtonSolver
     from fabricfem.verify import contact as cases
     problem, pull, _ = cases.capstan_model(0.3, 0.5 * math.pi, nx=24, comm=MPI.COMM_SELF)
-    solver = NewtonSolver(problem, TIGHT)
-    solve_load_path(problem, 1.0, solver=solver, initial_step=0.5)
-    problem.after_converged_step()
+    solver = NewtonSolver(problem.system, TIGHT)
+    solve_load_path(problem.system, 1.0, solver=solver, initial_step=0.5)
+    problem.system.after_converged_step()
     start = problem.model.w.x.array.copy()
     for g, c in pull:
         g.x.array[:] = PULL * c
@@ -343,15 +343,15 @@ def test_tie_tolerance_solution_satisfies_the_law_within_the_tie():
     for tie in (0.0, 1e-5):
         reference = cases.signorini_problem(n=6, comm=MPI.COMM_SELF)
         problem = type(reference)(reference.model, [cases.sphere()], active_set=True, tie_tolerance=tie)
-        solver = NewtonSolver(problem, TIGHT)
+        solver = NewtonSolver(problem.system, TIGHT)
         for lam in (0.5, 1.0):
-            problem.set_load_factor(lam)
+            problem.system.set_load_factor(lam)
             result = problem.solve(solver)
             assert result.converged, result.reason
             if lam < 1.0:
-                problem.after_converged_step()
+                problem.system.after_converged_step()
         b = problem.model.create_vector()
-        problem.residual(problem.model.w.vector, b)          # unilateral law: no fixed set after solve
+        problem.system.residual(problem.model.w.vector, b)          # unilateral law: no fixed set after solve
         bound = np.max(problem.nodes.area) * problem.penalty * tie + 1e-9 * problem.F_ref.norm()
         assert np.max(np.abs(b.array)) <= bound
         assert np.count_nonzero(problem.evaluate().pressure > 0.0) >= 1

@@ -6,12 +6,15 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from fabricfem.dynamics.backward_euler import BackwardEulerInertia
+from fabricfem.dynamics.mass import lumped_mass
+from fabricfem.solvers.newton import NewtonSolver
+from fabricfem.solvers.system import CompositeSystem
 from fabricfem.verify.drape import (
     CLOTH_L,
     CLOTH_WEIGHT,
     STANDARD_GRAVITY,
     TABLE_HALF,
-    _BackwardEulerStep,
     reading_admissibility,
     shortest_path_over_table,
     tablecloth_problem,
@@ -80,28 +83,21 @@ def test_backward_euler_step_free_fall():
     backward-Euler recurrence is exact in closed form: v_{k+1} = (v_k - g dt) / (1 + c dt),
     z_{k+1} = z_k + dt v_{k+1} (uniform lumped mass and weight: every node falls alike). Newton tolerance
     1e-10 relative: 1e-8 on the displacement."""
-    from fabricfem.dynamics.mass import lumped_mass
-    from fabricfem.solvers.newton import NewtonSolver
     rho_area = CLOTH_WEIGHT / STANDARD_GRAVITY
     problem, _ = tablecloth_problem(5, 0.0, density=rho_area / CLOTH_H, comm=MPI.COMM_WORLD)
-    problem.compile()
-    problem.set_load_factor(1.0)
+    problem.system.compile()
+    problem.system.set_load_factor(1.0)
     problem.model.w.x.array[:] = 0.0
     uz = np.asarray(problem.model.W.sub(0).sub(2).collapse()[1])
     problem.model.w.x.array[uz] = 1.0        # 1 m above the table: no contact
     c, dt = 1.5, 0.01
-    step = _BackwardEulerStep(problem, lumped_mass(problem.model), c)
-    step.dt = dt
-    solver = NewtonSolver(step, {"snes_max_it": 20})
-    problem.model.w.vector.copy(step.d)
-    step.v.set(0.0)
+    step = BackwardEulerInertia(problem.model, lumped_mass(problem.model), c, dt)
+    system = CompositeSystem(problem.model, [problem, step])
+    solver = NewtonSolver(system, {"snes_max_it": 20})
     z, v = 1.0, 0.0
     for _ in range(5):
         assert solver.solve().converged
-        problem.model.w.vector.copy(step.v)
-        step.v.axpy(-1.0, step.d)
-        step.v.scale(1.0 / dt)
-        problem.model.w.vector.copy(step.d)
+        system.after_converged_step()
         v = (v - STANDARD_GRAVITY * dt) / (1.0 + c * dt)
         z += dt * v
     corner = problem.node_value((0.1, 0.1, 0.0))

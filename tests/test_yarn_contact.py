@@ -385,12 +385,12 @@ def test_friction_tangent_is_consistent_on_sliding_cylinders():
 
     def contact_residual():
         b.set(0.0)
-        c.add_residual(b)
+        c.add_residual(newton.u.vector, b)
         return b.copy()
     C0 = contact_residual()
     A = newton.A.duplicate()
     A.zeroEntries()
-    c.add_jacobian(A)
+    c.add_jacobian(newton.u.vector, A)
     dofs = c._dofs(np.column_stack([c.slave[act], st["cur_quads"][act], st["ref_quads"][act]])).ravel()
     dofs = np.unique(dofs[dofs >= 0])
     v = b.duplicate()

@@ -1,16 +1,17 @@
-"""A ShellModel with frictional contact against rigid ellipsoids, for the implicit solvers.
+"""Frictional contact of a ShellModel against rigid ellipsoids, as a ResidualTerm for the implicit solvers.
 
-`ContactProblem(model, obstacles, ...)` wraps a `fabricfem.shell.ShellModel` and exposes the same
-callbacks (compile, residual, jacobian, create_vector, create_matrix, set_load_factor,
-after_converged_step, w, load_factor, F_ref, comm, ...), so `NewtonSolver(problem)` and
-`solve_load_path(problem, ...)` work unchanged. The residual becomes R_shell(x) - f_contact(x), with the
-nodal forces of fabricfem.contact.nodal / friction on the owned displacement nodes (ghost nodes are
-skipped, so nothing is counted twice under MPI), and the Jacobian gets the 3x3 nodal blocks.
+`ContactProblem(model, obstacles, ...)` holds the contact state of a `fabricfem.shell.ShellModel` and is a
+ResidualTerm (fabricfem.solvers.system): `add_residual` subtracts the nodal contact forces f_contact(x) of
+fabricfem.contact.nodal / friction on the owned displacement nodes (ghost nodes are skipped, so nothing is
+counted twice under MPI), `add_jacobian` adds the 3x3 nodal blocks, `commit` stores the friction history.
+`problem.system` is `CompositeSystem(model, [problem])`, R_shell(x) - f_contact(x), which
+`NewtonSolver(problem.system)` and `solve_load_path(problem.system, ...)` drive; the model's data (w, comm,
+F_ref, load_factor, ...) read through the problem as well.
 
 Normal methods: "penalty" (Box 3: p = k_N <-g>) and "augmented" (eq. 3.69: p = <lambda - k_N g>, Uzawa
 update lambda <- p between Newton solves, `solve_augmented`). Friction: Coulomb with coefficient
 `friction` and tangential penalty eps_T (fabricfem.contact.friction); history committed in
-`after_converged_step`. Units: SI (m, N, Pa, Pa/m).
+`commit` (run by `system.after_converged_step`). Units: SI (m, N, Pa, Pa/m).
 
 Active-set strategy (`active_set=True`, used through `solve`): the unilateral law p = <lambda - k_N g>
 has a tangent that jumps at lambda - k_N g = 0, and Newton can cycle for ever when a few nodes leave
@@ -51,8 +52,12 @@ from fabricfem.contact import nodal
 from fabricfem.contact.torque import TorqueMonitor, adjacent_segments
 from fabricfem.meshes._validate import non_negative
 from fabricfem.solvers.newton import NewtonResult, NewtonSolver, SolverError
+from fabricfem.solvers.system import CompositeSystem
 
 METHODS = ("penalty", "augmented")
+# the system contract (fabricfem.solvers.system), which ContactProblem does not delegate to its model
+_SYSTEM_CALLBACKS = frozenset({"residual", "jacobian", "set_state", "create_vector", "create_matrix",
+                               "after_converged_step", "compile", "set_load_factor", "internal_force"})
 
 
 @dataclass
@@ -133,26 +138,18 @@ class ContactProblem:
         self._free = ~self.nodes.constrained
         self.state: ContactState | None = None
         self._current_areas: nodal.CurrentAreas | None = None   # compiled on the first `contact_pressure`
+        self.system = CompositeSystem(model, [self])   # what the solvers drive: the shell plus this contact
 
     # ------------------------------------------------------------------ delegation
     def __getattr__(self, name):
-        # everything not defined here (w, load_factor, F_ref, comm, ndofs, node_value, reaction, ...)
+        # the model's data (w, load_factor, F_ref, comm, ndofs, node_value, reaction, ...); not its solver
+        # callbacks: this is a term, the system to solve is `self.system`
         model = self.__dict__.get("model")
         if model is None:
             raise AttributeError(name)
+        if name in _SYSTEM_CALLBACKS:
+            raise AttributeError(f"ContactProblem is a ResidualTerm, not a system: use ContactProblem.system.{name}")
         return getattr(model, name)
-
-    def compile(self):
-        self.model.compile()
-
-    def set_load_factor(self, lam: float):
-        self.model.set_load_factor(lam)
-
-    def create_vector(self) -> PETSc.Vec:
-        return self.model.create_vector()
-
-    def create_matrix(self) -> PETSc.Mat:
-        return self.model.create_matrix()
 
     # ------------------------------------------------------------------ obstacles
     def set_obstacles(self, obstacles: Sequence[Ellipsoid] | Body):
@@ -226,25 +223,17 @@ class ContactProblem:
         self.state = ContactState(x, g, n, seg, p, traction, slip, force, stiffness)
         return self.state
 
-    # ------------------------------------------------------------------ solver callbacks
-    def residual(self, x: PETSc.Vec, b: PETSc.Vec):
-        """b = R_shell(x) - f_contact(x) (Dirichlet rows untouched)."""
-        self.model.residual(x, b)
-        self.subtract_force(b)
-
-    def jacobian(self, x: PETSc.Vec, A: PETSc.Mat):
-        """A = J_shell(x) + sum_i K_i (3x3 nodal blocks on the free displacement rows and columns)."""
-        self.model.jacobian(x, A)
-        self.add_tangent(A)
-
-    def subtract_force(self, b: PETSc.Vec):
-        """b -= f_contact at the model's current state (free displacement rows of the owned nodes)."""
+    # ------------------------------------------------------------------ ResidualTerm
+    def add_residual(self, x: PETSc.Vec, b: PETSc.Vec):
+        """b -= f_contact at the model's current state (set from x by the model's residual): free displacement
+        rows of the owned nodes only, so nothing is counted twice under MPI; Dirichlet rows untouched."""
         s = self.evaluate()
         free = self._free
-        b.getArray()[self.nodes.dofs[free]] -= s.force[free]   # owned rows only: no double counting of ghosts
+        b.getArray()[self.nodes.dofs[free]] -= s.force[free]
 
-    def add_tangent(self, A: PETSc.Mat):
-        """A += the contact stiffness blocks at the model's current state (free displacement rows/columns)."""
+    def add_jacobian(self, x: PETSc.Vec, A: PETSc.Mat):
+        """A += the contact stiffness blocks K_i = -df_i/dx_i at the model's current state (free displacement
+        rows/columns)."""
         s = self.evaluate()
         free = self._free.astype(float)
         blocks = s.stiffness * free[:, :, None] * free[:, None, :]
@@ -252,12 +241,11 @@ class ContactProblem:
         A.setValuesLocalRCV(rows, rows, blocks, addv=PETSc.InsertMode.ADD_VALUES)
         A.assemble()
 
-    def after_converged_step(self):
-        """Commit the friction history (stick points) and let the shell re-base its director."""
+    def commit(self):
+        """Commit the friction history (stick points) of the converged state."""
         s = self.evaluate()
         if self.mu > 0.0:
             self._store_stick_points(s.position, s.traction)
-        self.model.after_converged_step()
 
     # ------------------------------------------------------------------ active-set strategy
     def contact_set(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -348,7 +336,7 @@ class ContactProblem:
         if self.method != "augmented":
             raise ValueError("solve_augmented needs method='augmented'")
         tolerance = nodal.positive_parameter("tolerance", tolerance)
-        solver = solver or NewtonSolver(self)
+        solver = solver or NewtonSolver(self.system)
         iterations = []
         for k in range(int(max_augmentations) + 1):
             result = self.solve(solver)

@@ -796,8 +796,9 @@ class YarnContact:
         force = G[:, :, None] * fN[:, None, :] + H[:, :, None] * fT[:, None, :]
         return self._dofs(nodes).reshape(len(act), 27), force.reshape(len(act), 27)
 
-    def add_residual(self, b: PETSc.Vec) -> None:
-        """b -= contact forces on the owned rows (call after the ghost reverse update)."""
+    def add_residual(self, x: PETSc.Vec | None, b: PETSc.Vec) -> None:
+        """b -= contact forces on the owned rows (call after the ghost reverse update). ResidualTerm interface
+        (fabricfem.solvers.system): the state is read from the Function u, which the solver has set from x."""
         st = self.evaluate()
         dofs, force = self.nodal_forces(st)
         self.dropped_active = int(np.any(dofs < 0, axis=1).sum())
@@ -810,8 +811,8 @@ class YarnContact:
         arr[:] -= local
         b.setArray(arr)  # ensures write-back on every vector type
 
-    def add_jacobian(self, A: PETSc.Mat) -> None:
-        """A += contact stiffness on the owned rows (A must be assembled; assembled again here)."""
+    def add_jacobian(self, x: PETSc.Vec | None, A: PETSc.Mat) -> None:
+        """A += contact stiffness on the owned rows (A must be assembled; assembled again here); state from u."""
         st = self.state if self.state is not None else self.evaluate()
         act, nodes, G, H = self._stencil(st)
         area = self.area[act]

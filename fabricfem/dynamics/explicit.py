@@ -62,7 +62,7 @@ class CentralDifference(TimeIntegrator):
             raise ValueError(f"damping_update_every must be >= 1, got {damping_update_every!r}")
         super().__init__(model, dt, load_factor, rayleigh, air_drag, lumped=True, energy_bound=energy_bound)
         if scale != 1.0:
-            self.ops = InertiaDamping(model, lumped=True, rayleigh=rayleigh, air_drag=air_drag,
+            self.ops = InertiaDamping(self.model, lumped=True, rayleigh=rayleigh, air_drag=air_drag,
                                       rotary_inertia_scale=scale)
         self.rotary_inertia_scale = scale
         self.contact = contact
@@ -116,7 +116,7 @@ class CentralDifference(TimeIntegrator):
             self.ops.freeze(self.d)
         rhs = self._rhs
         tic = time.perf_counter()
-        self.model.internal_force(self.d, rhs)  # f_int(d^{n+1}); copies d^{n+1} into the model's Function
+        self.system.internal_force(self.d, rhs)  # f_int(d^{n+1}) (+ terms); copies d^{n+1} into the model's Function
         toc = time.perf_counter()
         self.timings["internal_forces"] += toc - tic
         rhs.scale(-1.0)

@@ -40,6 +40,7 @@ from petsc4py import PETSc
 from fabricfem.dynamics.mass import InertiaDamping
 from fabricfem.io import SurfaceSeries, write_csv
 from fabricfem.solvers.newton import NewtonSolver, SolverError
+from fabricfem.solvers.system import add_term_jacobians, base_model, owned_dirichlet_rows
 
 LoadFactor = Callable[[float], float] | float
 
@@ -120,7 +121,9 @@ class TimeIntegrator:
     """State (d, v, a), energy bookkeeping, blow-up check and outputs shared by the time integrators.
 
     Args:
-        model: ShellModel (density > 0). Its director re-basing is switched off.
+        model: ShellModel (density > 0), or a CompositeSystem of one and ResidualTerms (e.g. contact with rigid
+            obstacles, fabricfem.solvers.system): the terms' forces enter internal_force and the residual, their
+            tangents the Jacobian. The shell's director re-basing is switched off.
         dt: time step [s] > 0.
         load_factor: lambda(t) scaling F_ref and prescribed displacements (callable of t [s], or a constant).
         rayleigh, air_drag, lumped: see fabricfem.dynamics.mass.InertiaDamping.
@@ -140,7 +143,8 @@ class TimeIntegrator:
             energy_bound = None if prescribed else 10.0
         if energy_bound is not None and not (isinstance(energy_bound, (int, float)) and energy_bound > 1.0):
             raise ValueError(f"energy_bound must exceed 1 (or be None), got {energy_bound!r}")
-        self.model = model
+        self.system = model  # the NonlinearSystem the forces come from: a ShellModel or a CompositeSystem of one
+        self.model = model = base_model(model)  # the shell: forms, state w, mass
         model.compile()
         model.rebase = False  # see module docstring: the angles' rates need a fixed base
         self.dt = float(dt)
@@ -155,10 +159,7 @@ class TimeIntegrator:
         model.w.vector.copy(self.d)
         for vec in (self.v, self.a, self._cv):
             vec.set(0.0)
-        n_local = self.d.getLocalSize()
-        bc_rows = [bc.dof_indices()[0][:bc.dof_indices()[1]] for bc in model.bcs]
-        rows = np.unique(np.concatenate(bc_rows)) if bc_rows else np.zeros(0, dtype=np.int32)
-        self.bc_rows = rows[rows < n_local].astype(np.int32)
+        self.bc_rows = owned_dirichlet_rows(model)
         self._energy_form = fem.form(model.energy)
         self.t = 0.0
         self.t0 = 0.0
@@ -219,7 +220,7 @@ class TimeIntegrator:
         self._sync_model()
         self.ops.freeze(self.d)
         rhs = self._work
-        self.model.internal_force(self.d, rhs)  # f_int(d^0)
+        self.system.internal_force(self.d, rhs)  # f_int(d^0) (+ the terms' forces)
         rhs.scale(-1.0)
         rhs.axpy(float(self.model.load_factor.value), self.model.F_ref)
         self.ops.damping_action(self.v, self._cv)
@@ -374,7 +375,7 @@ class _EffectiveSystem:
     def residual(self, x: PETSc.Vec, b: PETSc.Vec):
         """G(x) = f_int(x) - lambda F_ref + M a(x) + C v(x); Dirichlet rows x - lambda g."""
         it = self.it
-        self.model.residual(x, b)
+        it.system.residual(x, b)
         x.copy(self._acc)  # a(x) = (x - d~) / (beta dt^2)
         self._acc.axpy(-1.0, it.d_pred)
         self._acc.scale(float(self.c_mass.value))
@@ -396,9 +397,7 @@ class _EffectiveSystem:
         A.assemble()
         if self._diag is not None:
             A.setDiagonal(self._diag, addv=PETSc.InsertMode.ADD_VALUES)
-        extra_tangent = getattr(self.model, "add_contact_tangent", None)  # models with terms outside jacobian_form
-        if extra_tangent is not None:  # (fabricfem.scenes.run.ObstacleShell); they see the state x set above
-            extra_tangent(A)
+        add_term_jacobians(self.it.system, x, A)  # e.g. contact: they see the state x set above
 
 
 @dataclass
@@ -524,20 +523,20 @@ class NewmarkIntegrator(StepHalving, TimeIntegrator):
         self.beta, self.gamma = float(beta), float(gamma)
         self.d_pred = model.create_vector()
         self.v_pred = model.create_vector()
-        self.system = _EffectiveSystem(self)
+        self.effective = _EffectiveSystem(self)  # the step's residual and tangent, what Newton drives
         self._coefficient_dt = self.dt
-        self.system.set_coefficients(self.dt, self.beta, self.gamma)
+        self.effective.set_coefficients(self.dt, self.beta, self.gamma)
         # stol 1e-8: near round-off the residual of thin shells stagnates (ill-conditioned K) while the Newton
         # update is ~1e-9 of the solution; the full-step Newton only takes steps that small when converged.
         options = {"snes_atol": 1e-12 * max(model.F_ref.norm(), 1e-300), "snes_stol": 1e-8}
         options.update(newton_options or {})
-        self.solver = NewtonSolver(self.system, options)
+        self.solver = NewtonSolver(self.effective, options)
 
     def _substep(self, h: float) -> SubStep:
         """One Newmark step of size h from (t, d, v, a); on Newton failure nothing but model.w is changed."""
         beta, gamma = self.beta, self.gamma
         if h != self._coefficient_dt:
-            self.system.set_coefficients(h, beta, gamma)
+            self.effective.set_coefficients(h, beta, gamma)
             self._coefficient_dt = h
         t_new = self.t + h
         # predictors d~, v~ (eq. 2.76 with a* = 0)

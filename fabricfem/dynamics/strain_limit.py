@@ -304,7 +304,7 @@ def project_step(projection: FastProjection, integrator) -> ProjectionResult:
     if not isinstance(integrator, CentralDifference):
         return result
     rhs = integrator._work.duplicate()
-    model.internal_force(integrator.d, rhs)
+    integrator.system.internal_force(integrator.d, rhs)   # the shell + its terms (e.g. obstacle contact)
     rhs.scale(-1.0)
     rhs.axpy(float(model.load_factor.value), model.F_ref)
     cv = integrator._cv.duplicate()

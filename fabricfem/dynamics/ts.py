@@ -42,6 +42,7 @@ from petsc4py import PETSc
 
 from fabricfem.dynamics.newmark import LoadFactor, StepHalving, SubStep, TimeIntegrator
 from fabricfem.solvers.newton import _REASONS, DEFAULT_OPTIONS, prefixed_options
+from fabricfem.solvers.system import add_term_jacobians
 
 _prefix_counter = itertools.count()
 _TS_REASONS = {v: k for k, v in vars(PETSc.TS.ConvergedReason).items() if isinstance(v, int)}
@@ -129,7 +130,7 @@ class GeneralizedAlphaIntegrator(StepHalving, TimeIntegrator):
     def _residual(self, ts, t: float, x: PETSc.Vec, xdot: PETSc.Vec, xddot: PETSc.Vec, F: PETSc.Vec):
         """F = f_int(x) - lambda(t) F_ref + M xddot + C xdot; Dirichlet rows x - lambda(t) g."""
         self.model.set_load_factor(self.load(t))
-        self.model.residual(x, F)
+        self.system.residual(x, F)
         self.ops.mass_action(xddot, self._tmp)
         self.zero_bc_rows(self._tmp)
         F.axpy(1.0, self._tmp)
@@ -140,7 +141,7 @@ class GeneralizedAlphaIntegrator(StepHalving, TimeIntegrator):
 
     def _jacobian(self, ts, t: float, x: PETSc.Vec, xdot: PETSc.Vec, xddot: PETSc.Vec, shift_v: float,
                   shift_a: float, J: PETSc.Mat, P: PETSc.Mat):
-        """P = K(x) + shift_a M + shift_v C with identity Dirichlet rows (+ model.add_contact_tangent if present)."""
+        """P = K(x) + shift_a M + shift_v C with identity Dirichlet rows (+ the terms' tangents of a CompositeSystem)."""
         self.c_mass.value = shift_a
         self.c_damp.value = shift_v
         self.model.set_state(x)
@@ -156,9 +157,7 @@ class GeneralizedAlphaIntegrator(StepHalving, TimeIntegrator):
                 self.zero_bc_rows(self._diag)
                 self._diag_key = key
             P.setDiagonal(self._diag, addv=PETSc.InsertMode.ADD_VALUES)
-        extra_tangent = getattr(self.model, "add_contact_tangent", None)  # models with terms outside jacobian_form
-        if extra_tangent is not None:  # (fabricfem.scenes.run.ObstacleShell); they see the state x set above
-            extra_tangent(P)
+        add_term_jacobians(self.system, x, P)  # e.g. contact: they see the state x set above
         if J != P:
             J.assemble()
 

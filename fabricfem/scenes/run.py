@@ -17,7 +17,6 @@ from pathlib import Path
 
 import numpy as np
 from mpi4py import MPI
-from petsc4py import PETSc
 
 from fabricfem import io
 from fabricfem.body.ellipsoid import Ellipsoid
@@ -41,6 +40,7 @@ from fabricfem.scenes.sections import (
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.loadstep import LoadStep, solve_load_path
 from fabricfem.solvers.newton import NewtonSolver
+from fabricfem.solvers.system import base_model
 from fabricfem.wear.compression import fit_sleeve, pressure_report
 from fabricfem.wear.run import run_sleeve_scene
 
@@ -71,12 +71,12 @@ def _node_locator(model: ShellModel, point, where: str):
     return lambda x: np.linalg.norm(x.T - p, axis=1) < 1e-8 * max(1.0, float(np.abs(p).max()))
 
 
-def build_model(scene: Scene, comm=MPI.COMM_WORLD, model_class: type = ShellModel) -> ShellModel:
+def build_model(scene: Scene, comm=MPI.COMM_WORLD) -> ShellModel:
     fabric = build_fabric(scene["fabric"])
     model_spec = section(ModelSection, scene.get("model"))
     kind = model_spec.kind
     fmesh = build_mesh(scene["mesh"], comm)
-    model = model_class(fmesh, fabric, model=kind, rebase=model_spec.rebase)
+    model = ShellModel(fmesh, fabric, model=kind, rebase=model_spec.rebase)
     for i, support in enumerate(scene.get("support", [])):
         if "point" in support:
             where = _node_locator(model, support["point"], f"support[{i}].point")
@@ -194,41 +194,6 @@ def output_dir(scene: Scene) -> Path:
 
 
 # ---------------------------------------------------------------------------------------- dynamic scenes
-class ObstacleShell(ShellModel):
-    """ShellModel with penalty contact against fixed rigid obstacles (fabricfem.contact.obstacles) in its
-    internal force, residual and tangent, for the time integrators (which call internal_force / residual
-    and assemble the shell's jacobian_form themselves: `add_contact_tangent` adds the nodal 3x3 blocks).
-    Nodal contact as in fabricfem.contact.problem (owned nodes only, Dirichlet components excluded)."""
-
-    contact = None
-
-    def set_obstacles(self, obstacles: list, penalty: float | None = None):
-        self.compile()
-        self.contact = ContactProblem(self, obstacles, penalty=penalty)
-
-    def _subtract_contact_force(self, b: PETSc.Vec):
-        if self.contact is not None:
-            self.contact.subtract_force(b)  # at self.w, which the shell's assembly has just set
-
-    def internal_force(self, x: PETSc.Vec, b: PETSc.Vec):
-        """b = R_int(x) - f_contact(x)."""
-        super().internal_force(x, b)
-        self._subtract_contact_force(b)
-
-    def residual(self, x: PETSc.Vec, b: PETSc.Vec):
-        super().residual(x, b)
-        self._subtract_contact_force(b)
-
-    def add_contact_tangent(self, A: PETSc.Mat):
-        """A += the contact stiffness blocks at the current state self.w (free displacement rows)."""
-        if self.contact is not None:
-            self.contact.add_tangent(A)
-
-    def jacobian(self, x: PETSc.Vec, A: PETSc.Mat):
-        super().jacobian(x, A)
-        self.add_contact_tangent(A)
-
-
 def build_obstacles(spec: list[dict]) -> list:
     """Plane / RoundedBox obstacles of [[dynamics.obstacles]] (validated by fabricfem.scenes.schema), SI units."""
     out = []
@@ -266,14 +231,15 @@ def _load_function(ramp_time: float):
     return 1.0
 
 
-def build_integrator(spec: dict, model: ShellModel):
-    """(integrator, n_steps, dt [s], dt_crit [s] or None) for a [dynamics] section; dt is end_time / n_steps."""
+def build_integrator(spec: dict, model):
+    """(integrator, n_steps, dt [s], dt_crit [s] or None) for a [dynamics] section; dt is end_time / n_steps.
+    `model`: the ShellModel or a CompositeSystem of it (fabricfem.solvers.system, e.g. with obstacle contact)."""
     d = section(DynamicsSection, spec)
     kind = d.integrator
     end_time = float(d.end_time)
     rayleigh = tuple(float(c) for c in d.rayleigh)
     common = dict(load_factor=_load_function(float(d.ramp_time)), rayleigh=rayleigh, air_drag=float(d.air_drag))
-    dt_crit = critical_time_step(model, rayleigh) if kind == "explicit" else None
+    dt_crit = critical_time_step(base_model(model), rayleigh) if kind == "explicit" else None
     dt = float(d.dt_fraction) * dt_crit if d.dt == "auto" else float(d.dt)
     n_steps = max(1, math.ceil(end_time / dt * (1.0 - 1e-12)))
     dt = end_time / n_steps
@@ -359,10 +325,12 @@ def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD) -> DynamicRun:
     out = output_dir(scene)
     t0 = time.perf_counter()
     obstacles = build_obstacles(d.obstacles)
-    model = build_model(scene, comm, ObstacleShell if obstacles else ShellModel)
-    if obstacles:
-        model.set_obstacles(obstacles, d.contact_penalty)
-    integrator, n_steps, dt, dt_crit = build_integrator(spec, model)
+    model = build_model(scene, comm)
+    system = model
+    if obstacles:   # penalty contact with the fixed rigid obstacles: a ResidualTerm of the shell
+        model.compile()
+        system = ContactProblem(model, obstacles, penalty=d.contact_penalty).system
+    integrator, n_steps, dt, dt_crit = build_integrator(spec, system)
     limit = d.strain_limit
     # the projection's strain form also measures the strains (limit 1 when nothing is limited, as in
     # fabricfem.verify.strain_limit)

@@ -95,12 +95,12 @@ with both numbers unless force = true.
 """
 from __future__ import annotations
 
-import difflib
 import dataclasses
+import difflib
 import importlib.util
 import math
-import typing
 import tomllib
+import typing
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any

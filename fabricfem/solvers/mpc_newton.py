@@ -47,10 +47,11 @@ class MPCNewtonSolver:
         max_it: at most this many Newton iterations
         ksp_options: PETSc options of the linear solver (default MUMPS LU)
         form_compiler_params: FFCx parameters of both forms
-        contact: optional extra nodal forces (e.g. fabricfem.contact.yarn.YarnContact): an object with
-            add_residual(b) (subtracts its forces from the owned rows of the assembled residual, before
-            the Dirichlet rows are set) and add_jacobian(A) (adds its stiffness to the owned rows of the
-            assembled Jacobian); it must drop the rows/columns of `constrained_dofs()`
+        contact: optional extra nodal forces (e.g. fabricfem.contact.yarn.YarnContact), a ResidualTerm
+            (fabricfem.solvers.system) on the condensed (MPC) system: add_residual(x, b) (subtracts its forces
+            from the owned rows of the assembled residual, before the Dirichlet rows are set) and
+            add_jacobian(x, A) (adds its stiffness to the owned rows of the assembled Jacobian), x = u's vector;
+            it must drop the rows/columns of `constrained_dofs()`
         line_search: halve the Newton step until the residual norm decreases (at most 5 times)
     """
 
@@ -111,7 +112,7 @@ class MPCNewtonSolver:
         dolfinx_mpc.apply_lifting(self.b, [self.a], [self.bcs], self.mpc, x0=[x], scale=-1.0)
         self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         if self.contact is not None:
-            self.contact.add_residual(self.b)
+            self.contact.add_residual(x, self.b)
         fem_petsc.set_bc(self.b, self.bcs, x, -1.0)
         return self.b
 
@@ -120,7 +121,7 @@ class MPCNewtonSolver:
         dolfinx_mpc.assemble_matrix(self.a, self.mpc, bcs=self.bcs, A=self.A)
         self.A.assemble()
         if self.contact is not None:
-            self.contact.add_jacobian(self.A)
+            self.contact.add_jacobian(self.u.vector, self.A)
 
     def constrained_dofs(self) -> np.ndarray:
         """Global scalar indices of the Dirichlet and MPC-slave dofs held by this rank (owned or ghost):

@@ -136,8 +136,8 @@ def capstan_ratio(mu: float, theta: float, nx: int = 48, pull_max: float = 2e-3,
     ratio T2 / T1 there, the forward-sliding fraction and the history. Pull steps halve when Newton fails
     (stick/slip switching) and grow by 1.5 after easy steps."""
     problem, pull, t_end = capstan_model(mu, theta, nx, comm)
-    solver = NewtonSolver(problem)
-    solve_load_path(problem, 1.0, solver=solver, initial_step=0.5)     # apply T1 with the end held
+    solver = NewtonSolver(problem.system)
+    solve_load_path(problem.system, 1.0, solver=solver, initial_step=0.5)     # apply T1 with the end held
     tensions, fractions = [], []
     d, step = 0.0, pull_step
     while d < pull_max:
@@ -153,7 +153,7 @@ def capstan_ratio(mu: float, theta: float, nx: int = 48, pull_max: float = 2e-3,
                                   f"{1e-3 * pull_step:.1e} m")
             continue
         d += step
-        problem.after_converged_step()
+        problem.system.after_converged_step()
         reaction = np.array([problem.reaction("right", "u", 0), problem.reaction("right", "u", 2)])
         tensions.append(float(reaction @ t_end) / CAPSTAN_WIDTH)
         fractions.append(_forward_slip_fraction(problem))
@@ -234,7 +234,7 @@ def plate_weight() -> float:
 
 
 def solve_signorini(problem: ContactProblem) -> ContactProblem:
-    solve_load_path(problem, 1.0, initial_step=0.25)
+    solve_load_path(problem.system, 1.0, initial_step=0.25)
     return problem
 
 
@@ -274,7 +274,7 @@ def wrapped_strip_penetration(penalty: float, theta: float = math.pi, comm=MPI.C
     problem, _, _ = capstan_model(0.0, theta, comm=comm)
     problem.penalty = nodal_penalty = float(penalty)
     problem.tangential_penalty = nodal_penalty
-    solve_load_path(problem, 1.0, initial_step=0.5)
+    solve_load_path(problem.system, 1.0, initial_step=0.5)
     s = problem.evaluate()
     free = ~problem.nodes.constrained[:, 0]
     local = np.array([float(np.sum(-s.gap[free])), float(np.sum(free))])
@@ -298,7 +298,7 @@ def signorini_penetration() -> list:
     with Timer() as timer:
         k_al = problem.penalty / 10.0
         problem = signorini_problem(method="augmented", penalty=k_al)
-        solve_load_path(problem, 1.0, initial_step=0.25)
+        solve_load_path(problem.system, 1.0, initial_step=0.25)
         report = problem.solve_augmented(tolerance=1e-6)
     out.append(result("signorini-penetration", f"plate on sphere, augmented Lagrangian at k_N = {k_al:.2e} Pa/m: "
                       f"largest penetration [m] after {report.augmentations} augmentations (limit 1e-6 m)",

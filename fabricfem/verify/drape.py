@@ -25,16 +25,17 @@ import numpy as np
 import scipy.linalg
 from dolfinx import fem
 from mpi4py import MPI
-from petsc4py import PETSc
 
 from fabricfem.contact.obstacles import Plane, table_edge, table_top
 from fabricfem.contact.problem import ContactProblem
+from fabricfem.dynamics.backward_euler import BackwardEulerInertia
 from fabricfem.dynamics.mass import lumped_mass
 from fabricfem.materials import Fabric
 from fabricfem.meshes import plate
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.loadstep import solve_load_path
 from fabricfem.solvers.newton import NewtonResult, NewtonSolver, SolverError
+from fabricfem.solvers.system import CompositeSystem, owned_dirichlet_rows
 from fabricfem.verify import case, result
 from fabricfem.verify.particles_cases import (
     AIR_DRAG,
@@ -169,7 +170,7 @@ def fe_overhanging_beam(n: int = 24, comm=MPI.COMM_WORLD) -> dict:
     """Solve the beam (load steps on the weight) and measure it (SI); with ndofs and wall time [s]."""
     t0 = time.perf_counter()
     problem, top = overhanging_beam_problem(n, comm)
-    solve_load_path(problem, 1.0, solver=NewtonSolver(problem, NEWTON_OPTIONS), initial_step=0.25)
+    solve_load_path(problem.system, 1.0, solver=NewtonSolver(problem.system, NEWTON_OPTIONS), initial_step=0.25)
     out = measure_overhang(problem, top)
     out.update(ndofs=problem.ndofs, wall_s=time.perf_counter() - t0)
     return out
@@ -289,17 +290,16 @@ def lowest_tangent_eigenvalue(problem: ContactProblem) -> float:
     owned rows are gathered on rank 0 and the value broadcast, so every rank returns the same number). Its
     sign decides stability (the inertia does not depend on the mixed units of u and theta)."""
     comm = problem.comm
-    A = problem.create_matrix()
-    x = problem.create_vector()
+    A = problem.system.create_matrix()
+    x = problem.system.create_vector()
     problem.w.vector.copy(x)
-    problem.jacobian(x, A)
+    problem.system.jacobian(x, A)
     start, _ = A.getOwnershipRange()
     indptr, columns, values = A.getValuesCSR()
     n = A.getSize()[0]
     A.destroy()
     x.destroy()
-    fixed_local = [bc.dof_indices()[0][:bc.dof_indices()[1]] for bc in problem.bcs]
-    fixed_local = np.concatenate(fixed_local) if fixed_local else np.zeros(0, dtype=np.int32)
+    fixed_local = owned_dirichlet_rows(problem.model)
     parts = comm.gather((start, indptr, columns, values, start + fixed_local.astype(np.int64)), root=0)
     lowest = None
     if comm.rank == 0:
@@ -352,7 +352,7 @@ def fe_tablecloth_nodes(n: int = 10, imperfection: float = 0.0, comm=MPI.COMM_WO
     midside (0, L/2) positions [m] (table top at z = 0) after load stepping from the flat sheet, hem folds,
     diagonal asymmetry / L, ndofs and the Newton iteration count; the same on all ranks."""
     problem, top = tablecloth_problem(n, imperfection, comm=comm)
-    steps = solve_load_path(problem, 1.0, solver=NewtonSolver(problem, NEWTON_OPTIONS), initial_step=0.01)
+    steps = solve_load_path(problem.system, 1.0, solver=NewtonSolver(problem.system, NEWTON_OPTIONS), initial_step=0.01)
     out = _measure_tablecloth(problem, top, eigenvalue=False)
     out["iterations"] = int(sum(s.iterations for s in steps))
     return out
@@ -363,67 +363,10 @@ def fe_tablecloth(n: int = 10, imperfection: float = CLOTH_IMPERFECTION, comm=MP
     measure it (_measure_tablecloth); with the wall time [s]."""
     t0 = time.perf_counter()
     problem, top = tablecloth_problem(n, imperfection, comm=comm)
-    solve_load_path(problem, 1.0, solver=NewtonSolver(problem, NEWTON_OPTIONS), initial_step=0.01)
+    solve_load_path(problem.system, 1.0, solver=NewtonSolver(problem.system, NEWTON_OPTIONS), initial_step=0.01)
     out = _measure_tablecloth(problem, top)
     out["wall_s"] = time.perf_counter() - t0
     return out
-
-
-class _BackwardEulerStep:
-    """Model-like adapter for NewtonSolver: the residual of one backward-Euler step of the damped dynamics
-
-        M (x - d_n - dt v_n) / dt^2 + c M (x - d_n) / dt + R(x) = 0,   v_{n+1} = (x - d_n) / dt
-
-    (R: shell + contact residual of the ContactProblem, M: lumped mass of thesis eq. 2.82, c [1/s]: mass-
-    proportional air drag), tangent K(x) + (1 / dt^2 + c / dt) M. Dirichlet rows are left to R."""
-
-    def __init__(self, problem: ContactProblem, mass: PETSc.Vec, damping: float):
-        self.problem, self.mass, self.damping = problem, mass, float(damping)
-        self.w, self.comm, self.F_ref = problem.w, problem.comm, problem.F_ref
-        self.d = problem.create_vector()
-        self.v = problem.create_vector()
-        self._tmp = problem.create_vector()
-        self._diag = problem.create_vector()
-        n_local = self.d.getLocalSize()
-        rows = [bc.dof_indices()[0][:bc.dof_indices()[1]] for bc in problem.bcs]
-        rows = np.unique(np.concatenate(rows)) if rows else np.zeros(0, dtype=np.int32)
-        self._bc_rows = rows[rows < n_local].astype(np.int32)
-        self.dt = 1.0
-
-    def compile(self):
-        self.problem.compile()
-
-    def create_vector(self) -> PETSc.Vec:
-        return self.problem.create_vector()
-
-    def create_matrix(self) -> PETSc.Mat:
-        return self.problem.create_matrix()
-
-    def set_state(self, x: PETSc.Vec):
-        self.problem.set_state(x)
-
-    def residual(self, x: PETSc.Vec, b: PETSc.Vec):
-        self.problem.residual(x, b)
-        dt, c = self.dt, self.damping
-        x.copy(self._tmp)
-        self._tmp.axpy(-1.0, self.d)
-        self._tmp.scale(1.0 / dt ** 2 + c / dt)
-        self._tmp.axpy(-1.0 / dt, self.v)
-        self._tmp.pointwiseMult(self._tmp, self.mass)
-        self._tmp.getArray()[self._bc_rows] = 0.0
-        b.axpy(1.0, self._tmp)
-
-    def jacobian(self, x: PETSc.Vec, A: PETSc.Mat):
-        self.problem.jacobian(x, A)
-        self.mass.copy(self._diag)
-        self._diag.scale(1.0 / self.dt ** 2 + self.damping / self.dt)
-        self._diag.getArray()[self._bc_rows] = 0.0
-        A.setDiagonal(self._diag, addv=PETSc.InsertMode.ADD_VALUES)
-        A.assemble()
-
-    def destroy(self):
-        for vec in (self.d, self.v, self._tmp, self._diag):
-            vec.destroy()
 
 
 def fe_tablecloth_drop(n: int = 10, t_end: float = DROP_T_END, dt_max: float = DROP_DT_MAX,
@@ -433,7 +376,7 @@ def fe_tablecloth_drop(n: int = 10, t_end: float = DROP_T_END, dt_max: float = D
     particle drop) and FALLS under its full weight from t = 0; then a static Newton polish and the stability
     check.
 
-    Dynamics: backward Euler (_BackwardEulerStep) with the lumped mass (areal mass q / g) and the air drag
+    Dynamics: backward Euler (fabricfem.dynamics.backward_euler.BackwardEulerInertia) with the lumped mass (areal mass q / g) and the air drag
     c = eta / rho of seed 002 eq. 17d; the director is re-based after every step (the overhang turns through
     ~90 degrees) and the angle rates reset to zero (rotational inertia rho h^3 / 12 is 1e-8 of the
     translational one per unit area). Steps start at 1 ms (the first fall) and grow x 1.5 after every step
@@ -451,22 +394,20 @@ def fe_tablecloth_drop(n: int = 10, t_end: float = DROP_T_END, dt_max: float = D
     rho_area = CLOTH_WEIGHT / STANDARD_GRAVITY
     problem, top = tablecloth_problem(n, 0.0, density=rho_area / CLOTH_H, comm=comm)
     model = problem.model
-    problem.compile()
-    problem.set_load_factor(1.0)
+    problem.system.compile()
+    problem.system.set_load_factor(1.0)
     V, to_parent = model.W.sub(0).collapse()
     lift = fem.Function(V)
     lift.interpolate(lambda X: np.vstack([0.0 * X[0], 0.0 * X[0], flatness_imperfection(X[0], X[1])]))
     model.w.x.array[np.asarray(to_parent)] = lift.x.array
     mass = lumped_mass(model)
-    step = _BackwardEulerStep(problem, mass, AIR_DRAG / rho_area)
-    solver = NewtonSolver(step, NEWTON_OPTIONS)
-    theta_dofs = np.asarray(model.W.sub(1).collapse()[1])
-    model.w.vector.copy(step.d)
-    step.v.set(0.0)
+    inertia = BackwardEulerInertia(model, mass, AIR_DRAG / rho_area, 1.0)   # starts at rest from the lifted sheet
+    system = CompositeSystem(model, [problem, inertia])
+    solver = NewtonSolver(system, NEWTON_OPTIONS)
     t, dt, steps, newton, peak = 0.0, 1e-3, 0, 0, 0.0
     try:
         while t < t_end * (1.0 - 1e-12):
-            step.dt = min(dt, t_end - t)
+            inertia.set_time_step(min(dt, t_end - t))
             saved = model.w.x.array.copy()
             try:
                 result = solver.solve()
@@ -480,30 +421,27 @@ def fe_tablecloth_drop(n: int = 10, t_end: float = DROP_T_END, dt_max: float = D
                     raise RuntimeError(f"tablecloth drop: backward-Euler step below 1e-7 s at t = {t:.4g} s "
                                        f"(Newton {result.reason})")
                 continue
-            t += step.dt
+            t += inertia.dt
             steps += 1
-            model.w.vector.copy(step.v)
-            step.v.axpy(-1.0, step.d)
-            step.v.scale(1.0 / step.dt)
-            problem.after_converged_step()          # re-base the director: the angles restart at zero
-            step.v.getArray()[theta_dofs[theta_dofs < step.v.getLocalSize()]] = 0.0
-            model.w.vector.copy(step.d)
-            kinetic = 0.5 * comm.allreduce(float(np.sum(mass.getArray() * step.v.getArray() ** 2)))
+            # re-base the director (the angles restart at zero, and so do their rates: x^n and x are both
+            # re-based), then v^{n+1}, x^n
+            system.after_converged_step()
+            kinetic = inertia.kinetic_energy()
             peak = max(peak, kinetic)
             if result.iterations <= 5:
                 dt = min(1.5 * dt, dt_max)
         kinetic_end = kinetic
     finally:
         solver.destroy()
-        step.destroy()
-    polish = NewtonSolver(problem, {"snes_max_it": 100})
+        inertia.destroy()
+    polish = NewtonSolver(problem.system, {"snes_max_it": 100})
     try:
         result = polish.solve()
     finally:
         polish.destroy()
     if not result.converged:
         raise RuntimeError(f"tablecloth drop: static polish did not converge ({result.reason})")
-    problem.after_converged_step()
+    problem.system.after_converged_step()
     out = _measure_tablecloth(problem, top)
     out.update(steps=steps, newton_iterations=newton, polish_iterations=result.iterations,
                kinetic_end_over_peak=kinetic_end / peak, wall_s=time.perf_counter() - t0)

@@ -97,7 +97,7 @@ def don(problem: ContactProblem, segments: Sequence[Ellipsoid], start: float, st
     if not (isinstance(start, (int, float)) and 0.0 < start <= 1.0):
         raise ValueError(f"start must lie in (0, 1], got {start!r}")
     steps = count("steps", steps)
-    solver = solver or NewtonSolver(problem)
+    solver = solver or NewtonSolver(problem.system)
     history: list[DonningStep] = []
     reached, increment = start, (1.0 - start) / steps
     for k in range(1, steps + 1):
@@ -119,7 +119,7 @@ def don(problem: ContactProblem, segments: Sequence[Ellipsoid], start: float, st
                                       f"at {reached:.4g}", reason=getattr(err, "reason", "")) from err
                 h, cuts = 0.5 * h, cuts + 1
                 continue
-            problem.after_converged_step()
+            problem.system.after_converged_step()
             reached = factor
             augmentations += report.augmentations
             iterations += sum(report.newton_iterations)

@@ -94,6 +94,7 @@ from fabricfem.materials import Fabric
 from fabricfem.meshes import tube
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.newton import NewtonSolver, SolverError
+from fabricfem.solvers.system import CompositeSystem
 from fabricfem.wear.config import SleeveConfig
 
 GRAVITY = 9.81                       # m/s^2
@@ -101,51 +102,26 @@ ELBOW_AXIS = (0.0, 0.0, 1.0)          # flexion axis of the default arm
 
 
 class Stabilized:
-    """Viscous regularisation of the quasi-static steps: the residual gets a nodal drag
+    """Viscous regularisation of the quasi-static steps, a ResidualTerm (fabricfem.solvers.system): the residual
+    gets a nodal drag
 
         r_i = c w_i (x_i - x_i^n)      [N]   (backward-Euler viscous force eta v with c = eta / dt)
 
     on the free displacement components of every node (w_i: lumped area [m^2], x^n: the last converged
-    positions), and the Jacobian c w_i I. Tube buckling makes the elastic tangent indefinite on the way
-    to 57 degrees and an unregularised Newton step then fails; the drag keeps the step's tangent positive
-    definite and follows the stable branch, at the price of a fictitious force that is reported
-    (`drag_force`, compared with the contact force in SleeveStep.drag_ratio). c = 0 switches it off.
-    Wraps a ContactProblem with the callback interface the NewtonSolver expects.
-
-    General form (a nodal spring to an anchor): r_i = c w_i (x_i - a_i) with per-node `weights` w_i (default
-    the lumped areas [m^2]) and the anchor a_i set by `commit` (here x^n). fabricfem.wear.sleeve_implicit subclasses it
-    for the backward-Euler inertia and mass damping (w_i = lumped mass [kg], a_i from x^n and v^n).
+    positions, set by `commit`), and the Jacobian c w_i I. Tube buckling makes the elastic tangent indefinite on
+    the way to 57 degrees and an unregularised Newton step then fails; the drag keeps the step's tangent positive
+    definite and follows the stable branch, at the price of a fictitious force that is reported (`drag_force`,
+    compared with the contact force in SleeveStep.drag_ratio). c = 0 switches it off.
     """
 
-    def __init__(self, contact: ContactProblem, coefficient: float, weights: np.ndarray | None = None):
+    def __init__(self, contact: ContactProblem, coefficient: float):
         self.contact = contact
         self.coefficient = float(coefficient)
         nodes = contact.nodes
         self._free = ~nodes.constrained
         self._dofs = nodes.dofs
-        self._area = nodes.area if weights is None else np.asarray(weights, dtype=float)
-        if self._area.shape != nodes.area.shape:
-            raise ValueError(f"weights must have one entry per owned node ({nodes.area.shape}), "
-                             f"got shape {self._area.shape}")
+        self._area = nodes.area
         self.commit()
-
-    def __getattr__(self, name):
-        contact = self.__dict__.get("contact")
-        if contact is None:
-            raise AttributeError(name)
-        return getattr(contact, name)
-
-    def compile(self):
-        self.contact.compile()
-
-    def create_vector(self):
-        return self.contact.create_vector()
-
-    def create_matrix(self):
-        return self.contact.create_matrix()
-
-    def set_load_factor(self, lam: float):
-        self.contact.set_load_factor(lam)
 
     def commit(self):
         """Remember the current (converged) nodal displacements as x^n."""
@@ -161,15 +137,15 @@ class Stabilized:
         local = float(np.max(np.linalg.norm(self.drag(), axis=1), initial=0.0))
         return self.contact.comm.allreduce(local, op=MPI.MAX)
 
-    def residual(self, x, b):
-        self.contact.residual(x, b)
+    def add_residual(self, x, b):
+        """b += the drag on the free displacement rows of the owned nodes."""
         if self.coefficient > 0.0:
             arr = b.getArray()
             f = self.drag()
             arr[self._dofs[self._free]] += f[self._free]
 
-    def jacobian(self, x, A):
-        self.contact.jacobian(x, A)
+    def add_jacobian(self, x, A):
+        """A += c w_i I on the free displacement rows and columns."""
         if self.coefficient > 0.0:
             n = len(self._area)
             blocks = (self.coefficient * self._area)[:, None, None] * np.broadcast_to(np.eye(3), (n, 3, 3))
@@ -178,10 +154,6 @@ class Stabilized:
             rows = self._dofs.astype(PETSc.IntType)
             A.setValuesLocalRCV(rows, rows, blocks, addv=PETSc.InsertMode.ADD_VALUES)
             A.assemble()
-
-    def after_converged_step(self):
-        self.contact.after_converged_step()
-        self.commit()
 
 
 class StepLimiter:
@@ -244,11 +216,16 @@ class SleeveProblem:
     body: Body
     flexion: ElbowFlexion
     solver: NewtonSolver
-    system: Stabilized
+    system: CompositeSystem      # the shell + [contact, drag (Stabilized) or inertia]
 
     @property
     def comm(self):
         return self.model.comm
+
+    @property
+    def drag(self) -> Stabilized:
+        """The last term of `system`: the viscous drag of the quasi-static route."""
+        return self.system.terms[-1]
 
     def time_at(self, angle_deg: float) -> float:
         """Body time t [s] at which the flexion reaches `angle_deg`."""
@@ -317,10 +294,10 @@ def build_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
     flexion = elbow_flexion(config.arm, angular_velocity=math.radians(config.motion.angular_velocity),
                             final_angle=math.radians(config.motion.final_angle))
     body = default_arm(flexion, config.arm)
-    contact = ContactProblem(model, body, method=config.contact.method, penalty=config.contact.penalty, friction=config.contact.friction,
-                             time=flexion.t_start, active_set=config.contact.active_set)
+    contact = ContactProblem(model, body, method=config.contact.method, penalty=config.contact.penalty,
+                             friction=config.contact.friction, time=flexion.t_start, active_set=config.contact.active_set)
     track_elbow_torques(contact, body)
-    system = Stabilized(contact, 0.0)
+    system = CompositeSystem(model, [contact, Stabilized(contact, 0.0)])
     options = {"snes_max_it": config.route.newton_max_iterations}
     options.update(petsc_options or {})
     solver = NewtonSolver(system, options)
@@ -420,11 +397,11 @@ def _solve_once(problem: SleeveProblem) -> tuple[bool, int, str]:
 
 def _drag_ratio(problem: SleeveProblem) -> float:
     """sum |drag| / sum |contact force| over all nodes (0 when no drag acts)."""
-    system, contact = problem.system, problem.contact
-    if system.coefficient == 0.0:
+    term, contact = problem.drag, problem.contact
+    if term.coefficient == 0.0:
         return 0.0
     comm = problem.comm
-    drag = comm.allreduce(float(np.linalg.norm(system.drag(), axis=1).sum()), op=MPI.SUM)
+    drag = comm.allreduce(float(np.linalg.norm(term.drag(), axis=1).sum()), op=MPI.SUM)
     force = comm.allreduce(float(np.linalg.norm(contact.evaluate().force, axis=1).sum()), op=MPI.SUM)
     return drag / force if force > 0.0 else (0.0 if drag == 0.0 else math.inf)
 
@@ -437,10 +414,10 @@ def _equilibrate(problem: SleeveProblem) -> tuple[bool, int, str, float]:
     Newton solve converges from the relaxed state or the drag falls below drag_tolerance x contact force.
     Returns (converged, Newton iterations, reason, remaining drag ratio).
     """
-    cfg, system = problem.config, problem.system
+    cfg, system, drag = problem.config, problem.system, problem.drag
     saved = system.w.x.array.copy()
     saved_multiplier = problem.contact.multiplier.copy()
-    system.coefficient = 0.0
+    drag.coefficient = 0.0
     ok, total, reason = _solve_once(problem)
     if ok or cfg.contact.stabilization == 0.0:
         return ok, total, reason, 0.0
@@ -449,17 +426,17 @@ def _equilibrate(problem: SleeveProblem) -> tuple[bool, int, str, float]:
     coefficient = cfg.contact.stabilization * cfg.membrane_modulus * cfg.fabric.thickness / cfg.tube.radius ** 2
     ratio = math.inf
     for _ in range(cfg.contact.relaxation_steps):
-        system.coefficient = coefficient
+        drag.coefficient = coefficient
         ok, its, reason = _solve_once(problem)
         total += its
         if not ok:
-            system.coefficient = 0.0
+            drag.coefficient = 0.0
             return False, total, f"stabilised: {reason}", ratio
         ratio = _drag_ratio(problem)
-        system.commit()
+        drag.commit()
         relaxed = system.w.x.array.copy()
         relaxed_multiplier = problem.contact.multiplier.copy()
-        system.coefficient = 0.0
+        drag.coefficient = 0.0
         ok, its, reason = _solve_once(problem)
         total += its
         if ok:
@@ -468,11 +445,11 @@ def _equilibrate(problem: SleeveProblem) -> tuple[bool, int, str, float]:
         problem.contact.multiplier = relaxed_multiplier
         if ratio < cfg.contact.drag_tolerance:
             # accept the relaxed state: its fictitious drag is below the tolerance (reported)
-            system.coefficient = coefficient
-            system.commit()
-            system.coefficient = 0.0
+            drag.coefficient = coefficient
+            drag.commit()
+            drag.coefficient = 0.0
             return True, total, "relaxed", ratio
-    system.coefficient = 0.0
+    drag.coefficient = 0.0
     return False, total, f"no equilibrium after {cfg.contact.relaxation_steps} relaxations (drag ratio {ratio:.2e})", ratio
 
 
@@ -527,7 +504,7 @@ def run_quasistatic(problem: SleeveProblem, angles: np.ndarray | None = None,
         raise ValueError(f"radius: the arm penetrates the undeformed sleeve (min gap {gap0:.3e} m)")
     history.initial_gap = gap0
     # start pose: the load factor 1 switches on the dead load (gravity) if any
-    contact.set_load_factor(1.0)
+    system.set_load_factor(1.0)
     ok, its, reason, ratio = _equilibrate(problem)
     if not ok:
         raise SleeveError(f"sleeve: the start pose did not converge ({reason})")

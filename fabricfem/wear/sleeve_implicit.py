@@ -10,10 +10,10 @@ Time stepping: backward Euler with steps dt = (angle step) / omega (angle step =
     M (x - x^n - dt v^n) / dt^2 + alpha M (x - x^n) / dt + R_shell(x) - f_contact(x) = 0,   v = (x - x^n) / dt,
 
 i.e. M a + C v + f_int = F_gravity + f_contact at t^{n+1} (thesis eq. 2.84 with the accelerations and velocities
-of backward Euler). The nodal terms are a spring k_i (x_i - a_i) to an anchor with k_i = m_i (1 + alpha dt) / dt^2
-and a_i = x_i^n + dt v_i^n / (1 + alpha dt) (`InertiaDamping`, the generalised nodal drag of
-fabricfem.wear.sleeve.Stabilized, Jacobian k_i I on the free displacement components). The director rotations carry
-no inertia here (the explicit route's rotary inertia, scaled x100, is t^2 s / 12 = 8e-6 of the translational).
+of backward Euler): the term fabricfem.dynamics.backward_euler.BackwardEulerInertia (shared with the tablecloth drop
+of fabricfem.verify.drape), M ((x - x^n) (1 / dt^2 + alpha / dt) - v^n / dt) with tangent (1 / dt^2 + alpha / dt) M
+on the free displacement rows, in `CompositeSystem(model, [contact, inertia])`. The director rotations carry no
+inertia here (the explicit route's rotary inertia, scaled x100, is t^2 s / 12 = 8e-6 of the translational).
 
 Why backward Euler (not the trapezoidal Newmark rule): the flexion is meant to be quasi-static (damping time
 1 / alpha = 0.1 s, flexion 1.27 s), so second-order accuracy of the inertia is not needed, whereas the
@@ -55,16 +55,17 @@ from mpi4py import MPI
 
 from fabricfem.body.arm import default_arm, elbow_flexion
 from fabricfem.contact.problem import ContactProblem
+from fabricfem.dynamics.backward_euler import BackwardEulerInertia
 from fabricfem.dynamics.mass import lumped_mass
 from fabricfem.materials import positive_number
 from fabricfem.solvers.newton import NewtonSolver, SolverError
+from fabricfem.solvers.system import CompositeSystem
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.sleeve import (
     SleeveError,
     SleeveHistory,
     SleeveProblem,
     SleeveStep,
-    Stabilized,
     StepLimiter,
     sleeve_shell,
     track_elbow_torques,
@@ -82,69 +83,6 @@ TIE_FRACTION = 0.1
 CREASE_WIDTH = 2e-3
 ACTIVE_SET_MAX_ITERATIONS = 30   # Newton iterations of one active-set solve before the plain fallback (_solve_step)
 TRACE_COLUMNS = ("t_s", "angle_deg", "torque_Nm", "max_penetration_m", "newton_iterations", "dt_s")
-
-
-class InertiaDamping(Stabilized):
-    """Backward-Euler inertia and mass damping of the lumped translational masses m_i [kg]:
-
-        r_i += m_i (x_i - x_i^n - dt v_i^n) / dt^2 + alpha m_i (x_i - x_i^n) / dt = k_i (x_i - a_i)   [N]
-
-    with k_i = m_i (1 + alpha dt) / dt^2 [N/m] and a_i = x_i^n + dt v_i^n / (1 + alpha dt) (module docstring);
-    the Jacobian gets k_i I. Held components (shoulder) get nothing. `commit` (after a converged step) sets
-    v^{n+1} = (x - x^n) / dt and x^n <- x; `set_time_step` changes dt for the next step (step halving).
-    Wraps a ContactProblem with the NewtonSolver callback interface (through Stabilized).
-    """
-
-    def __init__(self, contact: ContactProblem, mass: np.ndarray, damping: float, dt: float):
-        mass = np.asarray(mass, dtype=float)
-        if not (mass.ndim == 1 and np.all(np.isfinite(mass)) and np.all(mass > 0.0)):
-            raise ValueError("mass: the lumped nodal masses must be positive and finite [kg]")
-        if not (math.isfinite(damping) and damping >= 0.0):
-            raise ValueError(f"damping must be a number >= 0 [1/s], got {damping!r}")
-        self.damping = float(damping)
-        self.dt = positive_number("dt", dt)
-        self.displacement: np.ndarray | None = None    # u^n (N, 3) [m]
-        self.velocity: np.ndarray | None = None        # v^n (N, 3) [m/s]
-        super().__init__(contact, self._coefficient(self.dt), weights=mass)   # commits u^n, v^n = 0
-
-    @property
-    def mass(self) -> np.ndarray:
-        """(N,) lumped translational masses [kg] of the owned nodes."""
-        return self._area
-
-    def _coefficient(self, dt: float) -> float:
-        return (1.0 + self.damping * dt) / dt ** 2      # [1/s^2]: k_i = m_i x this
-
-    def _set_anchor(self):
-        self._previous = self.displacement + self.dt * self.velocity / (1.0 + self.damping * self.dt)
-
-    def set_time_step(self, dt: float):
-        """Use step dt [s] for the next solve (from the committed x^n, v^n)."""
-        self.dt = positive_number("dt", dt)
-        self.coefficient = self._coefficient(self.dt)
-        self._set_anchor()
-
-    def commit(self):
-        """After a converged step: v^{n+1} = (x - x^n) / dt, x^n <- x (at construction: the state at rest)."""
-        u = self.contact.w.x.array[self._dofs].copy()
-        if self.displacement is None:
-            self.velocity = np.zeros_like(u)
-        else:
-            self.velocity = np.where(self._free, (u - self.displacement) / self.dt, 0.0)
-        self.displacement = u
-        self._set_anchor()
-
-    def predict(self):
-        """Start the next solve from x^n + dt v^n (free components of the owned nodes, ghosts updated)."""
-        w = self.contact.w
-        free = self._free
-        w.x.array[self._dofs[free]] = (self.displacement + self.dt * self.velocity)[free]
-        w.x.scatter_forward()
-
-    def kinetic_energy(self) -> float:
-        """1/2 sum m_i |v_i^n|^2 [J] over all ranks."""
-        local = 0.5 * float(np.sum(self._area * np.sum(self.velocity ** 2, axis=1)))
-        return self.contact.comm.allreduce(local, op=MPI.SUM)
 
 
 class ReturnMapContact(ContactProblem):
@@ -176,13 +114,18 @@ class ReturnMapContact(ContactProblem):
 
 @dataclass
 class ImplicitSleeve(SleeveProblem):
-    """The sleeve set up for backward Euler (`build_implicit`); system is the InertiaDamping wrapper."""
+    """The sleeve set up for backward Euler (`build_implicit`); system is the shell + [contact, inertia]."""
 
     dt: float = 0.0               # s, nominal step = angle step / omega
     settle_steps: int = 0         # steps of rest before the flexion (t_start = settle_steps x dt)
     record_time: float = 0.0      # s, duration of a record interval (output_angle_step / omega)
     trace: list = field(default_factory=list)   # per accepted step: TRACE_COLUMNS
     energy_form: object = None
+
+    @property
+    def inertia(self) -> BackwardEulerInertia:
+        """The backward-Euler inertia term of `system`."""
+        return self.system.terms[-1]
 
     def trace_array(self) -> np.ndarray:
         """(steps, 6) array of the per-step TRACE_COLUMNS (rest steps have angle 0)."""
@@ -226,10 +169,8 @@ def build_implicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                                tie_tolerance=TIE_FRACTION * config.contact.augmentation_tolerance, crease_width=CREASE_WIDTH)
     track_elbow_torques(contact, body)
     model.compile()
-    masses = lumped_mass(model, rotational=False)
-    mass = masses.array[contact.nodes.dofs[:, 0]].copy()     # the same on the three components of a node
-    masses.destroy()
-    system = InertiaDamping(contact, mass, config.damping, dt)
+    inertia = BackwardEulerInertia(model, lumped_mass(model, rotational=False), config.damping, dt)
+    system = CompositeSystem(model, [contact, inertia])
     # backtracking line search on the residual norm: without it Newton 2-cycled (residual alternating between
     # 1.2e-2 and 1.4e-2 N for 60 iterations) on nodes switching between stick and slip while the sleeve settles on
     # the arm (mesh I, 4 steps per degree), and the steps were halved below min_angle_step; with it the settling
@@ -297,6 +238,7 @@ def run_implicit(problem: ImplicitSleeve, on_step: Callable[[SleeveStep], None] 
     with stop_on_failure=False, the history up to the last record with `history.failure` set. `max_wall_time`
     [s] stops the same way. `history.timings` gets cpu_s (time.process_time of the run) and steps."""
     cfg, contact, system, flexion = problem.config, problem.contact, problem.system, problem.flexion
+    inertia = problem.inertia
     t0, cpu0 = time.perf_counter(), time.process_time()
     history = SleeveHistory(cfg, ndofs=problem.model.ndofs)
     contact.set_time(0.0)
@@ -304,7 +246,7 @@ def run_implicit(problem: ImplicitSleeve, on_step: Callable[[SleeveStep], None] 
     if gap0 <= 0.0:
         raise ValueError(f"radius: the arm penetrates the undeformed sleeve (min gap {gap0:.3e} m)")
     history.initial_gap = gap0
-    contact.set_load_factor(1.0)            # gravity (the dead load) on
+    system.set_load_factor(1.0)             # gravity (the dead load) on
     min_dt = math.radians(cfg.motion.min_angle_step) / math.radians(cfg.flexion_speed)
     state = {"t": 0.0}
 
@@ -314,8 +256,8 @@ def run_implicit(problem: ImplicitSleeve, on_step: Callable[[SleeveStep], None] 
     def step_once(h: float) -> tuple[bool, int, str]:
         saved = system.w.x.array.copy()
         saved_multiplier = contact.multiplier.copy()
-        system.set_time_step(h)
-        system.predict()
+        inertia.set_time_step(h)
+        inertia.predict()
         contact.set_time(state["t"] + h)
         ok, its, reason = _solve_step(problem)
         if ok:
@@ -365,7 +307,7 @@ def run_implicit(problem: ImplicitSleeve, on_step: Callable[[SleeveStep], None] 
         return SleeveStep(angle=angle, torque=torque, torque_all=problem.resisting_torque_all(),
                           newton_iterations=iterations, max_penetration=penetration,
                           contact_force=float(np.linalg.norm(contact.total_force())), wall=time.perf_counter() - t0,
-                          time_steps=len(window), kinetic_energy=system.kinetic_energy(),
+                          time_steps=len(window), kinetic_energy=inertia.kinetic_energy(),
                           strain_energy=problem.strain_energy())
 
     n_records = round(cfg.motion.final_angle / cfg.motion.output_angle_step)
@@ -374,7 +316,7 @@ def run_implicit(problem: ImplicitSleeve, on_step: Callable[[SleeveStep], None] 
     try:
         its = advance_to(flexion.t_start)
         if problem.settle_steps:
-            history.timings.update(settle_s=flexion.t_start, settle_kinetic_energy=system.kinetic_energy())
+            history.timings.update(settle_s=flexion.t_start, settle_kinetic_energy=inertia.kinetic_energy())
         start = record(0.0, its, flexion.t_start - problem.record_time)
         history.steps.append(start)
         if on_step:
