@@ -36,6 +36,17 @@ def _normalize_rows(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
+def _nonzero_vector(name: str, value: Sequence[float]) -> np.ndarray:
+    """`value` as a finite non-zero 3-vector, else ValueError naming `name`."""
+    try:
+        v = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be 3 finite numbers, got {value!r}") from None
+    if v.shape != (3,) or not np.all(np.isfinite(v)) or not np.linalg.norm(v) > 0:
+        raise ValueError(f"{name} must be a finite non-zero 3-vector (global x, y, z), got {value!r}")
+    return v
+
+
 class ShellModel:
     """Geometrically nonlinear fabric sheet on a `fabricfem.meshes.FabricMesh`.
 
@@ -122,6 +133,7 @@ class ShellModel:
             membrane_density = functools.partial(fabric.membrane_law.ufl_energy,
                                                  parameters=self.membrane_coefficients)
 
+        self.cell_size = self._cell_size()
         if model == "naghdi":
             law = fabric.bending_law
             eps = bending_eps
@@ -131,7 +143,8 @@ class ShellModel:
             self.energy = shell_forms.naghdi_energy(
                 self.u, self.theta, self.phi0, self.n0, (self.a3, self.a1, self.a2), (self.t1, self.t2),
                 self.A, self.D, self.shear_stiffness, self.thickness, law=law, law_eps=eps,
-                degrees=psri_degrees, cell_size=self._cell_size(), membrane_density=membrane_density)
+                degrees=psri_degrees, cell_size=self.cell_size, membrane_density=membrane_density)
+            self.d = shell_forms.director(self.theta, self.a3, self.a1, self.a2)
         else:
             self.energy = shell_forms.membrane_energy(self.u, self.phi0, self.t1, self.t2, self.A,
                                                       membrane_density=membrane_density)
@@ -139,6 +152,7 @@ class ShellModel:
         self.dx = ufl.Measure("dx", domain=mesh)
         self.ds = ufl.Measure("ds", domain=mesh, subdomain_data=fabric_mesh.facet_tags)
         self._external: list = []
+        self._director_loads: list = []   # external work that depends on the current director (moments)
         self._point_loads: list[tuple[np.ndarray, np.ndarray]] = []
         self.bcs: list = []
         self._scaled_bcs: list[tuple[fem.Function, np.ndarray]] = []
@@ -196,11 +210,18 @@ class ShellModel:
         self._external.append(load_forms.surface_pressure(self.v, q, self.n0, self.dx))
 
     def add_edge_moment(self, tag: str, moment: Sequence[float]):
-        """Moment per unit edge length [N m/m] as (m1, m2) about the director axes (t1, t2)."""
+        """Dead moment per unit reference edge length [N m/m] on the edge `tag`: a vector (mx, my, mz) in
+        the global frame (right-handed about its axis, fixed in space while the sheet turns).
+
+        Its virtual work is int m . (d x delta d) dS [Man2006, eqs. 2.47-2.51] (forms.loads.moment_work):
+        the work of a moment about any axis and through finite rotations; the component of m along the
+        current director d does no work (a director has no drilling rotation).
+        """
         if self.model != "naghdi":
             raise ValueError("edge moments need the 'naghdi' model (the membrane has no rotations)")
-        m = fem.Constant(self.mesh, PETSc.ScalarType(moment))
-        self._external.append(load_forms.edge_moment(self.eta, m, self._ds(tag)))
+        m = fem.Constant(self.mesh, PETSc.ScalarType(_nonzero_vector("moment", moment)))
+        delta_d = ufl.derivative(self.d, self.w, self.w_test)
+        self._director_loads.append(load_forms.moment_work(m, self.d, delta_d, self._ds(tag)))
 
     def add_point_load(self, point: Sequence[float], force: Sequence[float]):
         """Force [N] on the mesh node nearest to `point` (which must be a node, within 1e-8 m)."""
@@ -306,9 +327,13 @@ class ShellModel:
         """JIT-compile the residual and Jacobian forms and assemble F_ref."""
         if self._compiled:
             return
-        self.residual_form = ufl.derivative(self.energy, self.w, self.w_test)
+        internal = ufl.derivative(self.energy, self.w, self.w_test)
+        self.residual_form = internal
+        if self._director_loads:   # moments: configuration-dependent load, in R and (linearised) in J
+            self.residual_form = internal - self.load_factor * sum(self._director_loads[1:], self._director_loads[0])
         self.jacobian_form = ufl.derivative(self.residual_form, self.w, self.w_trial)
         self._R = fem.form(self.residual_form)
+        self._R_internal = fem.form(internal) if self._director_loads else self._R
         self._J = fem.form(self.jacobian_form)
         self.F_ref = fem_petsc.create_vector(self._R)
         with self.F_ref.localForm() as f:
@@ -331,10 +356,11 @@ class ShellModel:
         self.w.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
 
     def _assemble_internal(self, x: PETSc.Vec, b: PETSc.Vec, lift: bool):
+        """b = R(x) (with the moments' work when lift, i.e. for the residual; R_int alone otherwise)."""
         self.set_state(x)
         with b.localForm() as bl:
             bl.set(0.0)
-        fem_petsc.assemble_vector(b, self._R)
+        fem_petsc.assemble_vector(b, self._R if lift else self._R_internal)
         if lift:
             fem_petsc.apply_lifting(b, [self._J], [self.bcs], x0=[x], scale=-1.0)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)

@@ -49,7 +49,7 @@ def rollup(m_values=(0.25, 0.5, 0.75, 1.0), L: float = 1.0, width: float = 0.1, 
     model = strip_model(L, width, E, t, nx, comm=comm)
     EI = E * width * t ** 3 / 12.0
     M = 2.0 * np.pi * EI / L
-    model.add_edge_moment("right", (0.0, -M / width))  # about -y: the strip curls towards +z
+    model.add_edge_moment("right", (0.0, -M / width, 0.0))  # about -y: the strip curls towards +z
     tip = np.array([L, 0.0, 0.0])
     positions = {}
     history = solve_load_path(model, list(m_values), initial_step=0.05,
@@ -109,7 +109,7 @@ def moment_loaded_cantilever(lambdas=(0.5, 1.0, 1.5, 2.0), nx: int = 20) -> list
     with Timer() as timer:
         model, _ = seed_cantilever(nx)
         M = np.pi * SEED_EI / SEED_L
-        model.add_edge_moment("right", (0.0, -M / SEED_WIDTH))
+        model.add_edge_moment("right", (0.0, -M / SEED_WIDTH, 0.0))
         tip = np.array([SEED_L, 0.0, 0.0])
         angles, track = _tip_angle_tracker(model, tip, -1.0)
         values = {}
