@@ -159,6 +159,7 @@ class ShellModel:
         self._compiled = False
         self.rebase = rebase and model == "naghdi"
         self._rotation_prescribed = False
+        self._base_turned = False   # the director base was turned to a symmetry plane (symmetry)
         self._collapsed: dict = {}  # (field, component) -> collapsed subspace and map, for probes
 
     # ------------------------------------------------------------------ fields
@@ -265,6 +266,75 @@ class ShellModel:
                     self._scaled_bcs.append((g, np.full(g.x.array.shape, float(val))))
                 self.bcs.append(fem.dirichletbc(g, dofs, sub))
         return self
+
+    def symmetry(self, where: str, normal: Sequence[float], penalty: float = 1e8):
+        """Mirror symmetry about the plane through the edge `where` with normal n = `normal` (global
+        frame, any direction): on the edge u . n = 0 and d . n = 0 (no displacement through the plane,
+        no rotation of the director out of it).
+
+        d . n = 0 is exact: the director base is turned (everywhere, before any solve, about the
+        reference normal) so that a2 = -n on the edge, where d . n = sin th1, and th1 = 0 is prescribed
+        there; re-basing keeps a2 (rebase_director with th1 = 0). A base already aligned (warp or weft
+        normal to the plane, or a perpendicular plane set before) is kept and th1 or th2 is fixed.
+        u . n = 0 is a penalty energy int_edge k_u / 2 (u . n)^2 dS, k_u = penalty max|A_ij| / h_min
+        [N/m^2] (A the membrane stiffness [N/m], h_min the smallest cell [m]), met to O(1 / penalty)
+        relative (symmetry-plane verify case).
+
+        Raises:
+            ValueError: naming `normal` if it is not a finite non-zero 3-vector, if the plane through the
+                edge does not contain the edge, if the sheet's normal along the edge leaves the plane, or if
+                the base cannot be turned to it (the sheet's normal is parallel to n somewhere, or an
+                earlier symmetry plane is not perpendicular to this one).
+        """
+        if self._compiled:
+            raise ValueError(f"symmetry: add it before the first solve (the forms of {where!r} are compiled)")
+        n = _nonzero_vector("normal", normal)
+        n = n / np.linalg.norm(n)
+        if not (np.isfinite(penalty) and penalty > 0):
+            raise ValueError(f"penalty must be a positive number, got {penalty!r}")
+        nodes = fem.locate_dofs_topological(self.V2, self.mesh.topology.dim - 1, self.fmesh.facets(where))
+        offsets = self.V2.tabulate_dof_coordinates()[nodes] @ n
+        lo = self.comm.allreduce(offsets.min(initial=np.inf), op=MPI.MIN)
+        hi = self.comm.allreduce(offsets.max(initial=-np.inf), op=MPI.MAX)
+        size = self.comm.allreduce(float(np.ptp(self.mesh.geometry.x, axis=0).max()), op=MPI.MAX)
+        if hi - lo > 1e-8 * size:
+            raise ValueError(f"normal: the plane with normal {tuple(n)} does not contain the edge {where!r} "
+                             f"(it spans {hi - lo:.3e} m along the normal)")
+        if self._edge_max(np.abs(self.n0.x.array.reshape(-1, 3)[nodes] @ n)) > 1e-6:
+            raise ValueError(f"normal: the sheet's normal along {where!r} leaves the plane with normal "
+                             f"{tuple(n)}; no mirror symmetry there")
+        if self.model == "naghdi":
+            self.constrain(where, theta=self._symmetry_angle(nodes, n))
+        h_min = self.comm.allreduce(float(self.cell_size.x.array.min(initial=np.inf)), op=MPI.MIN)
+        k_u = penalty * float(np.abs(self.A.value).max()) / h_min
+        n_c = fem.Constant(self.mesh, PETSc.ScalarType(n))
+        self.energy = self.energy + 0.5 * k_u * ufl.dot(self.u, n_c) ** 2 * self._ds(where)
+        return self
+
+    def _edge_max(self, values: np.ndarray) -> float:
+        return self.comm.allreduce(float(values.max(initial=0.0)), op=MPI.MAX)
+
+    def _symmetry_angle(self, nodes: np.ndarray, n: np.ndarray) -> tuple[float | None, float | None]:
+        """The angle constraint (th1 = 0 or th2 = 0) that holds d . n = 0 on `nodes`, turning the director
+        base about n0 so that a2 = -n there when neither a1 nor a2 is along n yet."""
+        a1, a2 = (f.x.array.reshape(-1, 3) for f in (self.a1, self.a2))
+        if self._edge_max(1.0 - np.abs(a2[nodes] @ n)) < 1e-10:
+            return (0.0, None)
+        if self._edge_max(1.0 - np.abs(a1[nodes] @ n)) < 1e-10:
+            return (None, 0.0)
+        if self._base_turned:
+            raise ValueError(f"normal: {tuple(n)} is not perpendicular to an earlier symmetry plane (one "
+                             "director base cannot be aligned with both)")
+        n0 = self.n0.x.array.reshape(-1, 3)
+        b1 = np.cross(n0, n)
+        if self.comm.allreduce(float(np.linalg.norm(b1, axis=1).min(initial=1.0)), op=MPI.MIN) < 1e-6:
+            raise ValueError(f"normal: the sheet's normal is parallel to {tuple(n)} somewhere; the director base "
+                             "cannot be turned to the plane")
+        b1 = _normalize_rows(b1)
+        self.a1.x.array[:] = b1.reshape(-1)
+        self.a2.x.array[:] = np.cross(n0, b1).reshape(-1)
+        self._base_turned = True
+        return (0.0, None)
 
     def clamp(self, where: Locator):
         """All displacements and rotations zero."""
