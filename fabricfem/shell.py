@@ -460,21 +460,29 @@ class ShellModel:
         return fem_petsc.create_vector(self._R)
 
     # ----------------------------------------------------------------- probes
-    def owned_node_dof(self, point: Sequence[float], field: str, component: int) -> int | None:
-        """Local index (in W) of `field` component at the node at `point` on its owning rank, else None."""
+    def owned_node_dof(self, point: Sequence[float], field: str, component: int,
+                       side: str | None = None) -> int | None:
+        """Local index (in W) of `field` component at the node at `point` on its owning rank, else None;
+        `side`: an edge tag, to pick among coincident nodes the one on that edge."""
         key = (field, component)
         if key not in self._collapsed:
             self._collapsed[key] = self._subspace(field, component).collapse()
         V, to_parent = self._collapsed[key]
-        node = probe.owned_node(V, point)
+        candidates = None
+        if side is not None:
+            candidates = fem.locate_dofs_topological(V, self.mesh.topology.dim - 1, self.fmesh.facets(side))
+        node = probe.owned_node(V, point, candidates)
         return None if node is None else int(to_parent[node])
 
-    def node_value(self, point: Sequence[float], field: str = "u") -> np.ndarray:
-        """Displacement [m] (field "u") or rotation angles [rad] ("theta") at a mesh node, on all ranks."""
+    def node_value(self, point: Sequence[float], field: str = "u", side: str | None = None) -> np.ndarray:
+        """Displacement [m] (field "u") or rotation angles [rad] ("theta") at a mesh node, on all ranks.
+
+        Where nodes coincide (the two sides of a slit or a seam) `side` names the edge tag whose node is
+        read; without it such a point is refused (ValueError naming `side`)."""
         n = 3 if field == "u" else 2
         out = np.zeros(n)
         for i in range(n):
-            dof = self.owned_node_dof(point, field, i)
+            dof = self.owned_node_dof(point, field, i, side)
             if dof is not None:
                 out[i] = self.w.x.array[dof]
         return self.comm.allreduce(out, op=MPI.SUM)
