@@ -29,7 +29,7 @@ def rollup_demo(out: str = "results/demo", comm=MPI.COMM_WORLD) -> list[list[flo
         model.clamp("left")
         B1 = FABRIC.bending_matrix[0, 0] * WIDTH  # bending stiffness of the strip [N m^2]
         M = 2.0 * np.pi * B1 / LENGTH
-        model.add_edge_moment("right", (0.0, -M / WIDTH))
+        model.add_edge_moment("right", (0.0, -M / WIDTH, 0.0))
         say(f"roll-up demo: {model.ndofs} dofs, end moment up to {M:.3e} N m")
         series = io.SurfaceSeries(out / "rollup.xdmf", model.mesh)
         series.write(model.displacement(), 0.0)

@@ -8,20 +8,29 @@ from dolfinx import fem
 from mpi4py import MPI
 
 
-def owned_node(V: fem.FunctionSpace, point: Sequence[float]) -> int | None:
+def owned_node(V: fem.FunctionSpace, point: Sequence[float], candidates: np.ndarray | None = None) -> int | None:
     """Local block index of the node of V at `point` on the owning rank, None on the others.
 
-    Raises ValueError when no node lies within 1e-8 (relative to the domain size) of `point`.
+    `candidates` (local block indices) restricts the search, e.g. to the nodes of one side of a slit.
+    Raises ValueError when no node lies within 1e-8 (relative to the domain size) of `point`, or when
+    several distinct nodes do (coincident nodes: pass the side's candidates).
     """
     comm = V.mesh.comm
     X = V.tabulate_dof_coordinates()
     n_owned = V.dofmap.index_map.size_local
     dist = np.linalg.norm(X[:n_owned] - np.asarray(point, dtype=float), axis=1)
+    if candidates is not None:
+        allowed = np.zeros(n_owned, dtype=bool)
+        allowed[candidates[candidates < n_owned]] = True
+        dist[~allowed] = np.inf
     local_best = dist.min() if n_owned else np.inf
     best = comm.allreduce(local_best, op=MPI.MIN)
     scale = comm.allreduce(max(1.0, float(np.abs(X).max(initial=0.0))), op=MPI.MAX)
     if best > 1e-8 * scale:
         raise ValueError(f"point {tuple(point)} is not a mesh node (nearest node {best:.3e} m away)")
+    if comm.allreduce(int(np.count_nonzero(dist <= 1e-8 * scale)), op=MPI.SUM) > 1:
+        raise ValueError(f"side: {tuple(point)} holds coincident nodes (a slit or seam); name the edge tag "
+                         "of the side to read")
     owner = comm.allreduce(comm.rank if local_best == best else comm.size, op=MPI.MIN)
     return int(np.argmin(dist)) if comm.rank == owner else None
 

@@ -36,6 +36,17 @@ def _normalize_rows(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
+def _nonzero_vector(name: str, value: Sequence[float]) -> np.ndarray:
+    """`value` as a finite non-zero 3-vector, else ValueError naming `name`."""
+    try:
+        v = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be 3 finite numbers, got {value!r}") from None
+    if v.shape != (3,) or not np.all(np.isfinite(v)) or not np.linalg.norm(v) > 0:
+        raise ValueError(f"{name} must be a finite non-zero 3-vector (global x, y, z), got {value!r}")
+    return v
+
+
 class ShellModel:
     """Geometrically nonlinear fabric sheet on a `fabricfem.meshes.FabricMesh`.
 
@@ -122,6 +133,7 @@ class ShellModel:
             membrane_density = functools.partial(fabric.membrane_law.ufl_energy,
                                                  parameters=self.membrane_coefficients)
 
+        self.cell_size = self._cell_size()
         if model == "naghdi":
             law = fabric.bending_law
             eps = bending_eps
@@ -131,7 +143,8 @@ class ShellModel:
             self.energy = shell_forms.naghdi_energy(
                 self.u, self.theta, self.phi0, self.n0, (self.a3, self.a1, self.a2), (self.t1, self.t2),
                 self.A, self.D, self.shear_stiffness, self.thickness, law=law, law_eps=eps,
-                degrees=psri_degrees, cell_size=self._cell_size(), membrane_density=membrane_density)
+                degrees=psri_degrees, cell_size=self.cell_size, membrane_density=membrane_density)
+            self.d = shell_forms.director(self.theta, self.a3, self.a1, self.a2)
         else:
             self.energy = shell_forms.membrane_energy(self.u, self.phi0, self.t1, self.t2, self.A,
                                                       membrane_density=membrane_density)
@@ -139,12 +152,14 @@ class ShellModel:
         self.dx = ufl.Measure("dx", domain=mesh)
         self.ds = ufl.Measure("ds", domain=mesh, subdomain_data=fabric_mesh.facet_tags)
         self._external: list = []
+        self._director_loads: list = []   # external work that depends on the current director (moments)
         self._point_loads: list[tuple[np.ndarray, np.ndarray]] = []
         self.bcs: list = []
         self._scaled_bcs: list[tuple[fem.Function, np.ndarray]] = []
         self._compiled = False
         self.rebase = rebase and model == "naghdi"
         self._rotation_prescribed = False
+        self._base_turned = False   # the director base was turned to a symmetry plane (symmetry)
         self._collapsed: dict = {}  # (field, component) -> collapsed subspace and map, for probes
 
     # ------------------------------------------------------------------ fields
@@ -196,11 +211,18 @@ class ShellModel:
         self._external.append(load_forms.surface_pressure(self.v, q, self.n0, self.dx))
 
     def add_edge_moment(self, tag: str, moment: Sequence[float]):
-        """Moment per unit edge length [N m/m] as (m1, m2) about the director axes (t1, t2)."""
+        """Dead moment per unit reference edge length [N m/m] on the edge `tag`: a vector (mx, my, mz) in
+        the global frame (right-handed about its axis, fixed in space while the sheet turns).
+
+        Its virtual work is int m . (d x delta d) dS [Man2006, eqs. 2.47-2.51] (forms.loads.moment_work):
+        the work of a moment about any axis and through finite rotations; the component of m along the
+        current director d does no work (a director has no drilling rotation).
+        """
         if self.model != "naghdi":
             raise ValueError("edge moments need the 'naghdi' model (the membrane has no rotations)")
-        m = fem.Constant(self.mesh, PETSc.ScalarType(moment))
-        self._external.append(load_forms.edge_moment(self.eta, m, self._ds(tag)))
+        m = fem.Constant(self.mesh, PETSc.ScalarType(_nonzero_vector("moment", moment)))
+        delta_d = ufl.derivative(self.d, self.w, self.w_test)
+        self._director_loads.append(load_forms.moment_work(m, self.d, delta_d, self._ds(tag)))
 
     def add_point_load(self, point: Sequence[float], force: Sequence[float]):
         """Force [N] on the mesh node nearest to `point` (which must be a node, within 1e-8 m)."""
@@ -244,6 +266,75 @@ class ShellModel:
                     self._scaled_bcs.append((g, np.full(g.x.array.shape, float(val))))
                 self.bcs.append(fem.dirichletbc(g, dofs, sub))
         return self
+
+    def symmetry(self, where: str, normal: Sequence[float], penalty: float = 1e8):
+        """Mirror symmetry about the plane through the edge `where` with normal n = `normal` (global
+        frame, any direction): on the edge u . n = 0 and d . n = 0 (no displacement through the plane,
+        no rotation of the director out of it).
+
+        d . n = 0 is exact: the director base is turned (everywhere, before any solve, about the
+        reference normal) so that a2 = -n on the edge, where d . n = sin th1, and th1 = 0 is prescribed
+        there; re-basing keeps a2 (rebase_director with th1 = 0). A base already aligned (warp or weft
+        normal to the plane, or a perpendicular plane set before) is kept and th1 or th2 is fixed.
+        u . n = 0 is a penalty energy int_edge k_u / 2 (u . n)^2 dS, k_u = penalty max|A_ij| / h_min
+        [N/m^2] (A the membrane stiffness [N/m], h_min the smallest cell [m]), met to O(1 / penalty)
+        relative (symmetry-plane verify case).
+
+        Raises:
+            ValueError: naming `normal` if it is not a finite non-zero 3-vector, if the plane through the
+                edge does not contain the edge, if the sheet's normal along the edge leaves the plane, or if
+                the base cannot be turned to it (the sheet's normal is parallel to n somewhere, or an
+                earlier symmetry plane is not perpendicular to this one).
+        """
+        if self._compiled:
+            raise ValueError(f"symmetry: add it before the first solve (the forms of {where!r} are compiled)")
+        n = _nonzero_vector("normal", normal)
+        n = n / np.linalg.norm(n)
+        if not (np.isfinite(penalty) and penalty > 0):
+            raise ValueError(f"penalty must be a positive number, got {penalty!r}")
+        nodes = fem.locate_dofs_topological(self.V2, self.mesh.topology.dim - 1, self.fmesh.facets(where))
+        offsets = self.V2.tabulate_dof_coordinates()[nodes] @ n
+        lo = self.comm.allreduce(offsets.min(initial=np.inf), op=MPI.MIN)
+        hi = self.comm.allreduce(offsets.max(initial=-np.inf), op=MPI.MAX)
+        size = self.comm.allreduce(float(np.ptp(self.mesh.geometry.x, axis=0).max()), op=MPI.MAX)
+        if hi - lo > 1e-8 * size:
+            raise ValueError(f"normal: the plane with normal {tuple(n)} does not contain the edge {where!r} "
+                             f"(it spans {hi - lo:.3e} m along the normal)")
+        if self._edge_max(np.abs(self.n0.x.array.reshape(-1, 3)[nodes] @ n)) > 1e-6:
+            raise ValueError(f"normal: the sheet's normal along {where!r} leaves the plane with normal "
+                             f"{tuple(n)}; no mirror symmetry there")
+        if self.model == "naghdi":
+            self.constrain(where, theta=self._symmetry_angle(nodes, n))
+        h_min = self.comm.allreduce(float(self.cell_size.x.array.min(initial=np.inf)), op=MPI.MIN)
+        k_u = penalty * float(np.abs(self.A.value).max()) / h_min
+        n_c = fem.Constant(self.mesh, PETSc.ScalarType(n))
+        self.energy = self.energy + 0.5 * k_u * ufl.dot(self.u, n_c) ** 2 * self._ds(where)
+        return self
+
+    def _edge_max(self, values: np.ndarray) -> float:
+        return self.comm.allreduce(float(values.max(initial=0.0)), op=MPI.MAX)
+
+    def _symmetry_angle(self, nodes: np.ndarray, n: np.ndarray) -> tuple[float | None, float | None]:
+        """The angle constraint (th1 = 0 or th2 = 0) that holds d . n = 0 on `nodes`, turning the director
+        base about n0 so that a2 = -n there when neither a1 nor a2 is along n yet."""
+        a1, a2 = (f.x.array.reshape(-1, 3) for f in (self.a1, self.a2))
+        if self._edge_max(1.0 - np.abs(a2[nodes] @ n)) < 1e-10:
+            return (0.0, None)
+        if self._edge_max(1.0 - np.abs(a1[nodes] @ n)) < 1e-10:
+            return (None, 0.0)
+        if self._base_turned:
+            raise ValueError(f"normal: {tuple(n)} is not perpendicular to an earlier symmetry plane (one "
+                             "director base cannot be aligned with both)")
+        n0 = self.n0.x.array.reshape(-1, 3)
+        b1 = np.cross(n0, n)
+        if self.comm.allreduce(float(np.linalg.norm(b1, axis=1).min(initial=1.0)), op=MPI.MIN) < 1e-6:
+            raise ValueError(f"normal: the sheet's normal is parallel to {tuple(n)} somewhere; the director base "
+                             "cannot be turned to the plane")
+        b1 = _normalize_rows(b1)
+        self.a1.x.array[:] = b1.reshape(-1)
+        self.a2.x.array[:] = np.cross(n0, b1).reshape(-1)
+        self._base_turned = True
+        return (0.0, None)
 
     def clamp(self, where: Locator):
         """All displacements and rotations zero."""
@@ -306,9 +397,13 @@ class ShellModel:
         """JIT-compile the residual and Jacobian forms and assemble F_ref."""
         if self._compiled:
             return
-        self.residual_form = ufl.derivative(self.energy, self.w, self.w_test)
+        internal = ufl.derivative(self.energy, self.w, self.w_test)
+        self.residual_form = internal
+        if self._director_loads:   # moments: configuration-dependent load, in R and (linearised) in J
+            self.residual_form = internal - self.load_factor * sum(self._director_loads[1:], self._director_loads[0])
         self.jacobian_form = ufl.derivative(self.residual_form, self.w, self.w_trial)
         self._R = fem.form(self.residual_form)
+        self._R_internal = fem.form(internal) if self._director_loads else self._R
         self._J = fem.form(self.jacobian_form)
         self.F_ref = fem_petsc.create_vector(self._R)
         with self.F_ref.localForm() as f:
@@ -331,10 +426,11 @@ class ShellModel:
         self.w.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
 
     def _assemble_internal(self, x: PETSc.Vec, b: PETSc.Vec, lift: bool):
+        """b = R(x) (with the moments' work when lift, i.e. for the residual; R_int alone otherwise)."""
         self.set_state(x)
         with b.localForm() as bl:
             bl.set(0.0)
-        fem_petsc.assemble_vector(b, self._R)
+        fem_petsc.assemble_vector(b, self._R if lift else self._R_internal)
         if lift:
             fem_petsc.apply_lifting(b, [self._J], [self.bcs], x0=[x], scale=-1.0)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
@@ -364,21 +460,29 @@ class ShellModel:
         return fem_petsc.create_vector(self._R)
 
     # ----------------------------------------------------------------- probes
-    def owned_node_dof(self, point: Sequence[float], field: str, component: int) -> int | None:
-        """Local index (in W) of `field` component at the node at `point` on its owning rank, else None."""
+    def owned_node_dof(self, point: Sequence[float], field: str, component: int,
+                       side: str | None = None) -> int | None:
+        """Local index (in W) of `field` component at the node at `point` on its owning rank, else None;
+        `side`: an edge tag, to pick among coincident nodes the one on that edge."""
         key = (field, component)
         if key not in self._collapsed:
             self._collapsed[key] = self._subspace(field, component).collapse()
         V, to_parent = self._collapsed[key]
-        node = probe.owned_node(V, point)
+        candidates = None
+        if side is not None:
+            candidates = fem.locate_dofs_topological(V, self.mesh.topology.dim - 1, self.fmesh.facets(side))
+        node = probe.owned_node(V, point, candidates)
         return None if node is None else int(to_parent[node])
 
-    def node_value(self, point: Sequence[float], field: str = "u") -> np.ndarray:
-        """Displacement [m] (field "u") or rotation angles [rad] ("theta") at a mesh node, on all ranks."""
+    def node_value(self, point: Sequence[float], field: str = "u", side: str | None = None) -> np.ndarray:
+        """Displacement [m] (field "u") or rotation angles [rad] ("theta") at a mesh node, on all ranks.
+
+        Where nodes coincide (the two sides of a slit or a seam) `side` names the edge tag whose node is
+        read; without it such a point is refused (ValueError naming `side`)."""
         n = 3 if field == "u" else 2
         out = np.zeros(n)
         for i in range(n):
-            dof = self.owned_node_dof(point, field, i)
+            dof = self.owned_node_dof(point, field, i, side)
             if dof is not None:
                 out[i] = self.w.x.array[dof]
         return self.comm.allreduce(out, op=MPI.SUM)

@@ -15,7 +15,7 @@ import ufl
 from mpi4py import MPI
 
 from fabricfem.meshes import FabricMesh, cylindrical_panel, model_to_mesh, plate, tube
-from fabricfem.meshes.gmsh_io import mesh_from_gmsh
+from fabricfem.meshes.gmsh_io import gmsh_to_dolfinx
 
 COMM = MPI.COMM_WORLD
 serial_only = pytest.mark.skipif(COMM.size > 1, reason="checks process-local topology")
@@ -307,7 +307,7 @@ def _disk_with_two_groups(model) -> None:
 
 @pytest.mark.parametrize("gdim", [2, 3])
 def test_model_to_mesh_cell_tags_and_names(gdim):
-    mesh, cell_tags, facet_tags, names = mesh_from_gmsh(_disk_with_two_groups, COMM, gdim=gdim)
+    mesh, cell_tags, facet_tags, names = gmsh_to_dolfinx(_disk_with_two_groups, COMM, gdim=gdim)
     assert mesh.geometry.dim == gdim
     assert names == {"rim": 7, "9": 9}
     upper = integrate(1.0, ufl.Measure("dx", domain=mesh, subdomain_data=cell_tags)(1))
@@ -324,7 +324,7 @@ def test_model_to_mesh_without_mesh_raises():
         model.geo.addPoint(0, 0, 0)
         model.geo.synchronize()
     with pytest.raises(ValueError, match="^model:.*no mesh"):
-        mesh_from_gmsh(geometry_only, COMM)
+        gmsh_to_dolfinx(geometry_only, COMM)
 
 
 def test_model_to_mesh_bad_gdim():
@@ -380,4 +380,4 @@ def test_build_error_raised_on_all_ranks():
     def broken(model):
         raise RuntimeError("broken geometry")
     with pytest.raises(RuntimeError, match="broken geometry"):
-        mesh_from_gmsh(broken, COMM)
+        gmsh_to_dolfinx(broken, COMM)

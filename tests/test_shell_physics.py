@@ -90,7 +90,7 @@ def test_kawabata_rollup_uniform_curvature(sign):
     m_final = kawabata_moment(K_final)
     assert abs(m_final / (KAWABATA[0] * K_final)) - 1.0 > 0.3  # clearly nonlinear over the load range
     model = strip(Fabric.isotropic(E, 0.0, T, bending_law=KawabataBending(KAWABATA)))
-    model.add_edge_moment("right", (0.0, -m_final))
+    model.add_edge_moment("right", (0.0, -m_final, 0.0))
     errors = {}
 
     def record(lam):
@@ -175,7 +175,7 @@ def test_square_root_rollup_below_and_above_kappa0():
     m_final = sqrt_moment_regularised(2.0 * SQRT_KAPPA0)
     lam_below = sqrt_moment_regularised(0.5 * SQRT_KAPPA0) / m_final
     model = strip(Fabric.isotropic(E, 0.0, T, bending_law=SquareRootBending(SQRT_B0, SQRT_KAPPA0)))
-    model.add_edge_moment("right", (0.0, -m_final))
+    model.add_edge_moment("right", (0.0, -m_final, 0.0))
     errors = {}
 
     def record(lam):
@@ -205,15 +205,15 @@ def test_bending_rigidity_override(case):
     K_final = 1.0 / L_STRIP  # tip rotation 1 rad at load factor 1
     if case == "warp-strip":
         model, along = strip(fabric), "x"
-        model.add_edge_moment("right", (0.0, -K_final * B1))  # about t2 = -(-y): curls towards +z
+        model.add_edge_moment("right", (0.0, -K_final * B1, 0.0))  # about -y: curls towards +z
     elif case == "weft-strip":
         model, along = strip(fabric, along="y"), "y"
-        model.add_edge_moment("top", (K_final * B2, 0.0))     # about t1 = +x: curls towards +z
+        model.add_edge_moment("top", (K_final * B2, 0.0, 0.0))     # about +x: curls towards +z
     else:
         fmesh = plate(L_STRIP, W_STRIP, NX_STRIP, 1, cell="quadrilateral")
         fmesh = dataclasses.replace(fmesh, warp=directions.constant((0.0, 1.0, 0.0)))
         model, along = strip(fabric, fmesh=fmesh), "x"
-        model.add_edge_moment("right", (-K_final * B2, 0.0))  # about -t1 = -y: curls towards +z
+        model.add_edge_moment("right", (0.0, -K_final * B2, 0.0))  # about -y: curls towards +z
     errors = {}
     solve_load_path(model, [0.5, 1.0], initial_step=0.25,
                     on_target=lambda lam: errors.__setitem__(lam, rolled_strip_errors(model, lam * K_final, along)))
@@ -348,7 +348,7 @@ def linear_rollup(nx: int, rebase: bool) -> tuple[ShellModel, float]:
     """Linear strip with an end moment giving tip rotation pi at load factor 1 (K = pi / L)."""
     model = strip(Fabric.isotropic(E, 0.0, T), nx=nx, rebase=rebase)
     K = np.pi / L_STRIP
-    model.add_edge_moment("right", (0.0, -K * B_LINEAR))
+    model.add_edge_moment("right", (0.0, -K * B_LINEAR, 0.0))
     return model, K
 
 

@@ -1,7 +1,8 @@
 """External virtual work of dead loads on the reference surface (SI units).
 
-Each function returns the linear form delta W_ext(v) for a test function v of the
-displacement (or rotation) field; the solver multiplies the sum by the load factor.
+Each function returns the form delta W_ext(v) for a test function v of the displacement (or of
+the director); the solver multiplies the sum by the load factor. All are linear in the state except
+the moment, whose work depends on the current director.
 """
 from __future__ import annotations
 
@@ -23,6 +24,13 @@ def surface_pressure(v, pressure, normal, dx):
     return pressure * ufl.dot(normal, v) * dx
 
 
-def edge_moment(eta, moment, ds):
-    """Moment per unit edge length [N m/m] doing work on the rotation angles: int m . eta dS."""
-    return ufl.dot(moment, eta) * ds
+def moment_work(moment, d, delta_d, ds):
+    """Virtual work of a moment vector m per unit edge length [N m/m] on the unit director d:
+    int m . (d x delta d) dS [Man2006, eqs. 2.47-2.51].
+
+    A virtual rotation delta phi moves the director by delta d = delta phi x d, so
+    d x delta d = delta phi - (d . delta phi) d: the work is m . delta phi for any axis of m and any
+    finite rotation, less the drilling part along d, which a director cannot carry. With m fixed in
+    space (a dead moment) the form depends on d; its derivative is the consistent, non-symmetric tangent.
+    """
+    return ufl.dot(moment, ufl.cross(d, delta_d)) * ds

@@ -4,11 +4,13 @@ Every mesh is a :class:`FabricMesh` (coordinates in metres) carrying the
 warp direction E1 (first material direction), the reference normal N and,
 derived from them, the weft direction E2 = N x E1.
 """
-from .gmsh_io import FabricMesh, model_to_mesh
+from .gmsh_io import FabricMesh, mesh_from_gmsh, model_to_mesh
 from .plate import plate
+from .revolved import annulus, spherical_cap
 from .tube import cylindrical_panel, tube
 
-__all__ = ["FabricMesh", "model_to_mesh", "plate", "tube", "cylindrical_panel"]
+__all__ = ["FabricMesh", "mesh_from_gmsh", "model_to_mesh", "plate", "tube", "cylindrical_panel", "annulus",
+           "spherical_cap"]
 
 # Woven unit cells (3D hexahedral yarn meshes, thesis ch. 4.3)
 from .unit_cell import MeshResolution, UnitCellMesh, unit_cell  # noqa: E402

@@ -40,3 +40,14 @@ def radial_from_x_axis() -> Callable[[np.ndarray], np.ndarray]:
         return out
 
     return field
+
+
+def radial_from_origin() -> Callable[[np.ndarray], np.ndarray]:
+    """Outward unit radial direction ``x / |x|`` (a sphere about the origin); zero at the origin."""
+
+    def field(x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=np.float64)
+        r = np.linalg.norm(x, axis=0)
+        return np.divide(x, r, out=np.zeros_like(x), where=r > 0.0)
+
+    return field

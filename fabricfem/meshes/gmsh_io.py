@@ -25,7 +25,7 @@ warp is the first material direction E1, weft E2 = normal x warp.
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any
 
 import dolfinx.cpp
@@ -36,9 +36,10 @@ from dolfinx.mesh import GhostMode, Mesh, MeshTagsMetaClass
 from mpi4py import MPI
 
 from ._gmsh_session import gmsh_model
-from .fabric_mesh import FabricMesh
+from . import directions
+from .fabric_mesh import DirectionField, FabricMesh
 
-__all__ = ["FabricMesh", "mesh_from_gmsh", "model_to_mesh"]
+__all__ = ["FabricMesh", "gmsh_to_dolfinx", "mesh_from_gmsh", "model_to_mesh"]
 
 # gmsh element type -> (dolfinx/ufl cell name, degree)
 _CELLS: dict[int, tuple[str, int]] = {
@@ -215,8 +216,8 @@ def model_to_mesh(model: Any, comm: MPI.Comm, rank: int = 0, gdim: int = 3,
     return mesh, cell_tags, facet_tags, dict(header["names"])
 
 
-def mesh_from_gmsh(build: Callable[[Any], None], comm: MPI.Comm, rank: int = 0, gdim: int = 3,
-                   name: str = "fabricfem", options: Mapping[str, float] | None = None,
+def gmsh_to_dolfinx(build: Callable[[Any], None], comm: MPI.Comm, rank: int = 0, gdim: int = 3,
+                    name: str = "fabricfem", options: Mapping[str, float] | None = None,
                    ghost_mode: GhostMode = GhostMode.shared_facet,
                    ) -> tuple[Mesh, MeshTagsMetaClass | None, MeshTagsMetaClass, dict[str, int]]:
     """Run ``build(gmsh.model)`` in a fresh gmsh model on ``rank`` and convert it.
@@ -238,3 +239,32 @@ def mesh_from_gmsh(build: Callable[[Any], None], comm: MPI.Comm, rank: int = 0, 
         if error is not None:
             raise error
         return model_to_mesh(model, comm, rank, gdim=gdim, ghost_mode=ghost_mode)
+
+
+def mesh_from_gmsh(build: Callable[[Any], None], warp: Sequence[float] | DirectionField,
+                   normal: Sequence[float] | DirectionField, comm: MPI.Comm = MPI.COMM_WORLD, name: str = "fabricfem",
+                   options: Mapping[str, float] | None = None,
+                   ghost_mode: GhostMode = GhostMode.shared_facet) -> FabricMesh:
+    """Any surface built in gmsh as a distributed, tagged :class:`FabricMesh` (metres).
+
+    ``build(model)`` runs on rank 0 in a fresh ``gmsh.model`` (``options``: numeric gmsh options meanwhile)
+    and must create the geometry, the physical groups and the mesh (``model.mesh.generate(2)``, optionally
+    ``model.mesh.setOrder(2)``): triangles or quadrilaterals, one type. Named physical curves become the
+    edge tags (``FabricMesh.tag(name)``; unnamed ones are keyed by their id as a string).
+
+    Args:
+        build: geometry, physical groups and mesh of the surface in the given gmsh model.
+        warp: unit warp direction tangent to the surface: a constant 3-vector or a field
+            ``x (3, N) -> (3, N)`` (fabricfem.meshes.directions).
+        normal: unit reference normal, oriented like the cells (a 3-vector or a field as ``warp``).
+        comm: communicator of the mesh; gmsh runs on its rank 0 only.
+
+    Raises:
+        ValueError: on every rank, if ``build`` fails or the model cannot be converted (naming the cause), or
+            if ``warp``/``normal`` is a zero vector.
+    """
+    fields = [directions.constant(v) if not callable(v) else v for v in (warp, normal)]
+    mesh, cell_tags, facet_tags, names = gmsh_to_dolfinx(build, comm, 0, gdim=3, name=name, options=options,
+                                                         ghost_mode=ghost_mode)
+    return FabricMesh(mesh=mesh, facet_tags=facet_tags, tags=names, warp=fields[0], normal=fields[1],
+                      cell_tags=cell_tags)

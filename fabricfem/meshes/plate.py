@@ -17,7 +17,7 @@ from collections.abc import Sequence
 from dolfinx.mesh import GhostMode
 from mpi4py import MPI
 
-from . import _validate, directions
+from . import _validate
 from .gmsh_io import FabricMesh, mesh_from_gmsh
 
 # our name -> gmsh transfinite arrangement
@@ -83,9 +83,5 @@ def plate(lx: float, ly: float, nx: int, ny: int, cell: str = "triangle", struct
     diagonal = _validate.choice("diagonal", diagonal, tuple(DIAGONALS))
     p0 = _validate.point3("origin", origin)
     options = _QUAD_OPTIONS if (cell == "quadrilateral" and not structured) else {}
-    mesh, cell_tags, facet_tags, names = mesh_from_gmsh(
-        lambda model: _build(model, p0, lx, ly, nx, ny, cell, bool(structured), diagonal),
-        comm, 0, gdim=3, name="plate", options=options, ghost_mode=ghost_mode)
-    return FabricMesh(mesh=mesh, facet_tags=facet_tags, tags=names,
-                      warp=directions.constant((1.0, 0.0, 0.0)),
-                      normal=directions.constant((0.0, 0.0, 1.0)), cell_tags=cell_tags)
+    return mesh_from_gmsh(lambda model: _build(model, p0, lx, ly, nx, ny, cell, bool(structured), diagonal),
+                          (1.0, 0.0, 0.0), (0.0, 0.0, 1.0), comm, name="plate", options=options, ghost_mode=ghost_mode)

@@ -116,9 +116,5 @@ def _cylinder(length: float, radius: float, n_around: int, n_along: int, cell: s
     n_along = _validate.count("n_along", n_along)
     cell = _validate.choice("cell", cell, _validate.CELLS)
     order = _validate.choice("order", _validate.count("order", order), (1, 2))
-    mesh, cell_tags, facet_tags, names = mesh_from_gmsh(
-        lambda model: _build(model, length, radius, n_around, n_along, cell, order, sector),
-        comm, 0, gdim=3, name=name, ghost_mode=ghost_mode)
-    return FabricMesh(mesh=mesh, facet_tags=facet_tags, tags=names,
-                      warp=directions.constant((1.0, 0.0, 0.0)),
-                      normal=directions.radial_from_x_axis(), cell_tags=cell_tags)
+    return mesh_from_gmsh(lambda model: _build(model, length, radius, n_around, n_along, cell, order, sector),
+                          (1.0, 0.0, 0.0), directions.radial_from_x_axis(), comm, name=name, ghost_mode=ghost_mode)

@@ -28,7 +28,7 @@ typos). Units are SI. Example (scenes/rollup.toml):
     [[load]]
     type = "edge_moment"      # gravity | body_force | edge_traction | pressure | edge_moment | point
     edge = "right"
-    value = [0.0, -1.09e-3]   # N m/m
+    value = [0.0, -1.09e-3, 0.0]   # N m/m, a moment vector (x, y, z)
 
     [solver]
     targets = [0.25, 0.5, 0.75, 1.0]

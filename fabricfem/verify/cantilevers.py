@@ -1,6 +1,7 @@
 """Cantilever strips: roll-up (thesis sec. 2.3.2.2) and the elastica benchmarks of seed 001 sec. 4.1-4.2."""
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -10,7 +11,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fabricfem.materials import Fabric
-from fabricfem.meshes import plate
+from fabricfem.meshes import directions, plate
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.loadstep import solve_load_path
 from fabricfem.verify import Timer, case, references, result
@@ -19,10 +20,14 @@ from fabricfem.verify import Timer, case, references, result
 SEED_L, SEED_EA, SEED_EI, SEED_WIDTH = 1.0, 2.0 * np.sqrt(3.0) * 1e-3, 2.0 * np.sqrt(3.0) * 1e-9, 0.1
 
 
-def strip_model(L: float, width: float, E: float, t: float, nx: int, ny: int = 1, comm=MPI.COMM_WORLD) -> ShellModel:
-    """Strip [0, L] x [0, width] clamped at x = 0 (nu = 0, quadrilaterals)."""
-    model = ShellModel(plate(L, width, nx, ny, cell="quadrilateral", comm=comm), Fabric.isotropic(E, 0.0, t))
-    return model.clamp("left")
+def strip_model(L: float, width: float, E: float, t: float, nx: int, ny: int = 1, comm=MPI.COMM_WORLD,
+                cell: str = "quadrilateral", warp_angle: float = 0.0) -> ShellModel:
+    """Strip [0, L] x [0, width] clamped at x = 0 (nu = 0), its warp at `warp_angle` [rad] to the strip
+    (about +z; the director base starts on warp and weft)."""
+    fmesh = plate(L, width, nx, ny, cell=cell, comm=comm)
+    if warp_angle:
+        fmesh = dataclasses.replace(fmesh, warp=directions.constant((np.cos(warp_angle), np.sin(warp_angle), 0.0)))
+    return ShellModel(fmesh, Fabric.isotropic(E, 0.0, t)).clamp("left")
 
 
 def seed_cantilever(nx: int = 20, comm=MPI.COMM_WORLD) -> tuple[ShellModel, float]:
@@ -43,16 +48,17 @@ def _tip_angle_tracker(model: ShellModel, tip, sign: float):
 
 
 def rollup(m_values=(0.25, 0.5, 0.75, 1.0), L: float = 1.0, width: float = 0.1, t: float = 1e-3, E: float = 1e7,
-           nx: int = 40, comm=MPI.COMM_WORLD) -> tuple[ShellModel, dict[float, np.ndarray], float, list]:
-    """Roll the strip up by an end moment M = m 2 pi EI / L; returns the model, the tip position at each m,
-    EI and the load-step history."""
-    model = strip_model(L, width, E, t, nx, comm=comm)
+           nx: int = 40, comm=MPI.COMM_WORLD, cell: str = "quadrilateral", warp_angle: float = 0.0,
+           max_step: float | None = None) -> tuple[ShellModel, dict[float, np.ndarray], float, list]:
+    """Roll the strip up by an end moment M = m 2 pi EI / L (about -y, whatever the warp); returns the model,
+    the tip position at each m, EI and the load-step history (first step 0.05, capped by max_step)."""
+    model = strip_model(L, width, E, t, nx, comm=comm, cell=cell, warp_angle=warp_angle)
     EI = E * width * t ** 3 / 12.0
     M = 2.0 * np.pi * EI / L
-    model.add_edge_moment("right", (0.0, -M / width))  # about -y: the strip curls towards +z
+    model.add_edge_moment("right", (0.0, -M / width, 0.0))  # about -y: the strip curls towards +z
     tip = np.array([L, 0.0, 0.0])
     positions = {}
-    history = solve_load_path(model, list(m_values), initial_step=0.05,
+    history = solve_load_path(model, list(m_values), initial_step=0.05, max_step=max_step,
                               on_target=lambda m: positions.__setitem__(round(m, 12), tip + model.node_value(tip)))
     return model, positions, EI, history
 
@@ -109,7 +115,7 @@ def moment_loaded_cantilever(lambdas=(0.5, 1.0, 1.5, 2.0), nx: int = 20) -> list
     with Timer() as timer:
         model, _ = seed_cantilever(nx)
         M = np.pi * SEED_EI / SEED_L
-        model.add_edge_moment("right", (0.0, -M / SEED_WIDTH))
+        model.add_edge_moment("right", (0.0, -M / SEED_WIDTH, 0.0))
         tip = np.array([SEED_L, 0.0, 0.0])
         angles, track = _tip_angle_tracker(model, tip, -1.0)
         values = {}
