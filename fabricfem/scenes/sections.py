@@ -123,7 +123,8 @@ class LoadSection:
 
     type: str = doc("gravity | body_force | edge_traction | pressure | edge_moment | point")
     edge: str | None = doc("edge tag (edge loads)", None)
-    value: float | list | None = doc("N/m^3, N/m, Pa, N m/m or N by type", None)
+    value: float | list | None = doc("by type: body force [N/m^3], edge traction [N/m], pressure [Pa], edge moment "
+                                      "vector (x, y, z) [N m/m], point force [N]", None)
     point: list | None = doc("[x, y, z] [m] of a point load", None)
 
 
