@@ -9,11 +9,8 @@
 from __future__ import annotations
 
 import argparse
-import datetime
-import json
 import math
 import os
-import platform
 import sys
 from pathlib import Path
 
@@ -32,64 +29,13 @@ from fabricfem.studies.sleeve import run_methods, run_study, variants
 from fabricfem.studies.sleeve_fit import DEFAULT_LONG_AXIS_FACTOR, FIT_SCALES, fit_configs, run_fit_study
 from fabricfem.studies.unit_cell import previous_runs
 from fabricfem.studies.unit_cell import run_study as run_unit_cell_study
-from fabricfem.verify import CaseResult, load_cases
+from fabricfem.verify import load_cases, load_reproductions
+from fabricfem.verify.report import report
 
 
 def _print(*args, **kw):
     if MPI.COMM_WORLD.rank == 0:
         print(*args, **kw, flush=True)
-
-
-def write_markdown(path: str, results) -> None:
-    """The verification table as Markdown (rank 0), e.g. docs/verification.md."""
-    if MPI.COMM_WORLD.rank != 0:
-        return
-    lines = ["# Verification results\n",
-             f"Produced by `fabricfem verify --markdown {path}` on {datetime.date.today()} "
-             f"({platform.node()}, {MPI.COMM_WORLD.size} rank(s)). A tolerance of inf marks a reported-only row.\n",
-             "| case | quantity | value | reference | rel. error | tolerance | result | dofs | wall [s] |",
-             "|---|---|---|---|---|---|---|---|---|"]
-    for r in results:
-        quantity = r.quantity.replace("|", "\\|")
-        lines.append(f"| {r.case} | {quantity} | {r.value:.6g} | {r.reference:.6g} | {r.rel_error:.2e} | "
-                     f"{r.tolerance:.1e} | {'pass' if r.passed else 'FAIL'} | {r.ndofs} | {r.wall_s:.1f} |")
-    n_fail = sum(not r.passed for r in results)
-    lines.append(f"\n{len(results) - n_fail} passed, {n_fail} failed\n")
-    with open(path, "w") as f:
-        f.write("\n".join(lines))
-
-
-def verify(names: list[str], as_json: bool, markdown: str | None = None) -> int:
-    cases = load_cases()
-    unknown = [n for n in names if n not in cases]
-    if unknown:
-        _print(f"fabricfem verify: unknown case(s) {unknown}; available: {sorted(cases)}", file=sys.stderr)
-        return 2
-    results = []
-    for name in names or list(cases):
-        if not as_json:
-            _print(f"running {name} ...")
-        try:
-            results += cases[name]()
-        except Exception as exc:  # a case that crashes fails, with its reason
-            _print(f"  {name} raised {type(exc).__name__}: {exc}", file=sys.stderr)
-            results.append(CaseResult(name, f"error: {type(exc).__name__}: {exc}", float("nan"), float("nan"),
-                                      float("nan"), 0.0, False, 0, 0.0))
-    if markdown:
-        write_markdown(markdown, results)
-    if as_json:
-        _print(json.dumps([r.as_dict() for r in results], indent=1))
-    else:
-        header = f"{'case':<26} {'quantity':<64} {'value':>12} {'reference':>12} {'rel_err':>9} {'tol':>8} " \
-                 f"{'ok':>4} {'ndofs':>7} {'wall_s':>7}"
-        _print(header)
-        _print("-" * len(header))
-        for r in results:
-            _print(f"{r.case:<26} {r.quantity[:64]:<64} {r.value:>12.5g} {r.reference:>12.5g} {r.rel_error:>9.2e} "
-                   f"{r.tolerance:>8.1e} {'PASS' if r.passed else 'FAIL':>4} {r.ndofs:>7d} {r.wall_s:>7.1f}")
-        n_fail = sum(not r.passed for r in results)
-        _print(f"\n{len(results) - n_fail} passed, {n_fail} failed")
-    return 0 if all(r.passed for r in results) else 1
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -100,6 +46,12 @@ def main(argv: list[str] | None = None) -> int:
     p_verify.add_argument("--json", action="store_true", help="print a JSON list of results")
     p_verify.add_argument("--list", action="store_true", help="list the cases and exit")
     p_verify.add_argument("--markdown", metavar="PATH", help="also write the table as Markdown to PATH")
+    p_reproduce = sub.add_parser("reproduce", help="the source papers' figures and tables beside ours, with each "
+                                                  "deviation's measured cause (a report, not a gate)")
+    p_reproduce.add_argument("cases", nargs="*", help="reproduction names (default: all)")
+    p_reproduce.add_argument("--json", action="store_true", help="print a JSON list of results")
+    p_reproduce.add_argument("--list", action="store_true", help="list the reproductions and exit")
+    p_reproduce.add_argument("--markdown", metavar="PATH", help="also write the table as Markdown to PATH")
     p_run = sub.add_parser("run", help="run a scene file (TOML), e.g. scenes/rollup.toml")
     p_run.add_argument("scene", help="path of the scene file")
     p_scenes = sub.add_parser("scenes", help="the scene-file reference: every section and key with type, default, unit")
@@ -154,12 +106,13 @@ def main(argv: list[str] | None = None) -> int:
                               "fabricfem.studies.unit_cell.TIME_BUDGET)")
     args = parser.parse_args(argv)
 
-    if args.command == "verify":
+    if args.command in ("verify", "reproduce"):
+        registry = load_cases() if args.command == "verify" else load_reproductions()
         if args.list:
-            for name, fn in load_cases().items():
+            for name, fn in registry.items():
                 _print(f"{name:<26} {(fn.__doc__ or '').strip().splitlines()[0]}")
             return 0
-        return verify(args.cases, args.json, args.markdown)
+        return report(registry, args.cases, args.command, args.json, args.markdown)
     if args.command == "run":
         try:
             scene = scene_module.load(args.scene)

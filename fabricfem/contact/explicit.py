@@ -24,7 +24,6 @@ from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
-from dolfinx import fem
 from mpi4py import MPI
 
 from fabricfem.body.ellipsoid import Ellipsoid, _ray_to_surface

@@ -23,7 +23,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from mpi4py import MPI
 from petsc4py import PETSc
 
 from fabricfem.solvers.system import owned_dirichlet_rows

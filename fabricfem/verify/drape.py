@@ -36,7 +36,7 @@ from fabricfem.shell import ShellModel
 from fabricfem.solvers.loadstep import solve_load_path
 from fabricfem.solvers.newton import NewtonResult, NewtonSolver, SolverError
 from fabricfem.solvers.system import CompositeSystem, owned_dirichlet_rows
-from fabricfem.verify import case, result
+from fabricfem.verify import case, reproduction, result
 from fabricfem.verify.particles_cases import (
     AIR_DRAG,
     OVERHANG_SEED_PARTICLE,
@@ -464,7 +464,7 @@ def _drape_rows(name: str, label: str, run: dict, out: list):
                           run["lowest_eigenvalue"], 0.0, math.inf, run["ndofs"], run["wall_s"], scale=1.0))
 
 
-@case("tablecloth-drape", mpi=True)
+@reproduction("tablecloth-drape", mpi=True)
 def tablecloth_drape() -> list:
     """Seed 001 sec. 4.4, static routes, against the experiment row (floor reading).
 
@@ -503,7 +503,7 @@ def tablecloth_drape() -> list:
     return out
 
 
-@case("tablecloth-drop")
+@reproduction("tablecloth-drop")
 def tablecloth_drop() -> list:
     """Seed 001 sec. 4.4, dynamic routes as the seed computed them: the cloth falls from the (imperfect) flat
     state, settles under air drag, then a static Newton polish and a stability check (lowest eigenvalue).

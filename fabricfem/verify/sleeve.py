@@ -29,7 +29,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fabricfem.studies.sleeve import run_study
-from fabricfem.verify import CaseResult, Timer, case, result
+from fabricfem.verify import CaseResult, Timer, case, reproduction, result
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.run import run_sleeve
 
@@ -110,7 +110,7 @@ def trends(figures, tag: str, wall: float) -> list[CaseResult]:
     return out
 
 
-@case("sleeve-trends", known_failure=(
+@reproduction("sleeve-trends", deviation=(
     "evaluated on 57-degree explicit data with gravity (issue 4) in docs/figures/sleeve: parameter figures on mesh "
     "III, mesh series I-IV at mu = 0.1 and 0.5: T(mu=0.5)/T(mu=0.1) at 57 deg = 1.37 passes (0.0325 vs 0.0237 N m); "
     "T(fabric II, III)/T(fabric I) = 198 and 4044 pass; |T(mesh IV) - T(mesh III)| / T at 57 deg, mu = 0.5, = 8.6 % "

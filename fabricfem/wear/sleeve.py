@@ -90,7 +90,6 @@ from fabricfem.contact.explicit import ExplicitBodyContact
 from fabricfem.contact.problem import ContactProblem
 from fabricfem.dynamics import stability
 from fabricfem.dynamics.explicit import CentralDifference
-from fabricfem.materials import Fabric
 from fabricfem.meshes import tube
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.newton import NewtonSolver, SolverError
