@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import argparse
+import logging
 import math
 import os
 import sys
@@ -38,8 +39,14 @@ def _print(*args, **kw):
         print(*args, **kw, flush=True)
 
 
+# errors a user can cause (bad scene values, files, folders): one line on stderr, exit code 2 (--debug: traceback)
+USER_ERRORS = (scene_module.SceneError, ValueError, OSError, UnicodeDecodeError)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="fabricfem", description=__doc__)
+    parser.add_argument("--verbose", action="store_true", help="show the form compiler's and other libraries' INFO lines")
+    parser.add_argument("--debug", action="store_true", help="show the Python traceback of an input error")
     sub = parser.add_subparsers(dest="command", required=True)
     p_verify = sub.add_parser("verify", help="run verification cases against independent references")
     p_verify.add_argument("cases", nargs="*", help="case names (default: all)")
@@ -105,7 +112,19 @@ def main(argv: list[str] | None = None) -> int:
                          help="unit-cell: wall-time budget [s] of each solved load case (default: by cell, "
                               "fabricfem.studies.unit_cell.TIME_BUDGET)")
     args = parser.parse_args(argv)
+    # FFCx's logging.basicConfig and the compiler's (setuptools) root-logger level print every JIT compilation at
+    # INFO: hidden unless --verbose (global, since the level of the root logger is changed by those packages)
+    logging.disable(logging.NOTSET if args.verbose else logging.INFO)
+    try:
+        return _command(args)
+    except USER_ERRORS as exc:
+        if args.debug:
+            raise
+        _print(f"fabricfem {args.command}: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
 
+
+def _command(args) -> int:
     if args.command in ("verify", "reproduce"):
         registry = load_cases() if args.command == "verify" else load_reproductions()
         if args.list:
@@ -114,13 +133,7 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         return report(registry, args.cases, args.command, args.json, args.markdown)
     if args.command == "run":
-        try:
-            scene = scene_module.load(args.scene)
-        except scene_module.SceneError as exc:
-            _print(f"fabricfem run: {exc}", file=sys.stderr)
-            return 2
-        run_scene(scene)
-        return 0
+        return run_scene(scene_module.load(args.scene)).exit_code
     if args.command == "scenes":
         text = scene_module.schema.reference_markdown()
         if args.markdown:

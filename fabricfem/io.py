@@ -6,8 +6,10 @@ owned cells to rank 0.
 from __future__ import annotations
 
 import csv
+import datetime
 import json
 import os
+import time
 import resource
 from pathlib import Path
 from typing import Sequence
@@ -178,3 +180,54 @@ def plot_time_series(path: str | Path, time: Sequence[float], panels: dict[str, 
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100)
     plt.close(fig)
+
+
+class OutputFolder:
+    """The output folder of one run: at the start the files that the previous run listed in its summary.json are
+    removed (no stale output can pass for this run's) and summary.json says "running"; `finish` records the run's
+    status ("completed", "stopped early: ..." or "failed: ..."), the scene's SHA-256, the start and end times and
+    the files the run wrote (modified since its start), merged into the summary the runner may have written."""
+
+    SUMMARY = "summary.json"
+
+    def __init__(self, path: str | Path, scene_sha256: str, comm=MPI.COMM_WORLD):
+        self.path, self.comm, self.scene_sha256 = Path(path), comm, scene_sha256
+        self.started = time.time()
+        error = None
+        if comm.rank == 0:
+            try:
+                self.path.mkdir(parents=True, exist_ok=True)
+                for name in self._read().get("outputs", []):
+                    stale = self.path / name
+                    if "/" not in name and stale.is_file():
+                        stale.unlink()
+                self._write({"status": "running", "scene_sha256": scene_sha256, "started": _iso(self.started)})
+            except OSError as exc:
+                error = f"output.dir: cannot write the output folder {str(self.path)!r} ({exc.strerror or exc})"
+        error = comm.bcast(error, root=0)
+        if error:
+            raise OSError(error)
+
+    def _read(self) -> dict:
+        try:
+            return json.loads((self.path / self.SUMMARY).read_text())
+        except (OSError, ValueError):
+            return {}
+
+    def _write(self, data: dict) -> None:
+        with open(self.path / self.SUMMARY, "w") as f:
+            json.dump(data, f, indent=1, default=str)
+
+    def finish(self, status: str, summary: dict | None = None) -> None:
+        """Record the run's status (and `summary` entries) in summary.json (rank 0)."""
+        if self.comm.rank == 0:
+            outputs = sorted(p.name for p in self.path.iterdir()
+                             if p.is_file() and p.name != self.SUMMARY and p.stat().st_mtime >= self.started - 1.0)
+            data = {**self._read(), **(summary or {}), "status": status, "scene_sha256": self.scene_sha256,
+                    "started": _iso(self.started), "finished": _iso(time.time()), "outputs": outputs}
+            self._write(data)
+        self.comm.barrier()
+
+
+def _iso(t: float) -> str:
+    return datetime.datetime.fromtimestamp(t, datetime.timezone.utc).isoformat(timespec="seconds")

@@ -42,7 +42,7 @@ def test_bad_scene_is_refused_before_meshing(mutate, message):
 @pytest.mark.parametrize("mutate, message", [
     (lambda d: d["fabric"].update(E1=-5e6), r"fabric: E1 must be a positive"),
     (lambda d: d["fabric"].update(nu12=0.9, E1=1e6, E2=3e6), r"nu12"),
-    (lambda d: d["support"][0].update(edge="shoulder"), r"support\[0\].edge: unknown edge 'shoulder'"),
+    (lambda d: d["support"][0].update(edge="shoulder"), r"support\[0\].edge: a plate has no edge 'shoulder'"),
     (lambda d: d["support"][0].update(u=[0, 0]), r"support\[0\].u: expected 3 components"),
     (lambda d: d["support"][0].pop("edge") and d["support"][0].update(point=[0.0011, 0.0, 0.0]),
      r"support\[0\].point: point .* is not a mesh node"),
@@ -67,14 +67,17 @@ def test_run_small_rollup_scene(tmp_path):
     data = rollup_data()
     data["mesh"].update(nx=20, ny=1)
     data["output"].update(dir=str(tmp_path), render=False)
-    history = run_scene(scene_module.validate(data))
+    outcome = run_scene(scene_module.validate(data))
+    history = outcome.result
+    assert outcome.status == "completed" and outcome.exit_code == 0
     assert history[-1].load_factor == pytest.approx(1.0)
     rows = list(csv.reader(open(tmp_path / "history.csv")))
     tip = np.array([0.3, 0.0, 0.0]) + np.array([float(v) for v in rows[-1][2:5]])
     assert np.linalg.norm(tip - [0.0, tip[1], 0.0]) < 0.01 * 0.3
     assert (tmp_path / "solution.xdmf").exists() and (tmp_path / "solution.h5").exists()
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert summary["load_steps"] == len(history)
+    assert summary["load_steps"] == len(history) and summary["status"] == "completed"
+    assert set(summary["outputs"]) >= {"solution.xdmf", "solution.h5", "history.csv"}
     assert 50.0 < summary["peak_memory_mib"] < 1.0e5  # MiB (max over ranks of ru_maxrss)
 
 
@@ -102,3 +105,24 @@ def test_scene_reference_is_generated_from_the_section_dataclasses():
     for section, keys in {**scene_module.schema.SCHEMA, **scene_module.schema.SUB_SCHEMA}.items():
         for key in keys:
             assert f"| {key} |" in text, (section, key)
+
+
+def test_rerun_into_the_same_folder_leaves_no_stale_output(tmp_path):
+    """A first run renders final.png; a rerun of a changed scene (fewer steps, no render) into the same folder
+    removes the first run's outputs before it starts, so nothing of the first run passes for the second's; its
+    summary names the scene (hash) and lists only its own files."""
+    data = rollup_data()
+    data["mesh"].update(nx=10, ny=1)
+    data["solver"]["targets"] = [0.1, 0.2]
+    data["output"].update(dir=str(tmp_path), render=True)
+    first = run_scene(scene_module.validate(data))
+    assert (tmp_path / "final.png").exists() and first.exit_code == 0
+    first_hash = json.loads((tmp_path / "summary.json").read_text())["scene_sha256"]
+    data["solver"]["targets"] = [0.1]
+    data["output"]["render"] = False
+    second = run_scene(scene_module.validate(data))
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert not (tmp_path / "final.png").exists()
+    assert "final.png" not in summary["outputs"] and summary["status"] == "completed"
+    assert summary["scene_sha256"] != first_hash and len(summary["scene_sha256"]) == 64
+    assert len(list(csv.reader(open(tmp_path / "history.csv")))) == 1 + len(second.result)

@@ -131,8 +131,9 @@ def test_sleeve_scene_run_writes_outputs(tmp_path):
     data["motion"].update(final_angle=6.0, output_angle_step=3.0)
     data["output"] = {"dir": str(tmp_path), "render_angles": [6.0]}
     from fabricfem.scenes.run import run_scene
-    history = run_scene(scene_module.validate(data))
-    assert history.completed
+    outcome = run_scene(scene_module.validate(data))
+    history = outcome.result
+    assert history.completed and outcome.exit_code == 0
     for name in ("cloth.xdmf", "cloth.h5", "body.pvd", "body_0002.vtp", "torque.csv", "torque.png",
                  "pressure_06.0deg.png"):
         assert (tmp_path / name).exists(), name

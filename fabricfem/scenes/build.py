@@ -3,6 +3,7 @@ critical time step before meshing). `load` and `validate` are the entry points o
 from __future__ import annotations
 
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -84,9 +85,13 @@ def sleeve_config(data: dict) -> SleeveConfig:
     """The SleeveConfig of a sleeve scene's data ([mesh], [fabric], [body], [motion], [contact], [route]); its
     checks (fabricfem.wear.config) become SceneErrors naming the section and key."""
     fabric, name = data["fabric"], data.get("scene", {}).get("name", "sleeve")
+    build_fabric(fabric)                              # the values' own checks first (sign, range, finite)
+    if fabric["E1"] != fabric["E2"]:
+        raise SceneError(f"fabric.E2: the sleeve uses E1 = E2 [Man2006, sec. 5.3], got E1 = {fabric['E1']} and "
+                         f"E2 = {fabric['E2']}")
     try:
         return SleeveConfig(
-            tube=from_table(TubeSpec, data["mesh"], exclude=("type", "cell", "order")),
+            tube=from_table(TubeSpec, data["mesh"], exclude=("type", "cell", "order", "allow_large")),
             material=FabricSpec(E=fabric["E1"], G=fabric["G12"], nu12=fabric["nu12"], thickness=fabric["thickness"],
                                 density=fabric.get("density", 0.0)),
             motion=from_table(FlexionSpec, data["motion"], exclude=("type",)),
@@ -105,9 +110,36 @@ def sleeve_config(data: dict) -> SleeveConfig:
         raise SceneError(f"{where}: {message}") from None
 
 
+# bytes per degree of freedom of a shell solve (assembly, MUMPS LU fill, outputs): an order-of-magnitude bound used
+# only to refuse meshes far too large for the machine before meshing
+BYTES_PER_DOF = 20e3
+
+
+def estimated_dofs(mesh: dict, model_kind: str = "naghdi") -> int:
+    """Degrees of freedom of a plate or tube scene before meshing: P2 nodes x (5 naghdi, 3 membrane)."""
+    if mesh["type"] == "plate":
+        nodes = (2 * mesh["nx"] + 1) * (2 * mesh["ny"] + 1)
+    else:
+        nodes = 2 * mesh["n_around"] * (2 * mesh["n_along"] + 1)
+    return int(nodes * (5 if model_kind == "naghdi" else 3))
+
+
+def check_size(data: dict) -> None:
+    """Refuse, with the numbers, a mesh whose estimated memory exceeds the machine's physical memory (unless
+    mesh.allow_large)."""
+    mesh = data["mesh"]
+    dofs = estimated_dofs(mesh, data.get("model", {}).get("kind", "naghdi"))
+    need, have = dofs * BYTES_PER_DOF, os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    if need > have and not mesh.get("allow_large", False):
+        raise SceneError(f"mesh: about {dofs:.3g} dofs need about {need / 2**30:.0f} GiB, more than this machine's "
+                         f"{have / 2**30:.0f} GiB; use fewer cells or set mesh.allow_large = true")
+
+
 def check_objects(data: dict) -> None:
     """Checks that need objects: an explicit dynamic scene's numeric dt must not exceed the critical time step
     (unless dynamics.force = true)."""
+    check_size(data)
+    build_fabric(data["fabric"])                      # every fabric value checked before meshing
     if schema.SLEEVE_SECTIONS & set(data):
         sleeve_config(data)
     dyn = data.get("dynamics")

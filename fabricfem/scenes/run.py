@@ -6,10 +6,12 @@ summary that includes the peak resident memory (max over ranks). Outputs of a st
 <dir>/solution.xdmf (ParaView), <dir>/history.csv (load factor, Newton iterations, probe displacement),
 <dir>/final.png and <dir>/summary.json. Outputs of a dynamic scene <name>: <dir>/<name>.xdmf (displacement
 time series), <dir>/<name>.csv (time [s], energies [J], monitors, max vertex Green strain [-], Newton
-iterations), <dir>/<name>.png (monitors and energies over time) and <dir>/<name>_summary.json.
+iterations), <dir>/<name>.png (monitors and energies over time) and <dir>/summary.json.
 """
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import time
 from dataclasses import dataclass, field
@@ -116,20 +118,48 @@ def build_model(scene: Scene, comm=MPI.COMM_WORLD) -> ShellModel:
     return model
 
 
-def run_scene(scene: Scene, comm=MPI.COMM_WORLD):
-    """Run a scene: sleeve scenes (with [body]/[motion]/[contact]) go to fabricfem.wear.sleeve, dynamic ones to
-    run_dynamic_scene, compression scenes (with [limb]) to fabricfem.wear.compression, others are static
-    load-stepping scenes (returns the list of LoadStep)."""
-    if "body" in scene.data:
-        config = sleeve_config(scene.data)
-        output = section(OutputSection, scene.get("output"))
-        return run_sleeve_scene(config, Path(output.dir or f"results/{config.name}"), output.render,
-                                output.render_angles, output.body_samples, comm)
-    if "dynamics" in scene.data:
-        return run_dynamic_scene(scene, comm)
-    if "limb" in scene.data:
-        return run_compression_scene(scene, comm)
-    return run_static_scene(scene, comm)
+@dataclass
+class SceneOutcome:
+    """What `fabricfem run` did: the runner's result, its status ("completed" or "stopped early: <why>") and the
+    output folder; `exit_code` is 0 only for a completed run."""
+
+    result: object
+    status: str
+    out: Path
+
+    @property
+    def exit_code(self) -> int:
+        return 0 if self.status == "completed" else 1
+
+
+def scene_sha256(scene: Scene) -> str:
+    """SHA-256 of the scene's data (canonical JSON): identifies the scene a summary belongs to."""
+    return hashlib.sha256(json.dumps(scene.data, sort_keys=True, default=str).encode()).hexdigest()
+
+
+def run_scene(scene: Scene, comm=MPI.COMM_WORLD) -> SceneOutcome:
+    """Run a scene by its kind (static load stepping, dynamic, sleeve, compression) into its output folder
+    (io.OutputFolder: the previous run's outputs are removed first, summary.json records the status)."""
+    out = output_dir(scene)
+    folder = io.OutputFolder(out, scene_sha256(scene), comm)
+    try:
+        if scene.kind == "sleeve":
+            config = sleeve_config(scene.data)
+            output = section(OutputSection, scene.get("output"))
+            result = run_sleeve_scene(config, out, output.render, output.render_angles, output.body_samples, comm)
+        elif scene.kind == "dynamic":
+            result = run_dynamic_scene(scene, comm)
+        elif scene.kind == "compression":
+            result = run_compression_scene(scene, comm)
+        else:
+            result = run_static_scene(scene, comm)
+    except Exception as exc:
+        folder.finish(f"failed: {' '.join(str(exc).split())}")
+        raise
+    failure = getattr(result, "failure", "")
+    status = f"stopped early: {failure}" if failure else "completed"
+    folder.finish(status)
+    return SceneOutcome(result, status, out)
 
 
 def run_static_scene(scene: Scene, comm=MPI.COMM_WORLD) -> list[LoadStep]:
@@ -317,7 +347,7 @@ def _progress(comm, n_steps: int, say):
 
 
 def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD) -> DynamicRun:
-    """Integrate a [dynamics] scene from rest to end_time; write <name>.xdmf/.csv/.png/_summary.json."""
+    """Integrate a [dynamics] scene from rest to end_time; write <name>.xdmf/.csv/.png and summary.json."""
     say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
     spec = scene["dynamics"]
     d = section(DynamicsSection, spec)
@@ -373,7 +403,7 @@ def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD) -> DynamicRun:
                "peak_memory_mib": memory["max_mib"], "peak_memory_total_mib": memory["total_mib"],
                "peak_memory_per_rank_mib": memory["per_rank_mib"]}
     outputs = {"xdmf": xdmf, "csv": out / f"{name}.csv", "png": out / f"{name}.png",
-               "summary": out / f"{name}_summary.json"}
+               "summary": out / "summary.json"}
     io.write_json(outputs["summary"], summary, comm)
     say(f"done: {n_steps} steps in {run_wall:.1f} s (total {wall:.1f} s); final kinetic {summary['kinetic_J']:.4g} J, "
         f"strain {summary['strain_J']:.4g} J, external work {summary['external_work_J']:.4g} J, dissipated "
@@ -395,7 +425,7 @@ def run_compression_scene(scene, comm=MPI.COMM_WORLD) -> dict | None:
                      np.array(scene["limb"]["radii"], dtype=float))
     donning = section(DonningSection, scene.get("donning"))
     name = section(SceneSection, scene.get("scene")).name or "compression"
-    out = Path(section(OutputSection, scene.get("output")).dir or f"results/{name}")
+    out = output_dir(scene)
     fmesh = build_mesh(scene["mesh"], comm)
     start, steps = donning_start(scene.data), int(donning.steps)
     say(f"{name}: tube R = {scene['mesh']['radius']} m on a limb of radii {limb.radii.tolist()} m, growing from "

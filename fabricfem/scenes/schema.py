@@ -203,6 +203,8 @@ MOVED_KEYS = {"motion.steps": "motion.angle_steps", "motion.solver": "route.solv
 COMPRESSION_SECTIONS = {"limb", "donning"}           # a scene with any of them is a compression scene
 BODY_TYPES = {"default_arm"}
 MOTION_TYPES = {"elbow_flexion"}
+CELLS = ("quadrilateral", "triangle")
+EDGES = {"plate": ("left", "right", "bottom", "top"), "tube": ("end0", "end1")}   # edge tags of the builders
 MESH_KEYS = {"plate": {"lx", "ly", "nx", "ny"}, "tube": {"length", "radius", "n_around", "n_along"}}
 LOAD_TYPES = {"gravity", "body_force", "edge_traction", "pressure", "edge_moment", "point"}
 
@@ -299,14 +301,42 @@ def validate(data: dict, source: str = "scene") -> Scene:
     missing = MESH_KEYS[mesh["type"]] - set(mesh)
     if missing:
         raise SceneError(f"mesh: a {mesh['type']} needs {sorted(missing)}")
+    for key in sorted(MESH_KEYS[mesh["type"]]):
+        _finite(f"mesh.{key}", mesh[key], 0.0)
+    if mesh.get("cell", "quadrilateral") not in CELLS:
+        raise SceneError(f"mesh.cell: unknown cell {mesh['cell']!r}{_suggest(mesh['cell'], CELLS)}; allowed: {CELLS}")
+    edges = EDGES[mesh["type"]]
     for i, load in enumerate(data.get("load", [])):
         if load["type"] not in LOAD_TYPES:
             raise SceneError(f"load[{i}].type: unknown load {load['type']!r}{_suggest(load['type'], LOAD_TYPES)}")
+        if "value" in load:
+            value = load["value"]
+            _numbers(f"load[{i}].value", value if isinstance(value, list) else [value])
+        if "point" in load:
+            _numbers(f"load[{i}].point", load["point"], 3)
+        if "edge" in load and load["edge"] not in edges:
+            raise SceneError(f"load[{i}].edge: a {mesh['type']} has no edge {load['edge']!r}"
+                             f"{_suggest(load['edge'], edges)}; edges: {list(edges)}")
     for i, support in enumerate(data.get("support", [])):
         if ("edge" in support) == ("point" in support):
             raise SceneError(f"support[{i}]: give exactly one of 'edge' (an edge name) or 'point' = [x, y, z]")
         if "point" in support:
             _numbers(f"support[{i}].point", support["point"], 3)
+        for key, n in (("u", 3), ("theta", 2)):
+            if key in support:
+                values = support[key]
+                if not isinstance(values, list) or len(values) != n:
+                    raise SceneError(f"support[{i}].{key}: expected {n} components (numbers or \"free\"), "
+                                     f"got {values!r}")
+                _numbers(f"support[{i}].{key}", [0.0 if v == "free" else v for v in values], n)
+        if "edge" in support and support["edge"] not in edges:
+            raise SceneError(f"support[{i}].edge: a {mesh['type']} has no edge {support['edge']!r}"
+                             f"{_suggest(support['edge'], edges)}; edges: {list(edges)}")
+    if data.get("output", {}).get("probe") is not None:
+        _numbers("output.probe", data["output"]["probe"], 3)
+    for key in ("E1", "E2", "G12", "nu12", "thickness", "density", "G13"):
+        if key in data["fabric"]:
+            _finite(f"fabric.{key}", data["fabric"][key])
     if kind != inferred:
         raise SceneError(f"scene.kind: {kind!r} does not match the sections given, which make a {inferred!r} scene")
     if not sleeve and SLEEVE_MESH_KEYS & set(mesh):
@@ -326,9 +356,9 @@ def _positive(where: str, value) -> None:
 
 
 def _check_sleeve(data: dict) -> None:
-    """Sleeve scenes: a tube, a known body and motion, E1 = E2; the parameters themselves are checked by
+    """Sleeve scenes: a tube, a known body and motion; the parameters themselves (and E1 = E2) are checked by
     fabricfem.wear.config.SleeveConfig (scenes.build.sleeve_config)."""
-    mesh, body, motion, fabric = data["mesh"], data["body"], data["motion"], data["fabric"]
+    mesh, body, motion = data["mesh"], data["body"], data["motion"]
     if mesh["type"] != "tube":
         raise SceneError(f"mesh.type: a sleeve scene needs a 'tube' mesh, got {mesh['type']!r}")
     if body["type"] not in BODY_TYPES:
@@ -337,8 +367,6 @@ def _check_sleeve(data: dict) -> None:
     if motion["type"] not in MOTION_TYPES:
         raise SceneError(f"motion.type: unknown motion {motion['type']!r}{_suggest(motion['type'], MOTION_TYPES)}; "
                          f"allowed: {sorted(MOTION_TYPES)}")
-    if fabric["E1"] != fabric["E2"]:
-        raise SceneError("fabric.E2: the sleeve uses E1 = E2 (thesis sec. 5.3)")
 
 
 def donning_start(data: dict) -> float:
@@ -535,10 +563,12 @@ def _check_monitors(data: dict) -> None:
 def load(path: str | Path) -> Scene:
     """Read and validate the data of a scene file (checks that need objects: fabricfem.scenes.build.load)."""
     path = Path(path)
-    if not path.exists():
-        raise SceneError(f"scene file {str(path)!r} does not exist")
+    if not path.is_file():
+        raise SceneError(f"scene file {str(path)!r} does not exist or is not a file")
     try:
-        data = tomllib.loads(path.read_text())
+        data = tomllib.loads(path.read_bytes().decode("utf-8"))
+    except UnicodeDecodeError:
+        raise SceneError(f"{path}: not a UTF-8 text file (a scene is a TOML text file)") from None
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{path}: not valid TOML: {exc}") from None
     scene = validate(data, str(path))

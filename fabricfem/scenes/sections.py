@@ -78,6 +78,7 @@ class MeshSection:
     n_along: int | None = doc("tube cells along", None)
     cell: str = doc("quadrilateral | triangle", "quadrilateral")
     order: int = doc("geometry order of the tube (1 or 2)", 1)
+    allow_large: bool = doc("run a mesh whose estimated memory exceeds the machine's (refused otherwise)", False)
 
 
 @dataclasses.dataclass(frozen=True)

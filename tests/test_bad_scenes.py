@@ -1,0 +1,163 @@
+"""Bad scene files through the command line, for every scene kind: exit code 2, one line on stderr that names the
+offending key, no traceback, and nothing meshed (the mesh builders are replaced by a trap)."""
+import math
+import tomllib
+from pathlib import Path
+
+import pytest
+
+from fabricfem import cli
+from fabricfem.scenes import build as scene_build
+from fabricfem.scenes import run as scene_run
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENES = {"static": "rollup.toml", "dynamic": "cantilever_vibration.toml", "explicit": "corner_pinned.toml",
+          "sleeve": "sleeve.toml", "compression": "compression_sleeve.toml"}
+
+
+def _value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float) and not math.isfinite(v):
+        return "nan" if math.isnan(v) else ("inf" if v > 0 else "-inf")
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, list):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{k} = {_value(x)}" for k, x in v.items()) + "}"
+    raise TypeError(v)
+
+
+def dumps(data: dict) -> str:
+    """TOML text of a scene's data (tables, arrays of tables, one level of nested arrays of tables)."""
+    lines = []
+    for section, content in data.items():
+        tables = content if isinstance(content, list) else [content]
+        for table in tables:
+            lines.append(f"[[{section}]]" if isinstance(content, list) else f"[{section}]")
+            nested = {k: v for k, v in table.items() if isinstance(v, list) and v and isinstance(v[0], dict)}
+            lines += [f"{k} = {_value(v)}" for k, v in table.items() if k not in nested]
+            for key, items in nested.items():
+                for item in items:
+                    lines.append(f"[[{section}.{key}]]")
+                    lines += [f"{k} = {_value(v)}" for k, v in item.items()]
+    return "\n".join(lines) + "\n"
+
+
+def _scene(kind: str) -> dict:
+    return tomllib.loads((ROOT / "scenes" / SCENES[kind]).read_text())
+
+
+def _set(section: str, **values):
+    return lambda d: d.setdefault(section, {}).update(values)
+
+
+def _first(section: str, **values):
+    return lambda d: d[section][0].update(values)
+
+
+BAD = [  # (scene kind, mutation, text the one-line error must contain)
+    ("static", _set("fabric", E1=-5e6), "E1"),
+    ("static", _set("fabric", E2=float("inf")), "fabric.E2"),
+    ("static", _set("fabric", E1=float("nan")), "fabric.E1"),
+    ("static", _set("fabric", nu12=0.9, E1=1e6, E2=3e6), "nu12"),
+    ("static", _set("fabric", thickness=0.0), "thickness"),
+    ("static", _set("fabric", G12=-1.0), "G12"),
+    ("static", _set("fabric", thicknes=1e-3), "thicknes"),
+    ("static", _set("mesh", lx=0.0), "mesh.lx"),
+    ("static", _set("mesh", nx=0), "mesh.nx"),
+    ("static", _set("mesh", ny=-2), "mesh.ny"),
+    ("static", _set("mesh", type="disk"), "mesh.type"),
+    ("static", _set("mesh", cell="hexagon"), "mesh.cell"),
+    ("static", _set("mesh", nx=100000, ny=3000), "mesh"),
+    ("static", _first("support", edge="shoulder"), "support[0].edge"),
+    ("static", _first("support", u=[0, 0]), "support[0].u"),
+    ("static", _first("load", value=[0.0, float("nan"), 0.0]), "load[0].value"),
+    ("static", _first("load", value=[0.0, float("inf"), 0.0]), "load[0].value"),
+    ("static", _first("load", edge="tip"), "load[0].edge"),
+    ("static", _set("output", probe=[float("nan"), 0.0, 0.0]), "output.probe"),
+    ("static", _set("output", dir="/proc/fabricfem-cannot-write-here"), "output.dir"),
+    ("static", lambda d: d.update(solverr={}), "solverr"),
+    ("static", lambda d: d["solver"].pop("targets"), "targets"),
+    ("static", _set("scene", kind="dynamic"), "scene.kind"),
+    ("dynamic", _set("dynamics", dt=-1.0), "dynamics.dt"),
+    ("dynamic", _set("dynamics", end_time=0.0), "dynamics.end_time"),
+    ("dynamic", _set("dynamics", integrator="leapfrog"), "dynamics.integrator"),
+    ("dynamic", _set("fabric", density=0.0), "fabric.density"),
+    ("dynamic", _set("dynamics", rayleigh=[-1.0, 0.0]), "dynamics.rayleigh"),
+    ("dynamic", lambda d: d["dynamics"]["monitors"][0].pop("name"), "name"),
+    ("explicit", _set("dynamics", dt="auto", dt_fraction=1.5), "dynamics.dt_fraction"),
+    ("explicit", _set("dynamics", dt=1.0, end_time=10.0), "dynamics.dt"),
+    ("sleeve", _set("fabric", E1=-1.2e6), "E1 must be"),
+    ("sleeve", _set("fabric", E2=2.0e6), "fabric.E2"),
+    ("sleeve", _set("contact", friction=-0.1), "contact.friction"),
+    ("sleeve", _set("contact", method="mortar"), "contact.method"),
+    ("sleeve", _set("route", solver="walking"), "route.solver"),
+    ("sleeve", _set("route", rotary_inertia_scale=0.5), "route.rotary_inertia_scale"),
+    ("sleeve", _set("route", mass_damping=-1.0), "route.mass_damping"),
+    ("sleeve", _set("motion", final_angle=200.0), "motion.final_angle"),
+    ("sleeve", _set("motion", angular_velocity=0.0), "motion.angular_velocity"),
+    ("sleeve", _set("motion", solver="implicit"), "motion.solver"),
+    ("sleeve", _set("mesh", n_around=0), "mesh.n_around"),
+    ("sleeve", _set("body", upper_arm_girth=0.5), "upper_arm_girth"),
+    ("compression", _set("limb", radii=[0.32, -0.04, 0.036]), "limb.radii"),
+    ("compression", _set("limb", center=[0.12, 0.01, 0.0]), "limb.center"),
+    ("compression", _set("mesh", n_around=10), "mesh.n_around"),
+    ("compression", _set("donning", steps=0), "donning.steps"),
+    ("compression", _set("donning", start=1.5), "donning.start"),
+]
+
+
+@pytest.fixture
+def no_meshing(monkeypatch):
+    """Any attempt to mesh fails the test (the refusal must come before meshing)."""
+    def trap(*args, **kwargs):
+        raise AssertionError("meshed before refusing the scene")
+    for module in (scene_build, scene_run):
+        monkeypatch.setattr(module, "build_mesh", trap)
+    monkeypatch.setattr("fabricfem.wear.sleeve.tube", trap)
+
+
+def _run_cli(path: Path, capsys) -> tuple[int, list[str]]:
+    code = cli.main(["run", str(path)])
+    err = capsys.readouterr().err
+    return code, [line for line in err.splitlines() if line.strip()]
+
+
+def test_enough_bad_scenes_of_every_kind():
+    assert len(BAD) >= 40 and {kind for kind, _, _ in BAD} >= {"static", "dynamic", "sleeve", "compression"}
+
+
+@pytest.mark.parametrize("kind, mutate, key", BAD, ids=[f"{k}-{key}-{i}" for i, (k, _, key) in enumerate(BAD)])
+def test_bad_scene_one_line_exit_2_nothing_meshed(kind, mutate, key, tmp_path, capsys, no_meshing):
+    data = _scene(kind)
+    data.setdefault("output", {})
+    data["output"].setdefault("dir", str(tmp_path / "out"))
+    mutate(data)
+    path = tmp_path / "bad.toml"
+    path.write_text(dumps(data))
+    code, lines = _run_cli(path, capsys)
+    assert code == 2 and len(lines) == 1, lines
+    assert key in lines[0] and "Traceback" not in lines[0], lines[0]
+
+
+@pytest.mark.parametrize("content, text", [(b"\xff\xfe\x00[mesh]\x00\x81", "UTF-8"),
+                                           (bytes(range(256)), "UTF-8"),
+                                           (b"[mesh\ntype = ", "not valid TOML")])
+def test_binary_or_broken_scene_file(content, text, tmp_path, capsys, no_meshing):
+    path = tmp_path / "bad.toml"
+    path.write_bytes(content)
+    code, lines = _run_cli(path, capsys)
+    assert code == 2 and len(lines) == 1 and text in lines[0], lines
+
+
+def test_debug_shows_the_traceback(tmp_path):
+    data = _scene("static")
+    data["fabric"]["E1"] = -5e6
+    path = tmp_path / "bad.toml"
+    path.write_text(dumps(data))
+    with pytest.raises(Exception, match="E1"):
+        cli.main(["--debug", "run", str(path)])
