@@ -112,6 +112,7 @@ def main(argv: list[str] | None = None) -> int:
                          help="unit-cell: wall-time budget [s] of each solved load case (default: by cell, "
                               "fabricfem.studies.unit_cell.TIME_BUDGET)")
     args = parser.parse_args(argv)
+    args.argv = sys.argv[1:] if argv is None else list(argv)
     # FFCx's logging.basicConfig and the compiler's (setuptools) root-logger level print every JIT compilation at
     # INFO: hidden unless --verbose (global, since the level of the root logger is changed by those packages)
     logging.disable(logging.NOTSET if args.verbose else logging.INFO)
@@ -175,7 +176,7 @@ def _command(args) -> int:
     if args.command == "study" and args.name == "sleeve-methods":
         # the three contact methods on the sleeve with gravity (fabricfem.studies.sleeve.run_methods); --mesh defaults to
         # III here (the sleeve-fit default is II)
-        given = sys.argv[1:] if argv is None else argv
+        given = args.argv
         mesh = args.mesh if any(a == "--mesh" or a.startswith("--mesh=") for a in given) else "III"
         methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
         try:

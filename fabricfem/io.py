@@ -231,3 +231,22 @@ class OutputFolder:
 
 def _iso(t: float) -> str:
     return datetime.datetime.fromtimestamp(t, datetime.timezone.utc).isoformat(timespec="seconds")
+
+
+class Progress:
+    """Elapsed time and the estimated time left of a run at a done fraction in [0, 1]. The estimate extrapolates
+    the rate measured since the first update, so that the one-off form compilation and set-up before it (about
+    13 s for a new form) do not inflate it."""
+
+    def __init__(self):
+        self.start = time.perf_counter()
+        self.first: tuple[float, float] | None = None    # (time, done) of the first update
+
+    def __call__(self, done: float) -> str:
+        now = time.perf_counter()
+        if self.first is None:
+            self.first = (now, done)
+        t1, d1 = self.first
+        left = ("time left unknown" if done <= d1 else
+                f"about {(now - t1) / (done - d1) * (1.0 - done):6.1f} s left")
+        return f"[{done:5.1%}, {now - self.start:6.1f} s, {left}]"

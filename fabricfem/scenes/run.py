@@ -176,15 +176,13 @@ def run_static_scene(scene: Scene, comm=MPI.COMM_WORLD) -> list[LoadStep]:
     series = io.SurfaceSeries(out / "solution.xdmf", model.mesh)
     series.write(model.displacement(), 0.0)
     rows = []
+    clock = io.Progress()
 
     def progress(step: LoadStep):
         value = model.node_value(probe) if probe is not None else np.full(3, np.nan)
         rows.append([step.load_factor, step.iterations, *value])
-        elapsed = time.perf_counter() - t0
         done = step.load_factor / targets[-1]
-        eta = elapsed * (1 - done) / max(done, 1e-12)
-        say(f"  load factor {step.load_factor:8.4f}  Newton {step.iterations:2d}  [{done:5.1%}, "
-            f"{elapsed:6.1f} s, about {eta:5.1f} s left]")
+        say(f"  load factor {step.load_factor:8.4f}  Newton {step.iterations:2d}  {clock(done)}")
 
     history = solve_load_path(model, targets, solver=solver, initial_step=solver_spec.initial_step,
                               min_step=solver_spec.min_step, progress=progress,
@@ -336,13 +334,13 @@ def build_monitors(spec: list[dict], model: ShellModel, meter: _StrainMeter) -> 
 def _progress(comm, n_steps: int, say):
     """Progress callback of TimeIntegrator.run: about 10 lines with the estimated time left (rank 0)."""
     every = max(1, math.ceil(n_steps / 10))
+    clock = io.Progress()
 
     def report(step: int, total: int, t: float, elapsed: float):
-        if step % every and step != total:
-            return
-        left = elapsed / step * (total - step)
-        say(f"  step {step:6d}/{total}  t = {t:.5g} s  [{step / total:5.1%}, {elapsed:7.1f} s, "
-            f"about {left:6.1f} s left]")
+        if step == 1 or step % every == 0 or step == total:
+            line = clock(step / total)
+            if step != 1:
+                say(f"  step {step:6d}/{total}  t = {t:.5g} s  {line}")
     return report
 
 
@@ -417,7 +415,7 @@ def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD) -> DynamicRun:
 
 
 def run_compression_scene(scene, comm=MPI.COMM_WORLD) -> dict | None:
-    """`fabricfem run` for compression scenes ([limb], optional [donning], fabricfem.scenes.schema): don the tube onto the
+    """`fabricfem run` for compression scenes ([limb], optional [donning]): don the tube onto the
     limb with progress lines (rank 0) and write `pressure_report` into output.dir (default results/<name>)."""
     say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
     fabric = build_fabric(scene["fabric"])                       # before meshing: a bad fabric fails fast

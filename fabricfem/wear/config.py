@@ -59,7 +59,8 @@ class TubeSpec:
         _positive(self, "length", "radius")
         _positive_int(self, "n_around", "n_along")
         q = self.quadrature
-        if not (isinstance(q, tuple) and len(q) == 2 and all(isinstance(d, int) and d >= 1 for d in q) and q[0] >= q[1]):
+        degrees_ok = isinstance(q, tuple) and len(q) == 2 and all(isinstance(d, int) and d >= 1 for d in q)
+        if not (degrees_ok and q[0] >= q[1]):
             raise ValueError(f"quadrature must be (full, reduced) positive integer degrees with full >= reduced, "
                              f"got {q!r}")
 
@@ -81,7 +82,7 @@ class FabricSpec:
         _positive(self, "E", "G", "thickness")
         _non_negative(self, " [kg/m^3]", "density")
         if self.fabric_name is not None:
-            for key in ("E", "G", "nu12", "thickness", "density"):   # the stored fabric gives them: not silently ignored
+            for key in ("E", "G", "nu12", "thickness", "density"):   # the stored fabric gives them: not ignored
                 if getattr(self, key) != type(self).__dataclass_fields__[key].default:
                     raise ValueError(f"{key}: given together with fabric_name {self.fabric_name!r}, whose stored "
                                      f"fabric sets it; give one or the other")

@@ -34,6 +34,7 @@ class WearRecorder:
         self.xdmf = dio.XDMFFile(comm, str(self.out / "cloth.xdmf"), "w")
         self.xdmf.write_mesh(model.mesh)
         self.frames: list[tuple[float, str]] = []
+        self.renders: list[str] = []     # names of the pressure renders written
 
     def record(self, step) -> None:
         """Write the record of `step` (its angle [deg] is the time coordinate of the files)."""
@@ -51,8 +52,10 @@ class WearRecorder:
             self.frames.append((step.angle, name))
         while self.render and self.pending and step.angle >= self.pending[0] - 1e-9:
             angle = self.pending.pop(0)
-            render_pressure(self.out / f"pressure_{angle:04.1f}deg.png", run,
-                            f"{run.config.name}: elbow {step.angle:.1f} deg, contact pressure [Pa]", step.angle)
+            name = f"pressure_{angle:04.1f}deg.png"
+            title = f"{run.config.name}: elbow {step.angle:.1f} deg, contact pressure [Pa]"
+            render_pressure(self.out / name, run, title, step.angle)
+            self.renders.append(name)
 
     def close(self, history) -> None:
         """Close the XDMF file and write torque.csv, body.pvd and torque.png."""

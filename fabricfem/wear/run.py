@@ -8,6 +8,7 @@ from typing import Callable
 from mpi4py import MPI
 
 from fabricfem.wear.config import SleeveConfig
+from fabricfem import io as fio
 from fabricfem.wear.contract import WearRun
 from fabricfem.wear.recorder import WearRecorder
 from fabricfem.wear.sleeve import SleeveHistory, SleeveStep, build_explicit, build_sleeve, format_breakdown
@@ -45,17 +46,16 @@ def run_sleeve_scene(config: SleeveConfig, out: Path, render: bool = True, rende
     t0 = time.perf_counter()
     run = build_run(config, comm)
     say(f"sleeve: {config.tube.n_around} x {config.tube.n_along} Q2 tube, {run.model.ndofs} dofs, {comm.size} rank(s); "
-        f"mu = {config.contact.friction}, {config.contact.method} contact, gravity {'on' if config.route.gravity else 'off'}; "
+        f"mu = {config.contact.friction}, {config.contact.method} contact, "
+        f"gravity {'on' if config.route.gravity else 'off'}; "
         f"flexion to {config.motion.final_angle} deg by {run.describe()}")
     recorder = WearRecorder(run, out, render_angles, render, body_samples)
+    clock = fio.Progress()
 
     def on_step(step: SleeveStep):
         recorder.record(step)
-        done = step.angle / config.motion.final_angle
-        elapsed = time.perf_counter() - t0
-        eta = f"about {elapsed * (1 - done) / done:6.1f} s left" if done > 0 else "time left unknown"
         say(f"  angle {step.angle:6.2f} deg  torque {step.torque:+.4e} N m  {step.work()}  "
-            f"penetration {step.max_penetration:.1e} m  [{done:5.1%}, {elapsed:6.1f} s, {eta}]")
+            f"penetration {step.max_penetration:.1e} m  {clock(step.angle / config.motion.final_angle)}")
 
     history = run.run(on_step=on_step, stop_on_failure=False)
     history.wall = time.perf_counter() - t0
@@ -70,5 +70,5 @@ def run_sleeve_scene(config: SleeveConfig, out: Path, render: bool = True, rende
     if history.failure:
         say(f"STOPPED EARLY: {history.failure}")
     say(f"wrote {out}/cloth.xdmf, body.pvd (+ body_*.vtp), torque.csv, torque.png"
-        + (", pressure_*.png" if render else ""))
+        + "".join(f", {name}" for name in recorder.renders))
     return history

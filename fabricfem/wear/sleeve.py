@@ -274,7 +274,8 @@ def sleeve_shell(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> Shell
     """The sleeve's tube shell: shoulder end (end0) held, optional gravity along -y."""
     # second-order geometry: the Q2 mid-side nodes lie on the circle (on a first-order mesh they sit on the
     # chords, at R cos(pi / n_around): 1.4 mm closer to the arm on mesh I, a third of the 4.3 mm clearance)
-    fmesh = tube(config.tube.length, config.tube.radius, config.tube.n_around, config.tube.n_along, cell="quadrilateral", order=2,
+    t = config.tube
+    fmesh = tube(t.length, t.radius, t.n_around, t.n_along, cell="quadrilateral", order=2,
                  comm=comm)
     # no director re-basing: re-basing moves the discrete equilibrium by O(h^2) between steps (measured on
     # mesh I: a residual of 10% of the contact forces after every step); the rotations stay far from the
@@ -294,13 +295,15 @@ def build_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                             final_angle=math.radians(config.motion.final_angle))
     body = default_arm(flexion, config.arm)
     contact = ContactProblem(model, body, method=config.contact.method, penalty=config.contact.penalty,
-                             friction=config.contact.friction, time=flexion.t_start, active_set=config.contact.active_set)
+                             friction=config.contact.friction, time=flexion.t_start,
+                             active_set=config.contact.active_set)
     track_elbow_torques(contact, body)
     system = CompositeSystem(model, [contact, Stabilized(contact, 0.0)])
     options = {"snes_max_it": config.route.newton_max_iterations}
     options.update(petsc_options or {})
     solver = NewtonSolver(system, options)
-    solver.snes.setLineSearchPreCheck(StepLimiter(model, config.route.max_rotation_step, config.route.max_displacement_step))
+    solver.snes.setLineSearchPreCheck(StepLimiter(model, config.route.max_rotation_step,
+                                                  config.route.max_displacement_step))
     if not config.route.gravity:
         # no dead load: F_ref = 0, the absolute tolerance would be 1e-12 N; use the scale of the contact
         # forces instead (1e-10 of E t L, a force unit of the sleeve)
@@ -449,7 +452,8 @@ def _equilibrate(problem: SleeveProblem) -> tuple[bool, int, str, float]:
             drag.coefficient = 0.0
             return True, total, "relaxed", ratio
     drag.coefficient = 0.0
-    return False, total, f"no equilibrium after {cfg.contact.relaxation_steps} relaxations (drag ratio {ratio:.2e})", ratio
+    reason = f"no equilibrium after {cfg.contact.relaxation_steps} relaxations (drag ratio {ratio:.2e})"
+    return False, total, reason, ratio
 
 
 def _predict(problem: SleeveProblem, angle_from: float, angle_to: float, touching: float = 1e-3):
@@ -546,7 +550,8 @@ def run_quasistatic(problem: SleeveProblem, angles: np.ndarray | None = None,
             step *= 0.5
             if step < cfg.motion.min_angle_step:
                 message = (f"sleeve: Newton failed at elbow angle {trial:.4g} deg ({reason}); the angle step fell "
-                           f"below min_angle_step = {cfg.motion.min_angle_step} deg; last converged angle {current:.4g} deg")
+                           f"below min_angle_step = {cfg.motion.min_angle_step} deg; last converged angle "
+                           f"{current:.4g} deg")
                 if stop_on_failure:
                     raise SleeveError(message, last_converged_load_factor=current, reason=reason)
                 if current > history.steps[-1].angle:

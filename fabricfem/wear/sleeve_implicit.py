@@ -159,14 +159,17 @@ def build_implicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
     dt = positive_number("dt (angle step / angular_velocity)", math.radians(angle_step) / omega)
     record_time = math.radians(config.motion.output_angle_step) / omega
     # rest before the flexion: settle_time (in fabric I's time units under dynamic similarity), whole steps
-    settle_steps = (math.ceil(config.motion.settle_time / config.similarity_factor / dt - 1e-9) if config.route.gravity else 0)
+    settle_steps = (math.ceil(config.motion.settle_time / config.similarity_factor / dt - 1e-9)
+                    if config.route.gravity else 0)
     model = sleeve_shell(config, comm)
     flexion = elbow_flexion(config.arm, angular_velocity=omega, final_angle=math.radians(config.motion.final_angle),
                             t_start=settle_steps * dt)
     body = default_arm(flexion, config.arm)
-    contact = ReturnMapContact(model, body, method=config.contact.method, penalty=config.contact.penalty, friction=config.contact.friction,
+    contact = ReturnMapContact(model, body, method=config.contact.method, penalty=config.contact.penalty,
+                               friction=config.contact.friction,
                                time=0.0, active_set=config.contact.active_set,
-                               tie_tolerance=TIE_FRACTION * config.contact.augmentation_tolerance, crease_width=CREASE_WIDTH)
+                               tie_tolerance=TIE_FRACTION * config.contact.augmentation_tolerance,
+                               crease_width=CREASE_WIDTH)
     track_elbow_torques(contact, body)
     model.compile()
     inertia = BackwardEulerInertia(model, lumped_mass(model, rotational=False), config.damping, dt)
@@ -181,7 +184,8 @@ def build_implicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
         options["snes_atol"] = 1e-10 * config.membrane_modulus * config.fabric.thickness * config.tube.length
     options.update(petsc_options or {})
     solver = NewtonSolver(system, options)
-    solver.snes.setLineSearchPreCheck(StepLimiter(model, config.route.max_rotation_step, config.route.max_displacement_step))
+    solver.snes.setLineSearchPreCheck(StepLimiter(model, config.route.max_rotation_step,
+                                                  config.route.max_displacement_step))
     return ImplicitSleeve(config, model, contact, body, flexion, solver, system, dt=dt, settle_steps=settle_steps,
                           record_time=record_time, energy_form=fem.form(model.energy))
 
