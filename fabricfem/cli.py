@@ -75,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
                               "speed-accuracy: t = 0.3 s, two levels per method, one timing)")
     p_study = sub.add_parser("study", help="parameter studies (CSV + PNG per figure)")
     p_study.add_argument("name", choices=["sleeve", "unit-cell", "fabric-link", "sleeve-fit", "sleeve-methods"],
-                         help="study to run (sleeve: thesis sec. 5.3; unit-cell: thesis sec. 4.3.5, Figs. 21-28, 32-33)")
+                         help="study to run (sleeve: [Man2006, sec. 5.3]; unit-cell: [Man2006, sec. 4.3.5], Figs. 21-28, 32-33)")
     p_study.add_argument("--quick", action="store_true", help="coarse mesh and few angle steps (reduced)")
     p_study.add_argument("--out", default="results/sleeve_study")
     p_study.add_argument("--fine", choices=["I", "II", "III", "IV"], default="III",

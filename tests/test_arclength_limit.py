@@ -1,7 +1,7 @@
 """Arc-length continuation through a limit point: snap-through of a shallow arch.
 
 A shallow sinusoidal arch z = H sin(pi x / L) (half model, symmetric at the crown, pinned ends) under a
-crown load has a limit point. The limit load found by arc-length continuation (load control, seed 001
+crown load has a limit point. The limit load found by arc-length continuation (load control, [Eischen2000]
 eqs. 19-26) is compared with the one from displacement control of the crown (prescribed deflection,
 load = crown reaction), an independent way of tracing the same curve through the limit point.
 """

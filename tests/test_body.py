@@ -89,7 +89,7 @@ def test_closest_point_against_brute_force():
 
 
 def test_gap_error_order_and_thesis_projection():
-    """One cast projects along grad f at x (thesis Box 5) onto the surface; the default two casts
+    """One cast projects along grad f at x [Man2006, Box 5] onto the surface; the default two casts
     approximate the exact distance with relative error decreasing ~ d^4 (16x per halving of d)."""
     e = Ellipsoid(np.zeros(3), random_rotation(5), [0.25, 0.05, 0.1])
     rng = np.random.default_rng(6)
@@ -136,7 +136,7 @@ def test_posing_reproduces_joints_and_marker_plane():
         L = np.linalg.norm(J2 - J1)
         seg = Segment("s", "j1", "j2", "m", (L / 2, 0.05, 0.03))
         e = seg.pose({"j1": J1, "j2": J2, "m": M})
-        np.testing.assert_allclose(e.center, (J1 + J2) / 2, atol=1e-14)  # thesis sec. 5.1 centre
+        np.testing.assert_allclose(e.center, (J1 + J2) / 2, atol=1e-14)  # [Man2006, sec. 5.1] centre
         R = e.rotation
         np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-14)
         assert np.linalg.det(R) > 0
@@ -150,7 +150,7 @@ def test_posing_reproduces_joints_and_marker_plane():
 
 
 def test_elbow_flexion_angle_vs_time():
-    """alpha(t) = omega t up to 57 deg, then held (thesis sec. 5.3), measured on the posed forearm."""
+    """alpha(t) = omega t up to 57 deg, then held [Man2006, sec. 5.3], measured on the posed forearm."""
     body = default_arm()
     flex = body.kinematics
     omega = math.radians(45.0)

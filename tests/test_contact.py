@@ -1,4 +1,4 @@
-"""Contact layer: friction return mapping, nodal contact in the shell, explicit Box 5 projection, joint torque.
+"""Contact layer: friction return mapping, nodal contact in the shell, explicit [Man2006, Box 5] projection, joint torque.
 
 The verification cases `capstan-friction` and `signorini-penetration` (fabricfem/verify/contact.py) run
 in tests/test_verify.py; here: unit checks against closed forms / finite differences, a physical
@@ -202,7 +202,7 @@ def test_joint_torque_adjacent_segments_closed_form():
 # ------------------------------------------------------------------------------------------ explicit
 def test_explicit_particle_leaves_sphere_at_two_thirds():
     """A frictionless particle sliding from rest at angle theta0 from the top of a sphere leaves it at
-    cos(theta) = 2/3 cos(theta0) (energy + normal force zero). Box 5 with dt = 1e-4 s, R = 1 m: measured
+    cos(theta) = 2/3 cos(theta0) (energy + normal force zero). [Man2006, Box 5] with dt = 1e-4 s, R = 1 m: measured
     error 2e-3 at dt = 1e-3 and 2e-4 at 1e-4 (first order in dt); tolerance 1e-3."""
     R, g, dt, theta0 = 1.0, 9.81, 1e-4, 0.1
     body = Ellipsoid(np.zeros(3), np.eye(3), np.full(3, R))

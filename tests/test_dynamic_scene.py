@@ -199,7 +199,7 @@ def test_cantilever_vibration_scene(tmp_path):
 def test_corner_pinned_scene(tmp_path):
     """scenes/corner_pinned.toml as shipped (explicit, strain limit 0.01, t = 0.1 s).
 
-    * Every recorded max vertex strain is at most limit + tol (the projection's stopping rule, seed 002
+    * Every recorded max vertex strain is at most limit + tol (the projection's stopping rule, [Peng2022]
       eq. 33-34: max C < tol after each step).
     * The scene reproduces the corner-pinned-strain-limit verification case's model (run_cloth of
       fabricfem/verify/strain_limit.py, the same setup written in code) to round-off (1e-10 relative).
@@ -227,7 +227,7 @@ def test_corner_pinned_scene(tmp_path):
 def test_obstacle_scene_drop_on_plane(tmp_path):
     """A free 0.2 m membrane square (4 x 4 Q2) released from rest h = 5 mm above a plane, explicit, no drag.
 
-    Q2 lumped masses (thesis eq. 2.82) and the contact's nodal areas (int phi_i dA) are both the tensor
+    Q2 lumped masses [Man2006, eq. 2.82] and the contact's nodal areas (int phi_i dA) are both the tensor
     product of (1/6, 2/3, 1/6): every node is the same mass on the same penalty spring, the sheet stays flat,
     and the corner follows the closed forms:
     * free fall u_z = -g t^2 / 2 before touching (central differences integrate a constant acceleration

@@ -152,7 +152,7 @@ def test_rayleigh_damping_decay(kind):
 @pytest.mark.parametrize("scheme", ["newmark", "explicit"])
 def test_air_drag_rigid_translation(scheme):
     """A free sheet moving rigidly with v0 under air drag f = -eta v decays as v0 exp(-eta t / (rho t))
-    (seed 002 drag, closed form; 1e-4: the trapezoidal/central-difference error per step is
+    ([Peng2022] drag, closed form; 1e-4: the trapezoidal/central-difference error per step is
     (eta dt / rho t)^3 / 12 ~ 1e-9, strain energy stays zero)."""
     rho, t, eta = 500.0, 1e-3, 0.25  # eta / (rho t) = 0.5 1/s
     model = ShellModel(plate(0.2, 0.2, 2, 2, cell="quadrilateral"), Fabric.isotropic(1e5, 0.3, t, density=rho),
@@ -249,7 +249,7 @@ def test_outputs(tmp_path, capsys):
 
 
 def test_critical_time_step_estimate_includes_the_nonlinear_bending_tangent():
-    """Seed 002's cloth with the regularised square-root bending law (initial tangent 2 B0 sqrt(kappa0 / eps)
+    """[Peng2022]'s cloth with the regularised square-root bending law (initial tangent 2 B0 sqrt(kappa0 / eps)
     = 63 B0): its rotational modes set the step (the shear-and-membrane estimate alone was 7x too high).
     The estimate must be conservative and within 12% of the largest discrete frequency (SLEPc) on Q2 and
     P2 + bubble meshes, without and with rotary-inertia scaling. 12%: the three frequency terms are added

@@ -106,7 +106,7 @@ def test_damped_explicit_run_converges_to_the_static_solution(scale):
 
 
 def _project_reference(x, ellipsoids, passes=8, tol=1e-12):
-    """The projection of Box 5 done the plain way: every point against every segment in every pass
+    """The projection of [Man2006, Box 5] done the plain way: every point against every segment in every pass
     (Ellipsoid.gap with one ray cast), the deepest segment first (the algorithm before the vectorised search)."""
     out = np.array(x, dtype=float)
     scale = np.array([e.radii.min() for e in ellipsoids])
@@ -197,7 +197,7 @@ def test_projection_frees_points_trapped_where_two_segments_overlap():
     into the cone of the outward normals of the segments it was inside of (d . n_k >= 0: the direction of a
     frictionless contact force against two rigid bodies). Before the crease fallback the one-segment
     projections sent such points back and forth and the flexion stopped (mesh II, mu = 0.1 at 47 deg and
-    R = 0.07 m at 53 deg with gravity, issue 4)."""
+    R = 0.07 m at 53 deg with gravity)."""
     from fabricfem.body.ellipsoid import Ellipsoid
     from fabricfem.contact.explicit import _normalised_radii, project_with_segment
     elbow = np.array([0.335, 0.0, 0.0])

@@ -36,3 +36,21 @@ def test_layers_are_the_folders():
     assert (ROOT / "fabricfem" / "meshes" / "__init__.py").exists()
     assert not (ROOT / "forms").exists() and not (ROOT / "meshes").exists()
     assert "package-dir" not in (ROOT / "pyproject.toml").read_text()
+
+
+def test_citations_resolve_to_the_references():
+    """Every citation key used in code and docs ([Key, place] or [Key]) is listed in docs/references.md; no source
+    is cited as "seed 00x" or "thesis 000", and no issue number stands as a citation outside docs/findings."""
+    import re
+    listed = set(re.findall(r"^\| ([A-Z][A-Za-z]+[0-9]{4}[a-z]?) \|", (ROOT / "docs" / "references.md").read_text(),
+                            flags=re.M))
+    files = [p for p in (ROOT / "fabricfem").rglob("*.py")] + list((ROOT / "tests").glob("*.py"))
+    files += [p for p in (ROOT / "docs").rglob("*.md") if "findings" not in p.parts] + [ROOT / "README.md"]
+    unknown, old_style = set(), []
+    for path in files:
+        text = path.read_text()
+        unknown |= set(re.findall(r"\[([A-Z][A-Za-z]+[0-9]{4}[a-z]?)(?:,[^\]]*)?\]", text)) - listed
+        if path.name != "test_layers.py" and path.name not in ("verification.md", "reproduction.md"):
+            old_style += [f"{path.name}: {m}" for m in re.findall(r"[Ss]eed 00\d|thesis 000|\bissue \d{1,3}\b", text)]
+    assert not unknown, sorted(unknown)
+    assert not old_style, old_style

@@ -1,4 +1,4 @@
-"""Particle (mass-spring) cloth model against independent references (closed forms, elastica, seed 001 tables)."""
+"""Particle (mass-spring) cloth model against independent references (closed forms, elastica, [Eischen2000] tables)."""
 import numpy as np
 import pytest
 
@@ -69,7 +69,7 @@ def test_hanging_chain_static_relaxation_newton():
 
 
 def test_hanging_chain_static_relaxation_seed_algorithm():
-    """Seed 001 sec. 3.2.3 iteration (Disp = C_disp F with the C_acc pseudo-load). Stopped at a resultant of
+    """[Eischen2000, sec. 3.2.3] iteration (Disp = C_disp F with the C_acc pseudo-load). Stopped at a resultant of
     1e-8 of a particle weight, the elongations (n = 10 springs in series) are exact to < n * 1e-8 ~ 1e-6."""
     problem, exact, L0 = _hanging_chain()
     res = relax_seed(problem, tol=1e-8)
@@ -159,7 +159,7 @@ def test_provot_correction_limits_strain():
 
 
 def test_tip_loaded_cantilever_vs_elastica():
-    """Seed 001 sec. 4.1 with 8 particle elements. The seed only says the particle method "produces some error";
+    """[Eischen2000, sec. 4.1] with 8 particle elements. The seed only says the particle method "produces some error";
     we report it and require the tip deflection within 20% of the elastica (task brief). One flexion spring
     per particle with the full stiffness at the clamp over-counts the root compliance: linear theory gives
     w = (n+1)(2n+1)/(6 n^2) P L^3 / (EI) ... 1.195 x the exact 1/3, i.e. ~19% at small loads."""
@@ -174,7 +174,7 @@ def test_tip_loaded_cantilever_vs_elastica():
 
 
 def test_overhanging_beam_vs_seed_table():
-    """Seed 001 sec. 4.3, 24 elements. Tolerance per quantity: the seed's own particle-model error plus
+    """[Eischen2000, sec. 4.3, 24] elements. Tolerance per quantity: the seed's own particle-model error plus
     - for p: b/2 (the lift-off point is only located to a particle, b = 0.25 cm: 5.9% of p),
     - for R_b = w (a + p) - R_c: the same quantization, w b/2 (23.6% of R_b),
     - for the deflection and R_c: 2 percentage points (R_c moves by w (1/2 - a^2/(2 p^2)) b/2 ~ 1% with p).
@@ -193,7 +193,7 @@ def test_overhanging_beam_vs_seed_table():
 
 
 def test_tablecloth_drape_vs_seed_table():
-    """Seed 001 sec. 4.4, 20 x 20 elements, static equilibrium by Newton from the flat sheet (mirror planes).
+    """[Eischen2000, sec. 4.4, 20] x 20 elements, static equilibrium by Newton from the flat sheet (mirror planes).
     Required: the table (and floor) carry the weight within 1e-6 (vertical equilibrium of the whole cloth:
     the mirror supports only fix horizontal coordinates; the residual is 1e-9 of a particle's weight).
     Reported against the experiment row (floor reading, fabricfem.verify.drape.reading_admissibility): the

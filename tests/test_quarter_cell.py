@@ -1,4 +1,4 @@
-"""Anti-symmetric periodicity of the quarter unit cell (thesis 000 sec. 4.3.3, Fig. 19 option B):
+"""Anti-symmetric periodicity of the quarter unit cell ([Man2006, sec. 4.3.3], Fig. 19 option B):
 PeriodicPair with a point map (x, y, z) -> (x - Lx, y, -z) and component signs (1, 1, -1)."""
 import dolfinx.mesh as dmesh
 import numpy as np

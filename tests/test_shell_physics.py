@@ -69,7 +69,7 @@ def rolled_strip_errors(model: ShellModel, K: float, along: str = "x") -> tuple[
 
 
 # ----------------------------------------------------- 1. Kawabata bending law
-# Seed 001 eq. 15: M(K) = a1 K + a2 K^2 + a3 K^3 per unit width, extended oddly. a1 is close to the
+# [Eischen2000, eq. 15]: M(K) = a1 K + a2 K^2 + a3 K^3 per unit width, extended oddly. a1 is close to the
 # linear rigidity E t^3/12 of the sheet; dM/dK = a1 + 2 a2 K + 3 a3 K^2 > 0 for all K because
 # 4 a2^2 - 12 a1 a3 < 0 (monotone law). At the final curvature pi / (2 L) the law is 67% stiffer
 # than its linear part (asserted below, so the test really exercises the nonlinearity), and the
@@ -107,13 +107,13 @@ def test_kawabata_rollup_uniform_curvature(sign):
 
 
 # -------------------------------------------------- 2. square-root bending law
-# Seed 002 eq. 9: m = 2 B0 sqrt(kappa0 |K|) for |K| <= kappa0, B0 (|K| + kappa0) beyond.
+# [Peng2022, eq. 9]: m = 2 B0 sqrt(kappa0 |K|) for |K| <= kappa0, B0 (|K| + kappa0) beyond.
 SQRT_B0, SQRT_KAPPA0 = 3e-5, 5.0  # N m, 1/m
 SQRT_EPS = 1e-3 * SQRT_KAPPA0     # the model's default regularisation of |K| (ShellModel bending_eps)
 
 
 def sqrt_moment(K: float) -> float:
-    """Exact law of seed 002 eq. 9 (reference, independent of fabricfem.materials)."""
+    """Exact law of [Peng2022, eq. 9] (reference, independent of fabricfem.materials)."""
     k = abs(K)
     m = 2.0 * SQRT_B0 * np.sqrt(SQRT_KAPPA0 * k) if k <= SQRT_KAPPA0 else SQRT_B0 * (k + SQRT_KAPPA0)
     return float(np.sign(K) * m)

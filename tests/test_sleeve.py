@@ -1,4 +1,4 @@
-"""Sleeve scene (thesis sec. 5.3): scene validation, start clearance, moment balance of the elbow torque,
+"""Sleeve scene [Man2006, sec. 5.3]: scene validation, start clearance, moment balance of the elbow torque,
 outputs, and the same torque history on 1 and 2 MPI ranks. Quick variants (mesh I, <= 6 degrees). The moment
 balance and the active-set / step-limiter tests use the quasi-static route (solver="quasistatic"); the scene
 run and the MPI test the default explicit route."""

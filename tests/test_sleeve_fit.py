@@ -146,8 +146,8 @@ def test_energy_split_of_an_inflated_tube():
 # ------------------------------------------------------------------------ elbow taper (task B2): r1 = f L
 def test_long_semi_axis_reaches_the_ellipsoids():
     """r1 = f L: the posed ellipsoids of the study's arm (fit_configs -> SleeveConfig.arm -> default_arm) have
-    semi-axes (f L, r, r), centres at the joint midpoints (thesis sec. 5.1), and their far tips lie on the
-    surface: f(x^c +- r1 e1) = 0 (implicit function of the ellipsoid, thesis eq. 3.61; rounding only)."""
+    semi-axes (f L, r, r), centres at the joint midpoints [Man2006, sec. 5.1], and their far tips lie on the
+    surface: f(x^c +- r1 e1) = 0 (implicit function of the ellipsoid, [Man2006, eq. 3.61]; rounding only)."""
     from fabricfem.body.arm import default_arm
     cfg = fit_configs((1.0,), mesh="I", long_axis_factor=0.7)[1.0]["R=0.06 t=1mm"]
     assert cfg.arm.long_axis_factor == 0.7 and cfg.arm.upper_arm_girth == DEFAULT_ARM.upper_arm_girth
@@ -165,7 +165,7 @@ def test_long_semi_axis_reaches_the_ellipsoids():
 @pytest.mark.parametrize("factor", [0.5, 0.6, 0.7, 1.0])
 def test_elbow_radius_against_the_ellipsoid_surface(factor):
     """ArmDimensions.elbow_radius = max r sqrt(1 - (L / 2 / r1)^2) against a direct evaluation: the root in y of
-    the posed ellipsoids' implicit function f(x_elbow, y, 0) = 0 (thesis eq. 3.61), largest over the two
+    the posed ellipsoids' implicit function f(x_elbow, y, 0) = 0 [Man2006, eq. 3.61], largest over the two
     segments, found by bisection (brentq, xtol 1e-13 m: the 1e-9 relative tolerance is its resolution)."""
     from scipy.optimize import brentq
 

@@ -1,4 +1,4 @@
-"""Contact methods of the explicit sleeve (issue 4 three-method table) on a case with a closed-form answer,
+"""Contact methods of the explicit sleeve (the three-method table) on a case with a closed-form answer,
 and dynamic similarity of the sleeve flexion.
 
 Plate on a support: a free square plate (no supports, mu = 0) under its own weight settles by damped central
@@ -6,7 +6,7 @@ differences onto a rigid, nearly flat ellipsoid (radii 1000, 1000, 1 m: the top 
 plate). At rest the contact forces carry the weight (force balance, a conservation law independent of the
 contact algorithm): sum_i f_i = rho t g A. For the penalty law f_i = w_i k_N <-g_i> (w_i = int N_i dA, the
 same weights as the consistent nodal weight of the uniform gravity load) the penetration is then uniform,
--g = rho t g / k_N (closed form), so the penetration falls like 1/k_N; the Lagrange multipliers of Box 5
+-g = rho t g / k_N (closed form), so the penetration falls like 1/k_N; the Lagrange multipliers of [Man2006, Box 5]
 leave no penetration at all and carry the same weight.
 """
 import math
@@ -88,7 +88,7 @@ def test_penalty_penetration_is_weight_over_stiffness(factor):
 
 
 def test_lagrange_contact_carries_the_weight_without_penetration():
-    """Box 5 forward-increment multipliers on the same plate: the time-averaged contact force over the last
+    """[Man2006, Box 5] forward-increment multipliers on the same plate: the time-averaged contact force over the last
     100 steps carries the weight within 1e-4 (the transient has decayed by exp(-12)), and no node penetrates
     by more than 1e-12 m (the projection puts the next predictor on the surface; round-off of positions of
     order 1 m is ~1e-16 m)."""

@@ -43,7 +43,7 @@ class _LostSupport:
 
 
 def _cantilever():
-    """Seed 001 cantilever (8 elements) with the tip load SMALL_LOAD EI / L^2 per unit load factor."""
+    """[Eischen2000] cantilever (8 elements) with the tip load SMALL_LOAD EI / L^2 per unit load factor."""
     model, _ = seed_cantilever(8)
     model.add_edge_traction("right", (0.0, 0.0, -SMALL_LOAD * SEED_EI / SEED_L ** 2 / SEED_WIDTH))
     return model

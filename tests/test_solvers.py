@@ -64,7 +64,7 @@ def test_acceleration_factor_eq20():
 
 
 def test_arc_length_follows_elastica():
-    """Arc-length continuation of the seed 001 tip-loaded cantilever: every converged point (lambda_k, w_k)
+    """Arc-length continuation of the [Eischen2000] tip-loaded cantilever: every converged point (lambda_k, w_k)
     lies on the elastica (scipy ODE) within 1%, the path reaches lambda = 10, and each step satisfies the
     constraint of eq. 19."""
     model, _ = seed_cantilever(12)

@@ -1,4 +1,4 @@
-"""Continuum fast-projection strain limiting (fabricfem.dynamics.strain_limit, seed 002 sec. 3)."""
+"""Continuum fast-projection strain limiting (fabricfem.dynamics.strain_limit, [Peng2022, sec. 3])."""
 import math
 
 import numpy as np
@@ -165,7 +165,7 @@ def test_project_step_velocity_correction():
 
 
 def test_rotary_inertia_scaling_keeps_the_swinging_shell():
-    """The corner-pinned Naghdi shell with the bending law of seed 002 eq. 9, case (c) (k/rho = 100, no limit),
+    """The corner-pinned Naghdi shell with the bending law of [Peng2022, eq. 9], case (c) (k/rho = 100, no limit),
     4 x 4 Q2, t = 0.4 s: the run with the case's rotary-inertia scale (rule of shell_rotary_scale: s = 1.4e4,
     step 2.5e-3 s) against the same run with the physical rotary inertia s = 1 (step 2.3e-5 s, 17000 steps:
     the independent reference). Compared: the displacements of the free corners (1, 0), (1, 1) and of the

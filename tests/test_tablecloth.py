@@ -1,4 +1,4 @@
-"""Tablecloth drape helpers (seed 001 sec. 4.4): reading admissibility, hem fold count, flatness imperfection
+"""Tablecloth drape helpers [Eischen2000, sec. 4.4]: reading admissibility, hem fold count, flatness imperfection
 and the backward-Euler drop step of fabricfem.verify.drape (the cases themselves are run by test_verify)."""
 import math
 

@@ -94,7 +94,7 @@ def test_arc_length_matches_elliptic_integral():
 
 def test_amplitude_from_crimp_both_models():
     p, crimp = 1.0e-3, 0.1
-    # Kawabata's straight segments (thesis eq. 4.1): sqrt(4 h^2 + y0^2) = (1 + c) y0
+    # Kawabata's straight segments [Man2006, eq. 4.1]: sqrt(4 h^2 + y0^2) = (1 + c) y0
     h = amplitude_from_crimp(p, crimp, "kawabata")
     assert math.sqrt(4.0 * h * h + p * p) == pytest.approx((1.0 + crimp) * p, rel=1e-14)
     # sinusoid: the yarn length from the elliptic integral is (1 + c) p (brentq xtol 1e-15 p)
@@ -106,7 +106,7 @@ def test_amplitude_from_crimp_both_models():
 
 
 def test_balanced_weave_volume_fraction():
-    # thesis sec. 4.3.5: balanced weave, radius ratio 1.5, phi = 0.4
+    # [Man2006, sec. 4.3.5]: balanced weave, radius ratio 1.5, phi = 0.4
     weave = PlainWeave.balanced(1.0e-3, crimp=0.08, volume_fraction=0.4, aspect_ratio=1.5)
     assert weave.warp == weave.weft
     assert weave.warp.aspect_ratio == pytest.approx(1.5, rel=1e-14)

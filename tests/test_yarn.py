@@ -1,4 +1,4 @@
-"""Bonet-Burton yarn law (thesis sec. 4.3.4): verify cases, thesis parameter sets, conversion, bad input."""
+"""Bonet-Burton yarn law [Man2006, sec. 4.3.4]: verify cases, thesis parameter sets, conversion, bad input."""
 import numpy as np
 import pytest
 

@@ -114,7 +114,7 @@ def test_case_yarn_contact_patch():
     assert not failed, failed
 
 
-# ------------------------------------------------------------------ crushed elements (issue 5)
+# ------------------------------------------------------------------ crushed elements
 def _ti_cell_without_contact():
     from fabricfem.materials.yarn import THESIS_TRANSVERSELY_ISOTROPIC
     from fabricfem.meshes.unit_cell import unit_cell
@@ -255,7 +255,7 @@ def test_step_cutting_keeps_furthest_converged_state():
     assert np.linalg.norm(last.S - S_direct) <= 1e-4 * np.linalg.norm(S_direct)
 
 
-# ------------------------------------------------------------------ fixed facet sets (issue 5, active-set strategy)
+# ------------------------------------------------------------------ fixed facet sets (active-set strategy)
 def test_triangle_plane_projection_extrapolates_closed_form():
     """project_onto_triangle_planes: the orthogonal projection onto the plane of the fixed triangle with
     unclamped linear shape functions. Unit square quad in z = 0 (tensor order): a point above (1.1, 0.3)

@@ -1,4 +1,4 @@
-"""Where the explicit sleeve's time goes (issue 4): the wall-time breakdown of the central-difference flexion.
+"""Where the explicit sleeve's time goes: the wall-time breakdown of the central-difference flexion.
 
 `fabricfem bench sleeve-profile [--out results/bench] [--quick]` (run it under `mpirun -n 2` for the parallel
 numbers; every rank runs the same flexion on the full communicator):
@@ -15,7 +15,7 @@ Under MPI the parts are rank 0's (each rank times its own assembly and its own o
 tube is split along its length, so the ranks' contact loads differ; the loop wall time is common).
 
 Writes sleeve_profile.csv (one row per case) and sleeve_profile.png (stacked shares) under `out` (rank 0).
-Target of issue 4: contact search and corrections below 20 % of the total. SI units; times in seconds.
+Target: contact search and corrections below 20 % of the total. SI units; times in seconds.
 """
 from __future__ import annotations
 

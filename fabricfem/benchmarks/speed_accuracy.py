@@ -1,8 +1,8 @@
-"""Speed versus accuracy of the cloth methods: error of a dynamic quantity against wall time (issue 3, bench 1).
+"""Speed versus accuracy of the cloth methods: error of a dynamic quantity against wall time.
 
-Problem ("corner-pinned"; seed 002 sec. 4.1 parameters, the set-up of fabricfem.verify.strain_limit): a square
+Problem ("corner-pinned"; [Peng2022, sec. 4.1] parameters, the set-up of fabricfem.verify.strain_limit): a square
 cloth of side L = 1 m in the plane z = 0, pinned at the corners (0, 0, 0) and (0, L, 0), released from rest
-under gravity g = 9.81 m/s^2 along -z with the air drag eta = 0.351 kg/(m^2 s) of seed 002 eq. 17d;
+under gravity g = 9.81 m/s^2 along -z with the air drag eta = 0.351 kg/(m^2 s) of [Peng2022, eq. 17d];
 rho = 0.117 kg/m^2, h = 0.001177 m, k = k_warp = k_weft = 2.5 k_shear with k / rho = 1000 (m/s)^2, nu = 0.
 Quantity of interest: the displacement u_c of the free corner (L, L, 0) at t_end = 0.6 s (the time of the
 seed's Table 1); the error of a run is |u_c - u_c,ref| / |u_c,ref| (relative, Euclidean).
@@ -14,12 +14,12 @@ Methods (all start from rest, flat; one resolution = one mesh size n x n cells a
   velocity Verlet (fabricfem.particles.simulate) at 0.9 x its Gershgorin critical step; the drag
   -eta v per area is the mass-proportional damping c = eta / rho [1/s] (force -c m v, m = rho x area);
 * "explicit": the membrane model (fabricfem.shell.ShellModel(model="membrane"), Q2 quadrilaterals) with
-  central differences and the lumped mass of thesis eq. 2.82 (fabricfem.dynamics.CentralDifference) at
+  central differences and the lumped mass of [Man2006, eq. 2.82] (fabricfem.dynamics.CentralDifference) at
   0.9 x the critical step of fabricfem.dynamics.critical_time_step;
 * "implicit": the same membrane with implicit Newmark, trapezoidal rule (beta = 1/4, gamma = 1/2, consistent
   mass; fabricfem.dynamics.NewmarkIntegrator), mesh and step refined together (n, dt) = (4, 0.02 s),
   (8, 0.01 s), (16, 0.005 s);
-* "implicit+SL": "implicit" with the continuum strain limiting of seed 002 sec. 3 after every step
+* "implicit+SL": "implicit" with the continuum strain limiting of [Peng2022, sec. 3] after every step
   (fabricfem.dynamics.strain_limit.FastProjection + attach; warp / weft Green strain limit 0.01, the seed's
   case (a), projection tolerance 1e-4 as in the verification case). With k / rho = 1000 the free swing
   strains the cloth up to ~0.01 near the pins, so the limit is active and changes the answer: its error
@@ -27,7 +27,7 @@ Methods (all start from rest, flat; one resolution = one mesh size n x n cells a
 
 Why the membrane and not the Naghdi shell for every finite-element variant: explicitly the Naghdi shell's step
 is limited by thickness shear against the rotational inertia rho t^3 / 12 (fabricfem.dynamics.stability:
-~1e-5 s here, 6e4 steps to 0.6 s), and the verification case of seed 002 sec. 4.1 (fabricfem.verify.
+~1e-5 s here, 6e4 steps to 0.6 s), and the verification case of [Peng2022, sec. 4.1] (fabricfem.verify.
 strain_limit) documents Newton divergence of the implicit shell with the projection. The benchmark compares
 the cost and accuracy of the METHODS on one continuum model; the bending rigidity (B0 ~ 1e-5 N m here) only
 shapes folds. The particle model's flexion springs keep that small bending stiffness (it is how the seed-001
@@ -52,7 +52,7 @@ ratio of the next best method's cheapest qualifying wall time to its own.
 
 Writes speed_accuracy.csv, speed_accuracy_reference.csv and speed_accuracy.png under `out`. SI units.
 
-Second problem ("tablecloth", bench 2): the static drape of seed 001 sec. 4.4 (20 cm cotton cloth on an 8 cm
+Second problem ("tablecloth", bench 2): the static drape of [Eischen2000, sec. 4.4] (20 cm cotton cloth on an 8 cm
 square frictionless table, fabricfem.verify.drape / particles_cases) on ONE well-defined equilibrium: the
 diagonal-symmetric branch reached by static load stepping from the flat sheet with the mirror planes x = 0,
 y = 0 imposed and no imperfection (the drape has several equilibria: the dynamic drops of the verification
@@ -94,14 +94,14 @@ from fabricfem.verify.particles_cases import particle_tablecloth_nodes
 from fabricfem.verify.strain_limit import corner_pinned_cloth
 
 PROBLEM = "corner-pinned"
-K_OVER_RHO = 1000.0  # k / rho [(m/s)^2], seed 002 sec. 4.1-4.2 range
-AREAL_DENSITY = 0.117  # rho [kg/m^2], seed 002 sec. 4.1
-THICKNESS = 0.001177  # h [m], seed 002 sec. 4.1
-AIR_DRAG = 0.351  # eta [kg/(m^2 s)], seed 002 sec. 4.1 (eq. 17d)
-STIFFNESS_OVER_SHEAR = 2.5  # k / k_shear, seed 002 sec. 4.1
+K_OVER_RHO = 1000.0  # k / rho [(m/s)^2], [Peng2022, sec. 4.1-4.2] range
+AREAL_DENSITY = 0.117  # rho [kg/m^2], [Peng2022, sec. 4.1]
+THICKNESS = 0.001177  # h [m], [Peng2022, sec. 4.1]
+AIR_DRAG = 0.351  # eta [kg/(m^2 s)], [Peng2022, sec. 4.1] (eq. 17d)
+STIFFNESS_OVER_SHEAR = 2.5  # k / k_shear, [Peng2022, sec. 4.1]
 SIDE = 1.0  # L [m], as fabricfem.verify.strain_limit (the seed gives no size; see there)
 GRAVITY = 9.81  # [m/s^2], as fabricfem.verify.strain_limit.corner_pinned_cloth
-STRAIN_LIMIT = 0.01  # warp / weft Green strain limit [-], seed 002 case (a)
+STRAIN_LIMIT = 0.01  # warp / weft Green strain limit [-], [Peng2022] case (a)
 PROJECTION_TOL = 1e-4  # max violation accepted by the fast projection [-], as the verification case
 EXPLICIT_SAFETY = 0.9  # dt = 0.9 x the method's critical step estimate
 # Newton: up to 60 iterations per implicit step. The default 25 was exceeded by the strain-limited run at
@@ -221,7 +221,7 @@ def particle_cloth(n: int):
     n = _check_cells(n)
     spacing = SIDE / n
     E = K_OVER_RHO * AREAL_DENSITY / THICKNESS  # E h = k = (k / rho) rho [N/m]
-    # shear springs: B' E h / (2 (1 + nu)) = k / 2.5 with nu = 0 -> B' = 2 / 2.5 (seed 001 eq. 43)
+    # shear springs: B' E h / (2 (1 + nu)) = k / 2.5 with nu = 0 -> B' = 2 / 2.5 [Eischen2000, eq. 43]
     system = rectangular_grid(n + 1, n + 1, spacing, spacing, E, 0.0, THICKNESS, AREAL_DENSITY,
                               shear_factor=2.0 / STIFFNESS_OVER_SHEAR)
     problem = Problem(system, gravity=np.array([0.0, 0.0, -GRAVITY]), pinned=system.index([0, 0], [0, -1]),
@@ -295,7 +295,7 @@ def run_explicit(n: int, t_end: float, repeats: int = 3, comm=MPI.COMM_WORLD) ->
 def run_implicit(n: int, dt: float, t_end: float, strain_limit: float | None = None, repeats: int = 3,
                  comm=MPI.COMM_WORLD, model=None) -> SpeedRow:
     """Trapezoidal Newmark (consistent mass) on the n x n Q2 membrane with step dt (the largest step <= dt
-    dividing t_end); with strain_limit, FastProjection after each step (seed 002 eqs. 33-36)."""
+    dividing t_end); with strain_limit, FastProjection after each step [Peng2022, eqs. 33-36]."""
     _check_time("dt", dt)
     if strain_limit is not None:
         _check_time("strain_limit", strain_limit)  # a positive finite number (dimensionless)
@@ -571,7 +571,7 @@ def plot_drape(rows: Sequence[DrapeRow], reference_difference: float, path: Path
     ax.set_yscale("log")
     ax.set_xlabel("wall time [s] (median)")
     ax.set_ylabel("max(|corner - ref|, |midside - ref|) / L")
-    ax.set_title("Tablecloth drape (seed 001 sec. 4.4), static load path; open marks: other branch")
+    ax.set_title("Tablecloth drape [Eischen2000, sec. 4.4], static load path; open marks: other branch")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8)
     fig.tight_layout()

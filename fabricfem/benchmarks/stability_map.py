@@ -1,12 +1,12 @@
 """Stability map of the explicit schemes: largest stable time step vs in-plane stiffness and mesh size.
 
-Set-up (seed 002 sec. 4.1, "corner kidnapped cloth"): a square cloth of side 0.2 m in the plane z = 0,
+Set-up ([Peng2022, sec. 4.1], "corner kidnapped cloth"): a square cloth of side 0.2 m in the plane z = 0,
 pinned (displacements zero, rotations free) at its two corners on y = 0.2 m and released from rest under
 gravity (9.80665 m/s^2 along -z). In-plane model of the seed: k = k_weft = k_warp = 2.5 k_shear with k / rho
 in {50, 200, 1000, 5000} (m/s)^2, areal density rho = 0.117 kg/m^2, thickness h = 0.001177 m. Mapping:
 
 * shell (fabricfem.shell.ShellModel, Naghdi, Q2 quadrilaterals, central differences with the lumped mass of
-  thesis eq. 2.82): E t = k [N/m], i.e. E1 = E2 = (k / rho) rho / h [Pa], G12 = G13 = E / 2.5, nu12 = 0,
+  [Man2006, eq. 2.82]): E t = k [N/m], i.e. E1 = E2 = (k / rho) rho / h [Pa], G12 = G13 = E / 2.5, nu12 = 0,
   volumetric density rho / h [kg/m^3]; "membrane" is the same sheet without bending and thickness shear;
 * particles (fabricfem.particles.rectangular_grid, velocity Verlet): the same E, nu = 0 and h; the structural
   springs then carry k per unit width, and the shear springs get shear_factor 2 / 2.5 so that their
@@ -14,7 +14,7 @@ in {50, 200, 1000, 5000} (m/s)^2, areal density rho = 0.117 kg/m^2, thickness h 
 
 n x n cells (elements, or particle-grid cells) with n in {8, 16}. For each case:
 
-* dt_predicted: the critical step of the method's own estimate, 2 / omega_max (thesis eq. 2.86): for the
+* dt_predicted: the critical step of the method's own estimate, 2 / omega_max [Man2006, eq. 2.86]: for the
   shell stability.critical_time_step (eq. 2.87 extended with the Q2 constant and thickness shear), for the
   particles particles.critical_time_step (Gershgorin bound of M^-1 K);
 * dt_measured: the largest step for which a run of n_steps steps from rest neither raises DynamicsError /
@@ -66,12 +66,12 @@ from fabricfem.particles import (
 )
 from fabricfem.shell import ShellModel
 
-AREAL_DENSITY = 0.117  # rho [kg/m^2], seed 002 sec. 4.1
-THICKNESS = 0.001177  # h [m], seed 002 sec. 4.1
-STIFFNESS_OVER_SHEAR = 2.5  # k / k_shear, seed 002 sec. 4.1
+AREAL_DENSITY = 0.117  # rho [kg/m^2], [Peng2022, sec. 4.1]
+THICKNESS = 0.001177  # h [m], [Peng2022, sec. 4.1]
+STIFFNESS_OVER_SHEAR = 2.5  # k / k_shear, [Peng2022, sec. 4.1]
 SIDE = 0.2  # cloth side [m]
 GRAVITY = 9.80665  # [m/s^2]
-K_OVER_RHO = (50.0, 200.0, 1000.0, 5000.0)  # [(m/s)^2], seed 002 sec. 4.1-4.2 range
+K_OVER_RHO = (50.0, 200.0, 1000.0, 5000.0)  # [(m/s)^2], [Peng2022, sec. 4.1-4.2] range
 MESHES = (8, 16)
 METHODS = ("shell", "membrane", "particles")
 
@@ -114,7 +114,7 @@ def _check_inputs(k_over_rho: float, n: int):
 
 
 def youngs_modulus(k_over_rho: float) -> float:
-    """E [Pa] with E h = k = (k / rho) rho (seed 002's areal stiffness k [N/m] on a sheet of thickness h)."""
+    """E [Pa] with E h = k = (k / rho) rho ([Peng2022]'s areal stiffness k [N/m] on a sheet of thickness h)."""
     return float(k_over_rho) * AREAL_DENSITY / THICKNESS
 
 
@@ -143,7 +143,7 @@ def particle_cloth(k_over_rho: float, n: int):
     pinned at the two corners on y = 0.2 m, under gravity."""
     _check_inputs(k_over_rho, n)
     spacing = SIDE / n
-    # shear springs: B' E h / (2 (1 + nu)) = k / 2.5 with nu = 0 -> B' = 2 / 2.5 (seed 001 eq. 43, seed 002)
+    # shear springs: B' E h / (2 (1 + nu)) = k / 2.5 with nu = 0 -> B' = 2 / 2.5 ([Eischen2000, eq. 43], [Peng2022])
     system = rectangular_grid(n + 1, n + 1, spacing, spacing, youngs_modulus(k_over_rho), 0.0, THICKNESS,
                               AREAL_DENSITY, shear_factor=2.0 / STIFFNESS_OVER_SHEAR)
     return Problem(system, gravity=np.array([0.0, 0.0, -GRAVITY]), pinned=system.index([0, -1], [-1, -1]))
@@ -195,7 +195,7 @@ def bracketed_critical_time_step(run_is_stable: Callable[[float], bool], dt_gues
 
 # ------------------------------------------------------------------------- linear stability limits
 def shell_eigen_time_step(sheet) -> float:
-    """2 / omega_max of K vs M_L at the current state (thesis eq. 2.86 with the discrete omega_max, SLEPc)."""
+    """2 / omega_max of K vs M_L at the current state ([Man2006, eq. 2.86] with the discrete omega_max, SLEPc)."""
     return 2.0 / discrete_max_frequency(sheet, iterations=2000)
 
 

@@ -1,4 +1,4 @@
-"""Cost of the contact unit cell: `fabricfem bench unit-cell` (issue 5, performance).
+"""Cost of the contact unit cell: `fabricfem bench unit-cell`.
 
 For the quarter and full cells, coarse and fine meshes, transversely isotropic yarns with contact
 under biaxial extension (the first steps, Phi11 = Phi22 = 1 + 0.02 n: the contact is established in
@@ -66,7 +66,7 @@ def fe2_paragraph(step_s: float, newton_shell: int = 5, load_steps: int = 20) ->
             f"contact, one core), {newton_shell} shell Newton iterations per step and {load_steps} load steps, that "
             f"is {points} x {newton_shell} x {load_steps} x {step_s:.2f} s = {total:.3g} s = {total / 3600:.3g} "
             f"core-hours per sleeve simulation, before the consistent macroscopic tangent (which needs the unit "
-            f"cell's sensitivity, thesis sec. 4.3.6: 3 more linear solves per point) and with the coarsest "
+            f"cell's sensitivity, [Man2006, sec. 4.3.6]: 3 more linear solves per point) and with the coarsest "
             f"cell, whose stress differs from the fine one. The fitted membrane law (fabricfem/fitted_law.py) "
             f"costs one closed-form evaluation per point (no solve) after a one-off grid of a few dozen "
             f"unit-cell load paths, so it is the practical path; FE2 would need ~{total / 3600 / 1000:.2g}k cores "

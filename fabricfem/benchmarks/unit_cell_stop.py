@@ -1,4 +1,4 @@
-"""Where a unit-cell load path stops, and whether the usual remedies move the stop (issue 5, stability).
+"""Where a unit-cell load path stops, and whether the usual remedies move the stop.
 
 `python -m fabricfem.benchmarks.unit_cell_stop [--option full] [--out results/unit_cell_stop]`
 

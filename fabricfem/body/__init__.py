@@ -1,4 +1,4 @@
-"""The wearer: rigid ellipsoidal body segments posed from joint and marker positions (thesis ch. 5).
+"""The wearer: rigid ellipsoidal body segments posed from joint and marker positions [Man2006, ch. 5].
 
 Modules: `ellipsoid` (implicit surface eq. 3.61, gap, exact closest point, surface velocity), `pose`
 (segment frames from J1, J2, M, sec. 5.1; `Body`), `motion` (kinematics sources, motion-capture

@@ -1,4 +1,4 @@
-"""The default arm of the sleeve study (thesis sec. 5.3): upper arm and forearm ellipsoids.
+"""The default arm of the sleeve study [Man2006, sec. 5.3]: upper arm and forearm ellipsoids.
 
 Source: 2012 Anthropometric Survey of U.S. Army Personnel (ANSUR II), C. C. Gordon et al., Natick
 technical report NATICK/TR-15/007, 2014, adult male sample. Values used:
@@ -13,7 +13,7 @@ technical report NATICK/TR-15/007, 2014, adult male sample. Values used:
             upper arm 0.0557 m, forearm 0.0477 m  (both below the sleeve radius R = 0.06 m of the thesis,
             so the sleeve of sec. 5.3 fits over the arm with 4.3 mm and 12.3 mm clearance)
         long semi-axis r1 = f L with f = long_axis_factor, default f = 1/2: the ellipsoid tips reach the
-            joint centres (x^c = (J1 + J2) / 2 as in thesis sec. 5.1), so the upper-arm and forearm tips
+            joint centres (x^c = (J1 + J2) / 2 as in [Man2006, sec. 5.1]), so the upper-arm and forearm tips
             meet AT the elbow centre and the arm has zero girth there
 
 Long semi-axis (`ArmDimensions.long_axis_factor`): the thesis (sec. 5.1) fixes the centre x^c = (J1 + J2) / 2

@@ -3,7 +3,7 @@
 The ellipsoid is the set of points x with local coordinates y = R^T (x - c) (R: 3x3 rotation whose
 columns are the principal axes e1, e2, e3 in the global frame; c: centre) satisfying
 
-    f(x) = sum_i y_i^2 / r_i^2 - 1 = 0        (thesis eq. 3.61; f > 0 outside, f < 0 inside, eq. 3.60)
+    f(x) = sum_i y_i^2 / r_i^2 - 1 = 0        ([Man2006, eq. 3.61]; f > 0 outside, f < 0 inside, eq. 3.60)
 
 All functions take query points as an (N, 3) array (or a single (3,) point) in metres and are
 vectorised over the points; lengths in m, velocities in m/s, angular velocities in rad/s.
@@ -122,7 +122,7 @@ def _closest_sorted(y: np.ndarray, r: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, eq=False)  # numpy fields: compare explicitly, not with ==
 class Ellipsoid:
-    """A rigid ellipsoid (thesis sec. 3.2.3 / 5.1).
+    """A rigid ellipsoid ([Man2006, sec. 3.2.3] / 5.1).
 
     Args:
         center: centre x^c [m], shape (3,).
@@ -164,7 +164,7 @@ class Ellipsoid:
     # --- implicit surface ---------------------------------------------------------------------
     def implicit(self, x) -> np.ndarray:
         """f(x) = sum_i y_i^2 / r_i^2 - 1 (dimensionless), shape (N,)."""
-        # thesis eq. 3.61
+        # [Man2006, eq. 3.61]
         y = self.to_local(x)
         return np.sum((y / self.radii) ** 2, axis=1) - 1.0
 

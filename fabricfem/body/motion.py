@@ -1,10 +1,10 @@
-"""Kinematics sources: joint and marker positions over time for posing the body (thesis sec. 5.1).
+"""Kinematics sources: joint and marker positions over time for posing the body [Man2006, sec. 5.1].
 
 A kinematics source has `names` (the joints and markers it knows), `time_range` (t_start, t_end) [s]
 and `positions(t)` -> {name: (3,) position [m]}. Provided here:
 
 * `ElbowFlexion`: upper arm fixed, forearm rotating about the elbow at constant angular velocity up
-  to a final angle (the sleeve study, thesis sec. 5.3: 57 degrees).
+  to a final angle (the sleeve study, [Man2006, sec. 5.3]: 57 degrees).
 * `JointTrajectory`: positions sampled at given times, linearly interpolated; `read_trc` and
   `read_marker_csv` build one from motion-capture marker files.
 * `LegKinematics` with `walking` / `stepping_over`: a planar hip-knee-ankle chain driven by
@@ -77,11 +77,11 @@ def joint_torque(points, forces, joint, axis) -> float:
 
 
 # ------------------------------------------------------------------------------------------------
-# Elbow flexion (thesis sec. 5.3)
+# Elbow flexion [Man2006, sec. 5.3]
 # ------------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class ElbowFlexion:
-    """Forearm flexing about the elbow at constant angular velocity; upper arm fixed (thesis sec. 5.3).
+    """Forearm flexing about the elbow at constant angular velocity; upper arm fixed [Man2006, sec. 5.3].
 
     The flexion angle is alpha(t) = clip(omega (t - t_start), 0, final_angle) [rad]; the forearm
     points (wrist, forearm marker) rotate about `axis` (unit, right-handed: positive alpha is
@@ -92,7 +92,7 @@ class ElbowFlexion:
         axis: flexion axis (normalised here); positive rotation about it is flexion.
         angular_velocity: omega [rad/s] > 0 (default 45 deg/s; 30-60 deg/s is a typical voluntary
             flexion speed; the thesis gives no value).
-        final_angle: total rotation [rad] (thesis sec. 5.3: 57 degrees), > 0.
+        final_angle: total rotation [rad] ([Man2006, sec. 5.3]: 57 degrees), > 0.
         marker_offset: the markers sit at the segment midpoints displaced by this vector [m]
             (must not be parallel to the segments).
         t_start: time the flexion starts [s].

@@ -1,10 +1,10 @@
-"""Posing ellipsoidal segments from joint and marker positions (thesis sec. 5.1, Fig. 35).
+"""Posing ellipsoidal segments from joint and marker positions ([Man2006, sec. 5.1], Fig. 35).
 
 For a segment with joints J1, J2 and auxiliary marker M (positions in m):
 
-    x^c = (J1 + J2) / 2                                              (thesis sec. 5.1, "Center")
+    x^c = (J1 + J2) / 2                                              ([Man2006, sec. 5.1], "Center")
     e1 = (J2 - J1) / |J2 - J1|
-    e2 = [(M - x^c) - ((M - x^c) . e1) e1] / |...|,   e3 = e1 x e2     (thesis sec. 5.1, "Orientations")
+    e2 = [(M - x^c) - ((M - x^c) . e1) e1] / |...|,   e3 = e1 x e2     ([Man2006, sec. 5.1], "Orientations")
 
 so e1 runs along the segment, e2 points from the axis towards the marker and the ellipsoid radii
 (r1, r2, r3) are the semi-axes along (e1, e2, e3). A `Body` is a set of named segments sharing named
@@ -34,7 +34,7 @@ def _point(name: str, value) -> np.ndarray:
 
 
 def segment_frame(J1, J2, M, center_fraction: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
-    """Centre x^c [m] and rotation R = [e1 e2 e3] of a segment (thesis sec. 5.1).
+    """Centre x^c [m] and rotation R = [e1 e2 e3] of a segment [Man2006, sec. 5.1].
 
     Args:
         J1, J2: proximal and distal joint positions [m].

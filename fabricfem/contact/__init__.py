@@ -1,4 +1,4 @@
-"""Contact of the fabric with rigid ellipsoidal body segments (thesis ch. 3.3).
+"""Contact of the fabric with rigid ellipsoidal body segments [Man2006, ch. 3.3].
 
 Modules: `nodal` (node-to-ellipsoid gaps, lumped nodal areas, penalty / augmented-Lagrangian normal
 law, eqs. 3.61, 3.69, Box 3), `friction` (regularised Coulomb friction with return mapping, eqs.

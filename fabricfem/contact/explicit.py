@@ -1,12 +1,12 @@
-"""Forward-increment Lagrange multiplier contact for explicit time stepping (thesis sec. 3.3.2-3.3.3, Box 5).
+"""Forward-increment Lagrange multiplier contact for explicit time stepping ([Man2006, sec. 3.3.2-3.3.3], Box 5).
 
 In a central-difference step the trial positions x* of the next step are computed without contact. A
 node that penetrates a body segment is projected back onto the surface along the gradient of the
-segment's implicit function at x* (thesis Box 5: "the gradient at the penetrating trial position is
+segment's implicit function at x* ([Man2006, Box 5]: "the gradient at the penetrating trial position is
 chosen as the projection direction"), and the correction gives the multiplier:
 
-    d^c = proj(x*) - x*,   a^c = d^c / dt^2,   lambda = -M a^c                             (Box 5, step i)
-    a^{n+1} = a* + a^c,    v^{n+1} = v* + dt/2 a^c                                          (Box 5, step j)
+    d^c = proj(x*) - x*,   a^c = d^c / dt^2,   lambda = -M a^c                             ([Man2006, Box 5], step i)
+    a^{n+1} = a* + a^c,    v^{n+1} = v* + dt/2 a^c                                          ([Man2006, Box 5], step j)
 
 so that the next predictor d^{n+2} = d^{n+1} + dt v^{n+1} + dt^2/2 a^{n+1} = proj(x*) lies on the surface.
 The functions act on numpy arrays of nodal positions [m], velocities [m/s], accelerations [m/s^2] and
@@ -63,7 +63,7 @@ def _masses(masses, n: int) -> np.ndarray:
 
 
 def project_along_gradient(x, ellipsoids: Sequence[Ellipsoid]) -> tuple[np.ndarray, np.ndarray]:
-    """Move the points inside any ellipsoid onto its surface along grad f at the point (Box 5).
+    """Move the points inside any ellipsoid onto its surface along grad f at the point ([Man2006, Box 5]).
 
     The ray x + s grad f / |grad f| is intersected with the surface (`Ellipsoid.gap` with one cast);
     a point inside two overlapping segments is projected out of the deeper one first and re-checked
@@ -74,7 +74,7 @@ def project_along_gradient(x, ellipsoids: Sequence[Ellipsoid]) -> tuple[np.ndarr
 
 
 def _normalised_radius(x: np.ndarray, e: Ellipsoid) -> np.ndarray:
-    """q(x) = sum_i y_i^2 / r_i^2 = f(x) + 1 (thesis eq. 3.61), y = R^T (x - c): q < 1 strictly inside."""
+    """q(x) = sum_i y_i^2 / r_i^2 = f(x) + 1 [Man2006, eq. 3.61], y = R^T (x - c): q < 1 strictly inside."""
     y = (x - e.center) @ e.rotation
     return np.sum((y / e.radii) ** 2, axis=1)
 
@@ -203,7 +203,7 @@ def project_with_segment(x, ellipsoids: Sequence[Ellipsoid]) -> tuple[np.ndarray
 
 @dataclass
 class ExplicitContact:
-    """Correction of one explicit step (Box 5, step i).
+    """Correction of one explicit step ([Man2006, Box 5], step i).
 
     Attributes:
         position: (N, 3) corrected positions proj(x*) [m].
@@ -223,7 +223,7 @@ class ExplicitContact:
 
 
 def forward_increment_correction(x_trial, masses, dt: float, ellipsoids: Sequence[Ellipsoid]) -> ExplicitContact:
-    """Box 5 step i: project penetrating trial positions and return the multipliers."""
+    """[Man2006, Box 5] step i: project penetrating trial positions and return the multipliers."""
     dt = positive_parameter("dt", dt)
     x_trial = _points("x_trial", x_trial)
     m = _masses(masses, len(x_trial))
@@ -236,7 +236,7 @@ def forward_increment_correction(x_trial, masses, dt: float, ellipsoids: Sequenc
 
 def box5_step(x, v, a, masses, dt: float, acceleration: Callable[[np.ndarray, float], np.ndarray],
               t: float, ellipsoids_at: Callable[[float], Sequence[Ellipsoid]]):
-    """One step n -> n+1 of Box 5 for point masses (positions x = X + d).
+    """One step n -> n+1 of [Man2006, Box 5] for point masses (positions x = X + d).
 
     Args:
         x, v, a: (N, 3) state at t^n; x must be admissible.
@@ -251,19 +251,19 @@ def box5_step(x, v, a, masses, dt: float, acceleration: Callable[[np.ndarray, fl
     """
     dt = positive_parameter("dt", dt)
     x, v, a = _points("x", x), _points("v", v), _points("a", a)
-    v_star = v + 0.5 * dt * a                               # Box 5 f
-    x_next = x + dt * v + 0.5 * dt ** 2 * a                 # Box 5 f
-    a_star = np.asarray(acceleration(x_next, t + dt), dtype=float)   # Box 5 g
-    v_star = v_star + 0.5 * dt * a_star                     # Box 5 h
-    x_trial = x_next + dt * v_star + 0.5 * dt ** 2 * a_star  # Box 5 i: trial for n+2
+    v_star = v + 0.5 * dt * a                               # [Man2006, Box 5] f
+    x_next = x + dt * v + 0.5 * dt ** 2 * a                 # [Man2006, Box 5] f
+    a_star = np.asarray(acceleration(x_next, t + dt), dtype=float)   # [Man2006, Box 5] g
+    v_star = v_star + 0.5 * dt * a_star                     # [Man2006, Box 5] h
+    x_trial = x_next + dt * v_star + 0.5 * dt ** 2 * a_star  # [Man2006, Box 5] i: trial for n+2
     contact = forward_increment_correction(x_trial, masses, dt, ellipsoids_at(t + 2.0 * dt))
-    a_next = a_star + contact.acceleration                  # Box 5 j
+    a_next = a_star + contact.acceleration                  # [Man2006, Box 5] j
     v_next = v_star + 0.5 * dt * contact.acceleration
     return x_next, v_next, a_next, contact
 
 
 def initial_state(x, v, a_free, masses, dt: float, ellipsoids: Sequence[Ellipsoid]) -> tuple[np.ndarray, np.ndarray]:
-    """(v^0, a^0) of Box 5 step 1 for nodes that may start in contact: the first predictor
+    """(v^0, a^0) of [Man2006, Box 5] step 1 for nodes that may start in contact: the first predictor
     x + dt v + dt^2/2 a is corrected as in step j (a^0 = a* + a^c, v^0 = v + dt/2 a^c), so that it lands
     on the surface instead of inside."""
     a_free = _points("a_free", a_free)
@@ -281,7 +281,7 @@ EXPLICIT_METHODS = ("lagrange", "penalty")
 
 class ExplicitBodyContact:
     """Nodal frictional contact of a shell in explicit central differences (fabricfem.dynamics.explicit)
-    against rigid ellipsoids that move with a `Body` (thesis ch. 3, Box 5; ch. 5). SI units.
+    against rigid ellipsoids that move with a `Body` ([Man2006, ch. 3], Box 5; ch. 5). SI units.
 
     Nodes: the owned displacement nodes of the shell (fabricfem.contact.nodal.contact_nodes); nodes with a
     held displacement component carry no contact. Everything is vectorised over the nodes and local to a
@@ -292,18 +292,18 @@ class ExplicitBodyContact:
     a^{n+1} = rhs / (M + dt/2 C) of the step n -> n+1:
 
         x* = X + d^{n+1} + dt v~ + dt^2 a^{n+1}               the predictor of step n+2 (no contact)
-        x^c = proj(x*) on the body posed at t_{n+2}           along grad f at x* (Box 5, step i)
+        x^c = proj(x*) on the body posed at t_{n+2}           along grad f at x* ([Man2006, Box 5], step i)
         friction (eqs. 3.46-3.52, kinematic form): the stick point s (a material point of the segment,
             stored in its frame, so it moves with the body: the relative velocity is taken w.r.t. the
             body's surface velocity) pulls the node tangentially, d_T = P (s - x^c), P = I - n n^T;
             |m d_T / dt^2| <= mu |lambda_N| (return map, eq. 3.52): if exceeded, d_T is scaled to the
             limit (slip) and the stick point moves to the node's new position
-        a^c = (x^c + d_T - x*) / dt^2,  a^{n+1} += a^c,  f_c = (M + dt/2 C) a^c      (Box 5, step j)
+        a^c = (x^c + d_T - x*) / dt^2,  a^{n+1} += a^c,  f_c = (M + dt/2 C) a^c      ([Man2006, Box 5], step j)
 
     f_c [N] is the contact force on the cloth node (normal part -lambda_N, tangential part the friction).
 
     method = "penalty": called before the division, adds f = w (k_N <-g> n + t_T) at d^{n+1} against the
-    body at t_{n+1} (Box 3, friction by the return map of fabricfem.contact.friction with eps_T = k_N and
+    body at t_{n+1} ([Man2006, Box 3], friction by the return map of fabricfem.contact.friction with eps_T = k_N and
     stick points committed every step). Explicit stability needs the penalty frequency
     omega_p^2 = w k_N / m = k_N / (rho t) below the limit: (2 / dt)^2 > omega_max^2 + k_N / (rho t)
     (`penalty_frequency`); the integrator's dt must be chosen with it.
@@ -313,7 +313,7 @@ class ExplicitBodyContact:
     (the impulse over the interval divided by its length: the contact force of one explicit step is the
     change of momentum it imposes and oscillates from step to step).
 
-    Cost (issue 4): per step one pose of the body (`PoseCache`: the pose at t_{n+2} of one step is the
+    Cost: per step one pose of the body (`PoseCache`: the pose at t_{n+2} of one step is the
     joint position at t_{n+1} of the next), the normalised radius q of every node against every segment, and
     ray casts, friction and torque sums on the nodes in contact only (numpy, no loop over nodes).
     `timings["pose_torque"]` [s] accumulates the time spent posing the body and summing torques.
@@ -544,7 +544,7 @@ class ExplicitBodyContact:
                        integrator.dt)
 
     def correct(self, integrator, t: float):
-        """Lagrange method (Box 5 steps i-j with friction): a^{n+1} += a^c so that the predictor of
+        """Lagrange method ([Man2006, Box 5] steps i-j with friction): a^{n+1} += a^c so that the predictor of
         step n+2 lies on the body posed at t_{n+2} = t + dt (no-op for penalty)."""
         if self.method != "lagrange":
             return
@@ -649,7 +649,7 @@ class PoseCache:
 
 
 def _posed_segment(segment, positions) -> Ellipsoid:
-    """`Segment.pose` (fabricfem.body.pose.segment_frame, thesis sec. 5.1) with the same arithmetic but
+    """`Segment.pose` (fabricfem.body.pose.segment_frame, [Man2006, sec. 5.1]) with the same arithmetic but
     without re-validating the inputs of every explicit step (the rigid motion keeps the frame proper; the
     first pose of a PoseCache is validated): x^c = J1 + f (J2 - J1), e1 = (J2 - J1) / |J2 - J1|,
     e2 = the unit part of M - x^c normal to e1, e3 = e1 x e2."""

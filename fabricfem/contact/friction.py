@@ -1,4 +1,4 @@
-"""Regularised Coulomb friction with return mapping (thesis sec. 3.1.3, eqs. 3.46-3.52).
+"""Regularised Coulomb friction with return mapping ([Man2006, sec. 3.1.3], eqs. 3.46-3.52).
 
 Each contact node keeps a stick point a_i: a material point of the body segment, stored in the
 segment's local frame so that it moves rigidly with the body (for a moving segment this integrates the

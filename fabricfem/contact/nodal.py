@@ -1,4 +1,4 @@
-"""Node-to-ellipsoid contact at the displacement nodes of a shell (thesis sec. 3.3, Box 3, eq. 3.69).
+"""Node-to-ellipsoid contact at the displacement nodes of a shell ([Man2006, sec. 3.3], Box 3, eq. 3.69).
 
 Each owned displacement node i of the sheet carries the lumped reference area w_i = int phi_i dA [m^2]
 (phi_i: the scalar Lagrange basis function of the node). On quadrilateral Q2 meshes every w_i is
@@ -9,7 +9,7 @@ such meshes are refused (ValueError).
 Normal law at the deformed node x_i = X_i + u_i with signed gap g_i [m] (positive outside) and unit
 outward body normal n_i (minimum over the body segments):
 
-    p_i = < lambda_i - k_N g_i >               [Pa]   (eq. 3.69; penalty Box 3: lambda_i = 0)
+    p_i = < lambda_i - k_N g_i >               [Pa]   (eq. 3.69; penalty [Man2006, Box 3]: lambda_i = 0)
     f_i = w_i (p_i n_i + t_T,i)                 [N]    force of the body on the cloth node
 
 (the thesis writes g as a penetration, positive inside; here g is a signed distance). t_T is the

@@ -8,7 +8,7 @@ counted twice under MPI), `add_jacobian` adds the 3x3 nodal blocks, `commit` sto
 `NewtonSolver(problem.system)` and `solve_load_path(problem.system, ...)` drive; the model's data (w, comm,
 F_ref, load_factor, ...) read through the problem as well.
 
-Normal methods: "penalty" (Box 3: p = k_N <-g>) and "augmented" (eq. 3.69: p = <lambda - k_N g>, Uzawa
+Normal methods: "penalty" ([Man2006, Box 3]: p = k_N <-g>) and "augmented" (eq. 3.69: p = <lambda - k_N g>, Uzawa
 update lambda <- p between Newton solves, `solve_augmented`). Friction: Coulomb with coefficient
 `friction` and tangential penalty eps_T (fabricfem.contact.friction); history committed in
 `commit` (run by `system.after_converged_step`). Units: SI (m, N, Pa, Pa/m).
@@ -331,7 +331,7 @@ class ContactProblem:
     def solve_augmented(self, solver: NewtonSolver | None = None, tolerance: float = 1e-6,
                         max_augmentations: int = 50) -> AugmentationReport:
         """Newton solves at fixed multipliers, each followed by an Uzawa update, until the largest
-        penetration is below `tolerance` [m] (Box 6, outer loop). Raises SolverError on a failed
+        penetration is below `tolerance` [m] ([Man2006, Box 6], outer loop). Raises SolverError on a failed
         Newton solve or when the tolerance is not met after `max_augmentations` updates."""
         if self.method != "augmented":
             raise ValueError("solve_augmented needs method='augmented'")

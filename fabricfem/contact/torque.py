@@ -1,8 +1,8 @@
-"""Joint torque of the contact forces (thesis ch. 5 intro): the moment about a joint centre of all
+"""Joint torque of the contact forces ([Man2006, ch. 5] intro): the moment about a joint centre of all
 contact forces (normal + friction) acting on the body segments adjacent to that joint.
 
 "Clothing contact forces on a given body segment only contribute resisting torque to the joints
-directly connected to the segment" (thesis ch. 5). Sign convention of
+directly connected to the segment" [Man2006, ch. 5]. Sign convention of
 `fabricfem.body.motion.joint_torque`: tau = a . sum_i (x_i - J) x f_i [N m] for forces f_i [N] that
 the clothing exerts on the body at x_i [m] (the opposite of the forces on the cloth nodes).
 """

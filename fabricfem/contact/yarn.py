@@ -1,4 +1,4 @@
-"""Yarn-yarn frictional contact between hexahedral yarn meshes (thesis 000, sec. 3.2 and 3.4, Box 7).
+"""Yarn-yarn frictional contact between hexahedral yarn meshes ([Man2006, sec. 3.2] and 3.4, Box 7).
 
 Node-to-surface contact: the slave nodes are the vertices of one yarn's lateral surface facets, the
 master surface is the other yarn's lateral facets (quadrilaterals of the hex mesh, each split into the
@@ -18,18 +18,18 @@ The tangential slip since the last converged step is the relative motion of x_s 
 master material point x_ref = sum_i N_i(xi_n) x_i it was projected onto at that step (the convected
 coordinate xi_n of eq. 3.74), taken in the current tangent plane: P (x_s - x_ref), P = 1 - n n^T.
 
-Contact law: symmetrized augmented Lagrangian of Laursen (Box 7, eqs. 3.69, 3.74, 3.75, 3.79) with
+Contact law: symmetrized augmented Lagrangian of Laursen ([Man2006, Box 7], eqs. 3.69, 3.74, 3.75, 3.79) with
 multipliers lambda_N [Pa] and lambda_T [Pa, a tangential vector] per slave node, held fixed in the
 Newton solve of one augmentation:
 
     p   = < lambda_N - eps_N g >                                    (eq. 3.69, contact pressure)
     t*  = P lambda_T - eps_T P (x_s - x_ref)                          (eq. 3.74, trial traction)
-    t_T = t*                       if |t*| <= mu lambda_N  (stick)    (eq. 3.75 with Box 7's Phi~:
+    t_T = t*                       if |t*| <= mu lambda_N  (stick)    (eq. 3.75 with [Man2006, Box 7]'s Phi~:
     t_T = mu lambda_N t* / |t*|    otherwise (slip)                    the limit uses lambda_N, fixed)
 
 The slave node gets the force f_s = A_s (p n + t_T) [N] (A_s: its lumped reference area), the master
 nodes get -N_i A_s p n at the current projection and -N_i(xi_n) A_s t_T at the reference point.
-Uzawa augmentation between Newton solves (Box 7 step 3): lambda_N <- p, lambda_T <- t_T returned onto
+Uzawa augmentation between Newton solves ([Man2006, Box 7] step 3): lambda_N <- p, lambda_T <- t_T returned onto
 the new cone |lambda_T| <= mu lambda_N (eq. 3.79), until the largest penetration and the largest
 stick-slip violation are below `tolerance`. With `augmented=False` the law is the plain penalty one
 (lambda = 0, friction limit mu p). After a converged load step (`commit`), the reference points move
@@ -42,13 +42,13 @@ stencil weights at the projection and H = [1, -N_i(xi_n)] those of the reference
                                                    D = -(mu lambda_N eps_T / |t*|)(P - tau tau^T) (slip)
 
 It neglects the variation of n and of the projection xi (terms of relative size |g| / h and of the
-curvature), so it is approximately consistent; it is symmetric because lambda_N is fixed (Box 7).
+curvature), so it is approximately consistent; it is symmetric because lambda_N is fixed ([Man2006, Box 7]).
 With `consistent_tangent` both parts are central differences of the exact nodal forces over each
 contact element's stencil instead (normal: slave + the 16 patch vertices of the master facet;
 friction: those + the 4 reference facet vertices, branch fixed), which includes the rotation of n and
 of the tangent plane P(n) (relative size ~ p / (eps_N h) and ~ mu).
 
-Active-set strategy on the facets (`solve_with_fixed_sets`, issue 5): during one Newton solve each
+Active-set strategy on the facets (`solve_with_fixed_sets`): during one Newton solve each
 active slave keeps a fixed master facet and is projected onto the plane of a fixed triangle of it
 (`freeze`, `project_onto_triangle_planes`), so the law is smooth; the set is updated from the
 converged state until it no longer changes.
@@ -284,7 +284,7 @@ def _project(xs: np.ndarray, quad_x: np.ndarray, tri: np.ndarray | None) -> tupl
 
 def symmetric_return_map(trial: np.ndarray, limit: np.ndarray, eps_T: float, projector: np.ndarray,
                          branch: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Coulomb return mapping with a fixed friction limit (Box 7, eq. 3.75), n nodes, vectorized.
+    """Coulomb return mapping with a fixed friction limit ([Man2006, Box 7], eq. 3.75), n nodes, vectorized.
 
     trial: (n, 3) tangential trial tractions t* [Pa]; limit: (n,) mu lambda_N [Pa] >= 0;
     eps_T [Pa/m]; projector: (n, 3, 3) P = 1 - n n^T; branch: optional (n,) int, the branch imposed
@@ -754,7 +754,7 @@ class YarnContact:
         P = np.eye(3)[None] - normal[:, :, None] * normal[:, None, :]
         lam_T = self.lam_T if p_.augmented else np.zeros((n, 3))
         trial = np.einsum("nij,nj->ni", P, lam_T - p_.eps_T * (x[self.slave] - x_ref))       # eq. 3.74
-        limit = p_.friction * (self.lam_N if p_.augmented else pressure)                      # Box 7: mu lambda_N
+        limit = p_.friction * (self.lam_N if p_.augmented else pressure)                      # [Man2006, Box 7]: mu lambda_N
         traction, D, slip = symmetric_return_map(trial, limit, p_.eps_T, P)                   # eq. 3.75
         traction[~active], D[~active], slip[~active] = 0.0, 0.0, False
         cur_quads = np.zeros((n, 4), dtype=np.int64)
@@ -877,7 +877,7 @@ class YarnContact:
         return max(pen, 0.0), float(np.max(slip, initial=0.0))
 
     def augment(self) -> None:
-        """Uzawa update of the multipliers (Box 7 step 3, eq. 3.79)."""
+        """Uzawa update of the multipliers ([Man2006, Box 7] step 3, eq. 3.79)."""
         st = self.evaluate()
         self.lam_N = st["pressure"].copy()
         limit = self.params.friction * self.lam_N
@@ -992,7 +992,7 @@ def solve_with_fixed_sets(solve_newton, contact: YarnContact, accept, max_update
 
 
 def solve_with_contact(solve_newton, contact: YarnContact, step: int = 0) -> ContactReport:
-    """Box 7 outer loop for one load step: Newton solve with fixed multipliers (`solve_newton()` returns a
+    """[Man2006, Box 7] outer loop for one load step: Newton solve with fixed multipliers (`solve_newton()` returns a
     NewtonResult), then Uzawa augmentation until the penetration and stick slip are below the tolerance.
     Raises SolverError if Newton fails or the augmentations do not converge.
 
@@ -1001,7 +1001,7 @@ def solve_with_contact(solve_newton, contact: YarnContact, step: int = 0) -> Con
     of the TI unit cell) the violation can grow at every update (measured: x1.07-1.15 per update for 15
     updates, from 1.1e-7 m to 8.6e-7 m, at E11 = 0.141 of the biaxial path). When max(penetration, stick slip)
     has grown in two successive augmentations, eps_N and eps_T are multiplied by `penalty_growth` before the
-    next update (Box 7 allows eps to change between augmentations: the multipliers carry the pressure)."""
+    next update ([Man2006, Box 7] allows eps to change between augmentations: the multipliers carry the pressure)."""
     p_ = contact.params
     iterations, violations, growths = [], [], 0
     for k in range(p_.max_augmentations + 1):

@@ -1,4 +1,4 @@
-"""Time integration of the shell (thesis sec. 2.3.1.6): mass, damping, implicit Newmark, generalized-alpha
+"""Time integration of the shell [Man2006, sec. 2.3.1.6]: mass, damping, implicit Newmark, generalized-alpha
 (PETSc TS ALPHA2), explicit central differences and the critical time step. SI units throughout.
 
     from fabricfem.dynamics import NewmarkIntegrator, GeneralizedAlphaIntegrator, CentralDifference, critical_time_step

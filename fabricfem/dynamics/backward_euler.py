@@ -4,9 +4,9 @@ One step of M x'' + c M x' + R(x) = 0 from (x^n, v^n) with step dt, in the end-o
 
     M (x - x^n - dt v^n) / dt^2 + c M (x - x^n) / dt + R(x) = 0,   v^{n+1} = (x - x^n) / dt
 
-(thesis eq. 2.84 with the accelerations and velocities of backward Euler; M: a lumped diagonal mass of
+([Man2006, eq. 2.84] with the accelerations and velocities of backward Euler; M: a lumped diagonal mass of
 eq. 2.82 [kg, kg m^2] as a PETSc Vec, fabricfem.dynamics.mass.lumped_mass; c [1/s]: mass-proportional damping,
-e.g. air drag eta / (rho t) [seed 002, eq. 17d]). The term adds
+e.g. air drag eta / (rho t) [[Peng2022, eq. 17d]]). The term adds
 
     r = M ((x - x^n) (1 / dt^2 + c / dt) - v^n / dt)      [N, N m],   tangent (1 / dt^2 + c / dt) M,
 

@@ -1,4 +1,4 @@
-"""Explicit central differences with the lumped mass of thesis eq. 2.82 (Newmark beta = 0, gamma = 1/2).
+"""Explicit central differences with the lumped mass of [Man2006, eq. 2.82] (Newmark beta = 0, gamma = 1/2).
 
     d^{n+1} = d^n + dt v^n + dt^2 / 2 a^n                                            (eq. 2.76, beta = 0)
     v~      = v^n + dt / 2 a^n
@@ -9,7 +9,7 @@ C_L = a M_L + eta M_L^translational / (rho t) is diagonal and treated implicitly
 the stiffness-proportional part b K_M(d^n) acts on the predictor velocity v~ (a matrix-vector product).
 Dirichlet rows: d = lambda(t) g, a = 0, v = (d^{n+1} - d^n) / dt there.
 
-The step must not exceed the critical time step (fabricfem.dynamics.stability, thesis eqs. 2.86-2.87);
+The step must not exceed the critical time step (fabricfem.dynamics.stability, [Man2006, eqs. 2.86-2.87]);
 a larger one is refused (ValueError) unless force=True. Units: SI.
 
 Rotary-inertia mass scaling (`rotary_inertia_scale` s >= 1, default 1): the rotational lumped masses
@@ -19,7 +19,7 @@ with s.
 
 Contact (`contact`, optional): an object with `forces(integrator, t, rhs)` (penalty: adds nodal contact
 forces at d^{n+1} to the right-hand side before the division by the diagonal) and
-`correct(integrator, t)` (forward-increment Lagrange multipliers, thesis Box 5: modifies a^{n+1} after
+`correct(integrator, t)` (forward-increment Lagrange multipliers, [Man2006, Box 5]: modifies a^{n+1} after
 the division so that the next predictor lands on the body), see fabricfem.contact.explicit.
 """
 from __future__ import annotations
@@ -56,7 +56,7 @@ class CentralDifference(TimeIntegrator):
             raise ValueError(f"dt_crit must be positive, got {dt_crit!r}")
         if isinstance(dt, (int, float)) and dt > dt_crit and not force:
             raise ValueError(f"dt = {dt:.6g} s exceeds the critical time step dt_crit = {dt_crit:.6g} s of central "
-                             f"differences (thesis eqs. 2.86-2.87, ratio {dt / dt_crit:.3g}); use a smaller dt or "
+                             f"differences ([Man2006, eqs. 2.86-2.87], ratio {dt / dt_crit:.3g}); use a smaller dt or "
                              f"force=True")
         if int(damping_update_every) < 1:
             raise ValueError(f"damping_update_every must be >= 1, got {damping_update_every!r}")
@@ -132,7 +132,7 @@ class CentralDifference(TimeIntegrator):
         self.a.pointwiseDivide(rhs, self._denominator)
         if self.contact is not None:
             tic = time.perf_counter()
-            self.contact.correct(self, t_new)            # Box 5: a^{n+1} += a^c
+            self.contact.correct(self, t_new)            # [Man2006, Box 5]: a^{n+1} += a^c
             self.timings["contact"] += time.perf_counter() - tic
         self._v_pred.copy(self.v)
         self.v.axpy(0.5 * dt, self.a)

@@ -5,12 +5,12 @@ per unit area, air-drag coefficient eta [kg/(m^2 s)], Rayleigh coefficients a [1
 
 Rotational inertia. The Naghdi director is d = cos th1 cos th2 a3 + cos th1 sin th2 a1 - sin th1 a2
 (fabricfem.forms.shell.director). The thesis neglects the angular-velocity-squared term of the
-acceleration (thesis eq. 2.65); here the director velocity is also linearised about the director base,
+acceleration [Man2006, eq. 2.65]; here the director velocity is also linearised about the director base,
 d' ~ th2' a1 - th1' a2, so |d'|^2 ~ |theta'|^2 and the kinetic energy density is
 
     T = 1/2 rho t |u'|^2 + 1/2 rho t^3/12 |theta'|^2,
 
-which gives a constant mass matrix (thesis eq. 2.67 without the deformation dependence). The exact
+which gives a constant mass matrix ([Man2006, eq. 2.67] without the deformation dependence). The exact
 metric of the angles is diag(1, cos^2 th1), so the rotational inertia is exact at theta = 0 and off by
 O(th1^2) relative for finite angles; translational inertia is exact. The director base must therefore
 stay fixed during a dynamic run (ShellModel.rebase = False; the integrators switch it off).
@@ -45,7 +45,7 @@ def _check_density(model) -> float:
 
 
 def rotational_inertia_factor(model) -> float:
-    """t^2/12 [m^2]: rotational over translational inertia per unit area (thesis eq. 2.82)."""
+    """t^2/12 [m^2]: rotational over translational inertia per unit area [Man2006, eq. 2.82]."""
     return float(model.fabric.thickness) ** 2 / 12.0
 
 
@@ -58,7 +58,7 @@ def rotary_scale(value) -> float:
 
 
 def mass_form(model, rotary_inertia_scale: float = 1.0):
-    """Consistent mass bilinear form [kg]: rho t u.v + s rho t^3/12 theta.eta (thesis eq. 2.67, linearised
+    """Consistent mass bilinear form [kg]: rho t u.v + s rho t^3/12 theta.eta ([Man2006, eq. 2.67], linearised
     director; s the rotary-inertia scale, module docstring)."""
     scale = rotary_scale(rotary_inertia_scale)
     rho_t = fem.Constant(model.mesh, PETSc.ScalarType(_check_density(model)))
@@ -71,7 +71,7 @@ def mass_form(model, rotary_inertia_scale: float = 1.0):
 
 
 def air_drag_form(model, eta: float):
-    """Bilinear form of the air drag f_d = -eta v (seed 002), eta [kg/(m^2 s)] per unit reference area."""
+    """Bilinear form of the air drag f_d = -eta v [Peng2022], eta [kg/(m^2 s)] per unit reference area."""
     trial = ufl.split(model.w_trial)[0] if model.model == "naghdi" else model.w_trial
     return fem.Constant(model.mesh, PETSc.ScalarType(eta)) * ufl.dot(trial, model.v) * model.dx
 
@@ -95,7 +95,7 @@ def _strains(model, w):
 
 
 def material_stiffness_form(model, w_frozen: fem.Function, psri_degrees: tuple[int, int] = (4, 2)):
-    """Material part K_M of the tangent stiffness at the state `w_frozen` (thesis eq. 2.85).
+    """Material part K_M of the tangent stiffness at the state `w_frozen` [Man2006, eq. 2.85].
 
     K_M = int deps.A Deps + dkappa.D Dkappa + k_s G t dgamma.Dgamma with the strain variations taken at
     w_frozen and the PSRI split of the energy; the geometric part (stress times second variation of
@@ -128,7 +128,7 @@ def _subspaces(model) -> list[tuple[object, str]]:
 
 
 def _hrz_nodal_factors(model, scalar_element) -> tuple[np.ndarray, int]:
-    """Per owned cell and local node A: area_e int_e N_A^2 / sum_B int_e N_B^2 [m^2] (thesis eq. 2.82, lambda)."""
+    """Per owned cell and local node A: area_e int_e N_A^2 / sum_B int_e N_B^2 [m^2] ([Man2006, eq. 2.82], lambda)."""
     mesh = model.mesh
     cellname = mesh.ufl_cell().cellname()
     basix_cell = {"triangle": basix.CellType.triangle, "quadrilateral": basix.CellType.quadrilateral}[cellname]
@@ -147,7 +147,7 @@ def _hrz_nodal_factors(model, scalar_element) -> tuple[np.ndarray, int]:
 
 def lumped_mass(model, translational: bool = True, rotational: bool = True,
                 rotary_inertia_scale: float = 1.0) -> PETSc.Vec:
-    """Diagonal (lumped) mass of thesis eq. 2.82 [kg, kg m^2] as a ghosted PETSc Vec on W.
+    """Diagonal (lumped) mass of [Man2006, eq. 2.82] [kg, kg m^2] as a ghosted PETSc Vec on W.
 
     M_AA = lambda_e rho t int_e N_A^2 for the displacements and s t^2/12 of that for the rotations
     (s = rotary_inertia_scale >= 1, module docstring; 1 is eq. 2.82),
@@ -192,13 +192,13 @@ def consistent_mass(model, bcs=None, diagonal: float = 1.0) -> PETSc.Mat:
 
 
 class InertiaDamping:
-    """Mass M and damping C = a M + b K_M(d^n) + C_air of a model (thesis eqs. 2.82, 2.84-2.85; seed 002).
+    """Mass M and damping C = a M + b K_M(d^n) + C_air of a model ([Man2006, eqs. 2.82, 2.84]-2.85; [Peng2022]).
 
     Args:
         model: a ShellModel (compiled here).
         lumped: use the diagonal mass of eq. 2.82 (and a diagonal air drag) instead of the consistent ones.
         rayleigh: (a [1/s], b [s]) of C = a M + b K_M; K_M is the material stiffness at the last converged
-            state, frozen during a step (thesis eq. 2.85).
+            state, frozen during a step [Man2006, eq. 2.85].
         air_drag: eta [kg/(m^2 s)] of the drag force per unit area f_d = -eta v (translations only).
         rotary_inertia_scale: s >= 1 multiplying the rotational inertia (module docstring; 1: physical).
 
@@ -260,7 +260,7 @@ class InertiaDamping:
         self.C.assemble()
 
     def freeze(self, d: PETSc.Vec):
-        """Re-evaluate b K_M at the converged state d (thesis eq. 2.85: C fixed during a step)."""
+        """Re-evaluate b K_M at the converged state d ([Man2006, eq. 2.85]: C fixed during a step)."""
         if self.stiffness_ufl is None:
             return
         d.copy(self.w_frozen.vector)

@@ -1,4 +1,4 @@
-"""Implicit Newmark time integration of the shell (thesis sec. 2.3.1.6, eqs. 2.75-2.85, Box 2).
+"""Implicit Newmark time integration of the shell ([Man2006, sec. 2.3.1.6], eqs. 2.75-2.85, Box 2).
 
 Each step solves the effective residual in the end-of-step displacement d = d^{n+1} with SNES Newton:
 
@@ -494,7 +494,7 @@ class StepHalving:
 
 
 class NewmarkIntegrator(StepHalving, TimeIntegrator):
-    """Implicit Newmark (beta, gamma) with SNES Newton per step (thesis Box 2, eqs. 2.76, 2.84-2.85).
+    """Implicit Newmark (beta, gamma) with SNES Newton per step ([Man2006, Box 2], eqs. 2.76, 2.84-2.85).
 
     Args:
         beta, gamma: Newmark parameters; unconditionally stable for gamma >= 1/2 and beta >= (gamma + 1/2)^2 / 4

@@ -1,4 +1,4 @@
-"""Critical time step of explicit central differences (thesis eqs. 2.86-2.87) and a measured check.
+"""Critical time step of explicit central differences [Man2006, eqs. 2.86-2.87] and a measured check.
 
 Thesis: dt_crit = 2 / omega_max (eq. 2.86), omega_max ~ 2 c / h (eq. 2.87), c = sqrt(E / rho) the bar-wave
 speed, h the element size. That estimate is for linear elements and membrane waves only. For the
@@ -15,11 +15,11 @@ code with dense eigenvalue solves of K vs M_L, see tests/test_dynamics.py and th
 
 * bending: the rotational inertia against the bending tangent at zero curvature D0 (the largest of D11,
   D22 for the linear law; a0 for Kawabata's M = sum a_i K^i; 2 B0 sqrt(kappa0 / eps) for the regularised
-  square-root law of seed 002, whose exact tangent is infinite at K = 0) gives
+  square-root law of [Peng2022], whose exact tangent is infinite at K = 0) gives
   omega_b = chi_b sqrt(12 D0 / (rho t^3)) / h_min; chi_b = 4.9 for Q2 (measured 4.899-4.920 on 6x6 and
   12x12 bending-dominated cloths, the 1D quadratic-element value 2 sqrt 6 = 4.899) and 5.5 for P2 + bubble
   triangles. For linear laws and thin shells omega_b << omega_s; for the square-root law it sets the step
-  (seed 002 cloth: 7x above the shear-and-membrane estimate).
+  ([Peng2022] cloth: 7x above the shear-and-membrane estimate).
 
 omega_max = sqrt(omega_m^2 + omega_s^2 + omega_b^2) (Naghdi; shear and bending stiffness act on the same
 rotational inertia) or omega_m (membrane).
@@ -48,7 +48,7 @@ BENDING_CHI = {"quadrilateral": 4.95, "triangle": 5.5}
 
 
 def plane_stress_wave_speed(fabric) -> float:
-    """c = sqrt(E_max / (rho (1 - nu12 nu21))) [m/s] (thesis eq. 2.87 has sqrt(E / rho), the nu = 0 value)."""
+    """c = sqrt(E_max / (rho (1 - nu12 nu21))) [m/s] ([Man2006, eq. 2.87] has sqrt(E / rho), the nu = 0 value)."""
     rho = float(fabric.density)
     if not rho > 0:
         raise ValueError(f"the wave speed needs a positive fabric density, got {rho!r} kg/m^3")
@@ -95,7 +95,7 @@ def initial_bending_stiffness(model) -> float:
 
 def critical_time_step(model, rayleigh: tuple[float, float] = (0.0, 0.0), omega_max: float | None = None,
                        rotary_inertia_scale: float = 1.0) -> float:
-    """dt_crit = 2 / omega_max (thesis eq. 2.86), reduced for Rayleigh damping (a [1/s], b [s]); omega_max
+    """dt_crit = 2 / omega_max [Man2006, eq. 2.86], reduced for Rayleigh damping (a [1/s], b [s]); omega_max
     from `max_frequency_estimate(model, rotary_inertia_scale)` unless given."""
     omega = max_frequency_estimate(model, rotary_inertia_scale) if omega_max is None else float(omega_max)
     a, b = rayleigh

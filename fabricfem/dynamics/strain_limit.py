@@ -1,17 +1,17 @@
-"""Continuum strain limiting by fast projection (seed 002, sec. 3, eqs. 20-37; Goldenthal et al. 2007).
+"""Continuum strain limiting by fast projection ([Peng2022, sec. 3], eqs. 20-37; Goldenthal et al. 2007).
 
 After an unconstrained time step the candidate configuration q~ is corrected, q = q~ + Delta q, so that the
 warp and weft Green strains do not exceed a limit. With the constraints C(q) and the lumped mass M, each
 fast-projection iteration j solves the symmetric positive definite system
 
-    h^2 dC M^-1 dC^T dlambda = C^[j]                                           (seed 002 eq. 33)
-    Delta q^[j+1] = Delta q^[j] - h^2 M^-1 dC^T dlambda                         (seed 002 eq. 34)
+    h^2 dC M^-1 dC^T dlambda = C^[j]                                           [Peng2022, eq. 33]
+    Delta q^[j+1] = Delta q^[j] - h^2 M^-1 dC^T dlambda                         [Peng2022, eq. 34]
 
 until max C < tol. h^2 cancels from Delta q; it only scales the multipliers lambda [J] (eq. 37).
 
-Sampling points (seed 002 sec. 3.4): the mesh vertices, two constraints each,
+Sampling points [Peng2022, sec. 3.4]: the mesh vertices, two constraints each,
 
-    C_i = [E_warp,i - limit, E_weft,i - limit]                                  (seed 002 eq. 36)
+    C_i = [E_warp,i - limit, E_weft,i - limit]                                  [Peng2022, eq. 36]
 
 an inequality: only the rows with C_i > 0, or already active earlier in the same projection, are enforced
 (active set). Why vertices and how the vertex strain is measured:
@@ -84,7 +84,7 @@ def _finite_positive(name: str, value) -> float:
 
 
 class FastProjection:
-    """Warp/weft Green-strain limiting of a ShellModel by the continuum fast projection (seed 002 sec. 3).
+    """Warp/weft Green-strain limiting of a ShellModel by the continuum fast projection [Peng2022, sec. 3].
 
     Args:
         model: a ShellModel ("naghdi" or "membrane") with a positive fabric density.
@@ -135,7 +135,7 @@ class FastProjection:
     # ---------------------------------------------------------------- forms
     @staticmethod
     def strain_expressions(model):
-        """UFL (E_warp, E_weft): Green strain along the reference warp t1 and weft t2 (seed 002 eq. 3b)."""
+        """UFL (E_warp, E_weft): Green strain along the reference warp t1 and weft t2 [Peng2022, eq. 3b]."""
         u = ufl.split(model.w)[0] if model.model == "naghdi" else model.w
         F0 = ufl.grad(model.phi0)
         F = F0 + ufl.grad(u)
@@ -288,7 +288,7 @@ def project_step(projection: FastProjection, integrator) -> ProjectionResult:
 
     d += Delta q, v += Delta q / dt (Goldenthal et al.). CentralDifference: the end-of-step acceleration is
     re-evaluated at the projected state, (M_L + dt/2 C_L) a = lambda F - f_int(d) - C v~ with v~ = v - dt/2 a_old
-    and v = v~ + dt/2 a (thesis eq. 2.84, the step's own update). Newmark: a is kept. Re-evaluating it from
+    and v = v~ + dt/2 a ([Man2006, eq. 2.84], the step's own update). Newmark: a is kept. Re-evaluating it from
     the equation of motion, M a = lambda F - f_int(d) - C v, puts the unresolved stiff modes of the implicit
     step into a (the rotational inertia rho t^3/12 is tiny): measured on the corner-pinned cloth, a 2e-4 m
     correction gave a next-step Newton residual 4000 x the usual and divergence.

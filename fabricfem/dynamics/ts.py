@@ -1,6 +1,6 @@
 """Generalized-alpha time integration of the shell by PETSc TS ALPHA2 (Chung & Hulbert 1993).
 
-The semi-discrete equations of motion (thesis eq. 2.84 before the Newmark substitution)
+The semi-discrete equations of motion ([Man2006, eq. 2.84] before the Newmark substitution)
 
     M a + C v + f_int(d) - lambda(t) F_ref = 0
 
@@ -22,7 +22,7 @@ dissipation; energy-conserving for linear problems).
 Tangent handed to SNES (PETSc scales the residual by 1 / alpha_f): K(d_{n+alpha_f}) + shift_v C + shift_a M
 with shift_v = gamma / (beta dt), shift_a = alpha_m / (alpha_f beta dt^2). Dirichlet rows: x - lambda g in the
 residual, identity rows in the tangent (as in fabricfem.dynamics.newmark). C = a M + b K_M(d_n) + C_air is
-frozen during a step (thesis eq. 2.85). The director base stays fixed (see fabricfem.dynamics.newmark).
+frozen during a step [Man2006, eq. 2.85]. The director base stays fixed (see fabricfem.dynamics.newmark).
 
 Start-up: PETSc computes the initial acceleration of each (re)start itself (two backward-Euler half steps and a
 backward difference); for rho_inf = 1 the displacements and velocities do not depend on it (only the sum

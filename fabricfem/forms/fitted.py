@@ -1,4 +1,4 @@
-"""UFL form of a membrane strain energy fitted to homogenized unit-cell data (thesis 000, sec. 4.3.6, 6.2.2).
+"""UFL form of a membrane strain energy fitted to homogenized unit-cell data [Man2006, sec. 4.3.6, 6.2.2].
 
 The thesis' "hierarchical" route (sec. 6.2.2) casts the homogenized stress-strain relation of the unit
 cell as a strain-energy function the macroscale shell can use (sec. 4.3.6). Here that energy per unit

@@ -1,14 +1,14 @@
 """Geometrically nonlinear Naghdi shell in total Lagrangian form on a manifold mesh.
 
-Kinematics (seed 001, eqs. 1-6; thesis ch. 2): the mid-surface moves from phi0 to
+Kinematics ([Eischen2000, eqs. 1-6]; [Man2006, ch. 2]): the mid-surface moves from phi0 to
 phi = phi0 + u and the unit director moves from the reference normal n0 to d.
 With the tangential gradient of the embedded surface (3x3 tensors acting on the
 tangent plane) the strain measures read, coordinate-free,
 
-    membrane      E   = 1/2 (F^T F - F0^T F0)                              (seed 001 eq. 3)
-    transverse    g   = F^T d - F0^T n0                                     (seed 001 eq. 4)
+    membrane      E   = 1/2 (F^T F - F0^T F0)                              [Eischen2000, eq. 3]
+    transverse    g   = F^T d - F0^T n0                                     [Eischen2000, eq. 4]
     bending       K   = -1/2 (F^T grad d + grad d^T F)
-                        + 1/2 (F0^T grad n0 + grad n0^T F0)                 (seed 001 eq. 5, symmetrised)
+                        + 1/2 (F0^T grad n0 + grad n0^T F0)                 ([Eischen2000, eq. 5], symmetrised)
 
 with F = grad phi, F0 = grad phi0. Components are taken in the orthonormal
 material frame (e1 = warp, e2 = weft) of the reference surface. The director is
@@ -47,7 +47,7 @@ def material_frame(F0, t1, t2):
 
 
 def membrane_strain(F, F0):
-    """Green-Lagrange membrane strain tensor E = (F^T F - F0^T F0) / 2 (seed 001 eq. 3)."""
+    """Green-Lagrange membrane strain tensor E = (F^T F - F0^T F0) / 2 [Eischen2000, eq. 3]."""
     return 0.5 * (F.T * F - F0.T * F0)
 
 
@@ -59,13 +59,13 @@ def area_stretch(F, F0, t1, t2):
 
 
 def bending_strain(F, F0, d, n0):
-    """Change of curvature K (seed 001 eq. 5, symmetrised), sign chosen so K > 0 bends towards -n0."""
+    """Change of curvature K ([Eischen2000, eq. 5], symmetrised), sign chosen so K > 0 bends towards -n0."""
     grad_d, grad_n0 = ufl.grad(d), ufl.grad(n0)
     return -0.5 * (F.T * grad_d + grad_d.T * F) + 0.5 * (F0.T * grad_n0 + grad_n0.T * F0)
 
 
 def shear_strain(F, F0, d, n0):
-    """Transverse shear strain vector g = F^T d - F0^T n0 (seed 001 eq. 4)."""
+    """Transverse shear strain vector g = F^T d - F0^T n0 [Eischen2000, eq. 4]."""
     return F.T * d - F0.T * n0
 
 
@@ -80,13 +80,13 @@ def quadratic_energy(strain_voigt, C):
 
 
 def kawabata_energy(kappa, coefficients):
-    """Energy per unit area of M(K) = sum_i a_i K^i extended oddly (seed 001 eq. 15): sum_i a_i |K|^(i+1) / (i+1)."""
+    """Energy per unit area of M(K) = sum_i a_i K^i extended oddly [Eischen2000, eq. 15]: sum_i a_i |K|^(i+1) / (i+1)."""
     return sum(a * abs(kappa) ** (i + 2) / (i + 2) if i > 0 else a * kappa ** 2 / 2
                for i, a in enumerate(coefficients))
 
 
 def square_root_energy(kappa, B0, kappa0, eps):
-    """Energy of seed 002 eq. 9, m = 2 B0 sqrt(kappa0 |K|) up to kappa0 then B0 (|K| + kappa0).
+    """Energy of [Peng2022, eq. 9], m = 2 B0 sqrt(kappa0 |K|) up to kappa0 then B0 (|K| + kappa0).
 
     |K| is regularised as r = sqrt(K^2 + eps^2) (eps [1/m] set by the caller): the energy
     4/3 B0 sqrt(kappa0) (r^(3/2) - eps^(3/2)) gives m -> 2 B0 sqrt(kappa0 |K|) for |K| >> eps and a
@@ -155,7 +155,7 @@ def naghdi_energy(u, theta, phi0, n0, director_base, warp_weft, A, D, shear_stif
 
 
 def membrane_energy(u, phi0, t1, t2, A, degree: int = 4, membrane_density=None):
-    """Membrane-only (no bending, no shear) strain energy 1/2 E.A E [J] (seed 001 eq. 3, eq. 8), or
+    """Membrane-only (no bending, no shear) strain energy 1/2 E.A E [J] ([Eischen2000, eq. 3], eq. 8), or
     int W(eps) dA with a callable membrane_density W [J/m^2] of the Voigt strain (forms.fitted)."""
     mesh = u.ufl_domain()
     F0 = ufl.grad(phi0)

@@ -1,4 +1,4 @@
-"""Bonet-Burton transversely isotropic hyperelastic yarn law in UFL (thesis sec. 4.3.4, eqs. 4.66-4.69).
+"""Bonet-Burton transversely isotropic hyperelastic yarn law in UFL ([Man2006, sec. 4.3.4], eqs. 4.66-4.69).
 
 Energies are per unit reference volume [Pa]; C = F^T F is the right Cauchy-Green tensor, A the unit
 yarn axis in the reference configuration, I4 = A.C A, I5 = A.C^2 A. Parameters (lmbda, mu, alpha,

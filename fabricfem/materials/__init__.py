@@ -22,7 +22,7 @@ def positive_number(name: str, value: float) -> float:
 
 @dataclass(frozen=True)
 class KawabataBending:
-    """Polynomial moment-curvature law M(K) = sum_i alpha_i K^i (seed 001, eq. 15).
+    """Polynomial moment-curvature law M(K) = sum_i alpha_i K^i [Eischen2000, eq. 15].
 
     `coefficients` are (alpha_1, ..., alpha_n) in SI units: M in N m / m (moment per unit
     width) and K in 1/m. The law is extended as an odd function, M(-K) = -M(K), and must
@@ -46,7 +46,7 @@ class KawabataBending:
 
 @dataclass(frozen=True)
 class SquareRootBending:
-    """Square-root bending law of seed 002, eq. 9 (after Abbott, Grosberg and Leaf).
+    """Square-root bending law of [Peng2022, eq. 9] (after Abbott, Grosberg and Leaf).
 
     m = sign(K) 2 B0 sqrt(kappa0 |K|) for |K| <= kappa0, sign(K) (B0 |K| + B0 kappa0) beyond.
     B0 [N m] and kappa0 [1/m].

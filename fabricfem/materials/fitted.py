@@ -1,4 +1,4 @@
-"""A membrane strain-energy function fitted to homogenized unit-cell data (thesis 000, sec. 4.3.6, 6.2.2).
+"""A membrane strain-energy function fitted to homogenized unit-cell data [Man2006, sec. 4.3.6, 6.2.2].
 
 The thesis leaves the link between the unit cell (ch. 4) and the garment-scale shell (ch. 2) open:
 the homogenized relations "can not be applied to the clothing simulation unless they are cast as a

@@ -1,6 +1,6 @@
-"""Yarn material: Bonet-Burton transversely isotropic hyperelasticity (thesis sec. 4.3.4), SI units.
+"""Yarn material: Bonet-Burton transversely isotropic hyperelasticity [Man2006, sec. 4.3.4], SI units.
 
-Strain energy per unit reference volume [J/m^3 = Pa] (thesis eqs. 4.66-4.68, Bonet & Burton 1998):
+Strain energy per unit reference volume [J/m^3 = Pa] ([Man2006, eqs. 4.66-4.68], Bonet & Burton 1998):
 
     psi     = psi_iso + psi_ti                                                   (4.66)
     psi_iso = mu/2 (I1 - 3) - mu ln J + lambda/2 (J - 1)^2                        (4.67)
@@ -213,4 +213,4 @@ class YarnMaterial:
 # Thesis sec. 4.3.4-4.3.5 parameter sets [Pa]
 THESIS_TRANSVERSELY_ISOTROPIC = YarnMaterial(lmbda=0.4457e9, mu=0.5154e9, alpha=0.2714e9, beta=0.06548e9,
                                              gamma=10.54e9, name="Kevlar KM2 yarn (thesis, transversely isotropic)")
-THESIS_ISOTROPIC = YarnMaterial(lmbda=48.82e9, mu=32.55e9, name="Kevlar KM2 yarn (thesis sec. 4.3.5.1, isotropic)")
+THESIS_ISOTROPIC = YarnMaterial(lmbda=48.82e9, mu=32.55e9, name="Kevlar KM2 yarn ([Man2006, sec. 4.3.5.1], isotropic)")

@@ -12,7 +12,7 @@ from .tube import cylindrical_panel, tube
 __all__ = ["FabricMesh", "mesh_from_gmsh", "model_to_mesh", "plate", "tube", "cylindrical_panel", "annulus",
            "spherical_cap"]
 
-# Woven unit cells (3D hexahedral yarn meshes, thesis ch. 4.3)
+# Woven unit cells (3D hexahedral yarn meshes, [Man2006, ch. 4.3])
 from .unit_cell import MeshResolution, UnitCellMesh, unit_cell  # noqa: E402
 from .yarn_geometry import PlainWeave, YarnFamily, YarnPath, amplitude_from_crimp, check_weave  # noqa: E402
 

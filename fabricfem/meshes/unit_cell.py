@@ -1,4 +1,4 @@
-"""Hexahedral volume meshes of plain-weave unit cells (thesis sec. 4.3.3, Fig. 19).
+"""Hexahedral volume meshes of plain-weave unit cells ([Man2006, sec. 4.3.3], Fig. 19).
 
 Each yarn is a separate body (no shared nodes; the yarns interact by
 contact only): a structured mesh of first-order hexahedra obtained by
@@ -171,12 +171,12 @@ class UnitCellMesh:
         tags: facet tag name -> id.
         yarn_ids: yarn name (``warp0``, ``weft0``, ...) -> cell tag id.
         yarn_axis: DG0 vector Function, the unit centreline tangent of the
-            yarn of each cell (the material direction A of thesis eq. 4.68).
+            yarn of each cell (the material direction A of [Man2006, eq. 4.68]).
         weave: the geometry.
         option: ``"quarter"`` (thesis option B) or ``"full"`` (option A).
         yarns: the yarn pieces, in the order of ``yarn_ids``.
         box_lower, box_upper: corners of the cell bounding box (m) that
-            defines |Y| in the volume fraction (thesis eq. 4.65).
+            defines |Y| in the volume fraction [Man2006, eq. 4.65].
         yarn_volumes: measured volume of each yarn of the mesh (m^3).
         resolution: the divisions used.
     """
@@ -212,7 +212,7 @@ class UnitCellMesh:
 
     @property
     def volume_fraction(self) -> float:
-        """phi = |Y_s| / |Y| of the mesh (thesis eq. 4.65)."""
+        """phi = |Y_s| / |Y| of the mesh [Man2006, eq. 4.65]."""
         return self.yarn_volume / float(np.prod(self.cell_box))
 
     def tag(self, name: str) -> int:
@@ -246,7 +246,7 @@ class UnitCellMesh:
         """Map x (3, n) on the ``<name>_end`` face to the matching point of ``<name>_start``.
 
         Full cell: translation by minus the period along the yarn.  Quarter
-        cell (anti-symmetric repetition, thesis sec. 4.3.3): translation by
+        cell (anti-symmetric repetition, [Man2006, sec. 4.3.3]): translation by
         minus the half period and reflection z -> -z (so a periodic
         displacement constraint must also flip u_z).
         """

@@ -1,6 +1,6 @@
 """Plain-weave yarn geometry (pure numpy/scipy): sinusoidal centrelines, elliptic tubes.
 
-Thesis (seed 000, X. Man 2006) sec. 4.3.5: "the centerline of a yarn is
+Thesis ([Man2006], X. Man 2006) sec. 4.3.5: "the centerline of a yarn is
 represented as a half wave of a sinusoidal curve [...] the half period and
 the amplitude [...] identified using the yarn density and the crimp ratio"
 (Kawabata's parameters y_0i and h_mi, sec. 4.1.2.1); "the cross section of a
@@ -18,7 +18,7 @@ The cross-section of a yarn is the ellipse with semi-axes a = width / 2
 (along the binormal, in the fabric plane) and b = height / 2 (along the
 principal normal), in the plane perpendicular to the centreline tangent.
 
-Unit cells (thesis Fig. 19a): option B, ``"quarter"``, is
+Unit cells [Man2006, Fig. 19a]: option B, ``"quarter"``, is
 [-p_w/2, p_w/2] x [-p_f/2, p_f/2] and holds the half waves of warp 0 and
 weft 0 crossing at the origin, cut at their inflection points; the structure
 repeats anti-symmetrically (translation by a half period with z -> -z).
@@ -62,7 +62,7 @@ def amplitude_from_crimp(half_period: float, crimp: float, model: str = "sinusoi
       (1 + crimp) p over one half period (solved numerically), so the
       meshed yarn has exactly the requested crimp.
     * ``"kawabata"``: Kawabata's straight segments rising 2 h_m over y_0
-      (thesis eq. 4.1, l_0 = sqrt(4 h_m^2 + y_0^2)):
+      ([Man2006, eq. 4.1], l_0 = sqrt(4 h_m^2 + y_0^2)):
       h_m = (y_0 / 2) sqrt((1 + crimp)^2 - 1).
     """
     p = _positive("half_period", half_period)
@@ -321,9 +321,9 @@ class PlainWeave:
     @classmethod
     def balanced(cls, half_period: float = 1.0e-3, crimp: float = 0.08, volume_fraction: float = 0.4,
                  aspect_ratio: float = 1.5, crimp_model: str = "sinusoid") -> "PlainWeave":
-        """Balanced weave (warp = weft) as in thesis sec. 4.3.5.
+        """Balanced weave (warp = weft) as in [Man2006, sec. 4.3.5.]
 
-        From the thesis (seed 000, line ~2147-2149): sinusoidal half-wave centrelines, warp = weft,
+        From the thesis ([Man2006], line ~2147-2149): sinusoidal half-wave centrelines, warp = weft,
         elliptic section with radius ratio 1.5, volume fraction phi = 0.4. The thesis gives no
         numbers for the yarn spacing (half period), the crimp ratio or the gap between the yarns
         (it only says they follow from the yarn density and crimp ratio, Kawabata), so
@@ -331,7 +331,7 @@ class PlainWeave:
         not depend on half_period (no material length), only on crimp, aspect ratio and phi.
 
         The yarn width is solved so that the quarter-cell yarn volume over
-        the bounding box is ``volume_fraction`` (thesis eq. 4.65, phi = 0.4),
+        the bounding box is ``volume_fraction`` ([Man2006, eq. 4.65], phi = 0.4),
         the box height being the fabric thickness 2 (A + b).
 
         Args:
@@ -383,7 +383,7 @@ class PlainWeave:
         return lower, lower + np.array([n * pw, n * pf, 2.0 * h])
 
     def yarns(self, option: str) -> tuple[YarnPath, ...]:
-        """The yarn pieces of unit cell ``option`` (thesis Fig. 19a: quarter = B, full = A)."""
+        """The yarn pieces of unit cell ``option`` ([Man2006, Fig. 19a]: quarter = B, full = A)."""
         _option(option)
         pw, pf = self.warp.half_period, self.weft.half_period
         if option == "quarter":
@@ -399,7 +399,7 @@ class PlainWeave:
         return sum(y.volume() for y in self.yarns(option))
 
     def volume_fraction(self, option: str = "quarter") -> float:
-        """phi = |Y_s| / |Y| of the exact geometry (thesis eq. 4.65)."""
+        """phi = |Y_s| / |Y| of the exact geometry [Man2006, eq. 4.65]."""
         lower, upper = self.cell_bounds(option)
         return self.yarn_volume(option) / float(np.prod(upper - lower))
 

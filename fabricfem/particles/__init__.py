@@ -1,6 +1,6 @@
-"""Particle (mass-spring) cloth model: the fast baseline of seed 001 sec. 3 (SI units).
+"""Particle (mass-spring) cloth model: the fast baseline of [Eischen2000, sec. 3] (SI units).
 
-- springs: particle grid, structural / shear / flexion sets with seed 001's constants (eqs. 36-47),
+- springs: particle grid, structural / shear / flexion sets with [Eischen2000]'s constants (eqs. 36-47),
   forces, energies and sparse stiffness;
 - obstacles: frictionless penalty planes (table top, table edge);
 - integrate: velocity Verlet with Provot's strain limit, static relaxation (seed's iteration and Newton).

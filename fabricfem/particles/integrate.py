@@ -1,7 +1,7 @@
 """Dynamics and statics of a particle cloth: velocity Verlet with Provot's strain limit, and static
-relaxation (seed 001 sec. 3.2-3.3; thesis 000 sec. 2.1.1.1). SI units: m, kg, s, N, J.
+relaxation ([Eischen2000, sec. 3.2-3.3]; [Man2006, sec. 2.1.1.1]). SI units: m, kg, s, N, J.
 
-Equation of motion (seed 001 eq. 50): m dv/dt = W + F_ext + F_stretch + F_shear + F_bend - c m v, where
+Equation of motion [Eischen2000, eq. 50]: m dv/dt = W + F_ext + F_stretch + F_shear + F_bend - c m v, where
 W = m g is gravity, F_ext are point loads and obstacle contact forces and c [1/s] a mass-proportional
 viscous damping. Pinned particles keep their positions and have zero velocity.
 """
@@ -311,7 +311,7 @@ def _tangent(problem: Problem, x: np.ndarray, definite: bool = True) -> sp.csr_m
 
 def relax_seed(problem: Problem, x0: np.ndarray | None = None, momentum: float = 0.9, c_disp: float | None = None,
                tol: float = 1e-8, max_iterations: int = 200_000) -> StaticResult:
-    """Seed 001 sec. 3.2.3: each node moves along its resultant force, Disp^k = C_disp F^k, with
+    """[Eischen2000, sec. 3.2.3]: each node moves along its resultant force, Disp^k = C_disp F^k, with
     F^k = W + F_int + F_ext + C_acc Disp^{k-1} (eq. 49, the 'acceleration' pseudo-load).
 
     C_disp [m/N] defaults to 1 / (Gershgorin bound of the tangent stiffness at x0), which makes the plain
@@ -348,7 +348,7 @@ def relax_seed(problem: Problem, x0: np.ndarray | None = None, momentum: float =
 
 def relax_newton(problem: Problem, x0: np.ndarray | None = None, tol: float = 1e-9, load_steps: int = 1,
                  max_iterations: int = 200, max_step: float | None = None, definite: bool = False) -> StaticResult:
-    """Static equilibrium (seed 001 eq. 48) by Newton's method on the resultant forces.
+    """Static equilibrium [Eischen2000, eq. 48] by Newton's method on the resultant forces.
 
     Each load step (load factor i / load_steps on gravity and point loads) solves (K + mu D) dx = F with the
     sparse tangent K (springs with compressive geometric stiffness clipped, flexion Hessian, penalty); D is the

@@ -1,4 +1,4 @@
-"""Frictionless rigid obstacles for particles by penalty (seed 001 sec. 3.2.2, eq. 48 F_ext). SI units.
+"""Frictionless rigid obstacles for particles by penalty ([Eischen2000, sec. 3.2.2], eq. 48 F_ext). SI units.
 
 A `TableTop` is a horizontal rectangle [xmin, xmax] x [ymin, ymax] (bounds may be infinite: the half-plane
 x <= edge is the table of the overhanging beam) whose top surface is the plane z = height, with edges

@@ -1,11 +1,11 @@
-"""Particle grid, spring sets and their forces/stiffness (seed 001 sec. 3.1, eqs. 36-47). SI units.
+"""Particle grid, spring sets and their forces/stiffness ([Eischen2000, sec. 3.1], eqs. 36-47). SI units.
 
 A rectangular sheet is a grid of nx x ny particles (index k = iy nx + ix) joined by
 - structural springs between direct neighbours along x and y (stretching, eqs. 36-38),
 - shear springs along both diagonals of each cell (in-plane shear, eqs. 39-43),
 - flexion (bending) triples of consecutive particles along x and y, whose energy depends on the
   angle Delta phi between the two consecutive segments (eqs. 44-47),
-as in Provot's model (thesis 000 sec. 2.1.1.1, Fig. 4) with the stiffnesses of seed 001.
+as in Provot's model ([Man2006, sec. 2.1.1.1], Fig. 4) with the stiffnesses of [Eischen2000].
 
 Cross sections: eq. 37 writes A = b h with b the spacing. A spring along x stands for the strip of
 sheet of width dy around its row, so we take A = w h with w the tributary width (dy inside, dy / 2
@@ -105,7 +105,7 @@ def _tributary(n: int, d: float) -> np.ndarray:
 def rectangular_grid(nx: int, ny: int, dx: float, dy: float, E: float, nu: float, thickness: float,
                      areal_density: float, origin=(0.0, 0.0, 0.0), compression_factor: float = 1.0,
                      shear_factor: float = 1.0) -> ParticleSystem:
-    """Flat nx x ny particle grid in the plane z = origin[2] with seed 001's spring constants.
+    """Flat nx x ny particle grid in the plane z = origin[2] with [Eischen2000]'s spring constants.
 
     E [Pa], nu, thickness h [m], areal_density [kg/m^2], spacings dx, dy [m].
     compression_factor = D' of eq. 38 (stretch springs in compression), shear_factor = B' of eq. 43.
@@ -166,7 +166,7 @@ def rectangular_grid(nx: int, ny: int, dx: float, dy: float, E: float, nu: float
 
 def beam_strip(n_elements: int, length: float, EA: float, EI: float, line_density: float,
                origin=(0.0, 0.0, 0.0)) -> ParticleSystem:
-    """A beam as two lines of particles (seed 001 sec. 4: "two lines of particles"), n_elements cells along x.
+    """A beam as two lines of particles ([Eischen2000, sec. 4]: "two lines of particles"), n_elements cells along x.
 
     The strip has width W = dx = length / n_elements; thickness h = sqrt(12 EI / EA) and E = EA / (W h) make
     the two lines carry together the axial rigidity EA [N] and the bending rigidity EI [N m^2] (nu = 0);
@@ -227,7 +227,7 @@ def spring_energy(x: np.ndarray, s: SpringSet) -> float:
 
 
 def spring_forces(x: np.ndarray, s: SpringSet, out: np.ndarray | None = None) -> np.ndarray:
-    """Forces on the particles, thesis eq. 2.1: F_i = k (|d| - l0) d / |d|, F_j = -F_i, d = x_j - x_i."""
+    """Forces on the particles, [Man2006, eq. 2.1]: F_i = k (|d| - l0) d / |d|, F_j = -F_i, d = x_j - x_i."""
     out = np.zeros_like(x) if out is None else out
     d, length, k = _spring_state(x, s)
     f = (k * (length - s.rest_length) / length)[:, None] * d

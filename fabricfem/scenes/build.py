@@ -148,7 +148,7 @@ def check_objects(data: dict) -> None:
     dt, dt_crit = dyn["dt"], critical_time_step_estimate(data)
     if dt_crit is not None and dt > dt_crit:
         raise SceneError(f"dynamics.dt: {dt:.6g} s exceeds the critical time step {dt_crit:.6g} s of the explicit "
-                         f"integrator (ratio {dt / dt_crit:.3g}, thesis eqs. 2.86-2.87); use a smaller dt, "
+                         f"integrator (ratio {dt / dt_crit:.3g}, [Man2006, eqs. 2.86-2.87]); use a smaller dt, "
                          f"dt = \"auto\", or force = true")
 
 

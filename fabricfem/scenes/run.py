@@ -275,7 +275,7 @@ def build_integrator(spec: dict, model):
         force = bool(d.force)
         if dt > dt_crit and not force:
             raise SceneError(f"dynamics.dt: {dt:.6g} s exceeds the critical time step {dt_crit:.6g} s of this mesh "
-                             f"(ratio {dt / dt_crit:.3g}, thesis eqs. 2.86-2.87); use a smaller dt or force = true")
+                             f"(ratio {dt / dt_crit:.3g}, [Man2006, eqs. 2.86-2.87]); use a smaller dt or force = true")
         integrator = CentralDifference(model, dt, force=force, dt_crit=dt_crit, **common)
     elif kind == "newmark":
         integrator = NewmarkIntegrator(model, dt, beta=float(d.beta), gamma=float(d.gamma), lumped=bool(d.lumped),

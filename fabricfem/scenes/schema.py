@@ -66,7 +66,7 @@ instead of [solver]; it starts from rest in the reference configuration with the
     lumped = false                # lumped mass (newmark / generalized-alpha; explicit is always lumped)
     rayleigh = [0.0, 0.0]         # C = a M + b K: a [1/s], b [s]
     air_drag = 0.0                # eta [kg/(m^2 s)], drag force -eta v per unit area
-    strain_limit = 0.01           # optional: max warp/weft Green strain (fast projection, seed 002 sec. 3)
+    strain_limit = 0.01           # optional: max warp/weft Green strain (fast projection, [Peng2022, sec. 3])
     strain_limit_tol = 1e-4       # optional: projection tolerance [-]
     gravity = [0.0, 0.0, -9.81]   # optional, m/s^2 (same as a [[load]] of type "gravity": give one)
     ramp_time = 0.0               # optional, s: load factor min(t / ramp_time, 1)

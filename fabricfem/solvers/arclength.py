@@ -1,4 +1,4 @@
-"""Arc-length continuation with the adaptive step of Eischen and Bigliani (seed 001, eqs. 17-26).
+"""Arc-length continuation with the adaptive step of Eischen and Bigliani [Eischen2000, eqs. 17-26].
 
 Equilibrium F_ext(lambda) - P(Phi) = 0 with F_ext = lambda F_ref (eq. 17) is augmented by the
 constraint (eq. 19)
@@ -35,7 +35,7 @@ class ArcLengthStep:
 
 
 def acceleration_factor(step_index: int, target_iterations: int, last_iterations: int) -> float:
-    """gamma_n of seed 001 eq. 20: 1 for the first step, N_p / N_{n-1} afterwards."""
+    """gamma_n of [Eischen2000, eq. 20]: 1 for the first step, N_p / N_{n-1} afterwards."""
     if step_index <= 1:
         return 1.0
     return target_iterations / max(last_iterations, 1)

@@ -1,4 +1,4 @@
-"""The link back to the garment (issue 5, item 6): a membrane law fitted to the woven unit cell WITH contact.
+"""The link back to the garment: a membrane law fitted to the woven unit cell WITH contact.
 
 Steps (`fabricfem study fabric-link` runs them all; SI units: strains dimensionless, resultants N/m,
 torques N m, lengths m):
@@ -252,7 +252,7 @@ def save_contact_fabrics(law: FittedMembraneLaw | ConvexMembraneLaw, prestretch:
             if isinstance(law, ConvexMembraneLaw) else f"polynomial W(E11, E22, 2E12) of degree {law.degree}, fitted")
     save_fabric(fabric, FABRICS_DIR / f"{FABRIC_NAME}.json",
                 description=(
-                    f"Plain weave of thesis sec. 4.3.5 (PlainWeave.balanced(), TI yarns), membrane energy {what} "
+                    f"Plain weave of [Man2006, sec. 4.3.5] (PlainWeave.balanced(), TI yarns), membrane energy {what} "
                     f"to the homogenized unit cell WITH yarn contact. "
                     f"Hessian at E = 0 held to the measured A0: A11 = A22 = {A0[0, 0]:.6g} N/m (crimp, by "
                     f"central differences at Phi = I, contact inactive), A12 = {A0[0, 1]:.3g} N/m; the shear "

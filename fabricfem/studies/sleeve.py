@@ -1,4 +1,4 @@
-"""`fabricfem study sleeve`: the arm-sleeve parameter study of thesis sec. 5.3 (Figs. 37, 39, 42, 44-46).
+"""`fabricfem study sleeve`: the arm-sleeve parameter study of [Man2006, sec. 5.3] (Figs. 37, 39, 42, 44-46).
 
 Each variant is one flexion (fabricfem.wear.sleeve, explicit dynamics by default) giving a resisting-torque-vs-angle curve;
 each figure gets <out>/<figure>.csv (variant, angle_deg, torque_Nm, ...) and <out>/<figure>.png. Variants
@@ -40,7 +40,7 @@ from fabricfem.wear.sleeve import SleeveHistory, SleeveStep
 from fabricfem.wear.sleeve_implicit import run_implicit
 
 MESHES = {"I": (10, 13), "II": (15, 20), "III": (20, 26), "IV": (30, 39)}
-FABRICS = {"I": dict(E=1.2e6, G=1.2e6 / 200, density=436.0),       # thesis sec. 5.3.5, G = E / 200
+FABRICS = {"I": dict(E=1.2e6, G=1.2e6 / 200, density=436.0),       # [Man2006, sec. 5.3.5], G = E / 200
            "II": dict(E=350e6, G=350e6 / 200, density=436.0),
            "III": dict(E=7.2e9, G=7.2e9 / 200, density=700.0)}
 FIGURE_TITLES = {"mesh_mu0.1": "mesh convergence, mu = 0.1 (Fig. 37)",
@@ -277,9 +277,9 @@ class _Progress:
 
 
 # ------------------------------------------------------------------------------------------------------------
-# The three contact methods on the sleeve (issue 4 acceptance table)
+# The three contact methods on the sleeve (acceptance table)
 # ------------------------------------------------------------------------------------------------------------
-METHODS = {"lagrange": "explicit, forward-increment Lagrange multipliers (Box 5)",
+METHODS = {"lagrange": "explicit, forward-increment Lagrange multipliers ([Man2006, Box 5])",
            "penalty": "explicit, penalty (k_N = 10 E t / h^2)",
            "augmented": "implicit backward Euler + Newton, augmented Lagrangian (Uzawa)"}
 METHOD_COLUMNS = ("method", "route", "mesh", "ndofs", "ranks", "gravity", "reached_deg", "torque_57_Nm",

@@ -1,6 +1,6 @@
 """`fabricfem study sleeve-fit`: how the sleeve-trends "fit" and "thickness" checks depend on the arm.
 
-Hypothesis tested (issue 4): on the ANSUR II arm (fabricfem.body.arm, upper-arm radius 0.0557 m) the
+Hypothesis tested: on the ANSUR II arm (fabricfem.body.arm, upper-arm radius 0.0557 m) the
 R = 0.06 m sleeve has 4.3 mm clearance, hangs, sags and wrinkles (bending-dominated, weight-driven torque),
 whereas the thesis's sleeve (sec. 5.3.3-5.3.4: looser sleeve "significantly less" torque, double thickness
 "roughly double" torque, "membrane rather than bending behavior ... is dominant") was snug.
@@ -94,7 +94,7 @@ def fit_configs(scales=FIT_SCALES, mesh: str = "II", final_angle: float = 57.0,
 # ------------------------------------------------------------------------------------- strain energy split
 def energy_split_forms(model, degrees: tuple[int, int] = (4, 2)) -> dict:
     """Compiled rank-0 forms of the membrane, bending and transverse-shear energies [J] of a Naghdi
-    ShellModel with a linear bending law, PSRI-weighted exactly as forms.shell.naghdi_energy (seed 001
+    ShellModel with a linear bending law, PSRI-weighted exactly as forms.shell.naghdi_energy ([Eischen2000]
     eqs. 3-5): bending on the full quadrature, membrane and shear split alpha / (1 - alpha), alpha = t^2 / h^2."""
     if model.model != "naghdi" or model.fabric.bending_law is not None or model.fabric.membrane_law is not None:
         raise ValueError("model: the energy split needs a Naghdi shell with linear membrane and bending laws")
@@ -102,9 +102,9 @@ def energy_split_forms(model, degrees: tuple[int, int] = (4, 2)) -> dict:
     F = F0 + ufl.grad(model.u)
     d = sf.director(model.theta, model.a3, model.a1, model.a2)
     e1, e2 = sf.material_frame(F0, model.t1, model.t2)
-    eps_m = sf.voigt(sf.membrane_strain(F, F0), e1, e2)                       # seed 001 eq. 3
-    kappa = sf.voigt(sf.bending_strain(F, F0, d, model.n0), e1, e2)            # seed 001 eq. 5
-    g = sf.shear_strain(F, F0, d, model.n0)                                    # seed 001 eq. 4
+    eps_m = sf.voigt(sf.membrane_strain(F, F0), e1, e2)                       # [Eischen2000, eq. 3]
+    kappa = sf.voigt(sf.bending_strain(F, F0, d, model.n0), e1, e2)            # [Eischen2000, eq. 5]
+    g = sf.shear_strain(F, F0, d, model.n0)                                    # [Eischen2000, eq. 4]
     gamma = ufl.as_vector([ufl.dot(g, e1), ufl.dot(g, e2)])
     psi_m = sf.quadratic_energy(eps_m, model.A)
     psi_b = sf.bending_energy(kappa, model.D)

@@ -1,6 +1,6 @@
-"""Unit-cell study of thesis 000 sec. 4.3.5 (Figs. 20-28, 32-33): `fabricfem study unit-cell`.
+"""Unit-cell study of [Man2006, sec. 4.3.5] (Figs. 20-28, 32-33): `fabricfem study unit-cell`.
 
-Load cases (macroscopic Phi applied in equal increments, thesis sec. 4.3.5):
+Load cases (macroscopic Phi applied in equal increments, [Man2006, sec. 4.3.5]):
   biaxial      Phi11 = Phi22 -> 1.2
   uniaxial     Phi11 -> 1.2, Phi22 = 1
   shear        biaxial pre-stretch Phi11 = Phi22 = 1.02 (one step), then Phi12 = Phi21 -> 0.2
@@ -9,7 +9,7 @@ Yarns: isotropic (lambda = 48.82, mu = 32.55 GPa) or transversely isotropic (the
 with or without yarn contact, quarter (option B) or full (option A) cell, coarse or fine mesh.
 
 Yarn end faces (ContactUnitCell end_faces). The thesis' figures all use u*_z = 0 on the yarn end
-faces ("uz_fixed", the default here): sec. 4.3.5.3 (seed 000 line 2207) explains the quarter/full
+faces ("uz_fixed", the default here): sec. 4.3.5.3 [Man2006, line 2207] explains the quarter/full
 difference of Fig. 27 by "the boundary conditions applied here. In both unit cell models, the local
 vertical displacements on the end faces of a yarn are restricted. [...] as an end face, the section
 is restricted in the quarter model", and the quarter model is the one of all earlier figures ("The
@@ -93,7 +93,7 @@ class RunKey:
     contact: bool = True
     option: str = "quarter"
     refinement: str = "coarse"
-    end_faces: str = THESIS_END_FACES  # "uz_fixed" (thesis, sec. 4.3.5.3) | "periodic", see ContactUnitCell
+    end_faces: str = THESIS_END_FACES  # "uz_fixed" [Man2006, sec. 4.3.5.3] | "periodic", see ContactUnitCell
 
     @property
     def label(self) -> str:
@@ -272,7 +272,7 @@ def figures(quick: bool) -> dict[str, tuple[str, str, list[str], list[RunKey]]]:
     return figs
 
 
-# render figure -> (caption, load case): thesis Figs. 20 and 23, (a) undeformed, (b) biaxial extension
+# render figure -> (caption, load case): [Man2006, Figs. 20] and 23, (a) undeformed, (b) biaxial extension
 RENDERS: dict[str, tuple[str, RunKey]] = {
     "fig20": ("balanced weave, isotropic yarns, biaxial extension", RunKey("iso", "biaxial")),
     "fig23": ("balanced weave, TI yarns, biaxial extension", RunKey("ti", "biaxial")),
@@ -413,7 +413,7 @@ def run_study(out: str = "results/unit_cell", quick: bool = False, steps: int | 
     return runs
 
 
-# ------------------------------------------------------------------ geometry sensitivity (issue 5)
+# ------------------------------------------------------------------ geometry sensitivity
 # 0.04 is infeasible with phi = 0.4 and aspect ratio 1.5 (the yarns would interpenetrate at the
 # crossing; the smallest feasible crimp is ~0.062), so 0.065 is the lowest crimp that can be built
 SENSITIVITY_CRIMPS = (0.04, 0.065, 0.08, 0.10, 0.12)

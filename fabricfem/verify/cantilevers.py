@@ -1,4 +1,4 @@
-"""Cantilever strips: roll-up (thesis sec. 2.3.2.2) and the elastica benchmarks of seed 001 sec. 4.1-4.2."""
+"""Cantilever strips: roll-up [Man2006, sec. 2.3.2.2] and the elastica benchmarks of [Eischen2000, sec. 4.1-4.2.]"""
 from __future__ import annotations
 
 import dataclasses
@@ -16,7 +16,7 @@ from fabricfem.shell import ShellModel
 from fabricfem.solvers.loadstep import solve_load_path
 from fabricfem.verify import Timer, case, references, result
 
-# Seed 001 sec. 4.1-4.2: L = 1, EA = 2 sqrt(3) e-3, EI = 2 sqrt(3) e-9 (so t = sqrt(12 EI / EA) = 3.46e-3).
+# [Eischen2000, sec. 4.1-4.2]: L = 1, EA = 2 sqrt(3) e-3, EI = 2 sqrt(3) e-9 (so t = sqrt(12 EI / EA) = 3.46e-3).
 SEED_L, SEED_EA, SEED_EI, SEED_WIDTH = 1.0, 2.0 * np.sqrt(3.0) * 1e-3, 2.0 * np.sqrt(3.0) * 1e-9, 0.1
 
 
@@ -84,7 +84,7 @@ def rollup_cantilever() -> list:
 
 @case("tip-loaded-cantilever")
 def tip_loaded_cantilever(lambdas=(1.0, 2.0, 5.0, 10.0), nx: int = 20) -> list:
-    """Seed 001 sec. 4.1: dead tip load P = lambda EI / L^2; tip deflection and rotation against the
+    """[Eischen2000, sec. 4.1]: dead tip load P = lambda EI / L^2; tip deflection and rotation against the
     elastica ODE (scipy shooting, references.elastica_tip_load) within 1%."""
     out = []
     with Timer() as timer:
@@ -109,7 +109,7 @@ def tip_loaded_cantilever(lambdas=(1.0, 2.0, 5.0, 10.0), nx: int = 20) -> list:
 
 @case("moment-loaded-cantilever")
 def moment_loaded_cantilever(lambdas=(0.5, 1.0, 1.5, 2.0), nx: int = 20) -> list:
-    """Seed 001 sec. 4.2: end moment M = lambda pi EI / L; the elastica is a circular arc of curvature
+    """[Eischen2000, sec. 4.2]: end moment M = lambda pi EI / L; the elastica is a circular arc of curvature
     M / EI: tip deflection (error relative to L) and rotation lambda pi within 1%."""
     out = []
     with Timer() as timer:

@@ -14,7 +14,7 @@ equilibrium) and the augmented Lagrangian drives the penetration below 1e-6 m. T
 penetration ~ 1 / k_N is checked on a conforming contact with a closed-form pressure (the frictionless
 strip wrapped on the cylinder under tension T: p = T / R); on the plate the apex contact is nearly a
 point contact whose patch shrinks as k_N grows (measured slope -0.62), so there the penetration is not
-proportional to 1 / k_N. The explicit Box 5 method leaves no node inside the body: tested on particles
+proportional to 1 / k_N. The explicit [Man2006, Box 5] method leaves no node inside the body: tested on particles
 falling onto an ellipsoid (the shell's explicit integrator, fabricfem.dynamics.explicit, is not coupled
 to the contact here).
 """
@@ -240,7 +240,7 @@ def solve_signorini(problem: ContactProblem) -> ContactProblem:
 
 def falling_particles(steps: int = 400, dt: float = 1e-3) -> dict:
     """5 x 5 particles dropped from 2 cm above an ellipsoid (radii 0.1, 0.08, 0.06 m) under gravity,
-    Box 5 explicit steps. Returns the largest penetration after any step, the momentum balance error
+    [Man2006, Box 5] explicit steps. Returns the largest penetration after any step, the momentum balance error
     |P_end - P_0 - (gravity impulse + sum_n f_c^n dt)| [N s] and the contact impulse magnitude."""
     body = Ellipsoid(np.zeros(3), np.eye(3), np.array([0.1, 0.08, 0.06]))
     grid = np.linspace(-0.04, 0.04, 5)
@@ -285,7 +285,7 @@ def wrapped_strip_penetration(penalty: float, theta: float = math.pi, comm=MPI.C
 @case("signorini-penetration")
 def signorini_penetration() -> list:
     """Plate on a sphere under its weight: force balance, augmented Lagrangian penetration < 1e-6 m; penalty
-    penetration ~ 1/k_N on a conforming contact; explicit Box 5 particles never inside."""
+    penetration ~ 1/k_N on a conforming contact; explicit [Man2006, Box 5] particles never inside."""
     out = []
     weight = plate_weight()
     with Timer() as timer:
@@ -319,12 +319,12 @@ def signorini_penetration() -> list:
                       pairs[1][0] / pairs[1][1], 1.0, 0.01, 0, timer.elapsed))
     with Timer() as timer:
         particles = falling_particles()
-    # explicit Box 5: projected nodes land on the surface up to rounding (1e-12 m on 0.1 m radii)
-    out.append(result("signorini-penetration", "explicit Box 5 (25 particles onto an ellipsoid): largest "
+    # explicit [Man2006, Box 5]: projected nodes land on the surface up to rounding (1e-12 m on 0.1 m radii)
+    out.append(result("signorini-penetration", "explicit [Man2006, Box 5] (25 particles onto an ellipsoid): largest "
                       "penetration after any step [m]", particles["max_penetration"], 0.0, 1e-12, 0, timer.elapsed,
                       scale=1.0))
     # momentum change = impulse of gravity and contact forces (trapezoidal, as central differences integrate)
-    out.append(result("signorini-penetration", "explicit Box 5: |momentum change - impulse| / |contact impulse|",
+    out.append(result("signorini-penetration", "explicit [Man2006, Box 5]: |momentum change - impulse| / |contact impulse|",
                       particles["momentum_error"] / particles["momentum_scale"], 0.0, 1e-10, 0, timer.elapsed,
                       scale=1.0))
     return out

@@ -1,4 +1,4 @@
-"""Shell contact with tables: the overhanging beam (seed 001 sec. 4.3) and the tablecloth drape (sec. 4.4).
+"""Shell contact with tables: the overhanging beam [Eischen2000, sec. 4.3] and the tablecloth drape (sec. 4.4).
 
 Both use the Naghdi ShellModel on quadrilaterals with the nodal penalty contact of
 fabricfem.contact.ContactProblem against the rounded tables of fabricfem.contact.obstacles (fillet radius
@@ -181,7 +181,7 @@ _BEAM_UNITS = {"p": (CM, "cm"), "deflection": (CM, "cm"), "R_b": (GF, "gf"), "R_
 
 @case("overhanging-beam", mpi=True)
 def overhanging_beam() -> list:
-    """Seed 001 sec. 4.3 against the theory row: FE (24 x 1 elements) p and tip deflection within 2% (task);
+    """[Eischen2000, sec. 4.3] against the theory row: FE (24 x 1 elements) p and tip deflection within 2% (task);
     R_c within 2% (it follows from p by equilibrium: dR_c / R_c = 1.25 w dp / R_c = 1.7% for dp / p = 2%);
     R_b reported (R_b = w (a + p) - R_c is a difference of two near numbers: 1% on R_c is 6% on R_b);
     total contact force = weight within 1% (global equilibrium, exact up to Newton's tolerance);
@@ -377,7 +377,7 @@ def fe_tablecloth_drop(n: int = 10, t_end: float = DROP_T_END, dt_max: float = D
     check.
 
     Dynamics: backward Euler (fabricfem.dynamics.backward_euler.BackwardEulerInertia) with the lumped mass (areal mass q / g) and the air drag
-    c = eta / rho of seed 002 eq. 17d; the director is re-based after every step (the overhang turns through
+    c = eta / rho of [Peng2022, eq. 17d]; the director is re-based after every step (the overhang turns through
     ~90 degrees) and the angle rates reset to zero (rotational inertia rho h^3 / 12 is 1e-8 of the
     translational one per unit area). Steps start at 1 ms (the first fall) and grow x 1.5 after every step
     that converges in <= 5 Newton iterations up to dt_max; a failed step is retried at half size. Backward
@@ -466,7 +466,7 @@ def _drape_rows(name: str, label: str, run: dict, out: list):
 
 @reproduction("tablecloth-drape", mpi=True)
 def tablecloth_drape() -> list:
-    """Seed 001 sec. 4.4, static routes, against the experiment row (floor reading).
+    """[Eischen2000, sec. 4.4], static routes, against the experiment row (floor reading).
 
     Reading of the seed's table (reading_admissibility): x/L, z/L horizontal from the table centre, y/L
     vertical. As the depth below the table top, the experimental corner needs a mean strain of +4.2% along
@@ -505,7 +505,7 @@ def tablecloth_drape() -> list:
 
 @reproduction("tablecloth-drop")
 def tablecloth_drop() -> list:
-    """Seed 001 sec. 4.4, dynamic routes as the seed computed them: the cloth falls from the (imperfect) flat
+    """[Eischen2000, sec. 4.4], dynamic routes as the seed computed them: the cloth falls from the (imperfect) flat
     state, settles under air drag, then a static Newton polish and a stability check (lowest eigenvalue).
 
     Shell: fe_tablecloth_drop (quarter model with mirror planes, backward Euler to 4 s). Particles:

@@ -1,4 +1,4 @@
-"""Periodic unit-cell homogenization (thesis 000, sec. 4.2.2, 4.3.2-4.3.3) against closed forms."""
+"""Periodic unit-cell homogenization ([Man2006, sec. 4.2.2, 4.3.2]-4.3.3) against closed forms."""
 from __future__ import annotations
 
 import dolfinx.mesh as dmesh

@@ -1,4 +1,4 @@
-"""Membrane patch test (seed 002 sec. 4.4)."""
+"""Membrane patch test [Peng2022, sec. 4.4]."""
 from __future__ import annotations
 
 import numpy as np

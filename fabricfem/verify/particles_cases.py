@@ -1,4 +1,4 @@
-"""Particle-model benchmarks of seed 001 sec. 4 (helpers, not registered cases; SI units inside).
+"""Particle-model benchmarks of [Eischen2000, sec. 4] (helpers, not registered cases; SI units inside).
 
 Each helper returns a dict of the quantities of the seed's tables (in the seed's units, gf and cm, or the
 normalized x/L, y/L, z/L) with the theoretical / experimental row, the seed's particle-model row and
@@ -31,12 +31,12 @@ from fabricfem.verify.references import elastica_tip_load
 GF = STANDARD_GRAVITY * 1e-3  # one gram-force [N]
 CM, MM = 1e-2, 1e-3
 
-# Seed 001 sec. 4.3 table: theory and particle-model rows (p [cm], delta_y [cm], R_b [gf], R_c [gf])
+# [Eischen2000, sec. 4.3] table: theory and particle-model rows (p [cm], delta_y [cm], R_b [gf], R_c [gf])
 OVERHANG_THEORY = {"p": 2.1213, "deflection": 0.0812, "R_b": 0.0135, "R_c": 0.0788}
 OVERHANG_SEED_PARTICLE = {"p": 2.2499, "deflection": 0.0966, "R_b": 0.0156, "R_c": 0.0813}
 OVERHANG_SEED_PARTICLE_ERROR = {"p": 6.06, "deflection": 18.0, "R_b": 15.52, "R_c": 3.15}  # percent
 
-# Seed 001 sec. 4.4 table (experiment and particle model rows)
+# [Eischen2000, sec. 4.4] table (experiment and particle model rows)
 TABLECLOTH_EXPERIMENT = {"corner x/L": 0.39, "corner y/L": 0.38, "corner z/L": 0.39, "midside y/L": 0.18,
                          "midside z/L": 0.40}
 TABLECLOTH_SEED_PARTICLE = {"corner x/L": 0.39, "corner y/L": 0.39, "corner z/L": 0.38, "midside y/L": 0.16,
@@ -52,7 +52,7 @@ def _percent(value: float, reference: float) -> float:
 
 
 def particle_tip_loaded_cantilever(lam: float, n: int = 8) -> dict:
-    """Seed 001 sec. 4.1: L = 1, EA = 2 sqrt(3) e-3, EI = 2 sqrt(3) e-9 (consistent units), P = lam EI / L^2,
+    """[Eischen2000, sec. 4.1]: L = 1, EA = 2 sqrt(3) e-3, EI = 2 sqrt(3) e-9 (consistent units), P = lam EI / L^2,
     n particle elements (two lines of particles). The clamp pins the root particles and a ghost column one
     spacing behind them (zero displacement and zero rotation of the first flexion triple).
     Returns tip deflection w/L, shortening u/L and tip rotation [rad] with the elastica values."""
@@ -78,7 +78,7 @@ def particle_tip_loaded_cantilever(lam: float, n: int = 8) -> dict:
 
 
 def particle_overhanging_beam(n: int = 24) -> dict:
-    """Seed 001 sec. 4.3: L = 6 cm, overhang a = 1.5 cm past a frictionless table edge at x = 0, EA = 2809 gf,
+    """[Eischen2000, sec. 4.3]: L = 6 cm, overhang a = 1.5 cm past a frictionless table edge at x = 0, EA = 2809 gf,
     EI = 0.386 gf cm^2, w = 0.0255 gf/cm, n particle elements (two lines).
 
     Lift-off length p = x_C - x_B with B the contacting particle nearest to the edge C; deflection = drop of the
@@ -119,12 +119,12 @@ def particle_overhanging_beam(n: int = 24) -> dict:
 
 
 # ---------------------------------------------------------------------------- tablecloth (sec. 4.4)
-# Seed 001 sec. 4.4 set-up (SI): cloth side, isotropic cotton, weight per area, 8 cm cube (top at z = 0)
+# [Eischen2000, sec. 4.4] set-up (SI): cloth side, isotropic cotton, weight per area, 8 cm cube (top at z = 0)
 CLOTH_SIDE = 20.0 * CM                                                   # L [m]
 CLOTH_E, CLOTH_H, CLOTH_NU = 118.1176 * GF / MM ** 2, 0.54229 * MM, 0.3  # Pa, m, -
 CLOTH_WEIGHT = 0.2384e-3 * GF / MM ** 2                                  # q [N/m^2]
 TABLE_HALF, TABLE_HEIGHT = 4.0 * CM, 8.0 * CM                            # m
-# Air drag of a cloth, seed 002 eq. 17d (eta = 0.351 kg/(m^2 s)): force -eta v per area = -(eta / rho) m v.
+# Air drag of a cloth, [Peng2022, eq. 17d] (eta = 0.351 kg/(m^2 s)): force -eta v per area = -(eta / rho) m v.
 AIR_DRAG = 0.351                                                         # eta [kg/(m^2 s)]
 # Flatness imperfection of the cloth laid on the table before the drop (the same for every run and model):
 # a smooth random waviness of 8 plane waves, wavelengths uniform in [2 cm, 20 cm] (grid scale to cloth
@@ -245,7 +245,7 @@ def particle_tablecloth_nodes(n: int = 20, load_steps: int = 5) -> dict:
 
 
 def particle_tablecloth(n: int = 20, load_steps: int = 5) -> dict:
-    """Seed 001 sec. 4.4 by static relaxation: 20 cm square cloth centred on an 8 cm square frictionless
+    """[Eischen2000, sec. 4.4] by static relaxation: 20 cm square cloth centred on an 8 cm square frictionless
     table, E = 118.1176 gf/mm^2, weight 0.2384e-3 gf/mm^2, h = 0.54229 mm, nu = 0.3, n x n elements.
 
     Newton's method from the flat sheet in load_steps equal gravity increments (the drape has several
@@ -280,13 +280,13 @@ def _tablecloth_result(problem: Problem, res, t0: float, **extra) -> dict:
 
 
 def particle_tablecloth_drop(n: int = 20, t_end: float = 2.0, penalty_factor_drop: float = 4.0) -> dict:
-    """Seed 001 sec. 4.4 the way the seed computed it: the cloth FALLS from the (imperfect) flat state and
+    """[Eischen2000, sec. 4.4] the way the seed computed it: the cloth FALLS from the (imperfect) flat state and
     settles, then a static Newton polish and a stability check.
 
     Full n x n grid on the table and the floor (_table), no mirror planes (any fold pattern can form); the
     centre particle keeps x and y and its +x neighbour y (removes the free sliding and spinning on the
     frictionless table; these supports carry no load in equilibrium). Start: flatness_imperfection, at
-    rest. Drop: velocity Verlet with the air drag c = eta / rho (seed 002 eq. 17d) to t_end [s] (default
+    rest. Drop: velocity Verlet with the air drag c = eta / rho [Peng2022, eq. 17d] to t_end [s] (default
     2 s: > 3 periods of the slowest pendulum mode of the overhang, 2 pi sqrt(l / g) = 0.5-0.6 s for
     l = 6-8.5 cm, and 1.4 air-drag decay times 1 / c), at 0.9 x the critical step; during the drop the
     contact penalty is penalty_factor_drop x the stiffest spring (4: the step is then set by the springs,

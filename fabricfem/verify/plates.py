@@ -1,4 +1,4 @@
-"""Clamped square plate (thesis sec. 2.3.2.1; Timoshenko & Woinowsky-Krieger)."""
+"""Clamped square plate ([Man2006, sec. 2.3.2.1]; Timoshenko & Woinowsky-Krieger)."""
 from __future__ import annotations
 
 import numpy as np

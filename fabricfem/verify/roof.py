@@ -8,7 +8,7 @@ of a free edge, 0.3024 (the converged value for shear-deformable shell models qu
 used by Zienkiewicz, Taylor & Too 1971 to show that full integration locks and reduced integration does not).
 Units are consistent, not SI (the benchmark's own numbers).
 
-Why it is here (issue 4): the sleeve is a curved shell whose torque depends on the quadrature
+Why it is here: the sleeve is a curved shell whose torque depends on the quadrature
 (SleeveConfig.quadrature): the fully integrated Q2 tube converges to the PSRI one from above on the thesis's
 meshes, and with full quadrature the flexed sleeve turns membrane-dominated (docs/figures/sleeve/
 fit_sensitivity.md). This case checks, against an independent reference, that the default PSRI split

@@ -11,7 +11,7 @@ otherwise runs the reduced quick study (mesh I, explicit flexion to 6 degrees) a
 * fabrics II and III give at least ten times fabric I's torque ("roughly proportional to the stiffness",
   E ratios 292 and 6000, sec. 5.3.5). The study runs them with dynamic similarity (fabricfem.wear.sleeve), under
   which torque / E would be the same for all three fabrics without gravity (all moduli scale with E,
-  G = E / 200; case sleeve-similarity); with the sleeve's weight (on since issue 4) fabric I's torque is
+  G = E / 200; case sleeve-similarity); with the sleeve's weight fabric I's torque is
   partly the weight the forearm carries, which does not scale with E, so the ratios fall below the E ratios;
 * the mu = 0.5 mesh series changes by less than 10% between the two finest meshes.
 
@@ -111,7 +111,7 @@ def trends(figures, tag: str, wall: float) -> list[CaseResult]:
 
 
 @reproduction("sleeve-trends", deviation=(
-    "evaluated on 57-degree explicit data with gravity (issue 4) in docs/figures/sleeve: parameter figures on mesh "
+    "evaluated on 57-degree explicit data with gravity in docs/figures/sleeve: parameter figures on mesh "
     "III, mesh series I-IV at mu = 0.1 and 0.5: T(mu=0.5)/T(mu=0.1) at 57 deg = 1.37 passes (0.0325 vs 0.0237 N m); "
     "T(fabric II, III)/T(fabric I) = 198 and 4044 pass; |T(mesh IV) - T(mesh III)| / T at 57 deg, mu = 0.5, = 8.6 % "
     "passes; max T(R=0.07)/T(R=0.06) over 20-57 deg = 1.45 fails (the looser sleeve hangs with more of its weight "
@@ -122,7 +122,7 @@ def trends(figures, tag: str, wall: float) -> list[CaseResult]:
     "The thesis's 'roughly double' is what a membrane-locked (fully integrated) tube gives: 2.2-2.3 on meshes II-III, "
     "fading with refinement; see verify scordelis-lo, docs/figures/sleeve/fit_sensitivity.md"))
 def sleeve_trends() -> list[CaseResult]:
-    """Sleeve-study trends of thesis sec. 5.3 (friction, fit, thickness, fabrics, mesh) on study outputs."""
+    """Sleeve-study trends of [Man2006, sec. 5.3] (friction, fit, thickness, fabrics, mesh) on study outputs."""
     with Timer() as timer:
         found = [d for d in STUDY_DIRS if (d / "friction.csv").exists()]
         if found:

@@ -1,4 +1,4 @@
-"""Corner-pinned cloth swinging under gravity with and without continuum strain limiting (seed 002 sec. 4.1).
+"""Corner-pinned cloth swinging under gravity with and without continuum strain limiting [Peng2022, sec. 4.1].
 
 A square cloth in the x-y plane, pinned at the two corners (0, 0) and (0, L), falls and swings under gravity
 (-z). Seed parameters: rho = 0.117 kg/m^2, eta = 0.351 kg/(m^2 s), h = 0.001177 m,
@@ -107,7 +107,7 @@ from fabricfem.verify import case, result
 NAME = "corner-pinned-strain-limit"
 SEED = dict(rho=0.117, eta=0.351, h=0.001177, shear_ratio=2.5, t_end=0.6, B0=3.3e-3, kappa0=30.0)  # sec. 4.1 (SI)
 FRAME = 1.0 / 30.0  # s
-# seed 002 Table 1: CPU s/frame, max E_weft, max E_warp, mean E_weft, mean E_warp
+# [Peng2022, Table 1]: CPU s/frame, max E_weft, max E_warp, mean E_weft, mean E_warp
 TABLE1 = {"a": (0.13, 0.015, 0.013, 9.61e-4, 1.30e-3), "b": (0.325, 0.0828, 0.0512, 4.07e-3, 6.78e-3),
           "c": (0.054, 2.24, 2.20, 0.081, 0.111)}
 CASES = {"a": (100.0, 0.01, 0.9), "b": (5000.0, None, 0.9), "c": (100.0, None, 0.5)}  # k/rho, limit, dt/dt_crit
@@ -117,7 +117,7 @@ MEMBRANE_MARGIN = 2.0  # s_membrane = margin (omega_1 / omega_m)^2: the rotation
 
 
 def cloth_fabric(k_over_rho: float) -> Fabric:
-    """Fabric with E t = k = (k/rho) rho [N/m], G12 t = k / 2.5, nu = 0 (seed 002 eq. 8) and the square-root
+    """Fabric with E t = k = (k/rho) rho [N/m], G12 t = k / 2.5, nu = 0 [Peng2022, eq. 8] and the square-root
     bending law of eq. 9 (B0 = 3.3e-3 N m, kappa0 = 30 1/m; used by the shell, ignored by the membrane)."""
     rho, h = SEED["rho"], SEED["h"]
     k = k_over_rho * rho
@@ -239,7 +239,7 @@ def _strain_rows(out: list, label: str, r: dict, ref: tuple, nd: int, wall: floa
 
 @case(NAME, mpi=True)
 def corner_pinned_strain_limit() -> list:
-    """Seed 002 sec. 4.1 / Table 1: strain-limited (a), stiff (b) and soft (c) cloth at t = 0.6 s, with the
+    """[Peng2022, sec. 4.1] / Table 1: strain-limited (a), stiff (b) and soft (c) cloth at t = 0.6 s, with the
     Naghdi shell and the bending law of eq. 9 (the case's model) and the membrane (model comparison)."""
     shell, membrane = {}, {}
     t0 = time.perf_counter()

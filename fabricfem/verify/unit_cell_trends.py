@@ -1,4 +1,4 @@
-"""Trends of the woven unit cell with contact (thesis 000 sec. 4.3.5): case `unit-cell-trends`.
+"""Trends of the woven unit cell with contact [Man2006, sec. 4.3.5]: case `unit-cell-trends`.
 
 Computed from the CSVs that `fabricfem study unit-cell` writes (fig*.csv of the full study: coarse and
 fine, quarter and full cells, 10 steps per load case, several minutes; the committed docs/figures/unit_cell
@@ -9,14 +9,14 @@ results/unit_cell_quick, and the full-versus-quarter trend, which needs the full
 value nan.
 
 Yarn end faces: every trend uses the thesis' condition, u*_z = 0 on the yarn end faces with u*_x,
-u*_y periodic (study curves with end_faces "uz_fixed"): sec. 4.3.5.3 (seed 000 line 2207) says "In
+u*_y periodic (study curves with end_faces "uz_fixed"): sec. 4.3.5.3 [Man2006, line 2207] says "In
 both unit cell models, the local vertical displacements on the end faces of a yarn are restricted",
 and the quarter model of that sentence is the one of all earlier figures (fabricfem.studies.unit_cell
 docstring). The same numbers with the exact periodicity (the study's extra curves) are printed.
 
 The trends (the brief's acceptance list), each turned into one number and a bound:
   1. isotropic yarns, biaxial and uniaxial extension: nearly linear S11(E11): the secant modulus
-     S11/E11 at every step within 25% of its mean ("almost linear", thesis Fig. 21; 25% is the
+     S11/E11 at every step within 25% of its mean ("almost linear", [Man2006, Fig. 21]; 25% is the
      quantification chosen here of "nearly", not fitted to the result);
   2. isotropic uniaxial: S22 / S11 < 0.05 at the last step (the brief's bound);
   3. TI yarns with contact, biaxial: largest tangent modulus dS11/dE11 over the first (decrimping)
@@ -143,7 +143,7 @@ def trends(study_dir: str, end_faces: str = "uz_fixed") -> dict[str, float]:
     f28 = curves("fig28")  # printed only: the thesis' "even more pronounced difference" in shear
     ratio_at_common_strain(out, "full_over_quarter_shear", find_curve(f28, "ti", "shear", option="full", end_faces=ef),
                            find_curve(f28, "ti", "shear", end_faces=ef), "E12", "S12")
-    # printed only: fine / coarse mesh at the last common strain (thesis sec. 4.3.5.4: "the responses obtained
+    # printed only: fine / coarse mesh at the last common strain ([Man2006, sec. 4.3.5.4]: "the responses obtained
     # with the finer mesh are generally stiffer")
     for fig, load, x, y in (("fig32", "biaxial", "E11", "S11"), ("fig32", "uniaxial", "E11", "S11"),
                             ("fig33", "shear", "E12", "S12")):
@@ -164,7 +164,7 @@ def trends(study_dir: str, end_faces: str = "uz_fixed") -> dict[str, float]:
                     "E11 = 0.091, reported). Crimp map: docs/figures/unit_cell/geometry_sensitivity.csv. "
                     "Without the committed study CSVs the quick study cannot give the full-cell trend (nan).")
 def unit_cell_trends() -> list:
-    """Unit-cell trends of thesis sec. 4.3.5 from the study CSVs (docs/figures/unit_cell, the committed study,
+    """Unit-cell trends of [Man2006, sec. 4.3.5] from the study CSVs (docs/figures/unit_cell, the committed study,
     else results/unit_cell, else the quick study)."""
     with Timer() as t:
         study_dir = next((d for d in STUDY_DIRS if os.path.exists(os.path.join(d, "fig21.csv"))), None)

@@ -1,4 +1,4 @@
-"""Yarn law (thesis sec. 4.3.4): UFL stress against eq. 4.69 and finite differences; engineering constants
+"""Yarn law [Man2006, sec. 4.3.4]: UFL stress against eq. 4.69 and finite differences; engineering constants
 recovered by finite-element tests on a block."""
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Yarn-yarn contact (thesis 000, sec. 3.2, 3.4, Box 7) against Hertz and Coulomb: case `yarn-contact-patch`.
+"""Yarn-yarn contact ([Man2006, sec. 3.2, 3.4], Box 7) against Hertz and Coulomb: case `yarn-contact-patch`.
 
 Two straight circular cylinders (yarns) of radius R, length L, crossed at right angles and touching at
 the origin, are meshed with the O-grid sweep of meshes.unit_cell (a straight yarn is a zero-amplitude
@@ -163,7 +163,7 @@ class CrossedCylinders:
         return self.newton.ndofs
 
     def step(self, motion, n: int = 0):
-        """Move the upper support to `motion` (3,) [m] and solve (Box 7 loop); returns the ContactReport."""
+        """Move the upper support to `motion` (3,) [m] and solve ([Man2006, Box 7] loop); returns the ContactReport."""
         self.motion.value[:] = motion
         return solve_with_contact(lambda: self.newton.solve(self.force_scale, self.R), self.contact, n)
 

@@ -2,7 +2,7 @@
 part of the scene, each parameter and its default declared once (the scene schema of fabricfem.scenes derives
 the keys of [mesh], [fabric], [motion], [contact] and [route] of a sleeve scene from these fields).
 
-SI units; angles in degrees for readability. Defaults: thesis sec. 5.3 (L = 0.5 m, R = 0.06 m, t = 1 mm,
+SI units; angles in degrees for readability. Defaults: [Man2006, sec. 5.3] (L = 0.5 m, R = 0.06 m, t = 1 mm,
 E = 1.2 MPa, G = 0.1 MPa, rho = 436 kg/m^3, mu = 0.1, 57 degrees); nu12 = 0 (the thesis gives none); mesh III
 (20 x 26). Every ValueError names the parameter.
 """

@@ -1,4 +1,4 @@
-"""The arm-in-sleeve problem (thesis sec. 5.3): a tube of fabric over a flexing two-ellipsoid arm.
+"""The arm-in-sleeve problem [Man2006, sec. 5.3]: a tube of fabric over a flexing two-ellipsoid arm.
 
 Setup (SI units): the sleeve is an open cylinder of length L [m] and radius R [m] along +x
 (`fabricfem.meshes.tube`), its shoulder end (tag end0, x = 0) held (all displacement components zero,
@@ -16,7 +16,7 @@ Solution routes (SleeveConfig.solver, scene key motion.solver):
   rotational masses scaled by `rotary_inertia_scale`, so that the thickness-shear modes do not set the
   step: on mesh I the estimated critical step grows from 4.1e-5 s to 2.0e-4 s at s = 100), mass-proportional
   damping C = alpha M (alpha = `mass_damping` = 10 1/s) for a quasi-static flexion, and the explicit
-  forward-increment Lagrange-multiplier contact of Box 5 against the moving arm with Coulomb friction
+  forward-increment Lagrange-multiplier contact of [Man2006, Box 5] against the moving arm with Coulomb friction
   (fabricfem.contact.explicit.ExplicitBodyContact; penalty as an option). The torque of a record is the
   contact torque averaged over the record interval (`output_angle_step`). The drag alpha rho t v of the
   damping on the sleeve moving with the forearm (v <= 0.13 m/s at 45 deg/s) is about 2e-3 N m of elbow
@@ -39,7 +39,7 @@ Solution routes (SleeveConfig.solver, scene key motion.solver):
   rest, flexion) by backward Euler, steps of angle_step / omega solved by Newton with the augmented Lagrangian
   (Uzawa updates, eq. 3.69) or penalty; the inertia and damping regularise the buckling steps (it reaches 57 deg).
 
-Newton at one angle (issue 4: the plain solve stalled at 20.2 deg, mu = 0.1, and 12.6 deg, mu = 0.5, on
+Newton at one angle (the plain solve stalled at 20.2 deg, mu = 0.1, and 12.6 deg, mu = 0.5, on
 mesh I) uses two devices, neither of which changes the converged solution:
 * the active-set strategy of ContactProblem (`active_set`, default on): contact set, slip set and body
   segment of every node are fixed during one Newton solve and updated from the converged state until
@@ -50,7 +50,7 @@ mesh I) uses two devices, neither of which changes the converged solution:
   `max_rotation_step` and no displacement by more than `max_displacement_step` per iteration.
 The viscous drag of `Stabilized` remains the fallback of a failed solve.
 
-Gravity (issue 4): on by default on the explicit route, g = 9.81 m/s^2 along -y, opposite to the flexion (the
+Gravity: on by default on the explicit route, g = 9.81 m/s^2 along -y, opposite to the flexion (the
 forearm "rotates upward"), and the arm first rests for `settle_time` = 0.4 s while the sleeve settles on it
 under its weight (rho t g = 4.3 Pa for fabric I, 0.81 N for the whole sleeve). Reasons: (1) the thesis's
 sleeve has weight: at mu = 0.1 it "slips down as the forearm rotates upward", at mu = 0.5 friction "prevents
@@ -63,9 +63,9 @@ and 15 deg/s (tests/test_explicit_sleeve.py checks 45 vs 22.5 deg/s against the 
 The rest lets the sleeve's fall (about 12 mm onto the forearm; damping time 1 / alpha = 0.1 s) die out
 before the flexion: the start record is the torque at rest (the weight the forearm carries, 0.023 N m on
 mesh I). The quasi-static route keeps gravity off by default (its start-pose solve of the floating sleeve
-under its weight did not finish within 600 s on mesh I in issue 4; not investigated further).
+under its weight did not finish within 600 s on mesh I; not investigated further).
 
-Elbow torque (thesis ch. 5 intro): the moment about the elbow of all contact forces (normal + friction)
+Elbow torque ([Man2006, ch. 5] intro): the moment about the elbow of all contact forces (normal + friction)
 that the sleeve exerts on the forearm,
 
     tau = a . sum_{i on forearm} (x_i - J_elbow) x f_i          (fabricfem.body.motion.joint_torque)
@@ -619,7 +619,7 @@ class ExplicitSleeve:
 def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> ExplicitSleeve:
     """Sleeve, arm and explicit contact for `run_explicit`; the time step is
 
-        dt = safety x 2 / omega_max,   omega_max^2 = omega_shell^2(s) + omega_p^2      (thesis eq. 2.86)
+        dt = safety x 2 / omega_max,   omega_max^2 = omega_shell^2(s) + omega_p^2      [Man2006, eq. 2.86]
 
     with omega_shell from fabricfem.dynamics.stability for rotary-inertia scale s and omega_p the penalty
     spring's frequency (0 for Lagrange multipliers), reduced for the mass damping, then shortened so that
@@ -654,7 +654,7 @@ def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> Exp
 
 def run_explicit(problem: ExplicitSleeve, on_step: Callable[[SleeveStep], None] | None = None,
                  stop_on_failure: bool = True) -> SleeveHistory:
-    """Flex the elbow at constant angular velocity by explicit central differences (thesis ch. 5: the
+    """Flex the elbow at constant angular velocity by explicit central differences ([Man2006, ch. 5]: the
     sleeve's own mass, explicit Lagrange-multiplier contact, Box 5).
 
     Damping: mass-proportional C = alpha M (alpha = config.route.mass_damping [1/s]; on the translations a drag

@@ -1,7 +1,7 @@
 """Implicit route of the arm-in-sleeve flexion (SleeveConfig.solver = "implicit"): backward Euler + Newton.
 
 The same equations as the explicit route (fabricfem.wear.sleeve.build_explicit / run_explicit): the sleeve's lumped
-translational mass M (HRZ lumping, thesis eq. 2.82, fabricfem.dynamics.mass.lumped_mass), mass damping C = alpha M
+translational mass M (HRZ lumping, [Man2006, eq. 2.82], fabricfem.dynamics.mass.lumped_mass), mass damping C = alpha M
 (alpha = SleeveConfig.damping [1/s]), gravity g along -y (on by default), the arm resting for `settle_time`
 while the sleeve settles on it, then the elbow flexion at `flexion_speed` [deg/s] to `final_angle`. Units: SI.
 
@@ -9,7 +9,7 @@ Time stepping: backward Euler with steps dt = (angle step) / omega (angle step =
 
     M (x - x^n - dt v^n) / dt^2 + alpha M (x - x^n) / dt + R_shell(x) - f_contact(x) = 0,   v = (x - x^n) / dt,
 
-i.e. M a + C v + f_int = F_gravity + f_contact at t^{n+1} (thesis eq. 2.84 with the accelerations and velocities
+i.e. M a + C v + f_int = F_gravity + f_contact at t^{n+1} ([Man2006, eq. 2.84] with the accelerations and velocities
 of backward Euler): the term fabricfem.dynamics.backward_euler.BackwardEulerInertia (shared with the tablecloth drop
 of fabricfem.verify.drape), M ((x - x^n) (1 / dt^2 + alpha / dt) - v^n / dt) with tangent (1 / dt^2 + alpha / dt) M
 on the free displacement rows, in `CompositeSystem(model, [contact, inertia])`. The director rotations carry no

@@ -1,4 +1,4 @@
-"""Periodic unit-cell homogenization at finite strain (thesis 000, sec. 4.2.2 and 4.3.2-4.3.3).
+"""Periodic unit-cell homogenization at finite strain ([Man2006, sec. 4.2.2] and 4.3.2-4.3.3).
 
 The cell Y (a dolfinx 3D mesh, lengths in m) is loaded by a macroscopic deformation gradient Phi:
 the microscopic placement is y = Phi Y + u* (eq. 4.52) with the fluctuation u* periodic between
@@ -19,7 +19,7 @@ singular: MUMPS then returns one of the equivalent states (seen with a box perio
 the solve fails with SolverError; no further rigid modes are removed here.
 Pairs are translations (full cell, thesis option A) or general point maps `relation` with a
 sign per displacement component, u*_i(x) = s_i u*_i(relation(x)): the anti-symmetric quarter cell
-(option B, thesis sec. 4.3.3, Fig. 19) maps its end face by a half-period translation and z -> -z
+(option B, [Man2006, sec. 4.3.3], Fig. 19) maps its end face by a half-period translation and z -> -z
 with s = (1, 1, -1) (UnitCellMesh.periodic_relation gives the map). Non-unit signs are imposed
 per component (one geometrical dolfinx_mpc constraint per component and sign).
 
@@ -64,7 +64,7 @@ class PeriodicPair:
     (3, n) [m] is a general point map from the slave face onto the master face (e.g.
     UnitCellMesh.periodic_relation(name) of the quarter cell: half-period shift and z -> -z);
     give either `relation` or `translation`. `component_scale` (s_x, s_y, s_z), non-zero and
-    dimensionless, is (1, 1, -1) for the anti-symmetric quarter cell (thesis sec. 4.3.3).
+    dimensionless, is (1, 1, -1) for the anti-symmetric quarter cell [Man2006, sec. 4.3.3].
     `components` lists the displacement components (0, 1, 2) that are coupled; the others are left
     free by this pair (e.g. u*_z when it is prescribed on both faces by `fixed_facets`, the thesis'
     end-face condition of sec. 4.3.5.3).
@@ -243,7 +243,7 @@ class UnitCellProblem:
             rigid modes left free by the periodicity must be removed (fabricfem.weave.unit_cell pins
             them at points where the weave's symmetry makes that component of u* vanish anyway).
         fixed_facets: optional [(facet tag, components), ...]: u*_c = 0 on every vertex of the tagged
-            facets for each c in `components` (e.g. u*_z = 0 on the yarn end faces, thesis sec. 4.3.5.3);
+            facets for each c in `components` (e.g. u*_z = 0 on the yarn end faces, [Man2006, sec. 4.3.5.3]);
             a component fixed on a slave face must not be coupled by its PeriodicPair (`components`).
             These conditions are in `bcs` after the pins; `pin_bcs` holds the pins only.
     """

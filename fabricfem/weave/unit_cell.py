@@ -1,15 +1,15 @@
-"""Woven unit cell with yarn-yarn frictional contact (thesis 000, sec. 4.3.2-4.3.5 with sec. 3.4, Box 7).
+"""Woven unit cell with yarn-yarn frictional contact ([Man2006, sec. 4.3.2-4.3.5] with sec. 3.4, Box 7).
 
 A UnitCellMesh (meshes.unit_cell: quarter cell = option B, full cell = option A) of separate yarn
 bodies is loaded by the macroscopic deformation gradient Phi (y = Phi Y + u*, eq. 4.52) through the
 periodic UnitCellProblem (fabricfem.weave.homogenize); the yarns interact by node-to-surface frictional
-contact (fabricfem.contact.yarn.YarnContact, symmetrized augmented Lagrangian of Box 7, Coulomb
+contact (fabricfem.contact.yarn.YarnContact, symmetrized augmented Lagrangian of [Man2006, Box 7], Coulomb
 friction), whose forces and stiffness are added to the MPC-condensed residual and Jacobian. In each
 load step Newton solves with fixed multipliers, then Uzawa augmentations follow until the
 penetration is below the tolerance (solve_with_contact). Homogenized S by eq. 4.64, E by eq. 4.59.
 Units: m, N, Pa.
 
-Rigid modes (thesis sec. 4.3.5: "rigid body motions are precluded by applying appropriate essential
+Rigid modes ([Man2006, sec. 4.3.5]: "rigid body motions are precluded by applying appropriate essential
 boundary conditions"; sec. 4.3.2-4.3.3 pins per yarn one translation and the rotation about its own
 axis). Each yarn is its own body, so every rigid mode that its periodicity leaves free must be
 removed. Here they are removed at points where the weave's symmetry makes the pinned component of
@@ -39,7 +39,7 @@ s = p/2 is dropped there (that section is free in the thesis' full model).
 Materials: the yarns follow the Neo-Hookean + Bonet-Burton law (eqs. 4.66-4.68, forms.yarn) with
 the axis A = the centreline tangent (UnitCellMesh.yarn_axis, DG0).
 
-Crushed elements (issue 5, measured on the coarse quarter cell, TI yarns, biaxial): the contact
+Crushed elements: the contact
 pressure at the crossing is smooth over the patch (31 nodes, 0.25-1.3 GPa, mean 0.73 GPa ~ 0.55 E_T
 at E11 = 0.105) and flattens the transversely soft yarns; the outer ring of hexahedra of the lower
 yarn at the crossing takes the crush (min det F at the Gauss points 0.97, 0.77, 0.60, 0.45, 0.33,
@@ -62,8 +62,7 @@ min = 0.17, and there stops because Newton and the Uzawa updates cycle on stick/
 contact discretisation, not of the inversion any more (uniaxial, shear and compression reach their
 full paths with the same S as before).
 
-Newton at the crossing (issue 5, second pass; measured from the converged state at E11 = 0.127 with a
-step to E11 = 0.145): (1) the iterates did not cycle on stick/slip but on the MASTER FACET of 7 slave
+Newton at the crossing: (1) the iterates did not cycle on stick/slip but on the MASTER FACET of 7 slave
 nodes pressed 13-19 um into the lower yarn at its vertices (foot point weight 1 on one vertex, or on
 an edge next to it): the closest facet changes at every iterate, and from inside the polyhedral
 surface the closest point even jumps (one node: between two edges 2.6 um apart, normal turning by
@@ -78,7 +77,7 @@ solves whose Newton correction (|du| = 52 um against 87 um elements) is linear o
 it: the crushed elements' near-singular tangent. The MPC Newton solver then retries the update with
 the shifted matrix J + alpha mean|diag J| I (`damping`, Levenberg-Marquardt style; the residual and
 the tolerance are unchanged). Measured with (1)-(3) on the coarse quarter cell, ends u_z = 0: the
-path still stops at E11 = 0.1406 (Phi = 1.131875, min det F 0.170): Newton converges, but the Box 7
+path still stops at E11 = 0.1406 (Phi = 1.131875, min det F 0.170): Newton converges, but the [Man2006, Box 7]
 augmentations of the next sub-increment stall (penetration 1.2e-6 m and stick slip 1.1e-6 m after 20
 Uzawa updates against the tolerance 1.66e-7 m).
 """
@@ -113,7 +112,7 @@ from fabricfem.weave.homogenize import PeriodicPair, UnitCellProblem, green_lagr
 __all__ = ["ContactUnitCell", "ContactUnitCellStep", "default_contact_parameters", "symmetry_pins",
            "DEFAULT_VOLUME_FRACTION", "DEFAULT_FRICTION", "DeformationCheck", "MAX_CUTS"]
 
-DEFAULT_VOLUME_FRACTION = 0.4  # phi of eq. 4.65 (thesis sec. 4.3.5)
+DEFAULT_VOLUME_FRACTION = 0.4  # phi of eq. 4.65 [Man2006, sec. 4.3.5]
 END_FACES = ("periodic", "uz_fixed")
 DEFAULT_FRICTION = 0.2  # Coulomb coefficient yarn on yarn (assumed; the thesis does not give one for ch. 4)
 MAX_CUTS = 5  # a failed load increment is halved at most this many times (smallest sub-increment 1/32)
@@ -271,14 +270,14 @@ class ContactUnitCell:
         max_it: Newton iterations per solve
         two_pass: contact pairs in both directions (warp nodes on weft facets and weft nodes on warp
             facets): keeps the warp/weft symmetry of a balanced weave and catches the master nodes that
-            a one-pass search lets through (thesis Fig. 31's undetected penetrations). Off by default:
+            a one-pass search lets through ([Man2006, Fig. 31]'s undetected penetrations). Off by default:
             with the augmented Lagrangian it over-constrains faceted surfaces (both node sets cannot
             reach zero gap on the other's chords; measured: the Uzawa updates stall at a fixed
             penetration of ~1e-2 of the facet sag)
-        end_faces: "periodic" (exact periodicity of u*) or "uz_fixed" (thesis sec. 4.3.5.3: u*_z = 0 on
+        end_faces: "periodic" (exact periodicity of u*) or "uz_fixed" ([Man2006, sec. 4.3.5.3]: u*_z = 0 on
             every yarn end face, u*_x, u*_y periodic); see the module docstring
         active_set: Newton solves with the master facets fixed and updated between solves
-            (fabricfem.contact.yarn.solve_with_fixed_sets; module docstring, issue 5 second pass);
+            (fabricfem.contact.yarn.solve_with_fixed_sets; module docstring);
             False = the closest facet at every evaluation
     """
 
@@ -369,7 +368,7 @@ class ContactUnitCell:
         the master facets (a geometric stiffness ~ A p / h per node against the penalty stiffness
         A eps_N); keeping eps_N h / p_max >= PRESSURE_RATIO keeps that omission a small part of the
         tangent, so Newton converges fast (measured: with eps_N h / p ~ 1 the residual decays only
-        linearly at a rate ~0.7). Changing eps_N between augmentations is allowed in Box 7 (the
+        linearly at a rate ~0.7). Changing eps_N between augmentations is allowed in [Man2006, Box 7] (the
         multipliers, not eps_N, carry the converged pressure)."""
         c = self.contact
         p_max = float(np.max(c.lam_N, initial=0.0))
@@ -381,7 +380,7 @@ class ContactUnitCell:
                                        self._base_tangential * penalty / self._base_penalty)
 
     def _contact_step(self, force_scale: float, n: int, Phi_n: np.ndarray) -> ContactReport:
-        """Box 7 loop of one load step (Newton with fixed multipliers, Uzawa updates) with the adapted
+        """[Man2006, Box 7] loop of one load step (Newton with fixed multipliers, Uzawa updates) with the adapted
         penalty; the state is restored on failure so that the caller can cut the increment."""
         c, newton, problem = self.contact, self.problem.newton, self.problem
         saved = (problem.u.x.array.copy(), c.lam_N.copy(), c.lam_T.copy(), c.ref_quad.copy(), c.ref_weights.copy())
