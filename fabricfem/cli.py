@@ -24,7 +24,9 @@ from fabricfem.benchmarks.sleeve_profile import sleeve_profile
 from fabricfem.benchmarks.speed_accuracy import speed_accuracy
 from fabricfem.benchmarks.unit_cell_perf import unit_cell_perf
 from fabricfem.demo import rollup_demo
+from fabricfem.dynamics.newmark import DynamicsError
 from fabricfem.scenes.run import run_scene
+from fabricfem.solvers.newton import SolverError
 from fabricfem.studies.fabric_link import OUT_DIR, run_fabric_link
 from fabricfem.studies.sleeve import run_methods, run_study, variants
 from fabricfem.studies.sleeve_fit import DEFAULT_LONG_AXIS_FACTOR, FIT_SCALES, fit_configs, run_fit_study
@@ -66,7 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     p_demo = sub.add_parser("demo", help="the default demo: a fabric strip rolled up by an end moment")
     p_demo.add_argument("--out", default="results/demo", help="output folder (XDMF, PNG, CSV)")
     p_bench = sub.add_parser("bench", help="benchmarks (results/ CSV and PNG)")
-    p_bench.add_argument("name", choices=["rollup-profile", "stability-map", "speed-accuracy", "unit-cell",
+    p_bench.add_argument("name", nargs="?", default="rollup-profile", choices=["rollup-profile", "stability-map", "speed-accuracy", "unit-cell",
                                           "sleeve-profile"],
                          help="benchmark to run")
     p_bench.add_argument("--out", default="results/bench")
@@ -134,7 +136,15 @@ def _command(args) -> int:
             return 0
         return report(registry, args.cases, args.command, args.json, args.markdown)
     if args.command == "run":
-        return run_scene(scene_module.load(args.scene)).exit_code
+        scene = scene_module.load(args.scene)
+        try:
+            outcome = run_scene(scene)
+        except (SolverError, DynamicsError) as exc:   # the run stopped: summary.json says "failed: ..."
+            _print(f"fabricfem run: stopped: {' '.join(str(exc).split())}", file=sys.stderr)
+            return 1
+        if outcome.exit_code:
+            _print(f"fabricfem run: {outcome.status}", file=sys.stderr)
+        return outcome.exit_code
     if args.command == "scenes":
         text = scene_module.schema.reference_markdown()
         if args.markdown:

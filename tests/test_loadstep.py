@@ -3,8 +3,7 @@ import numpy as np
 import pytest
 
 from fabricfem.solvers.loadstep import solve_load_path
-from fabricfem.verify.cantilevers import rollup
-from fabricfem.verify.cantilevers import strip_model
+from fabricfem.verify.cantilevers import rollup, strip_model
 
 
 def test_rollup_needs_fewer_steps_than_fixed_stepping():

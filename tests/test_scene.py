@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from toml_text import dumps
 
 from fabricfem import scenes as scene_module
 from fabricfem.cli import main
@@ -126,3 +127,18 @@ def test_rerun_into_the_same_folder_leaves_no_stale_output(tmp_path):
     assert "final.png" not in summary["outputs"] and summary["status"] == "completed"
     assert summary["scene_sha256"] != first_hash and len(summary["scene_sha256"]) == 64
     assert len(list(csv.reader(open(tmp_path / "history.csv")))) == 1 + len(second.result)
+
+
+def test_a_run_that_stops_early_exits_1_and_says_so(tmp_path, capsys):
+    """A static scene whose load cannot be carried within the step limits (two Newton iterations allowed, no
+    step below the full load): exit code 1, one line on stderr saying why, and summary.json's status "failed"."""
+    data = rollup_data()
+    data["mesh"].update(nx=10, ny=1)
+    data["solver"].update(targets=[1.0], initial_step=1.0, min_step=1.0, petsc_options={"snes_max_it": 2})
+    data["output"].update(dir=str(tmp_path), render=False)
+    path = tmp_path / "stops.toml"
+    path.write_text(dumps(data))
+    assert main(["run", str(path)]) == 1
+    err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert len(err) == 1 and err[0].startswith("fabricfem run: stopped:"), err
+    assert json.loads((tmp_path / "summary.json").read_text())["status"].startswith("failed:")

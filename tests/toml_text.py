@@ -1,0 +1,34 @@
+"""TOML text of scene data, for tests that write scene files (the standard library reads TOML, writes none)."""
+import math
+
+
+def _value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float) and not math.isfinite(v):
+        return "nan" if math.isnan(v) else ("inf" if v > 0 else "-inf")
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, list):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{" + ", ".join(f"{k} = {_value(x)}" for k, x in v.items()) + "}"
+    raise TypeError(v)
+
+
+def dumps(data: dict) -> str:
+    """TOML text of a scene's data (tables, arrays of tables, one level of nested arrays of tables)."""
+    lines = []
+    for section, content in data.items():
+        tables = content if isinstance(content, list) else [content]
+        for table in tables:
+            lines.append(f"[[{section}]]" if isinstance(content, list) else f"[{section}]")
+            nested = {k: v for k, v in table.items() if isinstance(v, list) and v and isinstance(v[0], dict)}
+            lines += [f"{k} = {_value(v)}" for k, v in table.items() if k not in nested]
+            for key, items in nested.items():
+                for item in items:
+                    lines.append(f"[[{section}.{key}]]")
+                    lines += [f"{k} = {_value(v)}" for k, v in item.items()]
+    return "\n".join(lines) + "\n"
