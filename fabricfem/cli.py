@@ -27,11 +27,10 @@ from fabricfem.demo import rollup_demo
 from fabricfem.dynamics.newmark import DynamicsError
 from fabricfem.scenes.run import run_scene
 from fabricfem.solvers.newton import SolverError
+from fabricfem.studies import unit_cell as unit_cell_study
 from fabricfem.studies.fabric_link import OUT_DIR, run_fabric_link
 from fabricfem.studies.sleeve import run_methods, run_study, variants
 from fabricfem.studies.sleeve_fit import DEFAULT_LONG_AXIS_FACTOR, FIT_SCALES, fit_configs, run_fit_study
-from fabricfem.studies.unit_cell import previous_runs
-from fabricfem.studies.unit_cell import run_study as run_unit_cell_study
 from fabricfem.verify import load_cases, load_reproductions
 from fabricfem.verify.report import report
 
@@ -205,9 +204,9 @@ def _command(args) -> int:
                    file=sys.stderr)
             return 2
         skip = "fine" if args.coarse_only else "coarse" if args.fine_only else None
-        stopped = ({key for key, run in previous_runs(out).items() if run.stopped and key.refinement != skip}
+        stopped = ({key for key, run in unit_cell_study.previous_runs(out).items() if run.stopped and key.refinement != skip}
                    if args.recompute_stopped and os.path.isdir(out) else set())
-        run_unit_cell_study(out, quick=args.quick, recompute=stopped, time_budget=args.budget)
+        unit_cell_study.run_study(out, quick=args.quick, recompute=stopped, time_budget=args.budget)
         return 0
     if args.command == "study":
         options = dict(quick=args.quick, fine=args.fine,

@@ -137,7 +137,7 @@ def test_implicit_defaults_and_bad_time_step():
     inertia terms and a non-implicit configuration given to build_implicit raise ValueError naming them."""
     cfg = SleeveConfig.of(solver="implicit")
     assert cfg.contact.method == "augmented" and cfg.route.gravity is True
-    assert SleeveConfig().with_(solver="implicit").method == "augmented"
+    assert SleeveConfig().with_(solver="implicit").contact.method == "augmented"
     with pytest.raises(ValueError, match="solver"):
         build_implicit(SleeveConfig.of(n_around=10, n_along=13), MPI.COMM_SELF)
     fabric = Fabric.isotropic(1.2e6, 0.0, 1e-3, density=436.0)
