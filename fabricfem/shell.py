@@ -154,6 +154,7 @@ class ShellModel:
         self._external: list = []
         self._director_loads: list = []   # external work that depends on the current director (moments)
         self._point_loads: list[tuple[np.ndarray, np.ndarray]] = []
+        self._point_moments: list[tuple[np.ndarray, np.ndarray]] = []   # (point [m], moment [N m])
         self.bcs: list = []
         self._scaled_bcs: list[tuple[fem.Function, np.ndarray]] = []
         self._compiled = False
@@ -223,6 +224,35 @@ class ShellModel:
         m = fem.Constant(self.mesh, PETSc.ScalarType(_nonzero_vector("moment", moment)))
         delta_d = ufl.derivative(self.d, self.w, self.w_test)
         self._director_loads.append(load_forms.moment_work(m, self.d, delta_d, self._ds(tag)))
+
+    def add_point_moment(self, point: Sequence[float], moment: Sequence[float]):
+        """Dead moment [N m] at the mesh node at `point`: a vector (mx, my, mz) in the global frame, fixed in
+        space. Its virtual work is m . (d x delta d) at the node (as add_edge_moment's per unit length; the
+        component along the director does no work), with the consistent tangent (`_point_moment_terms`)."""
+        if self.model != "naghdi":
+            raise ValueError("point moments need the 'naghdi' model (the membrane has no rotations)")
+        self._point_moments.append((np.asarray(point, dtype=float), _nonzero_vector("moment", moment)))
+        self._compiled = False
+
+    def _point_moment_terms(self) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Per point moment on its owning rank: (theta dofs (2,), -lambda g (2,), -lambda dg/dtheta (2, 2)) with
+        the generalized forces g_i = m . (d x d_i) of the director d = c1 c2 a3 + c1 s2 a1 - s1 a2 at the node
+        (d_i = dd/dtheta_i) and their derivatives m . (d_j x d_i + d x d_ij); rows of held angles left out."""
+        out = []
+        lam = float(self.load_factor.value)
+        for dofs, node, m in self._moment_nodes:
+            n0, t1, t2 = (f.x.array.reshape(-1, 3)[node] for f in (self.a3, self.a1, self.a2))
+            th1, th2 = self.w.x.array[dofs]
+            c1, s1, c2, s2 = np.cos(th1), np.sin(th1), np.cos(th2), np.sin(th2)
+            d = c1 * c2 * n0 + c1 * s2 * t1 - s1 * t2
+            dd = [-s1 * c2 * n0 - s1 * s2 * t1 - c1 * t2, -c1 * s2 * n0 + c1 * c2 * t1]
+            ddd = [[-c1 * c2 * n0 - c1 * s2 * t1 + s1 * t2, s1 * s2 * n0 - s1 * c2 * t1],
+                   [s1 * s2 * n0 - s1 * c2 * t1, -c1 * c2 * n0 - c1 * s2 * t1]]
+            g = np.array([m @ np.cross(d, dd[i]) for i in range(2)])
+            k = np.array([[m @ (np.cross(dd[j], dd[i]) + np.cross(d, ddd[i][j])) for j in range(2)] for i in range(2)])
+            free = ~np.isin(dofs, self._bc_dofs)
+            out.append((dofs[free], -lam * g[free], -lam * k[np.ix_(free, free)]))
+        return out
 
     def add_point_load(self, point: Sequence[float], force: Sequence[float]):
         """Force [N] on the mesh node nearest to `point` (which must be a node, within 1e-8 m)."""
@@ -418,6 +448,14 @@ class ShellModel:
                     self.F_ref.setValueLocal(dof, force[i], addv=PETSc.InsertMode.ADD_VALUES)
         self.F_ref.assemble()
         fem_petsc.set_bc(self.F_ref, self.bcs, scale=0.0)
+        self._bc_dofs = np.unique(np.concatenate([bc.dof_indices()[0] for bc in self.bcs])) if self.bcs else \
+            np.zeros(0, dtype=np.int32)
+        self._moment_nodes = []     # (theta dofs in W, node of V2, moment) on the owning rank
+        for point, moment in self._point_moments:
+            dofs = [self.owned_node_dof(point, "theta", i) for i in range(2)]
+            node = probe.owned_node(self.V2, point)
+            if dofs[0] is not None and node is not None:
+                self._moment_nodes.append((np.array(dofs, dtype=np.int32), node, moment))
         self._compiled = True
 
     def set_state(self, x: PETSc.Vec):
@@ -439,6 +477,8 @@ class ShellModel:
         """b = R_int(x) - lambda F_ref with Dirichlet rows set to x - lambda g."""
         self._assemble_internal(x, b, lift=True)
         b.axpy(-float(self.load_factor.value), self.F_ref)
+        for dofs, force, _ in self._point_moment_terms():
+            b.getArray()[dofs] += force         # owned rows of the node's owning rank
         fem_petsc.set_bc(b, self.bcs, x, -1.0)
 
     def internal_force(self, x: PETSc.Vec, b: PETSc.Vec):
@@ -450,6 +490,10 @@ class ShellModel:
         A.zeroEntries()
         fem_petsc.assemble_matrix(A, self._J, bcs=self.bcs)
         A.assemble()
+        if self._point_moments:
+            for dofs, _, tangent in self._point_moment_terms():
+                A.setValuesLocal(dofs, dofs, tangent, addv=PETSc.InsertMode.ADD_VALUES)
+            A.assemble()
 
     def create_matrix(self) -> PETSc.Mat:
         self.compile()
