@@ -106,14 +106,6 @@ def test_mpi_equals_serial():
     assert world.augmentations == serial.augmentations
 
 
-def test_case_yarn_contact_patch():
-    """The verification case (Hertz force, AL penetration, penalty -> AL, Coulomb stick/slip)."""
-    from fabricfem.verify.yarn_contact import yarn_contact_patch
-    results = yarn_contact_patch()
-    failed = [r for r in results if not r.passed]
-    assert not failed, failed
-
-
 # ------------------------------------------------------------------ crushed elements
 def _ti_cell_without_contact():
     from fabricfem.materials.yarn import THESIS_TRANSVERSELY_ISOTROPIC

@@ -377,8 +377,8 @@ class ExplicitBodyContact:
     def torque(self, name: str) -> float:
         """The registered torque [N m] of the last step's forces (all ranks)."""
         monitor = self._monitors[name]
-        return monitor.value(self.position, self.force, self.segment, self.poses.joint(monitor.joint, self.time),
-                             self.comm)
+        return monitor.value(self.position, self.force, self.segment,
+                             lambda: self.poses.joint(monitor.joint, self.time), self.comm)
 
     def reset_means(self):
         for name in self._torque_impulse:
@@ -468,7 +468,7 @@ class ExplicitBodyContact:
         tic = time.perf_counter()
         step_torques = []
         for name, monitor in self._monitors.items():
-            tau = monitor.value(position, force, segment, self.poses.joint(monitor.joint, self.time), None)
+            tau = monitor.value(position, force, segment, lambda: self.poses.joint(monitor.joint, self.time), None)
             self._torque_impulse[name] += dt * tau
             step_torques.append(tau)
         if self.trace is not None:

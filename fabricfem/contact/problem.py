@@ -390,5 +390,5 @@ class ContactProblem:
 
     def _torque(self, monitor: TorqueMonitor) -> float:
         s = self.evaluate()
-        return monitor.value(s.position, s.force, s.segment, self.body.joint_position(monitor.joint, self.time),
-                             self.comm)
+        return monitor.value(s.position, s.force, s.segment,
+                             lambda: self.body.joint_position(monitor.joint, self.time), self.comm)

@@ -9,7 +9,7 @@ the clothing exerts on the body at x_i [m] (the opposite of the forces on the cl
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
 from mpi4py import MPI
@@ -48,13 +48,14 @@ def contact_torque(points: np.ndarray, forces_on_body: np.ndarray, segment: np.n
 @dataclass(frozen=True)
 class TorqueMonitor:
     """The resisting-torque monitor of a wear run: the torque [N m] about `joint` along the unit `axis` of the
-    forces the cloth exerts on the body segments `segments` (indices into the contact's segment names), by
-    `contact_torque` [Man2006, ch. 5 intro]. Every contact formulation (implicit ContactProblem, explicit
-    ExplicitBodyContact) evaluates its torques through this one path."""
+    forces the cloth exerts on the body segments flagged in `on_segments` (a lookup table over the contact's
+    segment indices), tau = a . sum_i (x_i - J) x f_i [Man2006, ch. 5 intro]. Every contact formulation
+    (implicit ContactProblem, explicit ExplicitBodyContact) evaluates its torques through this one path; the
+    joint is posed only when a node touches the segments (it is evaluated every explicit step)."""
 
     joint: str
     axis: np.ndarray
-    segments: np.ndarray
+    on_segments: np.ndarray
 
     @classmethod
     def build(cls, names: Sequence[str], joint: str, axis, segments: Sequence[str]) -> "TorqueMonitor":
@@ -67,9 +68,24 @@ class TorqueMonitor:
             raise ValueError(f"axis must be a finite non-zero 3-vector, got {axis!r}")
         on_segments = np.zeros(len(names), dtype=bool)
         on_segments[[list(names).index(s) for s in segments]] = True
-        return cls(joint, a / np.linalg.norm(a), np.flatnonzero(on_segments))
+        return cls(joint, a / np.linalg.norm(a), on_segments)
 
-    def value(self, position: np.ndarray, force_on_cloth: np.ndarray, segment: np.ndarray, joint_position,
-              comm: MPI.Comm | None) -> float:
-        """tau [N m] of the nodal forces on the cloth `force_on_cloth` (the body takes -f) at `position`."""
-        return contact_torque(position, -force_on_cloth, segment, self.segments, joint_position, self.axis, comm)
+    def value(self, position: np.ndarray, force_on_cloth: np.ndarray, segment: np.ndarray,
+              joint_position: Callable[[], np.ndarray], comm: MPI.Comm | None) -> float:
+        """tau [N m] of the nodal forces on the cloth `force_on_cloth` (the body takes -f) at `position`, summed
+        over the ranks of `comm` (None: this rank's nodes only); `joint_position()` gives J [m]."""
+        mask = self.on_segments[segment]
+        local = 0.0
+        if mask.any():
+            arm = position[mask] - joint_position()
+            local = float(np.dot(_cross(arm, -force_on_cloth[mask]).sum(axis=0), self.axis))
+        return local if comm is None else float(comm.allreduce(local, op=MPI.SUM))
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise a x b of (N, 3) arrays (the products and differences of np.cross, without its axis handling)."""
+    out = np.empty_like(a)
+    out[:, 0] = a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1]
+    out[:, 1] = a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2]
+    out[:, 2] = a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]
+    return out
