@@ -36,10 +36,11 @@ FOREARM = Ellipsoid(np.array([0.12, 0.0, 0.0]), np.eye(3), np.array([0.32, 0.044
 KNIT = Fabric(E1=0.8e6, E2=0.5e6, G12=0.1e6, nu12=0.3, thickness=7e-4, density=400.0, name="compression knit")
 
 
-def main(out: Path, comm=MPI.COMM_WORLD) -> dict | None:
-    """Run the demo into `out`; returns (rank 0) the summary of compression.pressure_report."""
+def main(out: Path, quick: bool = False, comm=MPI.COMM_WORLD) -> dict | None:
+    """Run the demo into `out` (`quick`: a 16 x 8 tube instead of 32 x 16); returns (rank 0) the summary of
+    compression.pressure_report."""
     say = print if comm.rank == 0 else (lambda *a, **k: None)
-    fmesh = tube(LENGTH, RELAXED_RADIUS, 32, 16, order=2, comm=comm)                        # mesh
+    fmesh = tube(LENGTH, RELAXED_RADIUS, *((16, 8) if quick else (32, 16)), order=2, comm=comm)   # mesh
     say(f"compression sleeve: relaxed radius {RELAXED_RADIUS * 1e3:.0f} mm on a forearm "
         f"{2e3 * FOREARM.radii[1]:.0f} x {2e3 * FOREARM.radii[2]:.0f} mm, {comm.size} rank(s)")
     problem = fit_sleeve(fmesh, KNIT, FOREARM, start=0.7, steps=12, tolerance=1e-7,           # forms + solver
@@ -58,4 +59,6 @@ def main(out: Path, comm=MPI.COMM_WORLD) -> dict | None:
 if __name__ == "__main__":
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=Path("results/demos/compression_sleeve"))
-    main(parser.parse_args().out)
+    parser.add_argument("--quick", action="store_true", help="a coarser tube")
+    args = parser.parse_args()
+    main(args.out, args.quick)

@@ -48,19 +48,20 @@ def case(name: str, mpi: bool = False):
     and exits 0 only when every row passes."""
     def register(fn):
         CASES[name] = fn
-        fn.case_name, fn.mpi, fn.deviation = name, mpi, None
+        fn.case_name, fn.mpi, fn.deviation, fn.in_tests = name, mpi, None, True
         return fn
     return register
 
 
-def reproduction(name: str, mpi: bool = False, deviation: str | None = None):
+def reproduction(name: str, mpi: bool = False, deviation: str | None = None, in_tests: bool = True):
     """Register a reproduction of a source paper's figure or table: our numbers beside the paper's, a report,
     not a gate (`fabricfem reproduce`). `deviation` states, for rows that differ from the paper, the measured
     cause and where it is documented; the test suite marks such a case xfail(strict=True), so a row that starts
-    to agree is noticed."""
+    to agree is noticed. `in_tests=False`: a long computation whose parts the tests cover; only `fabricfem
+    reproduce` runs it whole."""
     def register(fn):
         REPRODUCTIONS[name] = fn
-        fn.case_name, fn.mpi, fn.deviation = name, mpi, deviation
+        fn.case_name, fn.mpi, fn.deviation, fn.in_tests = name, mpi, deviation, in_tests
         return fn
     return register
 

@@ -464,7 +464,7 @@ def _drape_rows(name: str, label: str, run: dict, out: list):
                           run["lowest_eigenvalue"], 0.0, math.inf, run["ndofs"], run["wall_s"], scale=1.0))
 
 
-@reproduction("tablecloth-drape", mpi=True)
+@reproduction("tablecloth-drape", mpi=True, in_tests=False)   # parts: tests/test_tablecloth.py
 def tablecloth_drape() -> list:
     """[Eischen2000, sec. 4.4], static routes, against the experiment row (floor reading).
 
@@ -503,7 +503,7 @@ def tablecloth_drape() -> list:
     return out
 
 
-@reproduction("tablecloth-drop")
+@reproduction("tablecloth-drop", in_tests=False)   # parts: tests/test_tablecloth.py
 def tablecloth_drop() -> list:
     """[Eischen2000, sec. 4.4], dynamic routes as the seed computed them: the cloth falls from the (imperfect) flat
     state, settles under air drag, then a static Newton polish and a stability check (lowest eigenvalue).
