@@ -9,8 +9,8 @@ import csv
 import datetime
 import json
 import os
-import time
 import resource
+import time
 from pathlib import Path
 from typing import Sequence
 

@@ -133,6 +133,10 @@ class ElbowFlexion:
     def time_range(self) -> tuple[float, float]:
         return (self.t_start, self.t_end)
 
+    def time_at(self, angle: float) -> float:
+        """Time t [s] at which the flexion reaches `angle` [rad] (the inverse of `angle` on the flexion)."""
+        return self.t_start + angle / self.angular_velocity
+
     def angle(self, t: float) -> float:
         """Flexion angle alpha(t) [rad]."""
         t = _finite_time(t)

@@ -35,8 +35,8 @@ import ufl
 from dolfinx.mesh import GhostMode, Mesh, MeshTagsMetaClass
 from mpi4py import MPI
 
-from ._gmsh_session import gmsh_model
 from . import directions
+from ._gmsh_session import gmsh_model
 from .fabric_mesh import DirectionField, FabricMesh
 
 __all__ = ["FabricMesh", "gmsh_to_dolfinx", "mesh_from_gmsh", "model_to_mesh"]

@@ -14,7 +14,7 @@ from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
 from fabricfem.meshes import plate, tube
 from fabricfem.scenes import schema
 from fabricfem.scenes.schema import Scene, SceneError
-from fabricfem.scenes.sections import FabricSection, MeshSection, from_table, section
+from fabricfem.scenes.sections import DynamicsSection, FabricSection, MeshSection, ModelSection, from_table, section
 from fabricfem.wear.config import SECTIONS, ContactSpec, FabricSpec, FlexionSpec, RouteSpec, SleeveConfig, TubeSpec
 
 
@@ -41,9 +41,14 @@ def build_fabric(spec: dict) -> Fabric:
         raise SceneError(f"fabric: {exc}") from None
 
 
+def mesh_section(spec: dict) -> MeshSection:
+    """The MeshSection of a [mesh] table (a sleeve's tube keys, TubeSpec's, are left to sleeve_config)."""
+    return section(MeshSection, {k: v for k, v in spec.items() if k in MeshSection.__dataclass_fields__})
+
+
 def build_mesh(spec: dict, comm):
     """The FabricMesh of a [mesh] table (MeshSection): a plate or a tube."""
-    m = section(MeshSection, {k: v for k, v in spec.items() if k in MeshSection.__dataclass_fields__})
+    m = mesh_section(spec)
     if m.type == "plate":
         return plate(m.lx, m.ly, m.nx, m.ny, cell=m.cell, structured=m.structured, comm=comm)
     return tube(m.length, m.radius, m.n_around, m.n_along, cell=m.cell, order=m.order, comm=comm)
@@ -54,7 +59,7 @@ def mesh_spacing(mesh: dict) -> float | None:
     plate min(lx / nx, ly / ny) (triangle diagonals are longer), tube min(chord 2 R sin(pi / n_around),
     length / n_along)."""
     if mesh["type"] == "plate":
-        if not mesh.get("structured", MeshSection.structured):
+        if not mesh_section(mesh).structured:
             return None
         return min(mesh["lx"] / mesh["nx"], mesh["ly"] / mesh["ny"])
     return min(2.0 * mesh["radius"] * math.sin(math.pi / mesh["n_around"]), mesh["length"] / mesh["n_along"])
@@ -67,13 +72,13 @@ def critical_time_step_estimate(data: dict) -> float | None:
     if h_min is None:
         return None
     fabric = build_fabric(data["fabric"])
-    cell = data["mesh"].get("cell", "quadrilateral")
+    cell = mesh_section(data["mesh"]).cell
     omega = stability.MEMBRANE_KAPPA[cell] * stability.plane_stress_wave_speed(fabric) / h_min  # eq. 2.87
-    if data.get("model", {}).get("kind", "naghdi") == "naghdi":
+    if section(ModelSection, data.get("model")).kind == "naghdi":
         omega_s = (stability.THICKNESS_SHEAR_CHI[cell] * np.sqrt(12.0 * fabric.shear_correction *
                    fabric.transverse_shear_modulus / fabric.density) / fabric.thickness)
         omega = float(np.hypot(omega, omega_s))
-    rayleigh = data["dynamics"].get("rayleigh", [0.0, 0.0])
+    rayleigh = section(DynamicsSection, data["dynamics"]).rayleigh
     return stability.critical_time_step(None, tuple(rayleigh), omega_max=omega)  # eq. 2.86
 
 
@@ -93,7 +98,7 @@ def sleeve_config(data: dict) -> SleeveConfig:
         return SleeveConfig(
             tube=from_table(TubeSpec, data["mesh"], exclude=("type", "cell", "order", "allow_large")),
             material=FabricSpec(E=fabric["E1"], G=fabric["G12"], nu12=fabric["nu12"], thickness=fabric["thickness"],
-                                density=fabric.get("density", 0.0)),
+                                density=section(FabricSection, fabric).density),
             motion=from_table(FlexionSpec, data["motion"], exclude=("type",)),
             contact=from_table(ContactSpec, data.get("contact", {})),
             route=from_table(RouteSpec, data.get("route", {})),
@@ -128,9 +133,9 @@ def check_size(data: dict) -> None:
     """Refuse, with the numbers, a mesh whose estimated memory exceeds the machine's physical memory (unless
     mesh.allow_large)."""
     mesh = data["mesh"]
-    dofs = estimated_dofs(mesh, data.get("model", {}).get("kind", "naghdi"))
+    dofs = estimated_dofs(mesh, section(ModelSection, data.get("model")).kind)
     need, have = dofs * BYTES_PER_DOF, os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    if need > have and not mesh.get("allow_large", False):
+    if need > have and not mesh_section(mesh).allow_large:
         raise SceneError(f"mesh: about {dofs:.3g} dofs need about {need / 2**30:.0f} GiB, more than this machine's "
                          f"{have / 2**30:.0f} GiB; use fewer cells or set mesh.allow_large = true")
 
@@ -143,9 +148,12 @@ def check_objects(data: dict) -> None:
     if schema.SLEEVE_SECTIONS & set(data):
         sleeve_config(data)
     dyn = data.get("dynamics")
-    if not dyn or dyn["integrator"] != "explicit" or isinstance(dyn["dt"], str) or dyn.get("force", False):
+    if not dyn:
         return
-    dt, dt_crit = dyn["dt"], critical_time_step_estimate(data)
+    d = section(DynamicsSection, dyn)
+    if d.integrator != "explicit" or isinstance(d.dt, str) or d.force:
+        return
+    dt, dt_crit = d.dt, critical_time_step_estimate(data)
     if dt_crit is not None and dt > dt_crit:
         raise SceneError(f"dynamics.dt: {dt:.6g} s exceeds the critical time step {dt_crit:.6g} s of the explicit "
                          f"integrator (ratio {dt / dt_crit:.3g}, [Man2006, eqs. 2.86-2.87]); use a smaller dt, "

@@ -124,7 +124,7 @@ class LoadSection:
 
     type: str = doc("gravity | body_force | edge_traction | pressure | edge_moment | point")
     edge: str | None = doc("edge tag (edge loads)", None)
-    value: float | list | None = doc("by type: body force [N/m^3], edge traction [N/m], pressure [Pa], edge moment "
+    value: float | list | None = doc("by type: body force per area [N/m^2], edge traction [N/m], pressure [Pa], edge moment "
                                       "vector (x, y, z) [N m/m], point force [N]", None)
     point: list | None = doc("[x, y, z] [m] of a point load", None)
 

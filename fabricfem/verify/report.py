@@ -26,7 +26,7 @@ def _finite_or_none(value):
     return value if not isinstance(value, float) or math.isfinite(value) else None
 
 
-def run_cases(registry: dict[str, Callable], names: list[str], command: str, as_json: bool = False) -> list[CaseResult]:
+def run_cases(registry: dict[str, Callable], names: list[str], as_json: bool = False) -> list[CaseResult]:
     """Run the named cases (all when `names` is empty); a case that raises becomes one failed row naming the
     error. With `as_json`, whatever a case prints goes to stderr so that stdout holds the JSON alone."""
     results = []
@@ -99,7 +99,7 @@ def report(registry: dict[str, Callable], names: list[str], command: str, as_jso
     if unknown:
         _print(f"fabricfem {command}: unknown case(s) {unknown}; available: {sorted(registry)}", file=sys.stderr)
         return 2
-    results = run_cases(registry, names, command, as_json)
+    results = run_cases(registry, names, as_json)
     if markdown and MPI.COMM_WORLD.rank == 0:
         with open(markdown, "w") as f:
             f.write(markdown_text(markdown, results, command, registry))

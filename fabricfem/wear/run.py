@@ -7,8 +7,8 @@ from typing import Callable
 
 from mpi4py import MPI
 
-from fabricfem.wear.config import SleeveConfig
 from fabricfem import io as fio
+from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.contract import WearRun
 from fabricfem.wear.recorder import WearRecorder
 from fabricfem.wear.sleeve import SleeveHistory, SleeveStep, build_explicit, build_sleeve, format_breakdown

@@ -205,8 +205,22 @@ class SleeveError(SolverError):
     """The quasi-static flexion could not proceed (Newton failed below the minimum angle step)."""
 
 
+class ArmOutputs:
+    """The wearer contract's outputs shared by every sleeve route (fabricfem.wear.contract.WearRun): needs
+    `contact`, `body` and `flexion`."""
+
+    def pressure_field(self):
+        """Contact pressure on the body [Pa] per unit deformed cloth area, a Q2 Function (explicit route:
+        time-averaged over the last record)."""
+        return self.contact.pressure_field()
+
+    def posed_bodies(self, angle: float) -> list:
+        """The arm's ellipsoids at elbow angle `angle` [deg]."""
+        return list(self.body.pose(self.flexion.time_at(math.radians(angle))).values())
+
+
 @dataclass
-class SleeveProblem:
+class SleeveProblem(ArmOutputs):
     """The assembled sleeve problem."""
 
     config: SleeveConfig
@@ -228,7 +242,7 @@ class SleeveProblem:
 
     def time_at(self, angle_deg: float) -> float:
         """Body time t [s] at which the flexion reaches `angle_deg`."""
-        return self.flexion.t_start + math.radians(angle_deg) / self.flexion.angular_velocity
+        return self.flexion.time_at(math.radians(angle_deg))
 
     def resisting_torque(self) -> float:
         """-tau [N m] about the elbow along +z of the forces the sleeve exerts on the forearm (all ranks)."""
@@ -245,14 +259,6 @@ class SleeveProblem:
     def run(self, on_step: Callable[[SleeveStep], None] | None = None,
             stop_on_failure: bool = True) -> "SleeveHistory":
         return run_quasistatic(self, on_step=on_step, stop_on_failure=stop_on_failure)
-
-    def pressure_field(self):
-        """Contact pressure on the body [Pa] per unit deformed cloth area, a Q2 Function."""
-        return self.contact.pressure_field()
-
-    def posed_bodies(self, angle: float) -> list:
-        """The arm's ellipsoids at elbow angle `angle` [deg]."""
-        return list(self.body.pose(self.time_at(angle)).values())
 
     def destroy(self) -> None:
         self.solver.destroy()
@@ -571,7 +577,7 @@ def run_quasistatic(problem: SleeveProblem, angles: np.ndarray | None = None,
 
 # ---------------------------------------------------------------------------------------- explicit route
 @dataclass
-class ExplicitSleeve:
+class ExplicitSleeve(ArmOutputs):
     """The sleeve set up for explicit central differences (`build_explicit`)."""
 
     config: SleeveConfig
@@ -602,15 +608,6 @@ class ExplicitSleeve:
     def run(self, on_step: Callable[[SleeveStep], None] | None = None,
             stop_on_failure: bool = True) -> SleeveHistory:
         return run_explicit(self, on_step=on_step, stop_on_failure=stop_on_failure)
-
-    def pressure_field(self):
-        """Contact pressure on the body [Pa] per unit deformed cloth area, time-averaged over the last record."""
-        return self.contact.pressure_field()
-
-    def posed_bodies(self, angle: float) -> list:
-        """The arm's ellipsoids at elbow angle `angle` [deg]."""
-        t = self.flexion.t_start + math.radians(angle) / self.flexion.angular_velocity
-        return list(self.body.pose(t).values())
 
     def destroy(self) -> None:
         self.integrator.destroy()
