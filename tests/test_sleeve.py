@@ -159,7 +159,7 @@ def test_explicit_run_reports_a_timing_breakdown():
     """The explicit history carries the per-part wall times of `step_breakdown`: every part >= 0 except
     `other` (the remainder, which can be slightly negative only by timer granularity: > -1 % of the loop), the
     parts add up to the loop time (by construction, to round-off) and ms/step = loop / steps."""
-    from fabricfem.wear.sleeve import TIMING_PARTS, format_breakdown
+    from fabricfem.wear.engine import TIMING_PARTS, format_breakdown
     h = run_sleeve(QUICK_EXPLICIT.with_(final_angle=3.0), MPI.COMM_SELF)
     t = h.timings
     parts = [t[f"{p}_s"] for p in TIMING_PARTS]

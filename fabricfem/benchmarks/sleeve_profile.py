@@ -4,7 +4,7 @@
 numbers; every rank runs the same flexion on the full communicator):
 
 * short flexions (to `short_angle` degrees, past the first contact at about 5 degrees) on meshes I and III,
-  `repeats` times each; every part of `fabricfem.wear.sleeve.step_breakdown` (internal-force assembly, contact
+  `repeats` times each; every part of `fabricfem.wear.engine.step_breakdown` (internal-force assembly, contact
   search and corrections, pose and torque sums, output, other Python) is quoted as the MEDIAN over the
   repeats of its share of the loop's wall time, with the median ms per step in wall and in CPU time of the
   process (the machine is shared, so single timings scatter; ratios and CPU times scatter less than wall times);
@@ -29,8 +29,8 @@ import numpy as np
 from mpi4py import MPI
 
 from fabricfem.wear.config import SleeveConfig
+from fabricfem.wear.engine import TIMING_PARTS
 from fabricfem.wear.run import build_run
-from fabricfem.wear.sleeve import TIMING_PARTS
 
 MESHES = {"I": (10, 13), "II": (15, 20), "III": (20, 26), "IV": (30, 39)}
 COLUMNS = ("case", "mesh", "ranks", "final_angle_deg", "runs", "steps", "ndofs", "ms_per_step", "cpu_ms_per_step",

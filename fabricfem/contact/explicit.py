@@ -42,6 +42,7 @@ from fabricfem.contact.torque import TorqueMonitor
 MAX_PROJECTION_PASSES = 8
 MAX_CREASE_ITERATIONS = 20   # bisector pushes out of overlapping segments after the passes (project_with_segment)
 INSIDE_TOLERANCE = 1e-12   # relative to the smallest radius: rounding of a projected point is not "inside"
+PARKED_AT = np.array([1e4, 1e4, 1e4])   # m: where an inactive segment waits (fabricfem.wear donning), far from any garment
 
 
 def _points(name: str, x) -> np.ndarray:
@@ -360,6 +361,10 @@ class ExplicitBodyContact:
         self.monitor_penetration = False     # track the largest penetration of d^{n+1} at t_{n+1} every step
         self.max_penetration_seen = 0.0      # m, owned nodes (reduce with max_penetration_all)
         self.trace: list[tuple[float, ...]] | None = None   # per step: (t, torque of each monitor, sum |lambda_N|)
+        # donning (fabricfem.wear.donning): t -> factor on the segments' transverse radii (r2, r3), and
+        # t -> (K,) bool of the segments that take contact (an inactive segment is parked far from the garment)
+        self.transverse_scale: Callable[[float], float] | None = None
+        self.segment_active: Callable[[float], np.ndarray] | None = None
 
     # ------------------------------------------------------------------ set-up and output
     def penalty_frequency(self) -> float:
@@ -416,12 +421,12 @@ class ExplicitBodyContact:
 
     def max_penetration(self, d: np.ndarray, t: float) -> float:
         """max(0, -min g) [m] of the nodes at displacements `d` (local array of W) against the body at t, all ranks."""
-        g, _, _ = nearest_gap(self.reference + d[self.dofs], self.poses.ellipsoids(t))
+        g, _, _ = nearest_gap(self.reference + d[self.dofs], self.body_at(t))
         return float(self.comm.allreduce(float(np.max(-g, initial=0.0)), op=MPI.MAX))
 
     def min_gap(self, d: np.ndarray, t: float) -> float:
         """Smallest signed gap [m] of the nodes against the body at t (all ranks)."""
-        g, _, _ = nearest_gap(self.reference + d[self.dofs], self.poses.ellipsoids(t))
+        g, _, _ = nearest_gap(self.reference + d[self.dofs], self.body_at(t))
         return float(self.comm.allreduce(float(np.min(g, initial=np.inf)), op=MPI.MIN))
 
     def start_trace(self):
@@ -500,9 +505,21 @@ class ExplicitBodyContact:
             if mask.any():
                 self._stick_local[index[mask]] = e.to_local(points[mask])
 
+    def body_at(self, t: float) -> list[Ellipsoid]:
+        """The segments as the contact sees them at time t [s]: posed, grown by `transverse_scale` and with the
+        inactive ones (`segment_active`) parked at PARKED_AT, far from any garment."""
+        ellipsoids = self.poses.ellipsoids(t)
+        if self.transverse_scale is None and self.segment_active is None:
+            return ellipsoids
+        scale = 1.0 if self.transverse_scale is None else float(self.transverse_scale(t))
+        active = np.ones(len(ellipsoids), dtype=bool) if self.segment_active is None else self.segment_active(t)
+        return [Ellipsoid(e.center, e.rotation, e.radii * np.array([1.0, scale, scale])) if on
+                else Ellipsoid(PARKED_AT + 10.0 * k, np.eye(3), np.full(3, 1e-3))
+                for k, (e, on) in enumerate(zip(ellipsoids, active))]
+
     def _posed(self, t: float) -> list[Ellipsoid]:
         tic = time.perf_counter()
-        ellipsoids = self.poses.ellipsoids(t)
+        ellipsoids = self.body_at(t)
         self.timings["pose_torque"] += time.perf_counter() - tic
         return ellipsoids
 
@@ -557,7 +574,7 @@ class ExplicitBodyContact:
         a = integrator.a.getArray()
         rows = self.dofs
         if self.monitor_penetration:   # the positions d^{n+1} against the body at t_{n+1} (posed last step)
-            self._monitor_penetration(self.reference + d[rows], self.poses.ellipsoids(t))
+            self._monitor_penetration(self.reference + d[rows], self.body_at(t))
         x_trial = self.reference + d[rows] + dt * v[rows] + dt ** 2 * a[rows]
         projected, active, seg = project_with_segment(x_trial, ellipsoids)
         index = np.flatnonzero(active)                                   # nodes in contact

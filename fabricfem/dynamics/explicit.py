@@ -20,7 +20,9 @@ with s.
 Contact (`contact`, optional): an object with `forces(integrator, t, rhs)` (penalty: adds nodal contact
 forces at d^{n+1} to the right-hand side before the division by the diagonal) and
 `correct(integrator, t)` (forward-increment Lagrange multipliers, [Man2006, Box 5]: modifies a^{n+1} after
-the division so that the next predictor lands on the body), see fabricfem.contact.explicit.
+the division so that the next predictor lands on the body), see fabricfem.contact.explicit. A sequence of such
+layers is called in its order (the body contact first, then the seams of fabricfem.contact.seams, so that the
+stitched nodes end the step together).
 """
 from __future__ import annotations
 
@@ -42,7 +44,8 @@ class CentralDifference(TimeIntegrator):
         dt_crit: critical time step [s] to check against (default: stability.critical_time_step(model, rayleigh)).
         damping_update_every: re-evaluate K_M(d^n) of the stiffness-proportional damping every this many steps.
         rotary_inertia_scale: s >= 1 multiplying the rotational lumped masses (module docstring).
-        contact: explicit contact layer (module docstring), e.g. fabricfem.contact.explicit.ExplicitBodyContact.
+        contact: explicit contact layer or a sequence of them (module docstring), e.g.
+            fabricfem.contact.explicit.ExplicitBodyContact, fabricfem.contact.seams.SeamTies.
     """
 
     def __init__(self, model, dt: float, load_factor: LoadFactor = 1.0, rayleigh: tuple[float, float] = (0.0, 0.0),
@@ -66,6 +69,7 @@ class CentralDifference(TimeIntegrator):
                                       rotary_inertia_scale=scale)
         self.rotary_inertia_scale = scale
         self.contact = contact
+        self._hooks = [] if contact is None else list(contact) if isinstance(contact, (list, tuple)) else [contact]
         self.dt_crit = float(dt_crit)
         self.damping_update_every = int(damping_update_every)
         m = self.ops.mass_diag.getArray(readonly=True)
@@ -124,15 +128,17 @@ class CentralDifference(TimeIntegrator):
         if self.ops.has_damping:
             self.ops.damping_action(self._v_pred, self._cv)
             rhs.axpy(-1.0, self._cv)
-        if self.contact is not None:
+        if self._hooks:
             tic = time.perf_counter()
-            self.contact.forces(self, t_new, rhs)        # penalty contact: nodal forces at d^{n+1}
+            for hook in self._hooks:
+                hook.forces(self, t_new, rhs)            # penalty contact: nodal forces at d^{n+1}
             self.timings["contact"] += time.perf_counter() - tic
         self.zero_bc_rows(rhs)
         self.a.pointwiseDivide(rhs, self._denominator)
-        if self.contact is not None:
+        if self._hooks:
             tic = time.perf_counter()
-            self.contact.correct(self, t_new)            # [Man2006, Box 5]: a^{n+1} += a^c
+            for hook in self._hooks:
+                hook.correct(self, t_new)                # [Man2006, Box 5]: a^{n+1} += a^c
             self.timings["contact"] += time.perf_counter() - tic
         self._v_pred.copy(self.v)
         self.v.axpy(0.5 * dt, self.a)

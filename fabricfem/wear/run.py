@@ -10,8 +10,9 @@ from mpi4py import MPI
 from fabricfem import io as fio
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.contract import WearRun
+from fabricfem.wear.engine import format_breakdown
 from fabricfem.wear.recorder import WearRecorder
-from fabricfem.wear.sleeve import SleeveHistory, SleeveStep, build_explicit, build_sleeve, format_breakdown
+from fabricfem.wear.sleeve import SleeveHistory, SleeveStep, build_explicit, build_sleeve
 from fabricfem.wear.sleeve_implicit import build_implicit
 
 # route name (SleeveConfig.solver) -> builder of its WearRun

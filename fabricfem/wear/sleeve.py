@@ -95,6 +95,7 @@ from fabricfem.shell import ShellModel
 from fabricfem.solvers.newton import NewtonSolver, SolverError
 from fabricfem.solvers.system import CompositeSystem
 from fabricfem.wear.config import SleeveConfig
+from fabricfem.wear.engine import Phase, WearError, run_phases
 
 GRAVITY = 9.81                       # m/s^2
 ELBOW_AXIS = (0.0, 0.0, 1.0)          # flexion axis of the default arm
@@ -673,103 +674,36 @@ def run_explicit(problem: ExplicitSleeve, on_step: Callable[[SleeveStep], None] 
     history.initial_gap = gap0
     history.timings = {"dt": problem.dt, "dt_estimate": problem.dt_estimate,
                        "dt_estimate_unscaled": problem.dt_estimate_unscaled}
+    step_angle = cfg.motion.output_angle_step
 
-    output_time = [0.0]
-
-    def record(steps: int, angle: float) -> SleeveStep:
+    def record(phase: Phase, k: int, steps: int) -> SleeveStep:
         # the nominal angle of the record (the body angle at this time up to the rounding of t = n dt)
-        tic = time.perf_counter()
         torques = contact.mean_torques()
         d = integ.d.getArray(readonly=True)
-        step = SleeveStep(angle=angle, torque=-torques["forearm"], torque_all=-torques["both"], newton_iterations=0,
-                          max_penetration=contact.max_penetration(d, integ.t),
+        return SleeveStep(angle=phase.coordinate(k), torque=-torques["forearm"], torque_all=-torques["both"],
+                          newton_iterations=0, max_penetration=contact.max_penetration(d, integ.t),
                           contact_force=float(np.linalg.norm(contact.total_force())),
                           wall=time.perf_counter() - t0, time_steps=steps,
                           kinetic_energy=integ.kinetic_energy(), strain_energy=integ.strain_energy())
-        contact.reset_means()
-        output_time[0] += time.perf_counter() - tic
-        return step
 
-    def advance_one_record() -> bool:
-        """steps_per_record explicit steps; whether displacement and velocity are still finite."""
-        for _ in range(problem.steps_per_record):
-            integ.step()
-            integ.step_count += 1
-        return math.isfinite(integ.d.norm()) and math.isfinite(integ.v.norm())
+    def settled(phase: Phase) -> None:
+        if phase.name == "settle" and phase.records:
+            history.timings.update(settle_s=flexion.t_start, settle_kinetic_energy=integ.kinetic_energy(),
+                                   settle_strain_energy=integ.strain_energy())
 
+    n_records = round(cfg.motion.final_angle / step_angle)
+    if not math.isclose(n_records * step_angle, cfg.motion.final_angle, rel_tol=1e-9):
+        n_records = math.ceil(cfg.motion.final_angle / step_angle)
     # rest: the arm holds still (the flexion angle is 0 before t_start) while the sleeve settles on it; the
     # start record's torque is the mean over the last record interval of the rest
-    for _ in range(problem.settle_records):
-        contact.reset_means()
-        if not advance_one_record():
-            raise SleeveError("sleeve: the explicit run blew up while the sleeve settled on the arm",
-                              last_converged_load_factor=0.0, reason="EXPLICIT_BLOW_UP")
-    if problem.settle_records:
-        history.timings.update(settle_s=flexion.t_start, settle_kinetic_energy=integ.kinetic_energy(),
-                               settle_strain_energy=integ.strain_energy())
-    start = record(problem.settle_records * problem.steps_per_record, 0.0)
-    history.steps.append(start)
-    if on_step:
-        on_step(start)
-    n_records = round(cfg.motion.final_angle / cfg.motion.output_angle_step)
-    if not math.isclose(n_records * cfg.motion.output_angle_step, cfg.motion.final_angle, rel_tol=1e-9):
-        n_records = math.ceil(cfg.motion.final_angle / cfg.motion.output_angle_step)
-    integrator_base = dict(integ.timings)
-    contact_base = dict(contact.timings)
-    loop_start, cpu_start = time.perf_counter(), time.process_time()
-    for k in range(n_records):
-        try:
-            if not advance_one_record():
-                raise ValueError("non-finite displacement or velocity")
-        except ValueError as exc:
-            message = (f"sleeve: the explicit flexion blew up before {math.degrees(flexion.angle(integ.t)):.3g} deg "
-                       f"(step {integ.step_count}, dt = {problem.dt:.3g} s): {exc}")
-            if stop_on_failure:
-                raise SleeveError(message, last_converged_load_factor=history.steps[-1].angle,
-                                  reason="EXPLICIT_BLOW_UP") from exc
-            history.failure = message
-            break
-        step = record(problem.steps_per_record, min((k + 1) * cfg.motion.output_angle_step, cfg.motion.final_angle))
-        history.steps.append(step)
-        if on_step:
-            tic = time.perf_counter()
-            on_step(step)
-            output_time[0] += time.perf_counter() - tic
-    loop = time.perf_counter() - loop_start
-    history.timings.update(step_breakdown(
-        loop, integ.timings["internal_forces"] - integrator_base["internal_forces"],
-        integ.timings["contact"] - integrator_base["contact"],
-        contact.timings["pose_torque"] - contact_base["pose_torque"], output_time[0],
-        sum(s.time_steps for s in history.steps)))
-    # CPU time of this process: on a shared (oversubscribed) machine a steadier measure of the work than wall time
-    history.timings["cpu_s"] = time.process_time() - cpu_start
-    history.timings["cpu_ms_per_step"] = 1e3 * history.timings["cpu_s"] / max(history.timings["steps"], 1)
+    phases = [Phase("settle", problem.settle_records, report="end", coordinate=lambda k: 0.0),
+              Phase("flexion", n_records, coordinate=lambda k: min((k + 1) * step_angle, cfg.motion.final_angle))]
+    try:
+        timings = run_phases(integ, contact, phases, problem.steps_per_record, record, history, on_step,
+                             stop_on_failure, on_phase_end=settled, label="sleeve")
+    except WearError as exc:
+        raise SleeveError(str(exc), last_converged_load_factor=history.steps[-1].angle if history.steps else 0.0,
+                          reason="EXPLICIT_BLOW_UP") from exc
+    history.timings.update(timings)
     history.wall = time.perf_counter() - t0
     return history
-
-
-TIMING_PARTS = ("internal_forces", "contact", "pose_torque", "output", "other")
-
-
-def step_breakdown(total: float, internal_forces: float, contact_hooks: float, pose_torque: float,
-                   output: float, steps: int) -> dict:
-    """Wall-time breakdown [s] of an explicit flexion loop of `total` seconds and `steps` steps:
-    internal_forces (FFCx assembly of f_int, with the copy of d into the model), contact (search, projection
-    and friction corrections: the contact hooks minus posing and torque sums), pose_torque (posing the arm,
-    torque and pressure impulses), output (records: energies, penetration, the on_step callback) and other
-    (the rest of the central-difference step in Python/PETSc: vector updates, boundary rows, checks);
-    `<part>_share` = part / total, `ms_per_step` = 1e3 total / steps."""
-    parts = {"internal_forces": internal_forces, "contact": contact_hooks - pose_torque, "pose_torque": pose_torque,
-             "output": output}
-    parts["other"] = total - sum(parts.values())
-    out = {"loop_s": total, "steps": steps, "ms_per_step": 1e3 * total / steps if steps else math.nan}
-    for name in TIMING_PARTS:
-        out[f"{name}_s"] = parts[name]
-        out[f"{name}_share"] = parts[name] / total if total > 0 else math.nan
-    return out
-
-
-def format_breakdown(timings: dict) -> str:
-    """One line: ms per step and the shares of the parts of `step_breakdown`."""
-    shares = ", ".join(f"{name.replace('_', ' ')} {timings[name + '_share']:.0%}" for name in TIMING_PARTS)
-    return f"{timings['ms_per_step']:.2f} ms/step over {timings['steps']} steps ({shares})"

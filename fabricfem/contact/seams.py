@@ -1,0 +1,222 @@
+"""Seams of a garment in explicit central differences: stitched nodes sewn together, then held node to node.
+
+A seam pairs the nodes of two panel edges one to one (fabricfem.meshes.pattern: equal node counts on the two
+edges of a stitch). Pairs that share a node (a corner where several stitches meet) form one group G. The
+seam is a kinematic constraint on the translations only, applied as a forward-increment correction like the
+body contact of [Man2006, Box 5]: after the division a^{n+1} = rhs / (M + dt/2 C), the predictor of step n+2
+
+    y_i = X_i + d_i^{n+1} + dt v~_i + dt^2 a_i^{n+1}
+
+of every node i of a group G is moved to
+
+    y_i' = c_G + r_i(t_{n+2}),   c_G = sum_{j in G} m_j y_j / sum_{j in G} m_j,
+    r_i(t) = (1 - s(t)) r_i(0),  r_i(0) = x_i(0) - c_G(0),   s = smoothstep(t / T_sew)
+
+and a_i^{n+1} += (y_i' - y_i) / dt^2, with m the diagonal M + dt/2 C of the translations. sum_G m_j r_j = 0,
+so the correction conserves the group's momentum; the seam force on node i is f_i = m_i (y_i' - y_i) / dt^2
+[N]. During the sewing time T_sew [s] the stitched nodes are drawn together along straight lines (the
+"sewing phase" of garment CAD tools); after it they coincide and move as one (r = 0). A panel that starts
+coincident with its partner (a placement that allows it) has r(0) = 0 and is held from the first step.
+Rotations are not tied: a seam is a hinge, the directors of the two panels turn independently.
+
+Parallel: the groups' nodes may live on different ranks; each step the owned members' y and (once) m are
+summed into a small array over the ranks (one MPI Allreduce of 3 x members doubles), so the result does not
+depend on the partition.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+from mpi4py import MPI
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from fabricfem.contact.nodal import contact_nodes
+
+MATCH_TOLERANCE = 1e-9     # m: a stitch point is a mesh node of its panel within this distance
+
+
+@dataclass(frozen=True)
+class SeamSpec:
+    """One stitch as the seams need it: `name`, and per side the 3-D reference positions [m] of the paired
+    nodes (n, 3), in pairing order, and the cell tag of the panel they belong to; `length` [m] of the seam."""
+
+    name: str
+    points_a: np.ndarray
+    tag_a: int
+    points_b: np.ndarray
+    tag_b: int
+    length: float
+
+
+def smoothstep(s: float) -> float:
+    """3 s^2 - 2 s^3 on [0, 1], 0 before, 1 after: a sewing closure that starts and ends at rest."""
+    s = min(max(s, 0.0), 1.0)
+    return s * s * (3.0 - 2.0 * s)
+
+
+def _panel_nodes(model, nodes, tag: int) -> tuple[np.ndarray, np.ndarray]:
+    """Owned contact-node indices of the cells tagged `tag` and their reference positions."""
+    cell_tags = model.fmesh.cell_tags
+    if cell_tags is None:
+        raise ValueError("mesh: seams need the panels' cell tags (a garment mesh from fabricfem.meshes.pattern)")
+    cells = cell_tags.indices[cell_tags.values == tag]
+    dofmap = nodes.scalar_space.dofmap
+    scalar = np.unique(dofmap.list.array.reshape(-1, dofmap.dof_layout.num_dofs)[cells].ravel())
+    owned_node = np.full(dofmap.index_map.size_local + dofmap.index_map.num_ghosts, -1, dtype=np.int64)
+    owned_node[nodes.node_index] = np.arange(len(nodes.node_index))
+    node = owned_node[scalar]
+    node = node[node >= 0]
+    return node, nodes.reference[node]
+
+
+class SeamTies:
+    """The seams of a garment (module docstring) as an explicit contact hook (`correct`; `forces` is a no-op).
+
+    Args:
+        model: the garment's ShellModel (its fabric_mesh has the panels' cell tags).
+        seams: the stitches (SeamSpec) with their paired reference points.
+        sewing_time: T_sew [s]; 0 for seams that start closed (a gap above `closed_gap` is then refused).
+        closed_gap: m, largest distance of paired nodes accepted as closed at the start when sewing_time = 0.
+    """
+
+    def __init__(self, model, seams: Sequence[SeamSpec], sewing_time: float = 0.0, closed_gap: float = 1e-9):
+        if not (math.isfinite(sewing_time) and sewing_time >= 0.0):
+            raise ValueError(f"sewing_time must be a finite time >= 0 [s], got {sewing_time!r}")
+        self.model, self.comm = model, model.comm
+        self.seams = list(seams)
+        self.sewing_time = float(sewing_time)
+        nodes = contact_nodes(model)
+        imap = nodes.scalar_space.dofmap.index_map
+        # global node id (scalar-space global index) of every stitch point, found by the rank that owns it
+        ids, seam_of = [], []
+        for k, seam in enumerate(self.seams):
+            for points, tag, side in ((seam.points_a, seam.tag_a, "a"), (seam.points_b, seam.tag_b, "b")):
+                points = np.asarray(points, dtype=float).reshape(-1, 3)
+                node, X = _panel_nodes(model, nodes, tag)
+                found = np.full(len(points), -1, dtype=np.int64)
+                if len(node):
+                    distance, nearest = cKDTree(X).query(points)
+                    hit = distance < MATCH_TOLERANCE
+                    found[hit] = imap.local_to_global(nodes.node_index[node[nearest[hit]]].astype(np.int32))
+                ids.append(found)
+                seam_of.append(np.full(len(points), k))
+            if len(seam.points_a) != len(seam.points_b):
+                raise ValueError(f"seams: stitch {seam.name!r} pairs {len(seam.points_a)} with "
+                                 f"{len(seam.points_b)} nodes; a seam needs equal node counts on its two edges")
+        local = np.concatenate(ids) if ids else np.zeros(0, dtype=np.int64)
+        global_ids = np.empty_like(local)
+        self.comm.Allreduce(local, global_ids, op=MPI.MAX)
+        missing = np.flatnonzero(global_ids < 0)
+        if len(missing):
+            seam = self.seams[int(np.concatenate(seam_of)[missing[0]])]
+            raise ValueError(f"seams: stitch {seam.name!r}: {len(missing)} stitch points are not nodes of their "
+                             f"panels (tolerance {MATCH_TOLERANCE} m)")
+        # pairs -> groups (connected components over the member nodes)
+        half = [len(s.points_a) for s in self.seams]
+        a_ids, b_ids, offset = [], [], 0
+        for n in half:
+            a_ids.append(global_ids[offset:offset + n])
+            b_ids.append(global_ids[offset + n:offset + 2 * n])
+            offset += 2 * n
+        a_all = np.concatenate(a_ids) if a_ids else np.zeros(0, dtype=np.int64)
+        b_all = np.concatenate(b_ids) if b_ids else np.zeros(0, dtype=np.int64)
+        members, inverse = np.unique(np.concatenate([a_all, b_all]), return_inverse=True)
+        n_members, n_pairs = len(members), len(a_all)
+        graph = coo_matrix((np.ones(n_pairs), (inverse[:n_pairs], inverse[n_pairs:])), shape=(n_members,) * 2)
+        self.n_groups, self.group = connected_components(graph, directed=False)
+        self.members = members
+        self._pair_a, self._pair_b = inverse[:n_pairs], inverse[n_pairs:]
+        self._pair_seam = np.repeat(np.arange(len(self.seams)), half)
+        # the members this rank owns: their local rows in W
+        owned_global = imap.local_to_global(nodes.node_index.astype(np.int32))
+        position = np.searchsorted(members, owned_global)
+        position = np.minimum(position, max(n_members - 1, 0))
+        owned = (n_members > 0) & (members[position] == owned_global) if n_members else np.zeros(0, dtype=bool)
+        self._owned_node = np.flatnonzero(owned)                 # contact-node indices of owned members
+        self._owned_member = position[self._owned_node]          # their member indices
+        self._rows = nodes.dofs[self._owned_node]                # (k, 3) local rows in W
+        if nodes.constrained[self._owned_node].any():
+            raise ValueError("seams: a stitched node has a held displacement component; hold the garment away from "
+                             "its seams")
+        self._reference = nodes.reference[self._owned_node]
+        self._mass = None            # (members,) m of every member, summed over the ranks on first use
+        self._offset0 = None         # (members, 3) r(0)
+        self.force = np.zeros((len(self._owned_node), 3))     # seam force on the owned member nodes [N]
+        self.closed_gap = float(closed_gap)
+        self._gap0 = self._pair_gaps(self._gather(self._reference))
+        if self.sewing_time == 0.0 and len(self._gap0) and self._gap0.max() > self.closed_gap:
+            worst = int(np.argmax(self._gap0))
+            raise ValueError(f"sewing_time: stitch {self.seams[self._pair_seam[worst]].name!r} starts open "
+                             f"({self._gap0[worst]:.3g} m between paired nodes); give a sewing time [s] or a "
+                             f"placement with the stitched edges together")
+
+    # ------------------------------------------------------------------ helpers
+    def _gather(self, values: np.ndarray) -> np.ndarray:
+        """(members, ...) array of per-member values, each filled by the owning rank and summed over the ranks."""
+        full = np.zeros((len(self.members),) + values.shape[1:])
+        full[self._owned_member] = values
+        total = np.empty_like(full)
+        self.comm.Allreduce(full, total, op=MPI.SUM)
+        return total
+
+    def _pair_gaps(self, x: np.ndarray) -> np.ndarray:
+        """|x_a - x_b| [m] of every stitched pair from the members' positions x (members, 3)."""
+        return np.linalg.norm(x[self._pair_a] - x[self._pair_b], axis=1)
+
+    def _centroids(self, x: np.ndarray, m: np.ndarray) -> np.ndarray:
+        """Mass-weighted centre of each member's group, per member (members, 3)."""
+        total = np.bincount(self.group, m, self.n_groups)
+        c = np.stack([np.bincount(self.group, m * x[:, i], self.n_groups) for i in range(3)], axis=1)
+        return (c / total[:, None])[self.group]
+
+    def closure(self, t: float) -> float:
+        """s(t) in [0, 1]: how far the sewing has closed the seams at time t [s] (1: closed)."""
+        return 1.0 if self.sewing_time == 0.0 else smoothstep(t / self.sewing_time)
+
+    # ------------------------------------------------------------------ integrator hooks
+    def forces(self, integrator, t: float, rhs) -> None:
+        """No force before the division: the seams are a forward-increment constraint (`correct`)."""
+
+    def correct(self, integrator, t: float) -> None:
+        """a^{n+1} += (y' - y) / dt^2 on the stitched nodes (module docstring), for the predictor at t + dt."""
+        dt = integrator.dt
+        if self._mass is None:
+            m = integrator.denominator.getArray(readonly=True)[self._rows[:, 0]]
+            self._mass = self._gather(m)
+            x0 = self._gather(self._reference)
+            self._offset0 = x0 - self._centroids(x0, self._mass)
+        d = integrator.d.getArray(readonly=True)
+        v = integrator.velocity_predictor.getArray(readonly=True)
+        a = integrator.a.getArray()
+        rows = self._rows
+        y = self._reference + d[rows] + dt * v[rows] + dt ** 2 * a[rows]
+        y_all = self._gather(y)
+        target = self._centroids(y_all, self._mass) + (1.0 - self.closure(t + dt)) * self._offset0
+        change = target[self._owned_member] - y
+        a[rows] += change / dt ** 2
+        self.force = self._mass[self._owned_member, None] * change / dt ** 2
+
+    # ------------------------------------------------------------------ monitors
+    def gaps(self, d: np.ndarray) -> np.ndarray:
+        """|x_a - x_b| [m] of every stitched pair at displacements `d` (local array of W), all ranks."""
+        return self._pair_gaps(self._gather(self._reference + d[self._rows]))
+
+    def max_gap(self, d: np.ndarray) -> float:
+        """Largest distance [m] between paired nodes (all ranks)."""
+        g = self.gaps(d)
+        return float(g.max()) if len(g) else 0.0
+
+    def line_forces(self) -> dict[str, float]:
+        """Per seam: the mean seam force per unit seam length [N/m] of the last step, sum |f| over its side-a
+        nodes / its length (a seam's tension across the stitch line), all ranks."""
+        f = np.linalg.norm(self._gather(self.force), axis=1)
+        out = {}
+        for k, seam in enumerate(self.seams):
+            members = np.unique(self._pair_a[self._pair_seam == k])
+            out[seam.name] = float(f[members].sum() / seam.length) if seam.length > 0 else 0.0
+        return out

@@ -1,0 +1,386 @@
+"""Any garment on any moving wearer: the explicit wear engine's run of a sewn garment on a posed body.
+
+Inputs (SI units): a garment mesh (fabricfem.meshes: a tube, or panels from a sewing pattern with their
+stitches, fabricfem.meshes.pattern), a fabric (fabricfem.materials.Fabric: any law the shell knows), a body
+(fabricfem.body.pose.Body: named ellipsoid segments posed from joints and markers by any kinematics source),
+and a timeline of phases on one body clock:
+
+    sew     [0, T_sew]                  stitched nodes drawn together (fabricfem.contact.seams), body still
+    don     [T_sew, T_sew + T_don]      the body's transverse radii grow from `grow_from` to 1 (the garment is
+                                         placed around a thinner body and the body swells into it)
+    settle  [.., + T_settle]            the body at rest in its start pose, the garment settles (gravity)
+    motion  [.., + T_motion]            the kinematics source runs from its start (delayed by the phases above)
+
+Dynamics: central differences with the lumped mass, mass-proportional damping C = alpha M and rotary-inertia
+scaling (fabricfem.dynamics.explicit; the sleeve's settings [Man2006, ch. 5]), contact by forward-increment
+Lagrange multipliers or penalty against the body (fabricfem.contact.explicit) and the seams as a second
+forward-increment constraint. The step is dt = safety x the estimated critical step, shortened so that a
+record interval holds a whole number of steps.
+
+Records (`WearStep`, one per record interval, time-averaged over it): the resisting torque about each
+monitored joint (TorqueSpec: tau = a . sum_i (x_i - J) x f_i over the chosen segments' contact forces f_i on
+the body [Man2006, ch. 5 intro]; reported as -tau, positive when the garment opposes a right-handed rotation
+about the axis), the contact pressure on the body per unit deformed cloth area (peak with its segment and
+position, and the mean over the contact area), the largest penetration, the largest seam gap and the seam
+line forces, the largest fabric Green strain (warp and weft), kinetic and strain energy.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Sequence
+
+import numpy as np
+from mpi4py import MPI
+
+from fabricfem.body.pose import Body
+from fabricfem.contact.explicit import ExplicitBodyContact
+from fabricfem.contact.seams import SeamSpec, SeamTies, smoothstep
+from fabricfem.dynamics import stability
+from fabricfem.dynamics.explicit import CentralDifference
+from fabricfem.dynamics.strain_limit import FastProjection
+from fabricfem.materials import Fabric
+from fabricfem.shell import ShellModel
+from fabricfem.wear.engine import Phase, kinetic_ratio, run_phases
+
+PA_PER_MMHG = 133.322387415      # Pa per mmHg
+
+
+@dataclass(frozen=True)
+class TorqueSpec:
+    """A torque monitor: the resisting torque [N m] about `joint` along `axis` of the contact forces on
+    `segments` (the thesis's knee torque counts the segments below the knee)."""
+
+    name: str
+    joint: str
+    axis: tuple[float, float, float]
+    segments: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Timeline:
+    """The phases of a garment run [s] (module docstring) and the record interval."""
+
+    record_time: float = 0.01
+    sewing_time: float = 0.0
+    donning_time: float = 0.0
+    grow_from: float = 1.0
+    settle_time: float = 0.0
+    motion_time: float | None = None
+
+    def __post_init__(self):
+        for key in ("sewing_time", "donning_time", "settle_time"):
+            v = getattr(self, key)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"{key} must be a time >= 0 [s], got {v!r}")
+        if not (isinstance(self.record_time, (int, float)) and math.isfinite(self.record_time) and self.record_time > 0):
+            raise ValueError(f"record_time must be a positive time [s], got {self.record_time!r}")
+        if not (0.0 < self.grow_from <= 1.0):
+            raise ValueError(f"grow_from must lie in (0, 1], got {self.grow_from!r}")
+        if self.grow_from < 1.0 and self.donning_time == 0.0:
+            raise ValueError("donning_time: growing the body (grow_from < 1) needs a donning time > 0 [s]")
+        if self.motion_time is not None and not (math.isfinite(self.motion_time) and self.motion_time >= 0.0):
+            raise ValueError(f"motion_time must be a time >= 0 [s], got {self.motion_time!r}")
+
+    def records(self, duration: float) -> int:
+        """Whole record intervals covering `duration` [s]."""
+        return math.ceil(duration / self.record_time - 1e-9)
+
+
+@dataclass(frozen=True)
+class ExplicitSettings:
+    """Central-difference settings (the sleeve's defaults, fabricfem.wear.config.RouteSpec)."""
+
+    mass_damping: float = 10.0                 # alpha [1/s]
+    rotary_inertia_scale: float = 100.0        # s >= 1
+    time_step_safety: float = 0.8              # dt = safety x estimated critical step
+    gravity: tuple[float, float, float] | None = (0.0, 0.0, -9.81)   # m/s^2, None: off
+
+
+class DelayedKinematics:
+    """A kinematics source held in its start pose until `t0` [s] and run from its own start after it."""
+
+    def __init__(self, source, t0: float):
+        self.source, self.t0 = source, float(t0)
+        self.names = source.names
+        start, end = source.time_range
+        self._start = start
+        self.time_range = (0.0, self.t0 + end - start)
+
+    def positions(self, t: float) -> dict[str, np.ndarray]:
+        return self.source.positions(self._start + max(float(t) - self.t0, 0.0))
+
+
+@dataclass
+class WearStep:
+    """One record of a garment run (means over the record interval; SI units)."""
+
+    phase: str
+    time: float                       # s, body clock
+    torques: dict[str, float]         # N m, resisting torque per monitor
+    peak_pressure: float              # Pa, on the body per unit deformed cloth area
+    peak_segment: str                 # the segment under the peak ("" without contact)
+    peak_position: tuple[float, float, float]   # m
+    mean_pressure: float              # Pa, over the nodes in contact (area-weighted)
+    max_penetration: float            # m
+    contact_force: float              # N, |sum of contact forces on the cloth|
+    seam_gap: float                   # m, largest distance of stitched nodes
+    seam_forces: dict[str, float]     # N/m, mean seam line force per seam
+    max_strain: float                 # largest warp/weft Green strain
+    time_steps: int
+    kinetic_energy: float             # J
+    strain_energy: float              # J
+    wall: float                       # s since the start
+
+    @property
+    def coordinate(self) -> float:
+        return self.time
+
+    def work(self) -> str:
+        ratio = self.kinetic_energy / self.strain_energy if self.strain_energy else 0.0
+        return f"steps {self.time_steps:5d}  KE/SE {ratio:.1e}"
+
+
+@dataclass
+class WearHistory:
+    name: str
+    steps: list[WearStep] = field(default_factory=list)
+    ndofs: int = 0
+    wall: float = 0.0
+    timings: dict = field(default_factory=dict)
+    initial_gap: float = math.nan
+    failure: str = ""
+
+    @property
+    def completed(self) -> bool:
+        return not self.failure
+
+    @property
+    def times(self) -> np.ndarray:
+        return np.array([s.time for s in self.steps])
+
+    def torque(self, name: str) -> np.ndarray:
+        return np.array([s.torques[name] for s in self.steps])
+
+    @property
+    def monitors(self) -> list[str]:
+        return list(self.steps[0].torques) if self.steps else []
+
+    @property
+    def seams(self) -> list[str]:
+        return list(self.steps[0].seam_forces) if self.steps else []
+
+    @property
+    def header(self) -> tuple[str, ...]:
+        return ("time_s", "phase", *(f"{n}_torque_Nm" for n in self.monitors), "peak_pressure_Pa",
+                "peak_pressure_mmHg", "peak_segment", "peak_x_m", "peak_y_m", "peak_z_m", "mean_pressure_Pa",
+                "max_penetration_m", "contact_force_N", "seam_gap_m", *(f"seam_{n}_N_per_m" for n in self.seams),
+                "max_strain", "time_steps", "kinetic_energy_J", "strain_energy_J", "wall_s")
+
+    def rows(self) -> list[list]:
+        return [[s.time, s.phase, *s.torques.values(), s.peak_pressure, s.peak_pressure / PA_PER_MMHG,
+                 s.peak_segment, *s.peak_position, s.mean_pressure, s.max_penetration, s.contact_force, s.seam_gap,
+                 *s.seam_forces.values(), s.max_strain, s.time_steps, s.kinetic_energy, s.strain_energy, s.wall]
+                for s in self.steps]
+
+    def work(self) -> str:
+        steps = sum(s.time_steps for s in self.steps)
+        ratio = kinetic_ratio(np.array([s.kinetic_energy for s in self.steps if s.phase == "motion"]),
+                              np.array([s.strain_energy for s in self.steps if s.phase == "motion"]))
+        return f"{steps} explicit steps, largest KE/SE in the motion {ratio:.2e}"
+
+    def summary(self) -> dict:
+        """Peaks and finals per torque monitor (with their time), pressure peak and mean (Pa, kPa, mmHg) with
+        the segment and position of the peak, the largest strain, penetration and seam gap."""
+        out: dict = {"records": len(self.steps), "completed": self.completed}
+        if not self.steps:
+            return out
+        t = self.times
+        for name in self.monitors:
+            tau = self.torque(name)
+            k = int(np.argmax(np.abs(tau)))
+            out[f"torque_{name}"] = {"peak_Nm": float(tau[k]), "peak_time_s": float(t[k]),
+                                     "final_Nm": float(tau[-1]), "final_time_s": float(t[-1])}
+        k = int(np.argmax([s.peak_pressure for s in self.steps]))
+        peak = self.steps[k]
+        contact = [s.mean_pressure for s in self.steps if s.mean_pressure > 0.0]
+        mean = float(np.mean(contact)) if contact else 0.0
+        out["pressure"] = {"peak_Pa": peak.peak_pressure, "peak_kPa": peak.peak_pressure / 1e3,
+                           "peak_mmHg": peak.peak_pressure / PA_PER_MMHG, "peak_time_s": peak.time,
+                           "peak_segment": peak.peak_segment, "peak_position_m": list(peak.peak_position),
+                           "mean_Pa": mean, "mean_kPa": mean / 1e3, "mean_mmHg": mean / PA_PER_MMHG}
+        out["max_strain"] = max(s.max_strain for s in self.steps)
+        out["max_penetration_m"] = max(s.max_penetration for s in self.steps)
+        out["max_seam_gap_after_sewing_m"] = max((s.seam_gap for s in self.steps if s.phase != "sew"), default=0.0)
+        return out
+
+
+@dataclass
+class GarmentRun:
+    """A garment on a moving wearer set up for the explicit engine (the wearer contract,
+    fabricfem.wear.contract.WearRun; `build_garment_run`)."""
+
+    name: str
+    model: ShellModel
+    body: Body
+    contact: ExplicitBodyContact
+    seams: SeamTies | None
+    integrator: CentralDifference
+    timeline: Timeline
+    phases: list[Phase]
+    dt: float
+    dt_estimate: float
+    steps_per_record: int
+    torques: tuple[TorqueSpec, ...]
+    config: object = None
+    strain: FastProjection | None = None
+
+    @property
+    def comm(self) -> MPI.Comm:
+        return self.model.comm
+
+    @property
+    def duration(self) -> float:
+        return sum(p.records for p in self.phases) * self.timeline.record_time
+
+    def describe(self) -> str:
+        phases = ", ".join(f"{p.name} {p.records * self.timeline.record_time:.3g} s" for p in self.phases if p.records)
+        return (f"explicit central differences, dt = {self.dt:.3g} s (estimated critical step {self.dt_estimate:.3g} s), "
+                f"{self.steps_per_record} steps per record of {self.timeline.record_time:g} s; phases: {phases}")
+
+    def pressure_field(self):
+        """Contact pressure on the body [Pa] per unit deformed cloth area, mean over the last record."""
+        return self.contact.pressure_field()
+
+    def posed_bodies(self, time_s: float) -> list:
+        """The body's segments as the contact sees them at time `time_s` [s] (grown, inactive ones left out)."""
+        active = (np.ones(len(self.body.segments), dtype=bool) if self.contact.segment_active is None
+                  else self.contact.segment_active(time_s))
+        return [e for e, on in zip(self.contact.body_at(time_s), active) if on]
+
+    def destroy(self) -> None:
+        self.integrator.destroy()
+        if self.strain is not None:
+            self.strain.destroy()
+
+    def _peak(self, pressure: np.ndarray) -> tuple[float, str, tuple, float]:
+        """(peak [Pa], segment, position, area-weighted mean over the contact [Pa]) over all ranks."""
+        c, comm = self.contact, self.comm
+        local_max = float(pressure.max(initial=0.0))
+        k = int(np.argmax(pressure)) if len(pressure) else -1
+        candidate = (local_max, comm.rank)
+        best = comm.allreduce(candidate, op=MPI.MAX)
+        segment, position = "", (math.nan,) * 3
+        if best[0] > 0.0:
+            info = (c.names[int(c.segment[k])], tuple(float(v) for v in c.position[k])) if comm.rank == best[1] else None
+            segment, position = comm.bcast(info, root=best[1])
+        on = pressure > 0.0
+        sums = comm.allreduce(np.array([float(np.sum(pressure[on] * c.area[on])), float(np.sum(c.area[on]))]),
+                              op=MPI.SUM)
+        return best[0], segment, position, (sums[0] / sums[1] if sums[1] > 0 else 0.0)
+
+    def run(self, on_step: Callable[[WearStep], None] | None = None, stop_on_failure: bool = True) -> WearHistory:
+        """Run the phases; `on_step(step)` after every record; returns the history (module docstring)."""
+        integ, contact, t0 = self.integrator, self.contact, time.perf_counter()
+        history = WearHistory(self.name, ndofs=self.model.ndofs)
+        integ.initialize(t0=0.0)
+        history.initial_gap = contact.min_gap(integ.d.getArray(readonly=True), 0.0)
+        if history.initial_gap <= 0.0 and self.timeline.grow_from == 1.0:
+            raise ValueError(f"body: the body penetrates the garment at the start (min gap {history.initial_gap:.3e} m);"
+                             f" place the garment around it or grow the body (donning grow_from < 1)")
+        history.timings = {"dt": self.dt, "dt_estimate": self.dt_estimate}
+        start_of = {}
+        t_phase = 0.0
+        for phase in self.phases:
+            start_of[phase.name] = t_phase
+            t_phase += phase.records * self.timeline.record_time
+
+        def record(phase: Phase, k: int, steps: int) -> WearStep:
+            means = contact.mean_torques()
+            d = integ.d.getArray(readonly=True)
+            pressure = self.pressure_field().x.array[contact.nodes.node_index[contact.moving]]
+            peak, segment, position, mean = self._peak(pressure)
+            strains = self.strain.strain_summary() if self.strain is not None else {"max_warp": 0.0, "max_weft": 0.0}
+            return WearStep(
+                phase=phase.name, time=integ.t, torques={s.name: -means[s.name] for s in self.torques},
+                peak_pressure=peak, peak_segment=segment, peak_position=position, mean_pressure=mean,
+                max_penetration=contact.max_penetration(d, integ.t),
+                contact_force=float(np.linalg.norm(contact.total_force())),
+                seam_gap=self.seams.max_gap(d) if self.seams else 0.0,
+                seam_forces=self.seams.line_forces() if self.seams else {},
+                max_strain=max(strains["max_warp"], strains["max_weft"]), time_steps=steps,
+                kinetic_energy=integ.kinetic_energy(), strain_energy=integ.strain_energy(),
+                wall=time.perf_counter() - t0)
+
+        history.timings.update(run_phases(integ, contact, self.phases, self.steps_per_record, record, history,
+                                          on_step, stop_on_failure, timed=lambda p: p.name == "motion",
+                                          label=self.name))
+        history.wall = time.perf_counter() - t0
+        return history
+
+
+def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Sequence[SeamSpec] = (),
+                      holds: Sequence[str] = (), torques: Sequence[TorqueSpec] = (), timeline: Timeline = Timeline(),
+                      settings: ExplicitSettings = ExplicitSettings(), contact_method: str = "lagrange",
+                      friction: float = 0.0, penalty: float | None = None,
+                      segment_active: Callable[[float], np.ndarray] | None = None,
+                      psri_degrees: tuple[int, int] = (4, 2), measure_strain: bool = True,
+                      config: object = None) -> GarmentRun:
+    """Shell, seams, body contact, monitors, integrator and phases of a garment run (module docstring).
+
+    Args:
+        fmesh: the garment mesh (FabricMesh; Q2 quadrilaterals for the nodal contact); `holds` names its
+            facet tags whose nodes are held in place (u = 0).
+        body: the wearer; its kinematics start after the sewing, donning and settling phases.
+        seams: the stitches to sew and hold (fabricfem.contact.seams); sewn during `timeline.sewing_time`.
+        torques: the torque monitors (their segments and joints are checked against the body).
+        segment_active: t -> (K,) bool of the segments that take contact (donning removes the feet), or None.
+    """
+    if fabric.density <= 0.0:
+        raise ValueError("density: the explicit engine needs a positive fabric density [kg/m^3]")
+    for spec in torques:
+        body_joints = body.joints
+        if spec.joint not in body_joints:
+            raise ValueError(f"torques.{spec.name}.joint: {spec.joint!r} is not a joint of the body {list(body_joints)}")
+        sharing = [n for n, s in body.segments.items() if spec.joint in (s.proximal, s.distal)]
+        if len(sharing) < 2:
+            raise ValueError(f"torques.{spec.name}.joint: {spec.joint!r} joins fewer than two segments ({sharing})")
+        if not spec.segments or any(s not in body.segments for s in spec.segments):
+            raise ValueError(f"torques.{spec.name}.segments: {list(spec.segments)} names no or unknown segments "
+                             f"(body: {list(body.segments)})")
+    model = ShellModel(fmesh, fabric, rebase=False, psri_degrees=psri_degrees)
+    for tag in holds:
+        model.constrain(tag, u=(0.0, 0.0, 0.0))
+    if settings.gravity is not None:
+        model.add_gravity(tuple(settings.gravity))
+    model.compile()
+    t_motion = timeline.sewing_time + timeline.donning_time + timeline.settle_time
+    kin = body.kinematics
+    motion_time = (kin.time_range[1] - kin.time_range[0]) if timeline.motion_time is None else timeline.motion_time
+    posed = Body(list(body.segments.values()), DelayedKinematics(kin, timeline.records(t_motion) *
+                                                                    timeline.record_time))
+    contact = ExplicitBodyContact(model, posed, friction=friction, method=contact_method, penalty=penalty)
+    for spec in torques:
+        contact.track_torque(spec.name, spec.joint, spec.axis, spec.segments)
+    if timeline.grow_from < 1.0:
+        t_don0, t_don = timeline.records(timeline.sewing_time) * timeline.record_time, timeline.donning_time
+        g0 = timeline.grow_from
+        contact.transverse_scale = lambda t: g0 + (1.0 - g0) * smoothstep((t - t_don0) / t_don)
+    contact.segment_active = segment_active
+    ties = SeamTies(model, seams, sewing_time=timeline.sewing_time) if seams else None
+    rayleigh = (settings.mass_damping, 0.0)
+    omega = math.hypot(stability.max_frequency_estimate(model, settings.rotary_inertia_scale),
+                       contact.penalty_frequency())
+    dt_estimate = stability.critical_time_step(model, rayleigh, omega_max=omega)
+    steps_per_record = math.ceil(timeline.record_time / (settings.time_step_safety * dt_estimate))
+    dt = timeline.record_time / steps_per_record
+    hooks = [contact] + ([ties] if ties else [])
+    integrator = CentralDifference(model, dt, rayleigh=rayleigh, dt_crit=dt_estimate, energy_bound=None,
+                                   rotary_inertia_scale=settings.rotary_inertia_scale, contact=hooks)
+    phases = [Phase(n, timeline.records(d)) for n, d in
+              (("sew", timeline.sewing_time), ("don", timeline.donning_time), ("settle", timeline.settle_time),
+               ("motion", motion_time))]
+    strain = FastProjection(model, 1.0) if measure_strain else None
+    return GarmentRun(name, model, posed, contact, ties, integrator, timeline, phases, dt, dt_estimate,
+                      steps_per_record, tuple(torques), config, strain)
