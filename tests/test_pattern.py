@@ -7,9 +7,21 @@ import scipy.integrate
 from mpi4py import MPI
 from scipy.spatial.transform import Rotation
 
-from fabricfem.meshes.pattern import (Edge, Panel, Pattern, Stitch, bezier_length, check_pattern, edge_control_points,
-                                      edge_length, outline_area, pattern_from_dict, pattern_to_dict, pattern_to_toml,
-                                      read_garmentcode, read_pattern_toml)
+from fabricfem.meshes.pattern import (
+    Edge,
+    Panel,
+    Pattern,
+    Stitch,
+    bezier_length,
+    check_pattern,
+    edge_control_points,
+    outline_area,
+    pattern_from_dict,
+    pattern_to_dict,
+    pattern_to_toml,
+    read_garmentcode,
+    read_pattern_toml,
+)
 from fabricfem.meshes.pattern_mesh import mesh_pattern, wrap_on_cylinder
 from fabricfem.verify.pattern import TROUSERS, panel_areas, stretched
 
@@ -226,7 +238,8 @@ def test_per_panel_directions_at_the_shell_nodes():
 
 
 def test_stretched_trousers_are_refused():
-    with pytest.raises(ValueError, match=r"stitch Rfront.2-Rback.2: edge 2 of panel 'Rfront' .* edge 2 of panel 'Rback'"):
+    with pytest.raises(ValueError,
+                       match=r"stitch Rfront.2-Rback.2: edge 2 of panel 'Rfront' .* edge 2 of panel 'Rback'"):
         mesh_pattern(stretched(read_garmentcode(TROUSERS), "Rback", 1.1), 0.05)
 
 

@@ -34,9 +34,24 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["Edge", "Panel", "Stitch", "Pattern", "read_garmentcode", "pattern_from_dict", "read_pattern_toml",
-           "pattern_to_dict", "pattern_to_toml", "check_pattern", "edge_length", "edge_control_points",
-           "outline_area", "outline_polyline", "bezier_length", "STITCH_LENGTH_TOLERANCE"]
+__all__ = [
+    "STITCH_LENGTH_TOLERANCE",
+    "Edge",
+    "Panel",
+    "Pattern",
+    "Stitch",
+    "bezier_length",
+    "check_pattern",
+    "edge_control_points",
+    "edge_length",
+    "outline_area",
+    "outline_polyline",
+    "pattern_from_dict",
+    "pattern_to_dict",
+    "pattern_to_toml",
+    "read_garmentcode",
+    "read_pattern_toml",
+]
 
 STITCH_LENGTH_TOLERANCE = 0.02   # default relative length difference allowed between stitched edges
 _GAUSS_T, _GAUSS_W = np.polynomial.legendre.leggauss(48)

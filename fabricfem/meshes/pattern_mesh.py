@@ -44,7 +44,7 @@ from .fabric_mesh import DirectionField, FabricMesh
 from .gmsh_io import gmsh_to_dolfinx
 from .pattern import STITCH_LENGTH_TOLERANCE, Panel, Pattern, check_pattern, edge_control_points, edge_length
 
-__all__ = ["RigidPlacement", "CylinderWrap", "wrap_on_cylinder", "SeamPairs", "GarmentMesh", "mesh_pattern"]
+__all__ = ["CylinderWrap", "GarmentMesh", "RigidPlacement", "SeamPairs", "mesh_pattern", "wrap_on_cylinder"]
 
 _QUAD_OPTIONS = {"Mesh.Algorithm": 6, "Mesh.RecombinationAlgorithm": 3}   # as fabricfem.meshes.plate
 _PANEL_GAP = 1.0   # [m] panel i is meshed flat in the plane z = i * _PANEL_GAP (no two panels share a point)
@@ -66,7 +66,7 @@ class RigidPlacement:
     translation: np.ndarray
 
     @classmethod
-    def of(cls, panel: Panel) -> "RigidPlacement":
+    def of(cls, panel: Panel) -> RigidPlacement:
         """The panel's own placement (its translation and extrinsic XYZ Euler rotation)."""
         return cls(panel.rotation_matrix(), panel.translation.copy())
 
@@ -140,7 +140,8 @@ def wrap_on_cylinder(axis_point: Sequence[float], axis_dir: Sequence[float], rad
         raise ValueError(f"axis_dir: must be a non-zero 3-vector, got {axis_dir!r}")
     a = a / np.linalg.norm(a)
     r = _validate.positive_length("radius", radius)
-    z = np.eye(3)[np.argmin(np.abs(a))] if zero_direction is None else _validate.point3("zero_direction", zero_direction)
+    z = (np.eye(3)[np.argmin(np.abs(a))] if zero_direction is None
+         else _validate.point3("zero_direction", zero_direction))
     z = z - (z @ a) * a
     if not np.linalg.norm(z) > 1e-12:
         raise ValueError(f"zero_direction: must not be parallel to axis_dir, got {zero_direction!r}")
@@ -332,7 +333,8 @@ def mesh_pattern(pattern: Pattern, h: float, order: int = 2, cell: str = "quadri
     return GarmentMesh(fabric, pattern, seams, panel_tags, places, edges)
 
 
-def _nearest_panel_fields(x: np.ndarray, node_tag: np.ndarray, fields: Mapping[int, tuple[DirectionField, DirectionField]]
+def _nearest_panel_fields(x: np.ndarray, node_tag: np.ndarray,
+                          fields: Mapping[int, tuple[DirectionField, DirectionField]]
                           ) -> tuple[DirectionField, DirectionField]:
     """Fields of x only: each point takes the panel of the nearest (rank-local) mesh node. Where panels touch
     this is ambiguous; the shell uses FabricMesh.directions_at, which is not."""

@@ -4,13 +4,18 @@ from __future__ import annotations
 import copy
 from pathlib import Path
 
-import numpy as np
 import ufl
 from dolfinx import fem
 from mpi4py import MPI
 
-from fabricfem.meshes.pattern import (STITCH_LENGTH_TOLERANCE, Pattern, check_pattern, edge_length, outline_area,
-                                      read_garmentcode)
+from fabricfem.meshes.pattern import (
+    STITCH_LENGTH_TOLERANCE,
+    Pattern,
+    check_pattern,
+    edge_length,
+    outline_area,
+    read_garmentcode,
+)
 from fabricfem.meshes.pattern_mesh import mesh_pattern
 from fabricfem.verify import Timer, case, result
 
