@@ -103,8 +103,9 @@ class ShellModel:
         # Reference geometry and frames as P2 vector fields on the surface
         self.V2 = fem.VectorFunctionSpace(mesh, (family, degree), dim=3)
         x = self.V2.tabulate_dof_coordinates().T
-        n0 = _normalize_rows(np.asarray(fabric_mesh.normal(x), dtype=float).T)
-        warp = np.asarray(fabric_mesh.warp(x), dtype=float).T
+        warp, normal = fabric_mesh.directions_at(self.V2)   # per panel where the mesh has panel_directions
+        n0 = _normalize_rows(normal.T)
+        warp = warp.T
         t1 = _normalize_rows(warp - np.sum(warp * n0, axis=1, keepdims=True) * n0)
         t2 = np.cross(n0, t1)
         self.phi0 = self._vector_field(x.T, "reference_position")

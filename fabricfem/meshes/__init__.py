@@ -18,3 +18,11 @@ from .yarn_geometry import PlainWeave, YarnFamily, YarnPath, amplitude_from_crim
 
 __all__ += ["MeshResolution", "UnitCellMesh", "unit_cell", "PlainWeave", "YarnFamily", "YarnPath",
             "amplitude_from_crimp", "check_weave"]
+
+# Sewing patterns: panels, stitches, readers (GarmentCode JSON, TOML) and their meshing and placement
+from .pattern import Edge, Panel, Pattern, Stitch, check_pattern, pattern_from_dict, read_garmentcode  # noqa: E402
+from .pattern import read_pattern_toml  # noqa: E402
+from .pattern_mesh import GarmentMesh, SeamPairs, mesh_pattern, wrap_on_cylinder  # noqa: E402
+
+__all__ += ["Edge", "Panel", "Pattern", "Stitch", "check_pattern", "pattern_from_dict", "read_garmentcode",
+            "read_pattern_toml", "GarmentMesh", "SeamPairs", "mesh_pattern", "wrap_on_cylinder"]

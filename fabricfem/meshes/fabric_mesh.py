@@ -42,6 +42,9 @@ class FabricMesh:
         normal: ``x (3, N) -> N (3, N)``, unit reference normal with a
             consistent orientation.
         cell_tags: Cell tags from gmsh physical surfaces, or None.
+        panel_directions: optional cell tag value -> (warp, normal) fields, each valid on the cells with
+            that tag (a garment's panels: points of different panels may coincide in 3D, where a field of
+            x alone is ambiguous). Used by :meth:`directions_at`; None: ``warp`` and ``normal`` everywhere.
     """
 
     mesh: dolfinx.mesh.Mesh
@@ -50,6 +53,7 @@ class FabricMesh:
     warp: DirectionField
     normal: DirectionField
     cell_tags: dolfinx.mesh.MeshTagsMetaClass | None = None
+    panel_directions: dict[int, tuple[DirectionField, DirectionField]] | None = None
 
     def __post_init__(self) -> None:
         gdim, tdim = self.mesh.geometry.dim, self.mesh.topology.dim
@@ -58,6 +62,8 @@ class FabricMesh:
                 f"mesh: a FabricMesh needs a surface in 3D (tdim 2, gdim 3), got tdim {tdim}, gdim {gdim}")
         if self.facet_tags.dim != tdim - 1:
             raise ValueError(f"facet_tags: expected dimension {tdim - 1}, got {self.facet_tags.dim}")
+        if self.panel_directions is not None and self.cell_tags is None:
+            raise ValueError("panel_directions: needs cell_tags (the fields are given per cell tag value)")
 
     def tag(self, name: str) -> int:
         """Physical group id of the facet tag ``name``."""
@@ -75,3 +81,22 @@ class FabricMesh:
     def weft(self, x: np.ndarray) -> np.ndarray:
         """Weft direction ``E2 = N x E1`` at points ``x`` (3, N); unit, tangent."""
         return np.cross(self.normal(x), self.warp(x), axis=0)
+
+    def directions_at(self, V) -> tuple[np.ndarray, np.ndarray]:
+        """Warp E1 and normal N, each (3, n), at the n nodes of the Lagrange space ``V`` (the rows of
+        ``V.tabulate_dof_coordinates()``, one per node also for a vector space).
+
+        Without ``panel_directions``: ``warp`` and ``normal`` at the node coordinates. With them: the nodes of
+        the cells tagged t take the fields of t (a node shared by cells of two tags takes the later tag's;
+        panels of a garment share no node), the other nodes ``warp`` and ``normal``.
+        """
+        x = V.tabulate_dof_coordinates().T
+        warp = np.array(self.warp(x), dtype=float)
+        normal = np.array(self.normal(x), dtype=float)
+        if self.panel_directions:
+            dofs = V.dofmap.list.array.reshape(V.dofmap.list.num_nodes, -1)   # (cells, nodes per cell)
+            for value, (w, n) in self.panel_directions.items():
+                nodes = np.unique(dofs[self.cell_tags.indices[self.cell_tags.values == value]])
+                warp[:, nodes] = w(x[:, nodes])
+                normal[:, nodes] = n(x[:, nodes])
+        return warp, normal
