@@ -17,9 +17,10 @@ from fabricfem.meshes.pattern import (
     read_garmentcode,
 )
 from fabricfem.meshes.pattern_mesh import mesh_pattern
+from fabricfem.patterns import pattern_path
 from fabricfem.verify import Timer, case, result
 
-TROUSERS = Path("/work/shared/data/garment_patterns/pants_straight_sides.json")
+TROUSERS = pattern_path("pants_straight_sides")
 # (order, h [m]): order-2 geometry puts the mid-edge nodes on the Bezier edges (area error ~1e-6 at h = 5 cm);
 # order 1 needs h = 1 cm to bring the chord error of the curved edges below 1e-4
 MESHES = ((2, 0.05), (1, 0.01))
