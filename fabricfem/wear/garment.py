@@ -132,10 +132,12 @@ class WearStep:
     kinetic_energy: float             # J
     strain_energy: float              # J
     wall: float                       # s since the start
+    axis_value: float | None = None   # the record on the run's axis (a joint angle [deg]), None: the time
 
     @property
     def coordinate(self) -> float:
-        return self.time
+        """The record's coordinate on the run's axis (GarmentRun.axis: time [s] or a joint angle [deg])."""
+        return self.axis_value if self.axis_value is not None else self.time
 
     def work(self) -> str:
         ratio = self.kinetic_energy / self.strain_energy if self.strain_energy else 0.0
@@ -183,6 +185,11 @@ class WearHistory:
                  s.peak_segment, *s.peak_position, s.mean_pressure, s.max_penetration, s.contact_force, s.seam_gap,
                  *s.seam_forces.values(), s.max_strain, s.time_steps, s.kinetic_energy, s.strain_energy, s.wall]
                 for s in self.steps]
+
+    def torque_curves(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Resisting torque [N m] per monitor against the record coordinate."""
+        x = np.array([s.coordinate for s in self.steps])
+        return {name: (x, self.torque(name)) for name in self.monitors}
 
     def work(self) -> str:
         steps = sum(s.time_steps for s in self.steps)
@@ -235,6 +242,17 @@ class GarmentRun:
     torques: tuple[TorqueSpec, ...]
     config: object = None
     strain: FastProjection | None = None
+    axis: tuple[str, Callable[[float], float]] | None = None   # (label, motion time [s] -> value), e.g. an angle
+
+    @property
+    def axis_label(self) -> str:
+        """The label of the records' coordinate: "time [s]" or the axis's (e.g. "elbow angle [deg]")."""
+        return "time [s]" if self.axis is None else self.axis[0]
+
+    @property
+    def motion_start(self) -> float:
+        """Body time [s] at which the motion phase starts."""
+        return sum(p.records for p in self.phases[:-1]) * self.timeline.record_time
 
     @property
     def comm(self) -> MPI.Comm:
@@ -249,12 +267,31 @@ class GarmentRun:
         return (f"explicit central differences, dt = {self.dt:.3g} s (estimated critical step {self.dt_estimate:.3g} s), "
                 f"{self.steps_per_record} steps per record of {self.timeline.record_time:g} s; phases: {phases}")
 
+    def axis_at(self, t: float, phase: Phase | None = None) -> float | None:
+        """The axis value at body time t [s] (its value at the motion's start before the motion), or None."""
+        if self.axis is None:
+            return None
+        return self.axis[1](max(t - self.motion_start, 0.0) if phase is None or phase.name == "motion" else 0.0)
+
+    def time_at(self, coordinate: float) -> float:
+        """Body time [s] of a record coordinate (the inverse of the axis on the motion phase, by bisection of
+        the monotonic axis; the coordinate itself when the axis is time)."""
+        if self.axis is None:
+            return float(coordinate)
+        lo, hi = 0.0, self.phases[-1].records * self.timeline.record_time
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if self.axis[1](mid) < coordinate else (lo, mid)
+        return self.motion_start + 0.5 * (lo + hi)
+
     def pressure_field(self):
         """Contact pressure on the body [Pa] per unit deformed cloth area, mean over the last record."""
         return self.contact.pressure_field()
 
-    def posed_bodies(self, time_s: float) -> list:
-        """The body's segments as the contact sees them at time `time_s` [s] (grown, inactive ones left out)."""
+    def posed_bodies(self, coordinate: float) -> list:
+        """The body's segments as the contact sees them at the record coordinate (time [s] or the axis value;
+        grown, inactive ones left out)."""
+        time_s = self.time_at(coordinate)
         active = (np.ones(len(self.body.segments), dtype=bool) if self.contact.segment_active is None
                   else self.contact.segment_active(time_s))
         return [e for e, on in zip(self.contact.body_at(time_s), active) if on]
@@ -311,7 +348,7 @@ class GarmentRun:
                 seam_forces=self.seams.line_forces() if self.seams else {},
                 max_strain=max(strains["max_warp"], strains["max_weft"]), time_steps=steps,
                 kinetic_energy=integ.kinetic_energy(), strain_energy=integ.strain_energy(),
-                wall=time.perf_counter() - t0)
+                wall=time.perf_counter() - t0, axis_value=self.axis_at(integ.t, phase))
 
         history.timings.update(run_phases(integ, contact, self.phases, self.steps_per_record, record, history,
                                           on_step, stop_on_failure, timed=lambda p: p.name == "motion",
@@ -326,7 +363,7 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
                       friction: float = 0.0, penalty: float | None = None,
                       segment_active: Callable[[float], np.ndarray] | None = None,
                       psri_degrees: tuple[int, int] = (4, 2), measure_strain: bool = True,
-                      config: object = None) -> GarmentRun:
+                      config: object = None, axis: tuple[str, Callable[[float], float]] | None = None) -> GarmentRun:
     """Shell, seams, body contact, monitors, integrator and phases of a garment run (module docstring).
 
     Args:
@@ -336,6 +373,7 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
         seams: the stitches to sew and hold (fabricfem.contact.seams); sewn during `timeline.sewing_time`.
         torques: the torque monitors (their segments and joints are checked against the body).
         segment_active: t -> (K,) bool of the segments that take contact (donning removes the feet), or None.
+        axis: (label, motion time [s] -> value): the records' coordinate (e.g. the elbow angle [deg]); None: time.
     """
     if fabric.density <= 0.0:
         raise ValueError("density: the explicit engine needs a positive fabric density [kg/m^3]")
@@ -383,4 +421,4 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
                ("motion", motion_time))]
     strain = FastProjection(model, 1.0) if measure_strain else None
     return GarmentRun(name, model, posed, contact, ties, integrator, timeline, phases, dt, dt_estimate,
-                      steps_per_record, tuple(torques), config, strain)
+                      steps_per_record, tuple(torques), config, strain, axis)

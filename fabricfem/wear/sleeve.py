@@ -332,6 +332,16 @@ class SleeveStep:
     kinetic_energy: float = 0.0   # J, explicit: 1/2 v.M v (with the scaled rotary inertia)
     strain_energy: float = 0.0    # J, explicit
 
+    @property
+    def coordinate(self) -> float:
+        """The record's coordinate (the elbow angle [deg])."""
+        return self.angle
+
+    @property
+    def torques(self) -> dict[str, float]:
+        """Resisting torques [N m] by monitor name."""
+        return {"elbow": self.torque, "elbow_both_segments": self.torque_all}
+
     def work(self) -> str:
         """The solver work of this record for a progress line: time steps and KE/SE of a time-stepping record,
         Newton iterations of a quasi-static one."""
@@ -366,6 +376,23 @@ class SleeveHistory:
     def torque_at(self, angle: float) -> float:
         """Resisting torque [N m] at `angle` [deg] (linear interpolation of the history)."""
         return float(np.interp(angle, self.angles, self.torques))
+
+    @property
+    def header(self) -> tuple[str, ...]:
+        return self.HEADER
+
+    def torque_curves(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """Resisting torque [N m] against the elbow angle [deg], one curve."""
+        return {f"mu = {self.config.contact.friction}": (self.angles, self.torques)}
+
+    def summary(self) -> dict:
+        """Peak and final resisting torque with their angles."""
+        if not self.steps:
+            return {"records": 0}
+        k = int(np.argmax(np.abs(self.torques)))
+        return {"records": len(self.steps), "torque_elbow": {
+            "peak_Nm": float(self.torques[k]), "peak_angle_deg": float(self.angles[k]),
+            "final_Nm": float(self.torques[-1]), "final_angle_deg": float(self.angles[-1])}}
 
     HEADER = ("angle_deg", "torque_Nm", "torque_both_segments_Nm", "newton_iterations", "max_penetration_m",
               "contact_force_N", "wall_s", "drag_ratio", "time_steps", "kinetic_energy_J", "strain_energy_J")

@@ -1,0 +1,400 @@
+"""Wear scenes (`[scene] kind = "wear"`): any garment on any moving wearer, from a scene file.
+
+Sections: [garment] (a tube or a sewing pattern), [fabric] (any fabric: the orthotropic St. Venant-Kirchhoff
+keys with optional bending laws, or `catalogue` = a stored fabric of fabricfem.fabrics), [body] (a preset:
+arm, lower_body or limb, with its dimensions), [motion] (elbow_flexion, still or a motion-capture file),
+[donning], [contact], [route], [[torque]] monitors and [output]. Keys, types, defaults and units are the
+fields of the dataclasses below and of fabricfem.wear.config (ContactSpec, RouteSpec, FlexionSpec, TubeSpec),
+declared once; `fabricfem scenes` prints them.
+
+Routes: the explicit engine (fabricfem.wear.garment.GarmentRun) runs every wear scene; two scenes keep
+their own routes, chosen by [route] solver: the arm in a tube with the elbow flexion by "quasistatic" or
+"implicit" (fabricfem.wear.sleeve, the SleeveConfig routes; E1 = E2) and a limb grown into a tube by
+"quasistatic" (the compression sleeve, fabricfem.wear.compression).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+
+import numpy as np
+
+from fabricfem.body.arm import ArmDimensions, default_arm, elbow_flexion
+from fabricfem.body.pose import Body, Segment
+from fabricfem.contact.seams import SeamSpec
+from fabricfem.dynamics.stability import plane_stress_wave_speed
+from fabricfem.fabrics import load_fabric
+from fabricfem.parameters import param as doc
+from fabricfem.scenes.schema import SceneError, _suggest
+from fabricfem.scenes.sections import FabricSection, OutputSection, SceneSection, from_table, schema_of
+from fabricfem.wear.config import ContactSpec, FlexionSpec, RouteSpec, TubeSpec
+from fabricfem.wear.garment import ExplicitSettings, Timeline, TorqueSpec
+
+GRAVITY = 9.81                     # m/s^2
+BODY_TYPES = ("arm", "default_arm", "limb")
+MOTION_TYPES = ("elbow_flexion", "still")
+BUILDERS = ("tube", "pattern")
+
+
+@dataclasses.dataclass(frozen=True)
+class GarmentSection:
+    """[garment]: a tube along +x (fabricfem.meshes.tube) or the panels of a sewing pattern (fabricfem.meshes.pattern)
+    sewn along its stitches."""
+
+    builder: str = doc("tube | pattern", "pattern")
+    pattern: str | None = doc("pattern: a shipped pattern name (fabricfem/patterns) or a GarmentCode JSON / TOML file, "
+                              "relative to the scene file", None)
+    h: float = doc("pattern: element size [m]", 0.05)
+    order: int = doc("geometry order (2: curved edges and tubes without facets)", 2)
+    stitch_tolerance: float = doc("pattern: largest relative length difference of stitched edges", 0.02)
+    sewing_time: float = doc("pattern: time the seams take to close [s] (0: they must start closed)", 0.0)
+    rotate: list | None = doc("pattern: [rx, ry, rz] extrinsic XYZ Euler angles [deg] applied to the placed garment "
+                              "(GarmentCode files are Y-up: [90, 0, 0] turns them Z-up)", None)
+    translate: list | None = doc("pattern: [x, y, z] [m] added after `rotate`", None)
+    hold: list = doc("edge tags whose nodes are held in place (tube: end0 at x = 0, end1)", default_factory=list)
+    length: float | None = doc("tube: length along x [m]", None)
+    radius: float | None = doc("tube: radius [m]", None)
+    n_around: int | None = doc("tube: Q2 cells around", None)
+    n_along: int | None = doc("tube: Q2 cells along", None)
+    quadrature: list | None = doc("tube and pattern: (full, reduced) PSRI quadrature degrees", None)
+    hold_rotations: bool = doc("tube (quasistatic and implicit sleeve routes): clamp the rotations of end0", False)
+
+
+@dataclasses.dataclass(frozen=True)
+class WearFabricSection:
+    """[fabric] of a wear scene: a stored fabric by name (`catalogue`) or the keys of [fabric]."""
+
+    catalogue: str | None = doc("a stored fabric (fabricfem.fabrics: a name or a .json path) instead of E1 ...", None)
+
+
+@dataclasses.dataclass(frozen=True)
+class WearBodySection:
+    """[body]: the wearer, a preset of named ellipsoid segments: arm (upper arm + forearm, ANSUR II; the keys of
+    ArmDimensions), limb (one ellipsoid along x: center, radii)."""
+
+    type: str = doc("arm | limb (default_arm = arm)")
+    center: list | None = doc("limb: [x, y, z] centre [m]", None)
+    radii: list | None = doc("limb: [r1, r2, r3] semi-axes along x, y, z [m]", None)
+
+
+@dataclasses.dataclass(frozen=True)
+class WearMotionSection:
+    """[motion]: what drives the body: elbow_flexion (arm; FlexionSpec's keys) or still (the start pose held)."""
+
+    type: str = doc("elbow_flexion | still")
+    duration: float | None = doc("still: length of the motion phase [s]", None)
+    record_time: float | None = doc("record interval [s] (elbow_flexion: output_angle_step / angular velocity)", None)
+
+
+@dataclasses.dataclass(frozen=True)
+class WearDonningSection:
+    """[donning]: putting the garment on. grow: the body starts at `start` x its transverse radii and grows to full
+    size over `time` [s] (explicit) or in `steps` quasi-static increments (the compression route)."""
+
+    method: str = doc("none | grow", "none")
+    start: float | None = doc("grow: starting size of the body's transverse radii (0, 1]", None)
+    time: float = doc("grow, explicit: growth time [s]", 0.1)
+    steps: int = doc("grow, quasistatic: growth increments", 10)
+    tolerance: float = doc("grow, quasistatic: penetration tolerance of the augmented Lagrangian [m]", 1e-7)
+
+
+@dataclasses.dataclass(frozen=True)
+class TorqueSection:
+    """[[torque]]: a resisting-torque monitor about a joint from the contact forces on chosen segments."""
+
+    name: str = doc("column name")
+    joint: str = doc("joint name of the body")
+    axis: list = doc("[ax, ay, az] flexion axis (positive torque opposes a right-handed rotation about it)")
+    segments: list = doc("segment names whose contact forces count")
+
+
+@dataclasses.dataclass(frozen=True)
+class WearOutputSection:
+    """[output] of a wear scene: the keys of [output] and the record coordinates of the renders."""
+
+    render_at: list | None = doc("record coordinates (angle [deg] or time [s]) of the pressure renders (default: "
+                                 "the thirds of the motion)", None)
+
+
+# section -> the dataclasses that declare its keys (the wear kind's own table; fabricfem.scenes.schema has the
+# other kinds')
+WEAR_SECTION_CLASSES: dict[str, tuple] = {
+    "scene": (SceneSection,), "garment": (GarmentSection,), "fabric": (FabricSection, WearFabricSection),
+    "body": (WearBodySection, ArmDimensions), "motion": (WearMotionSection, FlexionSpec),
+    "donning": (WearDonningSection,), "contact": (ContactSpec,), "route": (RouteSpec,), "torque": (TorqueSection,),
+    "output": (OutputSection, WearOutputSection)}
+WEAR_LIST_SECTIONS = {"torque"}
+
+
+def _schema(name: str) -> dict:
+    out: dict = {}
+    for cls in WEAR_SECTION_CLASSES[name]:
+        out.update({k: v for k, v in schema_of(cls).items() if k not in out})
+    return out
+
+
+WEAR_SCHEMA = {name: _schema(name) for name in WEAR_SECTION_CLASSES}
+
+
+def _table(name: str, table, where: str) -> None:
+    """Keys and TOML types of one table against WEAR_SCHEMA (SceneError naming the key)."""
+    if not isinstance(table, dict):
+        raise SceneError(f"{where}: must be a table")
+    schema = WEAR_SCHEMA[name]
+    for key, value in table.items():
+        if key not in schema:
+            raise SceneError(f"{where}: unknown key {key!r}{_suggest(key, schema)}; allowed: {sorted(schema)}")
+        types, _ = schema[key]
+        accepted = types if isinstance(types, tuple) else (types,)
+        if (isinstance(value, bool) and bool not in accepted) or not isinstance(value, types):
+            raise SceneError(f"{where}.{key}: expected {getattr(types, '__name__', types)}, got {value!r}")
+    for key, (_, required) in schema.items():
+        if required and key not in table and not (name == "fabric" and "catalogue" in table):
+            raise SceneError(f"{where}: missing required key {key!r}")
+
+
+def _vector(where: str, value, n: int = 3) -> np.ndarray:
+    if not (isinstance(value, list) and len(value) == n and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)):
+        raise SceneError(f"{where}: expected {n} finite numbers, got {value!r}")
+    return np.array(value, dtype=float)
+
+
+def _choice(where: str, value, options) -> None:
+    if value not in options:
+        raise SceneError(f"{where}: unknown {value!r}{_suggest(str(value), options)}; allowed: {list(options)}")
+
+
+def route_of(data: dict) -> str:
+    """"sleeve" (the SleeveConfig routes), "compression" (the quasi-static donning of a limb) or "engine"."""
+    solver = data.get("route", {}).get("solver", "explicit")
+    if solver == "explicit":
+        return "engine"
+    body = data["body"]["type"]
+    if body in ("arm", "default_arm"):
+        return "sleeve"
+    if body == "limb" and solver == "quasistatic":
+        return "compression"
+    raise SceneError(f"route.solver: {solver!r} runs the arm in a sleeve (quasistatic, implicit) or a limb grown into "
+                     f"a tube (quasistatic); this scene's body {body!r} runs on the explicit engine")
+
+
+def check_wear(data: dict, source: str = "scene") -> None:
+    """The data checks of a wear scene (sections, keys, types, choices, cross-references), before any meshing."""
+    for name, content in data.items():
+        if name not in WEAR_SCHEMA:
+            raise SceneError(f"{source}: unknown section [{name}] for a wear scene{_suggest(name, WEAR_SCHEMA)}; "
+                             f"allowed: {sorted(WEAR_SCHEMA)}")
+        if name in WEAR_LIST_SECTIONS:
+            if not isinstance(content, list):
+                raise SceneError(f"{source}: [{name}] must be an array of tables: write [[{name}]]")
+            for i, table in enumerate(content):
+                _table(name, table, f"{name}[{i}]")
+        else:
+            _table(name, content, name)
+    for name in ("garment", "fabric", "body", "motion"):
+        if name not in data:
+            raise SceneError(f"{source}: missing section [{name}] of a wear scene")
+    garment, body, motion = data["garment"], data["body"], data["motion"]
+    _choice("garment.builder", garment.get("builder", "pattern"), BUILDERS)
+    if garment.get("builder", "pattern") == "tube":
+        missing = [k for k in ("length", "radius", "n_around", "n_along") if k not in garment]
+        if missing:
+            raise SceneError(f"garment: a tube needs {missing}")
+    elif "pattern" not in garment:
+        raise SceneError("garment.pattern: a pattern garment needs a pattern file or a shipped pattern name")
+    for key in ("rotate", "translate"):
+        if key in garment:
+            _vector(f"garment.{key}", garment[key])
+    _choice("body.type", body["type"], BODY_TYPES)
+    if body["type"] == "limb":
+        for key in ("center", "radii"):
+            if key not in body:
+                raise SceneError(f"body.{key}: a limb needs its {key}")
+            _vector(f"body.{key}", body[key])
+        if min(body["radii"]) <= 0:
+            raise SceneError(f"body.radii: must be positive, got {body['radii']}")
+    _choice("motion.type", motion["type"], MOTION_TYPES)
+    if motion["type"] == "elbow_flexion" and body["type"] not in ("arm", "default_arm"):
+        raise SceneError(f"motion.type: elbow_flexion drives the arm, not a {body['type']!r}")
+    donning = data.get("donning", {})
+    _choice("donning.method", donning.get("method", "none"), ("none", "grow"))
+    for i, spec in enumerate(data.get("torque", [])):
+        _vector(f"torque[{i}].axis", spec["axis"])
+        if not spec["segments"] or not all(isinstance(s, str) for s in spec["segments"]):
+            raise SceneError(f"torque[{i}].segments: a list of segment names, got {spec['segments']!r}")
+    route_of(data)
+
+
+# ------------------------------------------------------------------------------------------ objects
+def wear_fabric(data: dict, build_fabric):
+    """The scene's Fabric: the stored one named by fabric.catalogue, else `build_fabric` of [fabric]."""
+    spec = data["fabric"]
+    if "catalogue" in spec:
+        try:
+            return load_fabric(spec["catalogue"])
+        except (ValueError, FileNotFoundError) as exc:
+            raise SceneError(f"fabric.catalogue: {exc}") from None
+    return build_fabric(spec)
+
+
+def pattern_file(data: dict, scene_path: Path | None) -> Path:
+    """The pattern file of [garment] pattern: a shipped name, or a path (relative to the scene file)."""
+    from fabricfem.patterns import pattern_path
+    name = data["garment"]["pattern"]
+    candidate = Path(name)
+    if not candidate.is_absolute() and scene_path is not None:
+        candidate = Path(scene_path).parent / candidate
+    if candidate.is_file():
+        return candidate
+    try:
+        return pattern_path(name)
+    except ValueError as exc:
+        raise SceneError(f"garment.pattern: {name!r} is neither a file nor a shipped pattern ({exc})") from None
+
+
+class StillPose:
+    """A kinematics source that holds the given joint and marker positions [m] for `duration` [s]."""
+
+    def __init__(self, positions: dict[str, np.ndarray], duration: float = 0.0):
+        self._positions = {k: np.asarray(v, dtype=float) for k, v in positions.items()}
+        self.names = tuple(self._positions)
+        self.time_range = (0.0, float(duration))
+
+    def positions(self, t: float) -> dict[str, np.ndarray]:
+        return self._positions
+
+
+def limb_body(center, radii, duration: float = 0.0) -> Body:
+    """One ellipsoid segment "limb" along x (semi-axes r1 along x, r2 along y, r3 along z) held still."""
+    c, r = np.asarray(center, dtype=float), np.asarray(radii, dtype=float)
+    points = {"proximal": c - np.array([r[0], 0.0, 0.0]), "distal": c + np.array([r[0], 0.0, 0.0]),
+              "marker": c + np.array([0.0, 1.0, 0.0])}
+    return Body([Segment("limb", "proximal", "distal", "marker", tuple(r))], StillPose(points, duration))
+
+
+@dataclasses.dataclass
+class WearPlan:
+    """What a wear scene runs on the explicit engine (everything but the mesh)."""
+
+    body: Body
+    torques: list[TorqueSpec]
+    timeline: Timeline
+    settings: ExplicitSettings
+    contact: ContactSpec
+    axis: tuple | None
+    gravity_ramp: float
+
+
+def plan(data: dict, fabric) -> WearPlan:
+    """Body, monitors, phases and explicit settings of a wear scene on the engine (SceneError naming the key)."""
+    body_spec, motion_spec = data["body"], data["motion"]
+    donning = from_table(WearDonningSection, data.get("donning", {}))
+    route = from_table(RouteSpec, data.get("route", {}))
+    contact = from_table(ContactSpec, data.get("contact", {}))
+    garment = from_table(GarmentSection, data["garment"])
+    axis, torques = None, []
+    gravity = (0.0, 0.0, -GRAVITY)
+    if body_spec["type"] in ("arm", "default_arm"):
+        dims = from_table(ArmDimensions, {k: v for k, v in body_spec.items() if k in ArmDimensions.__dataclass_fields__})
+        gravity = (0.0, -GRAVITY, 0.0)       # the sleeve's convention: the forearm rotates up, towards +y
+        torques = [TorqueSpec("elbow", "elbow", (0.0, 0.0, 1.0), ("forearm",)),
+                   TorqueSpec("elbow_both_segments", "elbow", (0.0, 0.0, 1.0), ("upper_arm", "forearm"))]
+    if motion_spec["type"] == "elbow_flexion":
+        flex = from_table(FlexionSpec, {k: v for k, v in motion_spec.items() if k in FlexionSpec.__dataclass_fields__})
+        similarity = 1.0
+        if route.dynamic_similarity:
+            E_ref, rho_ref = route.similarity_reference
+            similarity = plane_stress_wave_speed(fabric) / math.sqrt(E_ref / rho_ref)
+        omega = math.radians(flex.angular_velocity * similarity)
+        flexion = elbow_flexion(dims, angular_velocity=omega, final_angle=math.radians(flex.final_angle))
+        body = default_arm(flexion, dims)
+        record_time = math.radians(flex.output_angle_step) / omega
+        motion_time = math.radians(flex.final_angle) / omega
+        settle = flex.settle_time / similarity if route.gravity else 0.0
+        axis = ("elbow angle [deg]", lambda t: min(math.degrees(flexion.angle(t)), flex.final_angle))
+        damping = route.mass_damping * similarity
+    else:
+        duration = float(motion_spec.get("duration", 0.0))
+        record_time = float(motion_spec.get("record_time", 0.01))
+        if body_spec["type"] == "limb":
+            body = limb_body(body_spec["center"], body_spec["radii"], duration)
+        else:
+            body = default_arm(StillPose(default_arm().kinematics.positions(0.0), duration), dims)
+        motion_time = duration
+        settle = float(motion_spec.get("settle_time", 0.0))
+        damping = route.mass_damping
+    for spec in data.get("torque", []):
+        torques.append(TorqueSpec(spec["name"], spec["joint"], tuple(spec["axis"]), tuple(spec["segments"])))
+    grow_from = donning.start if (donning.method == "grow" and donning.start is not None) else 1.0
+    try:
+        timeline = Timeline(record_time=record_time, sewing_time=garment.sewing_time,
+                            donning_time=donning.time if donning.method == "grow" else 0.0, grow_from=grow_from,
+                            settle_time=settle, motion_time=motion_time)
+    except ValueError as exc:
+        raise SceneError(f"donning: {exc}") from None
+    settings = ExplicitSettings(mass_damping=damping, rotary_inertia_scale=route.rotary_inertia_scale,
+                                time_step_safety=route.time_step_safety, gravity=gravity if route.gravity else None)
+    return WearPlan(body, torques, timeline, settings, contact, axis, garment.sewing_time)
+
+
+def garment_mesh(data: dict, scene_path: Path | None, comm):
+    """(FabricMesh, seams [SeamSpec], hold tags) of [garment]."""
+    g = from_table(GarmentSection, data["garment"])
+    if g.builder == "tube":
+        from fabricfem.meshes import tube
+        return tube(g.length, g.radius, g.n_around, g.n_along, cell="quadrilateral", order=g.order, comm=comm), [], \
+            list(g.hold)
+    from fabricfem.meshes.pattern import read_garmentcode, read_pattern_toml
+    from fabricfem.meshes.pattern_mesh import RigidPlacement, mesh_pattern
+    path = pattern_file(data, scene_path)
+    try:
+        pattern = read_pattern_toml(path) if path.suffix == ".toml" else read_garmentcode(path)
+    except ValueError as exc:
+        raise SceneError(f"garment.pattern: {exc}") from None
+    rotation = np.eye(3)
+    if g.rotate is not None:
+        from fabricfem.meshes.pattern import Panel
+        rotation = Panel("frame", np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), rotation=tuple(g.rotate)
+                         ).rotation_matrix()
+    shift = np.zeros(3) if g.translate is None else np.asarray(g.translate, dtype=float)
+    placements = {}
+    for name, panel in pattern.panels.items():
+        own = RigidPlacement.of(panel)
+        placements[name] = RigidPlacement(rotation @ own.rotation, rotation @ own.translation + shift)
+    try:
+        garment = mesh_pattern(pattern, g.h, order=g.order, placements=placements,
+                               stitch_length_tolerance=g.stitch_tolerance, comm=comm)
+    except ValueError as exc:
+        raise SceneError(f"garment.pattern: {exc}") from None
+    seams = [SeamSpec(s.name, s.points_a, s.panel_tag_a, s.points_b, s.panel_tag_b, float(np.mean(s.lengths)))
+             for s in garment.stitches]
+    return garment.fabric, seams, list(g.hold)
+
+
+def sleeve_data(data: dict) -> dict:
+    """The sleeve-kind data (fabricfem.scenes.build.sleeve_config) of an arm-in-tube wear scene."""
+    g = {k: v for k, v in data["garment"].items() if k in TubeSpec.__dataclass_fields__}
+    out = {"scene": {**data.get("scene", {}), "kind": "sleeve"}, "mesh": {"type": "tube", **g},
+           "fabric": data["fabric"], "body": {**data["body"], "type": "default_arm"},
+           "motion": {k: v for k, v in data["motion"].items() if k in FlexionSpec.__dataclass_fields__ or k == "type"}}
+    for name in ("contact", "route", "output"):
+        if name in data:
+            out[name] = data[name]
+    if "render_at" in out.get("output", {}):
+        out["output"] = {**{k: v for k, v in out["output"].items() if k != "render_at"},
+                         "render_angles": out["output"]["render_at"]}
+    return out
+
+
+def compression_data(data: dict) -> dict:
+    """The compression-kind data (fabricfem.scenes.run.run_compression_scene) of a limb-in-tube wear scene."""
+    g = data["garment"]
+    mesh = {"type": "tube", **{k: g[k] for k in ("length", "radius", "n_around", "n_along", "order") if k in g}}
+    donning = {k: v for k, v in data.get("donning", {}).items() if k in ("start", "steps", "tolerance")}
+    out = {"scene": {**data.get("scene", {}), "kind": "compression"}, "mesh": mesh, "fabric": data["fabric"],
+           "limb": {"center": data["body"]["center"], "radii": data["body"]["radii"]}, "donning": donning}
+    if "output" in data:
+        out["output"] = {k: v for k, v in data["output"].items() if k != "render_at"}
+    return out
