@@ -41,7 +41,7 @@ from typing import Callable
 import numpy as np
 from scipy.optimize import brentq
 
-from fabricfem.body.motion import JointTrajectory, _finite_time
+from fabricfem.body.motion import JointTrajectory, KinematicsSource, _finite_time
 from fabricfem.body.pose import Body, Segment
 from fabricfem.body.schedule import SegmentSchedule
 
@@ -303,7 +303,7 @@ def winter_walking(dimensions: LowerBodyDimensions = DEFAULT_LOWER_BODY, strides
                          fourier_curve(WINTER_ANKLE_DEG), dimensions, cycle_time, strides, speed)
 
 
-def lower_body(dimensions: LowerBodyDimensions = DEFAULT_LOWER_BODY, kinematics=None,
+def lower_body(dimensions: LowerBodyDimensions = DEFAULT_LOWER_BODY, kinematics: KinematicsSource | None = None,
                schedule: SegmentSchedule | None = None) -> Body:
     """The eight-segment lower body; kinematics default: `standing(dimensions)`."""
     return Body(dimensions.segments(), kinematics if kinematics is not None else standing(dimensions), schedule)

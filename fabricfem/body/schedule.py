@@ -7,6 +7,7 @@ A group (e.g. "feet": the two foot segments) is off for t_off <= t < t_on in eac
 from __future__ import annotations
 
 import math
+from itertools import pairwise
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
@@ -38,7 +39,7 @@ class SegmentSchedule:
                                      f"t_off < t_on [s]")
                 spans.append((t_off, t_on))
             spans.sort()
-            if any(b[0] < a[1] for a, b in zip(spans, spans[1:])):
+            if any(b[0] < a[1] for a, b in pairwise(spans)):
                 raise ValueError(f"groups[{name!r}]: intervals overlap: {spans}")
             clean[name] = (tuple(segments), tuple(spans))
         object.__setattr__(self, "groups", clean)
