@@ -2,7 +2,11 @@
 # Idempotent set-up for a fresh Debian bookworm machine:
 #   1. Debian packages (dolfinx 0.5.2 stack, gmsh, meshio, OpenMPI) via apt, as root or with sudo;
 #   2. a virtual environment .venv from /usr/bin/python3 --system-site-packages;
-#   3. the project installed editable, numpy pinned to the Debian numpy (numpy 2 breaks petsc4py).
+#   3. the project installed editable, numpy pinned to the Debian numpy (numpy 2 breaks petsc4py); ezc3d (C3D
+#      files) comes with it: should pip ever want another numpy for it, install it with --no-deps instead;
+#   4. optional test data: Debian assimp-testmodels (CMU motion-capture BVH files in
+#      /usr/share/assimp/models/BVH/, used by the mocap-roundtrip verify case), only as root with apt-get;
+#      its absence never fails the bootstrap (the case and test skip the CMU rows).
 set -euo pipefail
 here="$(cd "$(dirname "$0")/.." && pwd)"
 cd "$here"
@@ -34,4 +38,10 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   echo "[bootstrap] installing fabricfem (editable), numpy pinned to $numpy_version"
   "$VENV/bin/python" -m pip install -q --disable-pip-version-check -c "$VENV/constraints.txt" -e ".[dev]"
   touch "$stamp"
+fi
+
+if [ ! -d /usr/share/assimp/models/BVH ] && [ "$(id -u)" -eq 0 ] && command -v apt-get >/dev/null 2>&1; then
+  echo "[bootstrap] installing optional test data: assimp-testmodels (CMU BVH files)"
+  DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends assimp-testmodels \
+    || echo "[bootstrap] assimp-testmodels not installed (optional: the CMU rows of mocap-roundtrip are skipped)"
 fi

@@ -5,8 +5,8 @@ and `positions(t)` -> {name: (3,) position [m]}. Provided here:
 
 * `ElbowFlexion`: upper arm fixed, forearm rotating about the elbow at constant angular velocity up
   to a final angle (the sleeve study, [Man2006, sec. 5.3]: 57 degrees).
-* `JointTrajectory`: positions sampled at given times, linearly interpolated; `read_trc` and
-  `read_marker_csv` build one from motion-capture marker files.
+* `JointTrajectory`: positions sampled at given times, linearly interpolated; the motion-capture
+  readers of `fabricfem.body.mocap` (C3D, BVH, TRC, CSV) build one.
 * `LegKinematics` with `walking` / `stepping_over`: a planar hip-knee-ankle chain driven by
   prescribed hip and knee flexion curves (see `fabricfem.body.gait` notes below).
 
@@ -21,10 +21,8 @@ the clothing opposes flexion.
 """
 from __future__ import annotations
 
-import csv
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Callable, Mapping, Protocol, runtime_checkable
 
 import numpy as np
@@ -219,74 +217,23 @@ class JointTrajectory:
             raise ValueError(f"mapping: unknown names {unknown} (known: {list(self.names)})")
         return JointTrajectory(self.times, {mapping.get(n, n): self._data[:, i] for i, n in enumerate(self.names)})
 
+    def samples(self) -> dict[str, np.ndarray]:
+        """The sampled positions, name -> (T, 3) [m] (copies), at `times`."""
+        return {name: self._data[:, i].copy() for i, name in enumerate(self.names)}
 
-LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
-
-
-def _unit_scale(units: str) -> float:
-    if units.strip().lower() not in LENGTH_UNITS:
-        raise ValueError(f"units must be one of {sorted(LENGTH_UNITS)}, got {units!r}")
-    return LENGTH_UNITS[units.strip().lower()]
-
-
-def _parse_float(text: str) -> float:
-    text = text.strip()
-    return float(text) if text else math.nan
-
-
-def read_trc(path: str | Path) -> JointTrajectory:
-    """Read a TRC marker file (the tab-separated text format of Motion Analysis / OpenSim).
-
-    Layout: line 1 "PathFileType ...", line 2 the header keys (DataRate, CameraRate, NumFrames,
-    NumMarkers, Units, ...), line 3 their values, line 4 "Frame#  Time  name1 <tab><tab> name2 ...",
-    line 5 the coordinate labels X1 Y1 Z1 ..., then one row per frame. Units (mm, cm or m) are taken
-    from the header and converted to m. Missing samples raise ValueError.
-    """
-    lines = Path(path).read_text().splitlines()
-    if len(lines) < 6 or not lines[0].startswith("PathFileType"):
-        raise ValueError(f"path: {path} is not a TRC file (first line must start with 'PathFileType')")
-    keys = lines[1].split("\t")
-    values = lines[2].split("\t")
-    header = {k.strip(): v.strip() for k, v in zip(keys, values)}
-    if "Units" not in header or "NumMarkers" not in header:
-        raise ValueError(f"path: {path}: TRC header lacks Units/NumMarkers")
-    scale = _unit_scale(header["Units"])
-    n_markers = int(header["NumMarkers"])
-    labels = [s.strip() for s in lines[3].split("\t")[2:] if s.strip()]
-    if len(labels) != n_markers:
-        raise ValueError(f"path: {path}: {len(labels)} marker labels but NumMarkers = {n_markers}")
-    rows = [line.split("\t") for line in lines[5:] if line.strip()]
-    times = np.array([_parse_float(r[1]) for r in rows])
-    data = np.full((len(rows), n_markers, 3), math.nan)
-    for i, r in enumerate(rows):  # file parsing, not a hot path
-        vals = [_parse_float(v) for v in r[2:2 + 3 * n_markers]]
-        vals += [math.nan] * (3 * n_markers - len(vals))
-        data[i] = np.reshape(vals, (n_markers, 3))
-    return JointTrajectory(times, {name: scale * data[:, k] for k, name in enumerate(labels)})
-
-
-def read_marker_csv(path: str | Path, units: str = "m") -> JointTrajectory:
-    """Read a CSV marker file: a header "time, NAME_x, NAME_y, NAME_z, ..." (time in s; suffixes _x/_y/_z,
-    case-insensitive, also ".x" or ":x") and one row per sample, coordinates in `units` (m, cm, mm)."""
-    scale = _unit_scale(units)
-    with open(path, newline="") as fh:
-        rows = [r for r in csv.reader(fh) if r and any(c.strip() for c in r)]
-    if len(rows) < 3:
-        raise ValueError(f"path: {path}: need a header and at least 2 samples")
-    header = [h.strip() for h in rows[0]]
-    if header[0].lower() not in ("time", "t", "time_s", "time [s]"):
-        raise ValueError(f"path: {path}: the first column must be 'time', got {header[0]!r}")
-    columns: dict[str, dict[str, int]] = {}
-    for j, h in enumerate(header[1:], start=1):
-        if len(h) < 3 or h[-2] not in "_.:" or h[-1].lower() not in "xyz":
-            raise ValueError(f"path: {path}: column {h!r} is not NAME_x / NAME_y / NAME_z")
-        columns.setdefault(h[:-2], {})[h[-1].lower()] = j
-    for name, cols in columns.items():
-        if set(cols) != {"x", "y", "z"}:
-            raise ValueError(f"path: {path}: marker {name!r} lacks a coordinate column")
-    table = np.array([[_parse_float(c) for c in r] + [math.nan] * (len(header) - len(r)) for r in rows[1:]])
-    positions = {name: scale * table[:, [c["x"], c["y"], c["z"]]] for name, c in columns.items()}
-    return JointTrajectory(table[:, 0], positions)
+    def resampled(self, times) -> "JointTrajectory":
+        """The trajectory linearly interpolated at new `times` [s] (strictly increasing, inside
+        `time_range`); vectorised over the new times."""
+        t = np.asarray(times, dtype=float)
+        t0, t1 = self.time_range
+        if t.ndim != 1 or len(t) < 2 or not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0.0):
+            raise ValueError("times must be a 1-D array of at least 2 strictly increasing finite values [s]")
+        if t[0] < t0 or t[-1] > t1:
+            raise ValueError(f"times: [{t[0]}, {t[-1]}] s reaches outside the trajectory's time range [{t0}, {t1}]")
+        k = np.clip(np.searchsorted(self.times, t, side="right") - 1, 0, len(self.times) - 2)
+        w = ((t - self.times[k]) / (self.times[k + 1] - self.times[k]))[:, None, None]
+        data = (1.0 - w) * self._data[k] + w * self._data[k + 1]
+        return JointTrajectory(t, {name: data[:, i] for i, name in enumerate(self.names)})
 
 
 # ------------------------------------------------------------------------------------------------

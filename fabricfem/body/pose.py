@@ -21,6 +21,7 @@ import numpy as np
 
 from fabricfem.body.ellipsoid import Ellipsoid, _as_points, nearest_gap
 from fabricfem.body.motion import KinematicsSource
+from fabricfem.body.schedule import SegmentSchedule
 
 MIN_SEGMENT_LENGTH = 1e-9    # m: J1 and J2 closer than this are treated as coincident
 MIN_MARKER_OFFSET = 1e-9     # m: marker closer than this to the long axis does not fix a direction
@@ -112,9 +113,11 @@ class Body:
     Args:
         segments: the segments (unique names).
         kinematics: source of joint and marker positions over time (see `fabricfem.body.motion`).
+        schedule: segment groups switched off over time intervals (`active(t)`); default: all on.
     """
 
-    def __init__(self, segments: Sequence[Segment], kinematics: KinematicsSource):
+    def __init__(self, segments: Sequence[Segment], kinematics: KinematicsSource,
+                 schedule: SegmentSchedule | None = None):
         names = [s.name for s in segments]
         if len(names) == 0:
             raise ValueError("segments must not be empty")
@@ -128,6 +131,37 @@ class Body:
                                  f"(available: {sorted(available)})")
         self.segments: dict[str, Segment] = {s.name: s for s in segments}
         self.kinematics = kinematics
+        self.schedule = schedule
+        if schedule is not None:
+            for group, (names, _) in schedule.groups.items():
+                try:
+                    self.check_segments(names)
+                except ValueError as err:
+                    raise ValueError(f"schedule group {group!r}: {err}") from None
+
+    def check_segments(self, names: Sequence[str]) -> list[str]:
+        """The segment names as a list; ValueError for an empty set or naming the unknown segments."""
+        names = [names] if isinstance(names, str) else list(names)
+        if not names:
+            raise ValueError("segments: the segment set is empty")
+        unknown = [n for n in names if n not in self.segments]
+        if unknown:
+            raise ValueError(f"segments: unknown segments {unknown} (known: {list(self.segments)})")
+        return names
+
+    def check_joint(self, name: str) -> list[str]:
+        """The segments that share joint `name` (as J1 or J2); ValueError naming the joint when fewer than
+        two do (a torque about it would have no distal/proximal pair)."""
+        sharing = [n for n, s in self.segments.items() if name in (s.proximal, s.distal)]
+        if len(sharing) < 2:
+            raise ValueError(f"joint {name!r} is shared by {len(sharing)} segment(s) {sharing}, need 2 "
+                             f"(joints: {list(self.joints)})")
+        return sharing
+
+    def active(self, t: float) -> list[str]:
+        """Names of the segments switched on at time t [s] (all without a schedule), in segment order."""
+        off = self.schedule.inactive(t) if self.schedule is not None else set()
+        return [n for n in self.segments if n not in off]
 
     @property
     def joints(self) -> tuple[str, ...]:
@@ -175,10 +209,17 @@ class Body:
         return out
 
     def gap(self, x, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Smallest gap over all segments at time t [s] (see `Ellipsoid.gap`).
+        """Smallest gap over the segments active at time t [s] (see `Ellipsoid.gap`, `active`).
 
         Returns:
-            (g [m] (N,), unit outward normal (N, 3), index (N,) into `list(self.segments)`).
+            (g [m] (N,), unit outward normal (N, 3), index (N,) into `list(self.segments)`); with no
+            segment active: g = inf, normal 0, index -1.
         """
         pts, _ = _as_points(x)
-        return nearest_gap(pts, list(self.pose(t).values()))
+        active = self.active(t)
+        if not active:
+            return np.full(len(pts), np.inf), np.zeros((len(pts), 3)), np.full(len(pts), -1, dtype=np.int64)
+        posed = self.pose(t)
+        g, n, k = nearest_gap(pts, [posed[name] for name in active])
+        order = np.array([list(self.segments).index(name) for name in active], dtype=np.int64)
+        return g, n, order[k]
