@@ -12,7 +12,7 @@ from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
 from fabricfem.dynamics import stability
 from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
 from fabricfem.meshes import plate, tube
-from fabricfem.scenes import schema
+from fabricfem.scenes import schema, wear
 from fabricfem.scenes.schema import Scene, SceneError
 from fabricfem.scenes.sections import DynamicsSection, FabricSection, MeshSection, ModelSection, from_table, section
 from fabricfem.wear.config import SECTIONS, ContactSpec, FabricSpec, FlexionSpec, RouteSpec, SleeveConfig, TubeSpec
@@ -140,9 +140,13 @@ def check_size(data: dict) -> None:
                          f"{have / 2**30:.0f} GiB; use fewer cells or set mesh.allow_large = true")
 
 
-def check_objects(data: dict) -> None:
+def check_objects(data: dict, path: Path | None = None) -> None:
     """Checks that need objects: an explicit dynamic scene's numeric dt must not exceed the critical time step
-    (unless dynamics.force = true)."""
+    (unless dynamics.force = true); a wear scene's fabric, body, motion (the file is read), monitors and pattern
+    (read and checked, not meshed) are built (`path`: the scene file, for relative file names)."""
+    if "garment" in data or data.get("scene", {}).get("kind") == "wear":
+        check_wear_objects(data, path)
+        return
     check_size(data)
     build_fabric(data["fabric"])                      # every fabric value checked before meshing
     if schema.SLEEVE_SECTIONS & set(data):
@@ -170,5 +174,19 @@ def validate(data: dict, source: str = "scene") -> Scene:
 def load(path: str | Path) -> Scene:
     """Read a scene file and validate it completely (data and objects) before anything is meshed."""
     scene = schema.load(path)
-    check_objects(scene.data)
+    check_objects(scene.data, scene.path)
     return scene
+
+
+def check_wear_objects(data: dict, path: Path | None) -> None:
+    """The object checks of a wear scene before meshing (module docstring of fabricfem.scenes.wear)."""
+    route = wear.route_of(data)
+    if route == "sleeve":
+        sleeve_config(wear.sleeve_data(data))
+        return
+    if route == "compression":
+        check_objects(wear.compression_data(data))
+        return
+    fabric = wear.wear_fabric(data, build_fabric)
+    wear.plan(data, fabric, path)
+    wear.check_garment(data, path)

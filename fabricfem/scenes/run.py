@@ -27,6 +27,7 @@ from fabricfem.contact.problem import ContactProblem
 from fabricfem.dynamics import CentralDifference, NewmarkIntegrator, critical_time_step, node_monitor
 from fabricfem.dynamics.strain_limit import FastProjection, attach
 from fabricfem.dynamics.ts import GeneralizedAlphaIntegrator
+from fabricfem.scenes import wear
 from fabricfem.scenes.build import build_fabric, build_mesh, sleeve_config
 from fabricfem.scenes.schema import Scene, SceneError, donning_start
 from fabricfem.scenes.sections import (
@@ -44,7 +45,8 @@ from fabricfem.solvers.loadstep import LoadStep, solve_load_path
 from fabricfem.solvers.newton import NewtonSolver
 from fabricfem.solvers.system import base_model
 from fabricfem.wear.compression import fit_sleeve, pressure_report
-from fabricfem.wear.run import run_sleeve_scene
+from fabricfem.wear.garment import build_garment_run
+from fabricfem.wear.run import run_sleeve_scene, run_wear
 
 
 def _components(values, n: int, where: str):
@@ -143,7 +145,9 @@ def run_scene(scene: Scene, comm=MPI.COMM_WORLD) -> SceneOutcome:
     out = output_dir(scene)
     folder = io.OutputFolder(out, scene_sha256(scene), comm)
     try:
-        if scene.kind == "sleeve":
+        if scene.kind == "wear":
+            result = run_wear_scene(scene, out, comm)
+        elif scene.kind == "sleeve":
             config = sleeve_config(scene.data)
             output = section(OutputSection, scene.get("output"))
             result = run_sleeve_scene(config, out, output.render, output.render_angles, output.body_samples, comm)
@@ -158,8 +162,42 @@ def run_scene(scene: Scene, comm=MPI.COMM_WORLD) -> SceneOutcome:
         raise
     failure = getattr(result, "failure", "")
     status = f"stopped early: {failure}" if failure else "completed"
-    folder.finish(status)
+    summary = result.summary() if callable(getattr(result, "summary", None)) else None
+    folder.finish(status, summary)
     return SceneOutcome(result, status, out)
+
+
+def run_wear_scene(scene: Scene, out: Path, comm=MPI.COMM_WORLD):
+    """`fabricfem run` for wear scenes (fabricfem.scenes.wear): the sleeve's and the compression sleeve's own
+    routes, or the explicit engine (fabricfem.wear.garment) for any garment on any body."""
+    data = scene.data
+    route = wear.route_of(data)
+    if route == "sleeve":
+        sleeve = wear.sleeve_data(data)
+        output = section(OutputSection, sleeve.get("output"))
+        return run_sleeve_scene(sleeve_config(sleeve), out, output.render, output.render_angles, output.body_samples,
+                                comm)
+    if route == "compression":
+        return run_compression_scene(Scene(wear.compression_data(data), scene.path, "compression"), comm)
+    fabric = wear.wear_fabric(data, build_fabric)
+    plan = wear.plan(data, fabric, scene.path)
+    fmesh, seams, holds = wear.garment_mesh(data, scene.path, comm)
+    garment = section(wear.GarmentSection, data["garment"])
+    name = scene_name(scene)
+    run = build_garment_run(name, fmesh, fabric, plan.body, seams=seams, holds=holds, torques=plan.torques,
+                            timeline=plan.timeline, settings=plan.settings,
+                            contact_method=plan.contact.method or "lagrange", friction=plan.contact.friction,
+                            penalty=plan.contact.penalty,
+                            psri_degrees=tuple(garment.quadrature) if garment.quadrature else (4, 2), axis=plan.axis)
+    output = data.get("output", {})
+    render_at = output.get("render_at")
+    if render_at is None:
+        end = run.phases[-1].records * plan.timeline.record_time
+        render_at = ([plan.axis[1](f * end) for f in (1 / 3, 2 / 3, 1.0)] if plan.axis is not None else
+                     [run.duration * f for f in (1 / 3, 2 / 3, 1.0)])
+    headline = (f"{name}: {run.model.ndofs} dofs, {len(seams)} seams, body {list(plan.body.segments)}, "
+                f"{comm.size} rank(s); mu = {plan.contact.friction}, {run.contact.method} contact; {run.describe()}")
+    return run_wear(run, out, headline, render_at, output.get("render", True), output.get("body_samples", 24))
 
 
 def run_static_scene(scene: Scene, comm=MPI.COMM_WORLD) -> list[LoadStep]:

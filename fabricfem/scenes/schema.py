@@ -96,7 +96,6 @@ with both numbers unless force = true.
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import importlib.util
 import math
 import tomllib
@@ -107,6 +106,8 @@ from typing import Any
 
 from fabricfem.body.arm import ArmDimensions
 from fabricfem.parameters import param_doc
+from fabricfem.scenes.errors import SceneError
+from fabricfem.scenes.errors import suggest as _suggest
 from fabricfem.scenes.sections import (
     DonningSection,
     DynamicsSection,
@@ -123,6 +124,7 @@ from fabricfem.scenes.sections import (
     SupportSection,
     schema_of,
 )
+from fabricfem.scenes.wear import check_wear
 from fabricfem.wear.config import ContactSpec, FlexionSpec, RouteSpec, TubeSpec
 
 # section -> the dataclass(es) that declare its keys, types, defaults and units (fabricfem.scenes.sections, and
@@ -195,7 +197,7 @@ LIST_SECTIONS = {"support", "load"}
 REQUIRED_SECTIONS = {"mesh", "fabric", "solver"}
 SLEEVE_SECTIONS = {"body", "motion", "contact", "route"}   # a scene with any of them is a sleeve scene
 SLEEVE_MESH_KEYS = set(schema_of(TubeSpec)) - {"length", "radius", "n_around", "n_along"}   # sleeve-only [mesh] keys
-KINDS = ("static", "dynamic", "sleeve", "compression")
+KINDS = ("static", "dynamic", "sleeve", "compression", "wear")
 # keys of older scene files that moved: old -> new (refused with the new name)
 MOVED_KEYS = {"motion.steps": "motion.angle_steps", "motion.solver": "route.solver",
               "motion.mass_damping": "route.mass_damping", "motion.rotary_inertia_scale": "route.rotary_inertia_scale",
@@ -207,15 +209,6 @@ CELLS = ("quadrilateral", "triangle")
 EDGES = {"plate": ("left", "right", "bottom", "top"), "tube": ("end0", "end1")}   # edge tags of the builders
 MESH_KEYS = {"plate": {"lx", "ly", "nx", "ny"}, "tube": {"length", "radius", "n_around", "n_along"}}
 LOAD_TYPES = {"gravity", "body_force", "edge_traction", "pressure", "edge_moment", "point"}
-
-
-class SceneError(ValueError):
-    """A scene file that cannot be run; the message names the offending key."""
-
-
-def _suggest(name: str, options) -> str:
-    close = difflib.get_close_matches(name, list(options), n=1)
-    return f" (did you mean {close[0]!r}?)" if close else ""
 
 
 def _check_table(section: str, table: dict, where: str):
@@ -254,6 +247,9 @@ class Scene:
 
 def validate(data: dict, source: str = "scene") -> Scene:
     """Check sections, keys, types and cross-references; raise SceneError naming the problem."""
+    if "garment" in data or data.get("scene", {}).get("kind") == "wear":
+        check_wear(data, source)
+        return Scene(data, kind="wear")
     for section in data:
         if section not in SCHEMA:
             raise SceneError(f"{source}: unknown section [{section}]{_suggest(section, SCHEMA)}; "

@@ -148,6 +148,8 @@ class OutputSection:
     render: bool = doc("write PNG renders", True)
     render_angles: list | None = doc("sleeve: elbow angles [deg] of the pressure renders (default: thirds)", None)
     body_samples: int = doc("sleeve: points per ellipsoid ring of the body surfaces", 24)
+    render_at: list | None = doc("wear: record coordinates (angle [deg] or time [s]) of the pressure renders "
+                                 "(default: the thirds of the motion)", None)
 
 
 @dataclasses.dataclass(frozen=True)

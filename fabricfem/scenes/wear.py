@@ -21,19 +21,27 @@ from pathlib import Path
 import numpy as np
 
 from fabricfem.body.arm import ArmDimensions, default_arm, elbow_flexion
+from fabricfem.body.lower_body import LowerBodyDimensions, lower_body, standing, winter_walking
+from fabricfem.body.mocap import load_motion
 from fabricfem.body.pose import Body, Segment
+from fabricfem.body.schedule import SegmentSchedule
 from fabricfem.contact.seams import SeamSpec
 from fabricfem.dynamics.stability import plane_stress_wave_speed
 from fabricfem.fabrics import load_fabric
+from fabricfem.meshes import tube
+from fabricfem.meshes.pattern import Panel, check_pattern, read_garmentcode, read_pattern_toml
+from fabricfem.meshes.pattern_mesh import RigidPlacement, mesh_pattern
 from fabricfem.parameters import param as doc
-from fabricfem.scenes.schema import SceneError, _suggest
+from fabricfem.patterns import pattern_path
+from fabricfem.scenes.errors import SceneError
+from fabricfem.scenes.errors import suggest as _suggest
 from fabricfem.scenes.sections import FabricSection, OutputSection, SceneSection, from_table, schema_of
 from fabricfem.wear.config import ContactSpec, FlexionSpec, RouteSpec, TubeSpec
 from fabricfem.wear.garment import ExplicitSettings, Timeline, TorqueSpec
 
 GRAVITY = 9.81                     # m/s^2
-BODY_TYPES = ("arm", "default_arm", "limb")
-MOTION_TYPES = ("elbow_flexion", "still")
+BODY_TYPES = ("arm", "default_arm", "limb", "lower_body")
+MOTION_TYPES = ("elbow_flexion", "still", "walking", "file")
 BUILDERS = ("tube", "pattern")
 
 
@@ -49,6 +57,7 @@ class GarmentSection:
     order: int = doc("geometry order (2: curved edges and tubes without facets)", 2)
     stitch_tolerance: float = doc("pattern: largest relative length difference of stitched edges", 0.02)
     sewing_time: float = doc("pattern: time the seams take to close [s] (0: they must start closed)", 0.0)
+    scale: float = doc("pattern: grading factor on the panels' outlines and placements (1: as drawn)", 1.0)
     rotate: list | None = doc("pattern: [rx, ry, rz] extrinsic XYZ Euler angles [deg] applied to the placed garment "
                               "(GarmentCode files are Y-up: [90, 0, 0] turns them Z-up)", None)
     translate: list | None = doc("pattern: [x, y, z] [m] added after `rotate`", None)
@@ -71,20 +80,33 @@ class WearFabricSection:
 @dataclasses.dataclass(frozen=True)
 class WearBodySection:
     """[body]: the wearer, a preset of named ellipsoid segments: arm (upper arm + forearm, ANSUR II; the keys of
-    ArmDimensions), limb (one ellipsoid along x: center, radii)."""
+    ArmDimensions), lower_body (trunk, pelvis, thighs, shanks, feet, ANSUR II; the keys of LowerBodyDimensions),
+    limb (one ellipsoid along x: center, radii)."""
 
-    type: str = doc("arm | limb (default_arm = arm)")
+    type: str = doc("arm | lower_body | limb (default_arm = arm)")
     center: list | None = doc("limb: [x, y, z] centre [m]", None)
     radii: list | None = doc("limb: [r1, r2, r3] semi-axes along x, y, z [m]", None)
 
 
 @dataclasses.dataclass(frozen=True)
 class WearMotionSection:
-    """[motion]: what drives the body: elbow_flexion (arm; FlexionSpec's keys) or still (the start pose held)."""
+    """[motion]: what drives the body: elbow_flexion (arm; FlexionSpec's keys), still (the start pose held),
+    walking (lower body: Winter's normative gait, both legs) or file (a C3D, TRC, BVH or CSV motion capture with
+    a mapping of its markers or joints to the body's joint and marker names)."""
 
-    type: str = doc("elbow_flexion | still")
-    duration: float | None = doc("still: length of the motion phase [s]", None)
+    type: str = doc("elbow_flexion | still | walking | file")
+    duration: float | None = doc("still: length of the motion phase [s]; file, walking: at most this long", None)
     record_time: float | None = doc("record interval [s] (elbow_flexion: output_angle_step / angular velocity)", None)
+    strides: int = doc("walking: gait cycles", 2)
+    cycle_time: float = doc("walking: duration of one gait cycle [s]", 0.987)
+    speed: float = doc("walking: forward speed of the pelvis [m/s]", 1.43)
+    path: str | None = doc("file: the motion file (.c3d, .trc, .bvh, .csv), relative to the scene file", None)
+    units: str | None = doc("file: length unit of the file (mm, cm, m, in; default the file's metadata; BVH: "
+                            "required)", None)
+    up: str | None = doc("file: the file's up axis (y: mapped to z; default the reader's)", None)
+    fill_gaps: bool = doc("file: fill marker gaps by interpolation instead of refusing them", False)
+    mapping: dict | None = doc("file: body joint/marker name -> file marker or joint name (default: the same "
+                               "names)", None)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -93,6 +115,9 @@ class WearDonningSection:
     size over `time` [s] (explicit) or in `steps` quasi-static increments (the compression route)."""
 
     method: str = doc("none | grow", "none")
+    remove: list | None = doc("segments switched off while the garment goes on (the thesis removes the feet)", None)
+    restore_at: float | None = doc("time [s] at which the removed segments come back (default: the motion's start)",
+                                   None)
     start: float | None = doc("grow: starting size of the body's transverse radii (0, 1]", None)
     time: float = doc("grow, explicit: growth time [s]", 0.1)
     steps: int = doc("grow, quasistatic: growth increments", 10)
@@ -109,21 +134,13 @@ class TorqueSection:
     segments: list = doc("segment names whose contact forces count")
 
 
-@dataclasses.dataclass(frozen=True)
-class WearOutputSection:
-    """[output] of a wear scene: the keys of [output] and the record coordinates of the renders."""
-
-    render_at: list | None = doc("record coordinates (angle [deg] or time [s]) of the pressure renders (default: "
-                                 "the thirds of the motion)", None)
-
-
 # section -> the dataclasses that declare its keys (the wear kind's own table; fabricfem.scenes.schema has the
 # other kinds')
 WEAR_SECTION_CLASSES: dict[str, tuple] = {
     "scene": (SceneSection,), "garment": (GarmentSection,), "fabric": (FabricSection, WearFabricSection),
-    "body": (WearBodySection, ArmDimensions), "motion": (WearMotionSection, FlexionSpec),
+    "body": (WearBodySection, ArmDimensions, LowerBodyDimensions), "motion": (WearMotionSection, FlexionSpec),
     "donning": (WearDonningSection,), "contact": (ContactSpec,), "route": (RouteSpec,), "torque": (TorqueSection,),
-    "output": (OutputSection, WearOutputSection)}
+    "output": (OutputSection,)}
 WEAR_LIST_SECTIONS = {"torque"}
 
 
@@ -241,7 +258,6 @@ def wear_fabric(data: dict, build_fabric):
 
 def pattern_file(data: dict, scene_path: Path | None) -> Path:
     """The pattern file of [garment] pattern: a shipped name, or a path (relative to the scene file)."""
-    from fabricfem.patterns import pattern_path
     name = data["garment"]["pattern"]
     candidate = Path(name)
     if not candidate.is_absolute() and scene_path is not None:
@@ -284,78 +300,151 @@ class WearPlan:
     settings: ExplicitSettings
     contact: ContactSpec
     axis: tuple | None
-    gravity_ramp: float
 
 
-def plan(data: dict, fabric) -> WearPlan:
+def _fields(cls, table: dict):
+    """An instance of dataclass `cls` from the keys of `table` that are its fields (SceneError naming the key)."""
+    try:
+        return from_table(cls, {k: v for k, v in table.items() if k in cls.__dataclass_fields__})
+    except ValueError as exc:
+        raise SceneError(f"{exc}") from None
+
+
+def _motion_file(motion: dict, scene_path: Path | None, body_names) -> object:
+    """The kinematics of [motion] type = "file": the file read, mapped to the body's joint and marker names."""
+    if not motion.get("path"):
+        raise SceneError("motion.path: a file motion needs the path of its motion file")
+    path = Path(motion["path"])
+    if not path.is_absolute() and scene_path is not None:
+        path = Path(scene_path).parent / path
+    if not path.is_file():
+        raise SceneError(f"motion.path: no motion file {str(path)!r}")
+    mapping = motion.get("mapping") or {name: name for name in body_names}
+    try:
+        return load_motion(path, mapping, units=motion.get("units"), up=motion.get("up"),
+                           fill_gaps=motion.get("fill_gaps", False))
+    except ValueError as exc:
+        raise SceneError(f"motion.path: {exc}") from None
+
+
+def plan(data: dict, fabric, scene_path: Path | None = None) -> WearPlan:
     """Body, monitors, phases and explicit settings of a wear scene on the engine (SceneError naming the key)."""
     body_spec, motion_spec = data["body"], data["motion"]
+    kind, motion = body_spec["type"], motion_spec["type"]
     donning = from_table(WearDonningSection, data.get("donning", {}))
     route = from_table(RouteSpec, data.get("route", {}))
     contact = from_table(ContactSpec, data.get("contact", {}))
     garment = from_table(GarmentSection, data["garment"])
-    axis, torques = None, []
+    axis, torques, damping, similarity = None, [], route.mass_damping, 1.0
     gravity = (0.0, 0.0, -GRAVITY)
-    if body_spec["type"] in ("arm", "default_arm"):
-        dims = from_table(ArmDimensions, {k: v for k, v in body_spec.items() if k in ArmDimensions.__dataclass_fields__})
+    duration = motion_spec.get("duration")
+    record_time = float(motion_spec.get("record_time") or 0.01)
+    settle = float(motion_spec.get("settle_time", 0.0)) if "settle_time" in motion_spec else 0.0
+    if kind in ("arm", "default_arm"):
+        dims = _fields(ArmDimensions, body_spec)
         gravity = (0.0, -GRAVITY, 0.0)       # the sleeve's convention: the forearm rotates up, towards +y
         torques = [TorqueSpec("elbow", "elbow", (0.0, 0.0, 1.0), ("forearm",)),
                    TorqueSpec("elbow_both_segments", "elbow", (0.0, 0.0, 1.0), ("upper_arm", "forearm"))]
-    if motion_spec["type"] == "elbow_flexion":
-        flex = from_table(FlexionSpec, {k: v for k, v in motion_spec.items() if k in FlexionSpec.__dataclass_fields__})
-        similarity = 1.0
-        if route.dynamic_similarity:
-            E_ref, rho_ref = route.similarity_reference
-            similarity = plane_stress_wave_speed(fabric) / math.sqrt(E_ref / rho_ref)
-        omega = math.radians(flex.angular_velocity * similarity)
-        flexion = elbow_flexion(dims, angular_velocity=omega, final_angle=math.radians(flex.final_angle))
-        body = default_arm(flexion, dims)
-        record_time = math.radians(flex.output_angle_step) / omega
-        motion_time = math.radians(flex.final_angle) / omega
-        settle = flex.settle_time / similarity if route.gravity else 0.0
-        axis = ("elbow angle [deg]", lambda t: min(math.degrees(flexion.angle(t)), flex.final_angle))
-        damping = route.mass_damping * similarity
-    else:
-        duration = float(motion_spec.get("duration", 0.0))
-        record_time = float(motion_spec.get("record_time", 0.01))
-        if body_spec["type"] == "limb":
-            body = limb_body(body_spec["center"], body_spec["radii"], duration)
+        if motion == "elbow_flexion":
+            flex = _fields(FlexionSpec, motion_spec)
+            if route.dynamic_similarity:
+                E_ref, rho_ref = route.similarity_reference
+                similarity = plane_stress_wave_speed(fabric) / math.sqrt(E_ref / rho_ref)
+            omega = math.radians(flex.angular_velocity * similarity)
+            flexion = elbow_flexion(dims, angular_velocity=omega, final_angle=math.radians(flex.final_angle))
+            kinematics = flexion
+            record_time = math.radians(flex.output_angle_step) / omega
+            duration = math.radians(flex.final_angle) / omega
+            settle = flex.settle_time / similarity if route.gravity else 0.0
+            axis = ("elbow angle [deg]", lambda t: min(math.degrees(flexion.angle(t)), flex.final_angle))
+            damping = route.mass_damping * similarity
         else:
-            body = default_arm(StillPose(default_arm().kinematics.positions(0.0), duration), dims)
-        motion_time = duration
-        settle = float(motion_spec.get("settle_time", 0.0))
-        damping = route.mass_damping
-    for spec in data.get("torque", []):
+            kinematics = StillPose(default_arm(dimensions=dims).kinematics.positions(0.0), duration or 0.0)
+        body = default_arm(kinematics, dims)
+    elif kind == "limb":
+        body = limb_body(body_spec["center"], body_spec["radii"], duration or 0.0)
+    else:
+        dims = _fields(LowerBodyDimensions, body_spec)
+        if motion == "walking":
+            kinematics = winter_walking(dims, strides=int(motion_spec.get("strides", 2)),
+                                        cycle_time=float(motion_spec.get("cycle_time", 0.987)),
+                                        speed=float(motion_spec.get("speed", 1.43)))
+        elif motion == "file":
+            kinematics = _motion_file(motion_spec, scene_path, standing(dims).names)
+        else:
+            kinematics = standing(dims, duration=duration or 0.0)
+        body = lower_body(dims, kinematics)
+    if motion in ("walking", "file") and duration is not None:
+        start, end = body.kinematics.time_range
+        duration = min(float(duration), end - start)
+    for i, spec in enumerate(data.get("torque", [])):
         torques.append(TorqueSpec(spec["name"], spec["joint"], tuple(spec["axis"]), tuple(spec["segments"])))
+        try:
+            body.check_joint(spec["joint"])
+            body.check_segments(spec["segments"])
+        except ValueError as exc:
+            raise SceneError(f"torque[{i}]: {exc}") from None
     grow_from = donning.start if (donning.method == "grow" and donning.start is not None) else 1.0
     try:
         timeline = Timeline(record_time=record_time, sewing_time=garment.sewing_time,
                             donning_time=donning.time if donning.method == "grow" else 0.0, grow_from=grow_from,
-                            settle_time=settle, motion_time=motion_time)
+                            settle_time=settle, motion_time=duration)
     except ValueError as exc:
         raise SceneError(f"donning: {exc}") from None
+    if donning.remove:
+        t_motion = timeline.records(timeline.sewing_time + timeline.donning_time + timeline.settle_time) * record_time
+        restore = t_motion if donning.restore_at is None else float(donning.restore_at)
+        try:
+            body.check_segments(donning.remove)
+            schedule = SegmentSchedule({"removed": (list(donning.remove), [(-1.0, restore)])})
+            body = Body(list(body.segments.values()), body.kinematics, schedule)
+        except ValueError as exc:
+            raise SceneError(f"donning.remove: {exc}") from None
     settings = ExplicitSettings(mass_damping=damping, rotary_inertia_scale=route.rotary_inertia_scale,
                                 time_step_safety=route.time_step_safety, gravity=gravity if route.gravity else None)
-    return WearPlan(body, torques, timeline, settings, contact, axis, garment.sewing_time)
+    return WearPlan(body, torques, timeline, settings, contact, axis)
+
+
+def read_pattern(data: dict, scene_path: Path | None):
+    """The [garment] pattern, read, graded by `scale` and checked (stitches, outlines, stitched lengths) before
+    meshing (SceneError naming the item)."""
+    g = from_table(GarmentSection, data["garment"])
+    path = pattern_file(data, scene_path)
+    try:
+        pattern = read_pattern_toml(path) if path.suffix == ".toml" else read_garmentcode(path)
+        if g.scale != 1.0:
+            pattern = dataclasses.replace(pattern, panels={name: dataclasses.replace(
+                p, vertices=g.scale * np.asarray(p.vertices), translation=g.scale * np.asarray(p.translation))
+                for name, p in pattern.panels.items()})
+        check_pattern(pattern, g.stitch_tolerance)
+    except ValueError as exc:
+        raise SceneError(f"garment.pattern: {exc}") from None
+    return pattern
+
+
+def check_garment(data: dict, scene_path: Path | None) -> None:
+    """The garment's checks before meshing: a pattern is read and checked; a tube's sizes are positive."""
+    g = from_table(GarmentSection, data["garment"])
+    if g.builder == "pattern":
+        read_pattern(data, scene_path)
+    else:
+        for key in ("length", "radius", "n_around", "n_along"):
+            if not getattr(g, key) > 0:
+                raise SceneError(f"garment.{key}: must be positive, got {getattr(g, key)!r}")
+    if g.h <= 0 or g.sewing_time < 0 or g.scale <= 0:
+        raise SceneError("garment: h and scale must be positive and sewing_time >= 0 "
+                         f"(got h = {g.h}, scale = {g.scale}, sewing_time = {g.sewing_time})")
 
 
 def garment_mesh(data: dict, scene_path: Path | None, comm):
     """(FabricMesh, seams [SeamSpec], hold tags) of [garment]."""
     g = from_table(GarmentSection, data["garment"])
     if g.builder == "tube":
-        from fabricfem.meshes import tube
         return tube(g.length, g.radius, g.n_around, g.n_along, cell="quadrilateral", order=g.order, comm=comm), [], \
             list(g.hold)
-    from fabricfem.meshes.pattern import read_garmentcode, read_pattern_toml
-    from fabricfem.meshes.pattern_mesh import RigidPlacement, mesh_pattern
-    path = pattern_file(data, scene_path)
-    try:
-        pattern = read_pattern_toml(path) if path.suffix == ".toml" else read_garmentcode(path)
-    except ValueError as exc:
-        raise SceneError(f"garment.pattern: {exc}") from None
+    pattern = read_pattern(data, scene_path)
     rotation = np.eye(3)
     if g.rotate is not None:
-        from fabricfem.meshes.pattern import Panel
         rotation = Panel("frame", np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), rotation=tuple(g.rotate)
                          ).rotation_matrix()
     shift = np.zeros(3) if g.translate is None else np.asarray(g.translate, dtype=float)

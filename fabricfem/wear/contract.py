@@ -40,8 +40,12 @@ class WearRun(Protocol):
     def pressure_field(self) -> fem.Function:
         """The contact pressure on the body [Pa] per unit deformed cloth area at the last record."""
 
-    def posed_bodies(self, angle: float) -> list:
-        """The body's ellipsoid segments at joint angle `angle` [deg]."""
+    def posed_bodies(self, coordinate: float) -> list:
+        """The body's ellipsoid segments at a record coordinate (the steps' `coordinate`: a joint angle [deg]
+        or a time [s])."""
+
+    def fraction(self, step) -> float:
+        """The done fraction in [0, 1] of the run at record `step` (progress and time left)."""
 
     def destroy(self) -> None:
         """Free the PETSc objects of the route."""

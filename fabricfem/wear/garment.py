@@ -139,9 +139,21 @@ class WearStep:
         """The record's coordinate on the run's axis (GarmentRun.axis: time [s] or a joint angle [deg])."""
         return self.axis_value if self.axis_value is not None else self.time
 
+    @property
+    def output_time(self) -> float:
+        """The record's time coordinate in the output files (the body time [s], increasing)."""
+        return self.time
+
     def work(self) -> str:
         ratio = self.kinetic_energy / self.strain_energy if self.strain_energy else 0.0
         return f"steps {self.time_steps:5d}  KE/SE {ratio:.1e}"
+
+    def line(self) -> str:
+        """The record's progress line: phase, time (and axis), torques, peak pressure, seam gap, work."""
+        axis = f" ({self.axis_value:6.2f})" if self.axis_value is not None else ""
+        torques = "".join(f"  {n} {v:+.4e} N m" for n, v in self.torques.items())
+        return (f"{self.phase:6s} t {self.time:7.4f} s{axis}{torques}  peak p {self.peak_pressure / 1e3:7.3f} kPa"
+                f"  seam gap {self.seam_gap:.1e} m  penetration {self.max_penetration:.1e} m  {self.work()}")
 
 
 @dataclass
@@ -203,12 +215,16 @@ class WearHistory:
         out: dict = {"records": len(self.steps), "completed": self.completed}
         if not self.steps:
             return out
-        t = self.times
+        # torque peaks over the motion (the settling and donning records carry the garment's landing)
+        motion = [s for s in self.steps if s.phase == "motion"] or self.steps
         for name in self.monitors:
-            tau = self.torque(name)
+            tau = np.array([s.torques[name] for s in motion])
             k = int(np.argmax(np.abs(tau)))
-            out[f"torque_{name}"] = {"peak_Nm": float(tau[k]), "peak_time_s": float(t[k]),
-                                     "final_Nm": float(tau[-1]), "final_time_s": float(t[-1])}
+            entry = {"peak_Nm": float(tau[k]), "peak_time_s": motion[k].time,
+                     "final_Nm": float(tau[-1]), "final_time_s": motion[-1].time}
+            if motion[k].axis_value is not None:
+                entry.update(peak_at=motion[k].axis_value, final_at=motion[-1].axis_value)
+            out[f"torque_{name}"] = entry
         k = int(np.argmax([s.peak_pressure for s in self.steps]))
         peak = self.steps[k]
         contact = [s.mean_pressure for s in self.steps if s.mean_pressure > 0.0]
@@ -296,6 +312,10 @@ class GarmentRun:
                   else self.contact.segment_active(time_s))
         return [e for e, on in zip(self.contact.body_at(time_s), active) if on]
 
+    def fraction(self, step: WearStep) -> float:
+        """The done fraction of the run at record `step` (body time over the run's duration)."""
+        return step.time / self.duration
+
     def destroy(self) -> None:
         self.integrator.destroy()
         if self.strain is not None:
@@ -361,7 +381,6 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
                       holds: Sequence[str] = (), torques: Sequence[TorqueSpec] = (), timeline: Timeline = Timeline(),
                       settings: ExplicitSettings = ExplicitSettings(), contact_method: str = "lagrange",
                       friction: float = 0.0, penalty: float | None = None,
-                      segment_active: Callable[[float], np.ndarray] | None = None,
                       psri_degrees: tuple[int, int] = (4, 2), measure_strain: bool = True,
                       config: object = None, axis: tuple[str, Callable[[float], float]] | None = None) -> GarmentRun:
     """Shell, seams, body contact, monitors, integrator and phases of a garment run (module docstring).
@@ -372,21 +391,18 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
         body: the wearer; its kinematics start after the sewing, donning and settling phases.
         seams: the stitches to sew and hold (fabricfem.contact.seams); sewn during `timeline.sewing_time`.
         torques: the torque monitors (their segments and joints are checked against the body).
-        segment_active: t -> (K,) bool of the segments that take contact (donning removes the feet), or None.
+        body.schedule (fabricfem.body.schedule.SegmentSchedule, on the run's clock): segments switched off while
+            the garment goes on (the thesis removes the feet); they take no contact while off.
         axis: (label, motion time [s] -> value): the records' coordinate (e.g. the elbow angle [deg]); None: time.
     """
     if fabric.density <= 0.0:
         raise ValueError("density: the explicit engine needs a positive fabric density [kg/m^3]")
     for spec in torques:
-        body_joints = body.joints
-        if spec.joint not in body_joints:
-            raise ValueError(f"torques.{spec.name}.joint: {spec.joint!r} is not a joint of the body {list(body_joints)}")
-        sharing = [n for n, s in body.segments.items() if spec.joint in (s.proximal, s.distal)]
-        if len(sharing) < 2:
-            raise ValueError(f"torques.{spec.name}.joint: {spec.joint!r} joins fewer than two segments ({sharing})")
-        if not spec.segments or any(s not in body.segments for s in spec.segments):
-            raise ValueError(f"torques.{spec.name}.segments: {list(spec.segments)} names no or unknown segments "
-                             f"(body: {list(body.segments)})")
+        try:
+            body.check_joint(spec.joint)
+            body.check_segments(spec.segments)
+        except ValueError as exc:
+            raise ValueError(f"torques.{spec.name}: {exc}") from None
     model = ShellModel(fmesh, fabric, rebase=False, psri_degrees=psri_degrees)
     for tag in holds:
         model.constrain(tag, u=(0.0, 0.0, 0.0))
@@ -397,7 +413,7 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
     kin = body.kinematics
     motion_time = (kin.time_range[1] - kin.time_range[0]) if timeline.motion_time is None else timeline.motion_time
     posed = Body(list(body.segments.values()), DelayedKinematics(kin, timeline.records(t_motion) *
-                                                                    timeline.record_time))
+                                                                    timeline.record_time), body.schedule)
     contact = ExplicitBodyContact(model, posed, friction=friction, method=contact_method, penalty=penalty)
     for spec in torques:
         contact.track_torque(spec.name, spec.joint, spec.axis, spec.segments)
@@ -405,7 +421,9 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
         t_don0, t_don = timeline.records(timeline.sewing_time) * timeline.record_time, timeline.donning_time
         g0 = timeline.grow_from
         contact.transverse_scale = lambda t: g0 + (1.0 - g0) * smoothstep((t - t_don0) / t_don)
-    contact.segment_active = segment_active
+    if posed.schedule is not None:
+        names = list(posed.segments)
+        contact.segment_active = lambda t: np.isin(names, posed.active(t))
     ties = SeamTies(model, seams, sewing_time=timeline.sewing_time) if seams else None
     rayleigh = (settings.mass_damping, 0.0)
     omega = math.hypot(stability.max_frequency_estimate(model, settings.rotary_inertia_scale),
@@ -414,8 +432,13 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
     steps_per_record = math.ceil(timeline.record_time / (settings.time_step_safety * dt_estimate))
     dt = timeline.record_time / steps_per_record
     hooks = [contact] + ([ties] if ties else [])
-    integrator = CentralDifference(model, dt, rayleigh=rayleigh, dt_crit=dt_estimate, energy_bound=None,
-                                   rotary_inertia_scale=settings.rotary_inertia_scale, contact=hooks)
+    t_sewn = timeline.records(timeline.sewing_time) * timeline.record_time
+    # the garment's weight acts once it is sewn (panels would fall while their seams close), ramped on over
+    # a tenth of the sewing time
+    load = 1.0 if t_sewn == 0.0 else (lambda t: smoothstep((t - t_sewn) / (0.1 * t_sewn)))
+    integrator = CentralDifference(model, dt, load_factor=load, rayleigh=rayleigh, dt_crit=dt_estimate,
+                                   energy_bound=None, rotary_inertia_scale=settings.rotary_inertia_scale,
+                                   contact=hooks)
     phases = [Phase(n, timeline.records(d)) for n, d in
               (("sew", timeline.sewing_time), ("don", timeline.donning_time), ("settle", timeline.settle_time),
                ("motion", motion_time))]

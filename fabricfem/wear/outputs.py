@@ -26,8 +26,9 @@ def body_surface(ellipsoids, samples: int = 24) -> tuple[np.ndarray, np.ndarray]
     return np.concatenate(points), np.concatenate(cells)
 
 
-def plot_torque(path, curves: dict[str, tuple[np.ndarray, np.ndarray]], title: str = ""):
-    """Resisting torque [N m] vs elbow angle [deg] for named curves (PNG, rank 0)."""
+def plot_torque(path, curves: dict[str, tuple[np.ndarray, np.ndarray]], title: str = "",
+                xlabel: str = "elbow flexion angle [deg]"):
+    """Resisting torque [N m] against the record coordinate (`xlabel`) for named curves (PNG, rank 0)."""
     if MPI.COMM_WORLD.rank != 0:
         return
     import matplotlib  # optional heavy package: only when a plot is written
@@ -36,7 +37,7 @@ def plot_torque(path, curves: dict[str, tuple[np.ndarray, np.ndarray]], title: s
     fig, ax = plt.subplots(figsize=(6, 4))
     for label, (angle, torque) in curves.items():
         ax.plot(angle, torque, marker="o", ms=3, label=label)
-    ax.set_xlabel("elbow flexion angle [deg]")
+    ax.set_xlabel(xlabel)
     ax.set_ylabel("resisting torque [N m]")
     ax.set_title(title)
     ax.grid(True, alpha=0.3)

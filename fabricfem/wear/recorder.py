@@ -1,7 +1,7 @@
 """The recorder of a wear run: what `fabricfem run` writes while a garment moves on its wearer.
 
 Under the output folder: cloth.xdmf (garment displacement [m] and contact pressure on the body [Pa] per record,
-ParaView; the record coordinate, a time [s] or a joint angle [deg], is the XDMF time), body_NNNN.vtp + body.pvd
+ParaView; the XDMF time is the body time [s], or the angle [deg] of a quasi-static sleeve), body_NNNN.vtp + body.pvd
 (the posed body surfaces per record), torque.csv (the history's header), torque.png, torque.sto (OpenSim storage
 of the resisting torques against the body time), and pressure renders at the requested coordinates. It reads the
 run only through the wearer contract (fabricfem.wear.contract.WearRun).
@@ -42,18 +42,18 @@ class WearRecorder:
 
     def record(self, step) -> None:
         """Write the record of `step` (its coordinate is the time coordinate of the files)."""
-        run, x = self.run, step.coordinate
+        run, x, stamp = self.run, step.coordinate, step.output_time
         self.u_out.interpolate(run.model.displacement())
         self.p_out.interpolate(run.pressure_field())
-        self.xdmf.write_function(self.u_out, x)
-        self.xdmf.write_function(self.p_out, x)
+        self.xdmf.write_function(self.u_out, stamp)
+        self.xdmf.write_function(self.p_out, stamp)
         if run.comm.rank == 0:
             import pyvista as pv  # optional heavy package, loaded only when a render is made
             points, triangles = body_surface(run.posed_bodies(x), self.samples)
             name = f"body_{len(self.frames):04d}.vtp"
             faces = np.hstack([np.full((len(triangles), 1), 3), triangles]).ravel()
             pv.PolyData(points, faces).save(str(self.out / name))
-            self.frames.append((x, name))
+            self.frames.append((stamp, name))
         while self.render and self.pending and x >= self.pending[0] - 1e-9:
             at = self.pending.pop(0)
             name = f"pressure_{at:05.2f}{self.unit}.png"

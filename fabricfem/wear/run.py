@@ -38,38 +38,68 @@ def run_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
 
 def run_sleeve_scene(config: SleeveConfig, out: Path, render: bool = True, render_angles: list[float] | None = None,
                      body_samples: int = 24, comm: MPI.Comm = MPI.COMM_WORLD) -> SleeveHistory:
-    """`fabricfem run` for sleeve scenes: flex the arm and write the WearRecorder's outputs under `out`
-    (pressure renders at `render_angles` [deg], default the thirds of the flexion), with progress lines
-    (rank 0) and a closing summary."""
-    say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
-    final = config.motion.final_angle
-    render_angles = [final / 3, 2 * final / 3, final] if render_angles is None else [float(a) for a in render_angles]
-    t0 = time.perf_counter()
+    """`fabricfem run` for the sleeve's routes (SleeveConfig): flex the arm and write the recorder's outputs under
+    `out` (pressure renders at `render_angles` [deg], default the thirds of the flexion)."""
     run = build_run(config, comm)
-    say(f"sleeve: {config.tube.n_around} x {config.tube.n_along} Q2 tube, {run.model.ndofs} dofs, {comm.size} rank(s); "
-        f"mu = {config.contact.friction}, {config.contact.method} contact, "
-        f"gravity {'on' if config.route.gravity else 'off'}; "
-        f"flexion to {config.motion.final_angle} deg by {run.describe()}")
-    recorder = WearRecorder(run, out, render_angles, render, body_samples)
+    headline = (f"sleeve: {config.tube.n_around} x {config.tube.n_along} Q2 tube, {run.model.ndofs} dofs, "
+                f"{comm.size} rank(s); mu = {config.contact.friction}, {config.contact.method} contact, gravity "
+                f"{'on' if config.route.gravity else 'off'}; flexion to {config.motion.final_angle} deg by "
+                f"{run.describe()}")
+    final = config.motion.final_angle
+    return run_wear(run, out, headline, [final / 3, 2 * final / 3, final] if render_angles is None else render_angles,
+                    render, body_samples)
+
+
+def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], render: bool = True,
+             body_samples: int = 24):
+    """Run any WearRun with progress lines (rank 0), write the WearRecorder's outputs under `out`, print the
+    closing summary (peak and final torque per monitor, pressures, strain, penetration, seam gap) and return the
+    history."""
+    comm = run.comm
+    say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
+    t0 = time.perf_counter()
+    say(headline)
+    recorder = WearRecorder(run, out, [float(a) for a in render_at], render, body_samples)
     clock = fio.Progress()
 
-    def on_step(step: SleeveStep):
+    def on_step(step):
         recorder.record(step)
-        say(f"  angle {step.angle:6.2f} deg  torque {step.torque:+.4e} N m  {step.work()}  "
-            f"penetration {step.max_penetration:.1e} m  {clock(step.angle / config.motion.final_angle)}")
+        say(f"  {step.line()}  {clock(run.fraction(step))}")
 
     history = run.run(on_step=on_step, stop_on_failure=False)
     history.wall = time.perf_counter() - t0
     recorder.close(history)
     run.destroy()
-    last = history.steps[-1]
-    say(f"done: {len(history.steps) - 1} records to {last.angle:.2f} deg, {history.work()}, {history.wall:.1f} s; "
-        f"torque at {last.angle:.2f} deg: {last.torque:.4e} N m; largest penetration "
-        f"{max(s.max_penetration for s in history.steps):.2e} m; start clearance {history.initial_gap * 1e3:.2f} mm")
+    say(f"done: {len(history.steps)} records, {history.work()}, {history.wall:.1f} s; start clearance "
+        f"{history.initial_gap * 1e3:.2f} mm")
+    for line in format_summary(history.summary()):
+        say(line)
     if "ms_per_step" in history.timings:
         say(f"time per part: {format_breakdown(history.timings)}")
     if history.failure:
         say(f"STOPPED EARLY: {history.failure}")
-    say(f"wrote {out}/cloth.xdmf, body.pvd (+ body_*.vtp), torque.csv, torque.png"
+    say(f"wrote {out}/cloth.xdmf, body.pvd (+ body_*.vtp), torque.csv, torque.sto, torque.png"
         + "".join(f", {name}" for name in recorder.renders))
     return history
+
+
+def format_summary(summary: dict) -> list[str]:
+    """The printed lines of a history's summary (peak and final torques, pressure, strain, penetration, gap)."""
+    lines = []
+    for key, value in summary.items():
+        if key.startswith("torque_"):
+            where = {k: v for k, v in value.items() if not k.endswith("Nm")}
+            at = ", ".join(f"{k.replace('_', ' ')} {v:.4g}" for k, v in where.items())
+            lines.append(f"torque {key[7:]}: peak {value['peak_Nm']:.4e} N m, final {value['final_Nm']:.4e} N m ({at})")
+    p = summary.get("pressure")
+    if p:
+        position = ", ".join(f"{v:.3f}" for v in p["peak_position_m"])
+        lines.append(f"contact pressure on the body: peak {p['peak_Pa']:.4g} Pa = {p['peak_kPa']:.4g} kPa = "
+                     f"{p['peak_mmHg']:.4g} mmHg on {p['peak_segment'] or '-'} at ({position}) m, t = "
+                     f"{p['peak_time_s']:.3g} s; mean over the contact {p['mean_Pa']:.4g} Pa = {p['mean_kPa']:.4g} kPa = "
+                     f"{p['mean_mmHg']:.4g} mmHg")
+    if "max_strain" in summary:
+        lines.append(f"largest fabric strain {summary['max_strain']:.3e}, largest penetration "
+                     f"{summary['max_penetration_m']:.2e} m, largest seam gap after sewing "
+                     f"{summary['max_seam_gap_after_sewing_m']:.2e} m")
+    return lines

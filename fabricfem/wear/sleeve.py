@@ -219,6 +219,10 @@ class ArmOutputs:
         """The arm's ellipsoids at elbow angle `angle` [deg]."""
         return list(self.body.pose(self.flexion.time_at(math.radians(angle))).values())
 
+    def fraction(self, step) -> float:
+        """The done fraction of the run at record `step` (its angle over the final angle)."""
+        return step.angle / self.config.motion.final_angle
+
 
 @dataclass
 class SleeveProblem(ArmOutputs):
@@ -338,6 +342,16 @@ class SleeveStep:
         return self.angle
 
     @property
+    def output_time(self) -> float:
+        """The record's time coordinate in the output files (the elbow angle [deg])."""
+        return self.angle
+
+    def line(self) -> str:
+        """The record's progress line."""
+        return (f"angle {self.angle:6.2f} deg  torque {self.torque:+.4e} N m  {self.work()}  "
+                f"penetration {self.max_penetration:.1e} m")
+
+    @property
     def torques(self) -> dict[str, float]:
         """Resisting torques [N m] by monitor name."""
         return {"elbow": self.torque, "elbow_both_segments": self.torque_all}
@@ -391,8 +405,8 @@ class SleeveHistory:
             return {"records": 0}
         k = int(np.argmax(np.abs(self.torques)))
         return {"records": len(self.steps), "torque_elbow": {
-            "peak_Nm": float(self.torques[k]), "peak_angle_deg": float(self.angles[k]),
-            "final_Nm": float(self.torques[-1]), "final_angle_deg": float(self.angles[-1])}}
+            "peak_Nm": float(self.torques[k]), "peak_at": float(self.angles[k]),
+            "final_Nm": float(self.torques[-1]), "final_at": float(self.angles[-1])}}
 
     HEADER = ("angle_deg", "torque_Nm", "torque_both_segments_Nm", "newton_iterations", "max_penetration_m",
               "contact_force_N", "wall_s", "drag_ratio", "time_steps", "kinetic_energy_J", "strain_energy_J")
