@@ -17,7 +17,10 @@ so the correction conserves the group's momentum; the seam force on node i is f_
 [N]. During the sewing time T_sew [s] the stitched nodes are drawn together along straight lines (the
 "sewing phase" of garment CAD tools); after it they coincide and move as one (r = 0). A panel that starts
 coincident with its partner (a placement that allows it) has r(0) = 0 and is held from the first step.
-Rotations are not tied: a seam is a hinge, the directors of the two panels turn independently.
+Rotations are not tied: a seam is a hinge, the directors of the two panels turn independently. The engine
+(fabricfem.wear.garment) applies the seams before the body contact, so that a seam drawn across the body
+cannot pull a node into it; coincident stitched nodes get the same contact projection, so frictionless seams
+stay closed exactly (with friction, their stick points may differ and the gap is reported).
 
 Parallel: the groups' nodes may live on different ranks; each step the owned members' y and (once) m are
 summed into a small array over the ranks (one MPI Allreduce of 3 x members doubles), so the result does not

@@ -99,7 +99,7 @@ def run_phases(integrator, contact, phases: list[Phase], steps_per_record: int,
                 if not (math.isfinite(integrator.d.norm()) and math.isfinite(integrator.v.norm())):
                     raise ValueError("non-finite displacement or velocity")
             except ValueError as exc:
-                message = (f"{label}: the explicit run blew up in phase {phase.name!r} before t = {integrator.t:.6g} s "
+                message = (f"{label}: the explicit run stopped in phase {phase.name!r} before t = {integrator.t:.6g} s "
                            f"(step {integrator.step_count}, dt = {integrator.dt:.3g} s): {exc}")
                 if stop_on_failure:
                     raise WearError(message, reason="EXPLICIT_BLOW_UP") from exc

@@ -99,17 +99,20 @@ class ExplicitSettings:
 
 
 class DelayedKinematics:
-    """A kinematics source held in its start pose until `t0` [s] and run from its own start after it."""
+    """A kinematics source held in its start pose until `t0` [s], run from its own start after it and held in
+    its end pose after its end."""
 
     def __init__(self, source, t0: float):
         self.source, self.t0 = source, float(t0)
         self.names = source.names
         start, end = source.time_range
-        self._start = start
+        self._start, self._end = start, end
         self.time_range = (0.0, self.t0 + end - start)
 
     def positions(self, t: float) -> dict[str, np.ndarray]:
-        return self.source.positions(self._start + max(float(t) - self.t0, 0.0))
+        """The source's positions at its own time start + (t - t0), held at its start before t0 and at its end
+        after it (the explicit contact poses the body one step ahead of the last record)."""
+        return self.source.positions(min(self._start + max(float(t) - self.t0, 0.0), self._end))
 
 
 @dataclass
@@ -431,7 +434,8 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
     dt_estimate = stability.critical_time_step(model, rayleigh, omega_max=omega)
     steps_per_record = math.ceil(timeline.record_time / (settings.time_step_safety * dt_estimate))
     dt = timeline.record_time / steps_per_record
-    hooks = [contact] + ([ties] if ties else [])
+    # the seams first, the body contact last: a seam drawn across the body cannot pull a node into it
+    hooks = ([ties] if ties else []) + [contact]
     t_sewn = timeline.records(timeline.sewing_time) * timeline.record_time
     # the garment's weight acts once it is sewn (panels would fall while their seams close), ramped on over
     # a tenth of the sewing time

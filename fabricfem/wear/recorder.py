@@ -1,7 +1,7 @@
 """The recorder of a wear run: what `fabricfem run` writes while a garment moves on its wearer.
 
-Under the output folder: cloth.xdmf (garment displacement [m] and contact pressure on the body [Pa] per record,
-ParaView; the XDMF time is the body time [s], or the angle [deg] of a quasi-static sleeve), body_NNNN.vtp + body.pvd
+Under the output folder: cloth.xdmf (garment displacement [m]) and cloth_pressure.xdmf (contact pressure on the
+body [Pa] per unit deformed cloth area) per record, for ParaView and meshio; the XDMF time is the body time [s], or the angle [deg] of a quasi-static sleeve), body_NNNN.vtp + body.pvd
 (the posed body surfaces per record), torque.csv (the history's header), torque.png, torque.sto (OpenSim storage
 of the resisting torques against the body time), and pressure renders at the requested coordinates. It reads the
 run only through the wearer contract (fabricfem.wear.contract.WearRun).
@@ -33,8 +33,11 @@ class WearRecorder:
         model = run.model
         self.u_out = fem.Function(model.V2, name="displacement")
         self.p_out = fem.Function(fem.FunctionSpace(model.mesh, ("Lagrange", 2)), name="contact_pressure")
+        # one field per file: meshio's XDMF reader keeps one function per time step
         self.xdmf = dio.XDMFFile(comm, str(self.out / "cloth.xdmf"), "w")
         self.xdmf.write_mesh(model.mesh)
+        self.xdmf_pressure = dio.XDMFFile(comm, str(self.out / "cloth_pressure.xdmf"), "w")
+        self.xdmf_pressure.write_mesh(model.mesh)
         self.frames: list[tuple[float, str]] = []
         self.renders: list[str] = []     # names of the pressure renders written
         self.label = getattr(run, "axis_label", "elbow angle [deg]")
@@ -46,7 +49,7 @@ class WearRecorder:
         self.u_out.interpolate(run.model.displacement())
         self.p_out.interpolate(run.pressure_field())
         self.xdmf.write_function(self.u_out, stamp)
-        self.xdmf.write_function(self.p_out, stamp)
+        self.xdmf_pressure.write_function(self.p_out, stamp)
         if run.comm.rank == 0:
             import pyvista as pv  # optional heavy package, loaded only when a render is made
             points, triangles = body_surface(run.posed_bodies(x), self.samples)
@@ -64,6 +67,7 @@ class WearRecorder:
     def close(self, history) -> None:
         """Close the XDMF file and write torque.csv, body.pvd and torque.png."""
         self.xdmf.close()
+        self.xdmf_pressure.close()
         comm = self.run.comm
         fio.write_csv(self.out / "torque.csv", history.header, history.rows(), comm)
         if comm.rank == 0:
