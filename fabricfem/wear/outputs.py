@@ -147,8 +147,11 @@ def render_skin_pressure(path: str | Path, points: np.ndarray, triangles: np.nda
     plotter.add_mesh(skin, scalars="pressure_kPa", cmap="viridis", clim=(low, high), smooth_shading=True,
                      show_scalar_bar=False)
     if garment_surface is not None:
-        plotter.add_mesh(fio.polydata(*garment_surface), color="gray", opacity=0.25, show_edges=True,
-                         edge_color="dimgray")
+        # where the garment presses, its flat cells lie on or just under the finer skin and are hidden by it:
+        # the grey fill and edges show the garment where it stands off the skin
+        plotter.add_mesh(fio.polydata(*garment_surface), color="gray", opacity=0.15)
+        plotter.add_mesh(fio.polydata(*garment_surface), style="wireframe", color="dimgray", opacity=0.5,
+                         line_width=1)
     fio.set_camera(plotter, camera, zoom)
     image = plotter.screenshot(None, return_img=True)
     plotter.close()
