@@ -1,14 +1,17 @@
 #!/usr/bin/env bash
 # Idempotent set-up for a fresh Debian bookworm machine:
-#   1. Debian packages (dolfinx 0.5.2 stack, gmsh, meshio, OpenMPI) via apt, as root or with sudo;
+#   1. Debian packages (dolfinx 0.5.2 stack, gmsh, meshio + h5py, OpenMPI) via apt, as root or with sudo;
 #   2. a virtual environment .venv from /usr/bin/python3 --system-site-packages;
 #   3. the project installed editable, numpy pinned to the Debian numpy (numpy 2 breaks petsc4py).
 set -euo pipefail
 here="$(cd "$(dirname "$0")/.." && pwd)"
 cd "$here"
 VENV="${FABRICFEM_VENV:-$here/.venv}"
+# h5py (meshio reads the HDF5 data of XDMF files with it) must be Debian's, built against the HDF5 1.10 that
+# dolfinx loads: a pip wheel of h5py bundles another HDF5 and fails to import after dolfinx ("Not a datatype").
+# python3-h5py-mpi is the flavour Debian's h5py picks under mpirun.
 DEBS="python3-dolfinx python3-petsc4py python3-mpi4py python3-gmsh python3-meshio python3-venv \
-python3-dolfinx-mpc python3-scipy openmpi-bin"
+python3-dolfinx-mpc python3-scipy openmpi-bin python3-h5py python3-h5py-mpi"
 
 missing=""
 for p in $DEBS; do
@@ -34,4 +37,11 @@ if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   echo "[bootstrap] installing fabricfem (editable), numpy pinned to $numpy_version"
   "$VENV/bin/python" -m pip install -q --disable-pip-version-check -c "$VENV/constraints.txt" -e ".[dev]"
   touch "$stamp"
+fi
+
+# h5py through --system-site-packages (Debian's; see DEBS), importable next to dolfinx
+if ! "$VENV/bin/python" -c "import dolfinx, h5py" 2>/dev/null; then
+  echo "[bootstrap] h5py does not import next to dolfinx in $VENV: install Debian's python3-h5py and remove any" \
+       "pip-installed h5py ($VENV/bin/python -m pip uninstall h5py)" >&2
+  exit 1
 fi
