@@ -1,4 +1,4 @@
-"""What a garment engineer reads (issue 18, item 6): XDMF fields read back by name with meshio (h5py), joint
+"""What a garment engineer reads: XDMF fields read back by name with meshio (h5py), joint
 moments in OpenSim's storage format, contact pressure on the skin, its render, progress lines without "nan"."""
 import importlib.util
 import json
@@ -84,10 +84,10 @@ def test_sto_round_trip_and_header(tmp_path):
 
 
 @pytest.mark.parametrize("kwargs, name", [
-    (dict(times=[0.0, 1.0], columns={"elbow_moment": [1.0]}), r"columns\['elbow_moment'\]"),
-    (dict(times=[1.0, 0.0], columns={"elbow_moment": [1.0, 2.0]}), "times"),
-    (dict(times=[0.0, 1.0], columns={"elbow moment": [1.0, 2.0]}), "columns"),
-    (dict(times=[0.0, 1.0], columns={"a_moment": [1.0, 2.0]}, header_note="positive = flexion"), "header_note"),
+    ({"times": [0.0, 1.0], "columns": {"elbow_moment": [1.0]}}, r"columns\['elbow_moment'\]"),
+    ({"times": [1.0, 0.0], "columns": {"elbow_moment": [1.0, 2.0]}}, "times"),
+    ({"times": [0.0, 1.0], "columns": {"elbow moment": [1.0, 2.0]}}, "columns"),
+    ({"times": [0.0, 1.0], "columns": {"a_moment": [1.0, 2.0]}, "header_note": "positive = flexion"}, "header_note"),
 ])
 def test_sto_refuses_bad_input_naming_the_parameter(tmp_path, kwargs, name):
     with pytest.raises(ValueError, match=name):
@@ -124,16 +124,17 @@ def test_idw_is_weighted_towards_the_nearer_node():
 
 
 @pytest.mark.parametrize("kwargs, name", [
-    (dict(radius=0.0), "radius"),
-    (dict(node_pressure=np.ones(3)), "node_pressure"),
-    (dict(node_positions=np.zeros((2, 2)), node_pressure=np.ones(2)), "node_positions"),
+    ({"radius": 0.0}, "radius"),
+    ({"node_pressure": np.ones(3)}, "node_pressure"),
+    ({"node_positions": np.zeros((2, 2)), "node_pressure": np.ones(2)}, "node_positions"),
 ])
 def test_skin_pressure_refuses_bad_input_naming_the_parameter(kwargs, name):
-    args = dict(node_positions=ring(0.1, 4), node_pressure=np.ones(4), radius=0.01) | kwargs
+    args = {"node_positions": ring(0.1, 4), "node_pressure": np.ones(4), "radius": 0.01} | kwargs
     with pytest.raises(ValueError, match=name):
         skin_pressure([SPHERE], 8, **args)
 
 
+@pytest.mark.mpi
 def test_gather_contact_concatenates_on_rank_0():
     comm = MPI.COMM_WORLD
     gathered = gather_contact(np.full((2, 3), comm.rank), np.full(2, float(comm.rank)), comm)

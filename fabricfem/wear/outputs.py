@@ -9,8 +9,8 @@ a fixed colour range, so that frames share one scale (1 kPa = 7.50 mmHg, the uni
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Mapping, Sequence
 
 import numpy as np
 from mpi4py import MPI
