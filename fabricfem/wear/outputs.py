@@ -60,15 +60,16 @@ def plot_torque(path, curves: dict[str, tuple[np.ndarray, np.ndarray]], title: s
     plt.close(fig)
 
 
-def render_pressure(path, run, title: str, angle: float):
+def render_pressure(path, run, title: str, angle: float, clim: tuple[float, float] | None = None):
     """Deformed garment of a WearRun coloured by contact pressure [Pa] with the posed body (pyvista, off-screen);
-    `title` is printed as given, the quantity and unit are on the colour bar."""
+    `title` is printed as given, the quantity and unit are on the colour bar; `clim` [Pa] fixes the colour range
+    (the same for every frame of a run), default 0 to this frame's peak."""
     mesh = run.model.mesh
     surface = fio.gather_surface(mesh, run.model.displacement())
     values = fio.gather_field(mesh, run.pressure_field())
     if run.comm.rank == 0:
         fio.render_field(path, surface, values, title, bodies=[body_surface(run.posed_bodies(angle))],
-                         scalar_bar_title="contact pressure [Pa]")
+                         clim=clim, scalar_bar_title="contact pressure [Pa]")
 
 
 # ---------------------------------------------------------------------------------------- pressure on the skin
