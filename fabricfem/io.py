@@ -8,11 +8,13 @@ from __future__ import annotations
 import csv
 import datetime
 import json
+import math
 import os
 import resource
 import time
 from pathlib import Path
 from typing import Sequence
+from xml.etree import ElementTree
 
 import numpy as np
 from dolfinx import fem, io
@@ -42,6 +44,18 @@ class SurfaceSeries:
 
     def close(self):
         self.file.close()
+
+
+def xdmf_fields(path: str | Path) -> dict[str, list[float]]:
+    """{function name: its times} of an XDMF file written by dolfinx (io.XDMFFile.write_function). dolfinx writes
+    one temporal collection per function; meshio's xdmf.TimeSeriesReader reads only the last collection of a
+    file, so read the names here (and the data of the other functions with h5py, at "/Function/<name>/<time>")."""
+    root = ElementTree.parse(path).getroot()
+    fields: dict[str, list[float]] = {}
+    for grid in root.iter("Grid"):
+        if grid.get("CollectionType") == "Temporal":
+            fields[grid.get("Name")] = [float(t.get("Value")) for t in grid.iter("Time")]
+    return fields
 
 
 def write_csv(path: str | Path, header: Sequence[str], rows: Sequence[Sequence[float]], comm=MPI.COMM_WORLD):
@@ -89,30 +103,92 @@ def gather_field(mesh, field: fem.Function) -> np.ndarray | None:
     return np.concatenate(gathered) if mesh.comm.rank == 0 else None
 
 
-def render_field(path: str | Path, surface: tuple[np.ndarray, np.ndarray], values: np.ndarray, title: str,
-                 bodies: Sequence[tuple[np.ndarray, np.ndarray]] = (), camera: str = "xy", zoom: float = 1.0):
-    """Render a gathered surface coloured by per-point `values` (viridis, from 0), with translucent body
-    surfaces (points, cells) behind it, to a PNG off-screen (call on rank 0 with gathered data)."""
-    os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")
+CAMERAS = ("xz", "xy", "yz", "iso")
+
+
+def polydata(points: np.ndarray, cells: np.ndarray):
+    """pyvista PolyData of a surface: points (n, 3) [m], cells (m, k) into points (all of one kind)."""
     import pyvista as pv  # optional heavy package, loaded only when a render is made
-    points, cells = surface
-    cloth = pv.PolyData(points, np.hstack([np.full((len(cells), 1), cells.shape[1]), cells]).ravel())
-    cloth.point_data["field"] = values
-    plotter = pv.Plotter(off_screen=True, window_size=(1200, 800))
-    for bp, bc in bodies:
-        plotter.add_mesh(pv.PolyData(bp, np.hstack([np.full((len(bc), 1), bc.shape[1]), bc]).ravel()),
-                         color="wheat", opacity=0.35)
-    # no scalar bar: its tick layout crashes VTK 9.x off-screen here (segfault in vtkScalarBarActor); the
-    # colour range goes into the title instead
-    top = max(float(np.max(values)), 1e-12)
-    plotter.add_mesh(cloth, scalars="field", cmap="viridis", show_edges=True, show_scalar_bar=False,
-                     clim=(0.0, top))
-    plotter.add_text(f"{title}\ncolour: 0 (dark) to {top:.3g} (yellow)", font_size=11)
+    cells = np.asarray(cells, dtype=np.int64)
+    return pv.PolyData(np.asarray(points, dtype=float), np.hstack([np.full((len(cells), 1), cells.shape[1]),
+                                                                   cells]).ravel())
+
+
+def colour_range(values: np.ndarray, clim: tuple[float, float] | None = None) -> tuple[float, float]:
+    """The colour range (low, high) of a render: `clim` if given (finite, low < high; ValueError naming clim
+    otherwise), else (0, max(values)) (at least (0, 1e-12), so that a zero field still renders)."""
+    if clim is None:
+        finite = np.asarray(values, dtype=float)
+        finite = finite[np.isfinite(finite)]
+        return 0.0, max(float(np.max(finite, initial=0.0)), 1e-12)
+    if len(clim) != 2 or not all(np.isfinite(clim)) or not float(clim[0]) < float(clim[1]):
+        raise ValueError(f"clim must be two finite numbers (low, high) with low < high, got {clim!r}")
+    return float(clim[0]), float(clim[1])
+
+
+def save_with_colour_bar(path: str | Path, image: np.ndarray, title: str, clim: tuple[float, float], bar_title: str,
+                         cmap: str = "viridis", secondary: tuple[str, float] | None = None) -> None:
+    """PNG of a rendered `image` (H, W, 3) under one `title`, with a horizontal colour bar below it: `cmap` over
+    `clim`, labelled `bar_title` (the quantity and its unit), and, if `secondary` = (label, factor), a second
+    scale above the bar in another unit (value * factor, e.g. ("[mmHg]", 7.50) for kPa).
+
+    The colour bar is drawn by matplotlib, not by VTK: vtkScalarBarActor aborts the process (std::bad_alloc in
+    the std::regex of its tick-label format, vtk::to_std_format) once dolfinx is imported, with the VTK 9.x
+    wheels here."""
+    import matplotlib  # optional heavy package, loaded only when a plot is drawn
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
+    height, width = image.shape[:2]
+    dpi = 100
+    below, above = 130, 40                       # pixels for the colour bar and for the title
+    total = height + below + above
+    fig = plt.figure(figsize=(width / dpi, total / dpi), dpi=dpi)
+    bottom = below / total
+    view = fig.add_axes((0.0, bottom, 1.0, height / total))
+    view.imshow(image)
+    view.set_axis_off()
+    fig.text(0.01, 1.0 - 0.5 * above / total, title, fontsize=13, va="center", ha="left")
+    bar_axes = fig.add_axes((0.2, 0.45 * bottom, 0.6, 0.15 * bottom))
+    mappable = matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(*clim), cmap=cmap)
+    bar = fig.colorbar(mappable, cax=bar_axes, orientation="horizontal")
+    bar.set_label(bar_title)
+    if secondary is not None:
+        label, factor = secondary
+        top = bar_axes.secondary_xaxis("top", functions=(lambda v: v * factor, lambda v: v / factor))
+        top.set_xlabel(label)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
+def set_camera(plotter, camera: str, zoom: float) -> None:
+    """Point the camera of `plotter` along one of CAMERAS and zoom by `zoom` (ValueError naming camera)."""
+    if camera not in CAMERAS:
+        raise ValueError(f"camera must be one of {CAMERAS}, got {camera!r}")
     {"xz": plotter.view_xz, "xy": plotter.view_xy, "yz": plotter.view_yz, "iso": plotter.view_isometric}[camera]()
     plotter.camera.zoom(zoom)
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    plotter.screenshot(str(path))
+
+
+def render_field(path: str | Path, surface: tuple[np.ndarray, np.ndarray], values: np.ndarray, title: str,
+                 bodies: Sequence[tuple[np.ndarray, np.ndarray]] = (), camera: str = "xy", zoom: float = 1.0,
+                 clim: tuple[float, float] | None = None, scalar_bar_title: str = ""):
+    """Render a gathered surface coloured by per-point `values` (viridis over `clim`, default 0 to the largest
+    value), with translucent body surfaces (points, cells) behind it, to a PNG off-screen (call on rank 0 with
+    gathered data). The title is printed once, as given; the colour bar carries `scalar_bar_title` (the
+    quantity and its unit, e.g. "contact pressure [Pa]"); pass the same `clim` to frames that share a scale."""
+    os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")
+    import pyvista as pv  # optional heavy package, loaded only when a render is made
+    cloth = polydata(*surface)
+    cloth.point_data["field"] = np.asarray(values, dtype=float)
+    low_high = colour_range(values, clim)
+    plotter = pv.Plotter(off_screen=True, window_size=(1200, 800))
+    for bp, bc in bodies:
+        plotter.add_mesh(polydata(bp, bc), color="wheat", opacity=0.35)
+    plotter.add_mesh(cloth, scalars="field", cmap="viridis", show_edges=True, clim=low_high, show_scalar_bar=False)
+    set_camera(plotter, camera, zoom)
+    image = plotter.screenshot(None, return_img=True)
     plotter.close()
+    save_with_colour_bar(path, image, title, low_high, scalar_bar_title or "value")
 
 
 def render_surfaces(path: str | Path, surfaces: list[tuple[np.ndarray, np.ndarray]], title: str = "",
@@ -154,6 +230,20 @@ def write_json(path: str | Path, data: dict, comm=MPI.COMM_WORLD):
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     with open(path, "w") as f:
         json.dump(data, f, indent=1, default=str)
+
+
+def update_json(path: str | Path, data: dict, comm=MPI.COMM_WORLD):
+    """Merge `data` into the JSON object in `path` (created if missing or unreadable; its entries are kept
+    unless `data` replaces them), written by rank 0: how a runner adds its results to a run's summary.json
+    (OutputFolder.finish keeps them)."""
+    if comm.rank != 0:
+        return
+    path = Path(path)
+    try:
+        old = json.loads(path.read_text())
+    except (OSError, ValueError):
+        old = {}
+    write_json(path, {**(old if isinstance(old, dict) else {}), **data}, MPI.COMM_SELF)
 
 
 def plot_time_series(path: str | Path, time: Sequence[float], panels: dict[str, dict[str, Sequence[float]]],
@@ -218,6 +308,11 @@ class OutputFolder:
         with open(self.path / self.SUMMARY, "w") as f:
             json.dump(data, f, indent=1, default=str)
 
+    def add(self, **data) -> None:
+        """Add entries (JSON-serialisable; paths become strings) to the run's summary.json now (rank 0 writes;
+        `finish` keeps them)."""
+        update_json(self.path / self.SUMMARY, data, self.comm)
+
     def finish(self, status: str, summary: dict | None = None) -> None:
         """Record the run's status (and `summary` entries) in summary.json (rank 0)."""
         if self.comm.rank == 0:
@@ -234,19 +329,31 @@ def _iso(t: float) -> str:
 
 
 class Progress:
-    """Elapsed time and the estimated time left of a run at a done fraction in [0, 1]. The estimate extrapolates
-    the rate measured since the first update, so that the one-off form compilation and set-up before it (about
-    13 s for a new form) do not inflate it."""
+    """Elapsed time and the estimated time left of a run at a done fraction in [0, 1], optionally per phase.
 
-    def __init__(self):
+    `clock(done)` returns "[40.0%, 12.3 s, about 18.5 s left]"; with a phase label (given to the constructor
+    or to a call: `clock(done, "donning")`) "[donning 40.0%, ...]". The estimate extrapolates the rate
+    measured since the first update of the current phase, so that the one-off form compilation and set-up
+    before it (about 13 s for a new form) do not inflate it; until the fraction has grown past that first
+    update (or when it is not a finite number) it reads "estimating". A new phase label restarts the
+    fraction (each phase runs from 0 to 1) and the estimate; the elapsed time counts from the construction."""
+
+    def __init__(self, phase: str = ""):
         self.start = time.perf_counter()
-        self.first: tuple[float, float] | None = None    # (time, done) of the first update
+        self.phase = phase
+        self.first: tuple[float, float] | None = None    # (time, done) of the first update of the phase
 
-    def __call__(self, done: float) -> str:
+    def __call__(self, done: float, phase: str | None = None) -> str:
         now = time.perf_counter()
-        if self.first is None:
-            self.first = (now, done)
-        t1, d1 = self.first
-        left = ("time left unknown" if done <= d1 else
-                f"about {(now - t1) / (done - d1) * (1.0 - done):6.1f} s left")
-        return f"[{done:5.1%}, {now - self.start:6.1f} s, {left}]"
+        if phase is not None and phase != self.phase:
+            self.phase, self.first = phase, None
+        finite = isinstance(done, (int, float, np.floating, np.integer)) and math.isfinite(done)
+        if finite and self.first is None:
+            self.first = (now, float(done))
+        left = "estimating"
+        if finite and self.first is not None and done > self.first[1]:
+            t1, d1 = self.first
+            left = f"about {(now - t1) / (done - d1) * max(1.0 - done, 0.0):6.1f} s left"
+        label = f"{self.phase} " if self.phase else ""
+        fraction = f"{done:5.1%}" if finite else "  ?  "
+        return f"[{label}{fraction}, {now - self.start:6.1f} s, {left}]"

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Idempotent set-up for a fresh Debian bookworm machine:
-#   1. Debian packages (dolfinx 0.5.2 stack, gmsh, meshio, OpenMPI) via apt, as root or with sudo;
+#   1. Debian packages (dolfinx 0.5.2 stack, gmsh, meshio + h5py, OpenMPI) via apt, as root or with sudo;
 #   2. a virtual environment .venv from /usr/bin/python3 --system-site-packages;
 #   3. the project installed editable, numpy pinned to the Debian numpy (numpy 2 breaks petsc4py); ezc3d (C3D
 #      files) comes with it: should pip ever want another numpy for it, install it with --no-deps instead;
@@ -11,8 +11,11 @@ set -euo pipefail
 here="$(cd "$(dirname "$0")/.." && pwd)"
 cd "$here"
 VENV="${FABRICFEM_VENV:-$here/.venv}"
+# h5py (meshio reads the HDF5 data of XDMF files with it) must be Debian's, built against the HDF5 1.10 that
+# dolfinx loads: a pip wheel of h5py bundles another HDF5 and fails to import after dolfinx ("Not a datatype").
+# python3-h5py-mpi is the flavour Debian's h5py picks under mpirun.
 DEBS="python3-dolfinx python3-petsc4py python3-mpi4py python3-gmsh python3-meshio python3-venv \
-python3-dolfinx-mpc python3-scipy openmpi-bin"
+python3-dolfinx-mpc python3-scipy openmpi-bin python3-h5py python3-h5py-mpi"
 
 missing=""
 for p in $DEBS; do
@@ -44,4 +47,11 @@ if [ ! -d /usr/share/assimp/models/BVH ] && [ "$(id -u)" -eq 0 ] && command -v a
   echo "[bootstrap] installing optional test data: assimp-testmodels (CMU BVH files)"
   DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends assimp-testmodels \
     || echo "[bootstrap] assimp-testmodels not installed (optional: the CMU rows of mocap-roundtrip are skipped)"
+fi
+
+# h5py through --system-site-packages (Debian's; see DEBS), importable next to dolfinx
+if ! "$VENV/bin/python" -c "import dolfinx, h5py" 2>/dev/null; then
+  echo "[bootstrap] h5py does not import next to dolfinx in $VENV: install Debian's python3-h5py and remove any" \
+       "pip-installed h5py ($VENV/bin/python -m pip uninstall h5py)" >&2
+  exit 1
 fi

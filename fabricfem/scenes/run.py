@@ -454,7 +454,9 @@ def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD) -> DynamicRun:
 
 def run_compression_scene(scene, comm=MPI.COMM_WORLD) -> dict | None:
     """`fabricfem run` for compression scenes ([limb], optional [donning]): don the tube onto the
-    limb with progress lines (rank 0) and write `pressure_report` into output.dir (default results/<name>)."""
+    limb with progress lines (rank 0), write `pressure_report` into output.dir (default results/<name>), add
+    its summary (peak and mean pressure on the skin in Pa, kPa and mmHg with the peak's position, hoop tension)
+    to the run's summary.json and print it. Returns the summary on rank 0, None elsewhere."""
     say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
     fabric = build_fabric(scene["fabric"])                       # before meshing: a bad fabric fails fast
     limb = Ellipsoid(np.array(scene["limb"]["center"], dtype=float), np.eye(3),
@@ -462,19 +464,32 @@ def run_compression_scene(scene, comm=MPI.COMM_WORLD) -> dict | None:
     donning = section(DonningSection, scene.get("donning"))
     name = section(SceneSection, scene.get("scene")).name or "compression"
     out = output_dir(scene)
+    render = section(OutputSection, scene.get("output")).render
+    t0 = time.perf_counter()
     fmesh = build_mesh(scene["mesh"], comm)
     start, steps = donning_start(scene.data), int(donning.steps)
     say(f"{name}: tube R = {scene['mesh']['radius']} m on a limb of radii {limb.radii.tolist()} m, growing from "
         f"{start:.3g} of its size in {steps} steps, {comm.size} rank(s)")
+    clock = io.Progress("donning")
     problem = fit_sleeve(fmesh, fabric, limb, start, steps, float(donning.tolerance),
                          on_step=lambda s: say(f"  limb at {s.factor:5.3f}: {s.augmentations} augmentations, "
                                                f"{s.newton_iterations} Newton iterations, penetration "
-                                               f"{s.max_penetration:.1e} m"))
-    summary = pressure_report(problem, limb, out, name, render=section(OutputSection, scene.get("output")).render)
-    if summary is not None:
-        say(f"{name}: pressure on the skin {summary['min_mmHg']:.1f}-{summary['max_mmHg']:.1f} mmHg (ring means "
-            f"{summary['ring_min_mmHg']:.1f}-{summary['ring_max_mmHg']:.1f} mmHg); ring nearest the limb's centre: "
-            f"p = T kappa, T = {summary['hoop_tension']:.1f} N/m, largest deviation "
-            f"{100 * summary['laplace_deviation']:.2f}% of its peak; wrote {out}/sleeve.xdmf, pressure.png, "
-            f"pressure_profile.csv/.png")
+                                               f"{s.max_penetration:.1e} m  "
+                                               f"{clock((s.factor - start) / max(1.0 - start, 1e-12))}"))
+    report = pressure_report(problem, limb, out, name, render=render)
+    memory = io.peak_memory_mib(comm)
+    if report is None:
+        return None
+    summary = {"scene": name, "kind": "compression", "ranks": comm.size, "wall_s": time.perf_counter() - t0,
+               "peak_memory_mib": memory["max_mib"], **report}
+    io.update_json(out / "summary.json", summary, MPI.COMM_SELF)
+    say(f"{name}: pressure on the skin: peak {report['peak_pressure_kPa']:.3f} kPa = "
+        f"{report['peak_pressure_mmHg']:.1f} mmHg at {tuple(round(c, 4) for c in report['peak_position_m'])} m, "
+        f"mean {report['mean_pressure_kPa']:.3f} kPa = {report['mean_pressure_mmHg']:.1f} mmHg over "
+        f"{report['contact_area_m2'] * 1e4:.1f} cm^2; range {report['min_mmHg']:.1f}-{report['max_mmHg']:.1f} mmHg "
+        f"(ring means {report['ring_min_mmHg']:.1f}-{report['ring_max_mmHg']:.1f} mmHg); ring nearest the limb's "
+        f"centre: p = T kappa, hoop tension T = {report['hoop_tension_N_per_m']:.1f} N/m, largest deviation "
+        f"{100 * report['laplace_deviation']:.2f}% of its peak")
+    say(f"wrote {out}/sleeve.xdmf (displacement [m], pressure_mmHg), pressure_profile.csv/.png, summary.json"
+        + (", pressure.png, skin_pressure.png" if render else ""))
     return summary

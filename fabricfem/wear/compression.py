@@ -44,9 +44,7 @@ from fabricfem.materials import Fabric
 from fabricfem.meshes._validate import choice, count, positive
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.newton import NewtonSolver, SolverError
-from fabricfem.wear.outputs import body_surface
-
-PA_PER_MMHG = 133.322387415      # Pa
+from fabricfem.wear.outputs import PA_PER_MMHG, body_surface, render_skin_pressure, skin_pressure
 
 
 @dataclass
@@ -166,36 +164,99 @@ def section_curvature(limb: Ellipsoid, points: np.ndarray) -> np.ndarray:
     return 1.0 / (a ** 2 * b ** 2 * (y ** 2 / a ** 4 + z ** 2 / b ** 4) ** 1.5)
 
 
+def write_sleeve_xdmf(problem: ContactProblem, path: Path) -> None:
+    """sleeve.xdmf: the fields "displacement" [m] and "pressure_mmHg" (pressure on the skin) at time 0 (all ranks)."""
+    model = problem.model
+    displacement = model.displacement()
+    displacement.name = "displacement"
+    pressure = problem.pressure_field()
+    pressure.x.array[:] /= PA_PER_MMHG
+    pressure.name = "pressure_mmHg"
+    with io.XDMFFile(problem.comm, str(path), "w") as xdmf:
+        xdmf.write_mesh(model.mesh)
+        xdmf.write_function(displacement, 0.0)
+        xdmf.write_function(pressure, 0.0)
+
+
+def pressure_summary(position: np.ndarray, pressure: np.ndarray, area: np.ndarray) -> dict:
+    """Peak and mean pressure on the skin of the nodes (positions (N, 3) [m], pressures (N,) [Pa], lumped
+    reference areas (N,) [m^2]): peak in Pa, kPa and mmHg with its node's position [m]; mean over the nodes
+    in contact (pressure > 0) weighted by their areas; the number of those nodes and their area [m^2]."""
+    peak = int(np.argmax(pressure))
+    touching = pressure > 0.0
+    contact_area = float(np.sum(area[touching]))
+    mean = float(np.sum(pressure[touching] * area[touching]) / contact_area) if contact_area > 0.0 else 0.0
+    out = {"contact_nodes": int(np.sum(touching)), "contact_area_m2": contact_area,
+           "peak_position_m": [float(c) for c in position[peak]]}
+    for name, value in (("peak_pressure", float(pressure[peak])), ("mean_pressure", mean)):
+        out.update({f"{name}_Pa": value, f"{name}_kPa": value / 1e3, f"{name}_mmHg": value / PA_PER_MMHG})
+    return out
+
+
+def plot_pressure_profile(path: Path, ring_x: np.ndarray, ring_p: np.ndarray, kappa: np.ndarray, p: np.ndarray,
+                          ring_position: float, tension: float) -> None:
+    """pressure_profile.png (rank 0): ring-mean pressure [mmHg] along x [m]; the pressure [mmHg] of the widest
+    ring's nodes against their section curvature kappa [1/m] with the Laplace fit p = T kappa (T [mmHg m])."""
+    import matplotlib  # optional heavy package, loaded only when a plot is drawn
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4))
+    left.plot(ring_x * 1e3, ring_p, "o-")
+    left.set(xlabel="x along the limb [mm]", ylabel="ring-mean pressure [mmHg]", title="along the limb")
+    order = np.argsort(kappa)
+    right.plot(kappa, p, "o", label=f"computed (nodes of the ring at x = {1e3 * ring_position:.0f} mm)")
+    right.plot(kappa[order], tension * kappa[order], "-",
+               label=f"Laplace p = T kappa, T = {tension * PA_PER_MMHG:.1f} N/m")
+    right.set(xlabel="section curvature kappa [1/m]", ylabel="pressure [mmHg]", title="around the widest ring")
+    right.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def render_limb_pressure(path: Path, limb: Ellipsoid, position: np.ndarray, pressure: np.ndarray,
+                         radius: float, garment_surface, title: str, samples: int = 96) -> None:
+    """skin_pressure.png (rank 0): the limb's skin coloured by the sleeve's pressure [kPa] (skin_pressure of the
+    nodes' positions (N, 3) [m] and pressures (N,) [Pa] within `radius` [m]), colour range 0 to the nodes' peak,
+    the sleeve as a translucent grey surface."""
+    points, triangles, values = skin_pressure([limb], samples, position, pressure, radius)
+    top = max(float(np.max(pressure, initial=0.0)) / 1e3, 1e-9)
+    render_skin_pressure(path, points, triangles, values / 1e3, title, (0.0, top), garment_surface, camera="iso",
+                         zoom=1.6)
+
+
 def pressure_report(problem: ContactProblem, limb: Ellipsoid, out: Path, title: str = "compression sleeve",
                     render: bool = True) -> dict | None:
-    """Write into `out`: sleeve.xdmf (displacement [m], pressure on the skin [mmHg]), pressure.png (render),
-    pressure_profile.csv / .png (ring-mean pressure along x; p against the section curvature at the ring
-    nearest the limb's centre, with the least-squares Laplace fit p = T kappa). Returns on rank 0 the
-    pressure range and ring means [mmHg], T [N/m] and the largest deviation from T kappa / the peak there."""
-
+    """Write into `out`: sleeve.xdmf (fields "displacement" [m] and "pressure_mmHg", the pressure on the skin),
+    pressure.png (the sleeve coloured by it) and skin_pressure.png (the limb's skin coloured by it [kPa]) when
+    `render`, pressure_profile.csv / .png (ring-mean pressure along x; p against the section curvature at the
+    ring nearest the limb's centre, with the least-squares Laplace fit p = T kappa). Returns on rank 0 (None
+    elsewhere) the summary: `pressure_summary` (peak with its position, mean; Pa, kPa, mmHg), the pressure range
+    and ring means [mmHg], the hoop tension T [N/m] ("hoop_tension_N_per_m", also "hoop_tension") and the
+    largest deviation from T kappa relative to the peak there ("laplace_deviation")."""
     comm, model = problem.comm, problem.model
     out = Path(out)
     if comm.rank == 0:
         out.mkdir(parents=True, exist_ok=True)
     comm.barrier()
-    field = problem.pressure_field()
-    field.x.array[:] /= PA_PER_MMHG
-    field.name = "pressure_mmHg"
-    with io.XDMFFile(comm, str(out / "sleeve.xdmf"), "w") as xdmf:
-        xdmf.write_mesh(model.mesh)
-        xdmf.write_function(model.displacement(), 0.0)
-        xdmf.write_function(field, 0.0)
+    write_sleeve_xdmf(problem, out / "sleeve.xdmf")
     surface = fio.gather_surface(model.mesh, model.displacement())
-    values = fio.gather_field(model.mesh, field)
-    if render and comm.rank == 0:
-        fio.render_field(out / "pressure.png", surface, values, f"{title}, pressure on the skin [mmHg]",
-                         bodies=[body_surface([limb])], camera="iso", zoom=1.8)
+    if render:
+        field = problem.pressure_field()
+        field.x.array[:] /= PA_PER_MMHG
+        values = fio.gather_field(model.mesh, field)
+        if comm.rank == 0:
+            fio.render_field(out / "pressure.png", surface, values, f"{title}: pressure on the skin",
+                             bodies=[body_surface([limb])], camera="iso", zoom=1.8,
+                             scalar_bar_title="pressure on the skin [mmHg]")
     s = problem.evaluate()
-    p_mmhg = problem.contact_pressure() / PA_PER_MMHG
-    gathered = [comm.gather(a, root=0) for a in (s.position, problem.nodes.reference[:, 0], p_mmhg)]
+    p_pa = problem.contact_pressure()
+    gathered = [comm.gather(a, root=0) for a in (s.position, problem.nodes.reference[:, 0], p_pa,
+                                                 problem.nodes.area)]
     if comm.rank != 0:
         return None
-    x, X, p = (np.concatenate(a) for a in gathered)
+    x, X, p_pa, area = (np.concatenate(a) for a in gathered)
+    p = p_pa / PA_PER_MMHG
     ring_X, rings = np.unique(np.round(X, 9), return_inverse=True)     # the node rings of the tube
     ring_x = np.bincount(rings, x[:, 0]) / np.bincount(rings)
     ring_p = np.bincount(rings, p) / np.bincount(rings)
@@ -206,21 +267,12 @@ def pressure_report(problem: ContactProblem, limb: Ellipsoid, out: Path, title: 
     deviation = float(np.max(np.abs(p[widest] - tension * kappa)) / np.max(p[widest]))
     fio.write_csv(out / "pressure_profile.csv", ["x_m", "ring_mean_pressure_mmHg"],
                   np.column_stack([ring_x, ring_p]), MPI.COMM_SELF)
-    import matplotlib  # optional heavy package, loaded only when a plot is drawn
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
-    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4))
-    left.plot(ring_x * 1e3, ring_p, "o-")
-    left.set(xlabel="x along the limb [mm]", ylabel="ring-mean pressure [mmHg]", title="along the limb")
-    order = np.argsort(kappa)
-    right.plot(kappa, p[widest], "o", label=f"computed (nodes of the ring at x = {1e3 * ring_X[centre_ring]:.0f} mm)")
-    right.plot(kappa[order], tension * kappa[order], "-",
-               label=f"Laplace p = T kappa, T = {tension * PA_PER_MMHG:.1f} N/m")
-    right.set(xlabel="section curvature kappa [1/m]", ylabel="pressure [mmHg]", title="around the widest ring")
-    right.legend()
-    fig.tight_layout()
-    fig.savefig(out / "pressure_profile.png", dpi=120)
-    plt.close(fig)
-    return {"min_mmHg": float(p.min()), "max_mmHg": float(p.max()), "ring_min_mmHg": float(ring_p.min()),
-            "ring_max_mmHg": float(ring_p.max()), "hoop_tension": tension * PA_PER_MMHG,
+    plot_pressure_profile(out / "pressure_profile.png", ring_x, ring_p, kappa, p[widest], ring_X[centre_ring],
+                          tension)
+    if render:
+        render_limb_pressure(out / "skin_pressure.png", limb, x, p_pa, 1.5 * problem.nodes.element_size,
+                             surface, f"{title}: contact pressure on the skin")
+    return {**pressure_summary(x, p_pa, area), "min_mmHg": float(p.min()), "max_mmHg": float(p.max()),
+            "ring_min_mmHg": float(ring_p.min()), "ring_max_mmHg": float(ring_p.max()),
+            "hoop_tension_N_per_m": tension * PA_PER_MMHG, "hoop_tension": tension * PA_PER_MMHG,
             "laplace_deviation": deviation}

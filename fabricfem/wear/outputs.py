@@ -1,12 +1,25 @@
-"""Outputs of a wear run: posed body surfaces, torque plots, pressure renders."""
+"""Outputs of a wear run, what a garment engineer reads: posed body surfaces, torque plots, pressure renders
+on the garment and on the skin, joint moments in OpenSim's storage format (.sto).
+
+Pressure on the skin (`skin_pressure`): the garment's nodal contact pressures [Pa] carried onto the vertices of
+the triangulated body surface (`body_surface`) by an inverse-distance-weighted mean of the nodes in contact
+within a radius (about 1.5 element sizes), 0 where none is near. `render_skin_pressure` draws it in kPa with
+a fixed colour range, so that frames share one scale (1 kPa = 7.50 mmHg, the unit of compression classes).
+"""
 from __future__ import annotations
 
+import os
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
 from mpi4py import MPI
+from scipy.spatial import cKDTree
 
 from fabricfem import io as fio
+
+PA_PER_MMHG = 133.322387415      # Pa
+MMHG_PER_KPA = 1000.0 / PA_PER_MMHG
 
 
 def body_surface(ellipsoids, samples: int = 24) -> tuple[np.ndarray, np.ndarray]:
@@ -48,11 +61,151 @@ def plot_torque(path, curves: dict[str, tuple[np.ndarray, np.ndarray]], title: s
     plt.close(fig)
 
 
-def render_pressure(path, run, title: str, angle: float):
-    """Deformed garment of a WearRun coloured by contact pressure [Pa] with the posed body (pyvista, off-screen)."""
+def render_pressure(path, run, title: str, angle: float, clim: tuple[float, float] | None = None):
+    """Deformed garment of a WearRun coloured by contact pressure [Pa] with the posed body (pyvista, off-screen);
+    `title` is printed as given, the quantity and unit are on the colour bar; `clim` [Pa] fixes the colour range
+    (the same for every frame of a run), default 0 to this frame's peak."""
     mesh = run.model.mesh
     surface = fio.gather_surface(mesh, run.model.displacement())
     values = fio.gather_field(mesh, run.pressure_field())
     if run.comm.rank == 0:
-        fio.render_field(path, surface, values, f"{title}, contact pressure [Pa]",
-                         bodies=[body_surface(run.posed_bodies(angle))])
+        fio.render_field(path, surface, values, title, bodies=[body_surface(run.posed_bodies(angle))],
+                         clim=clim, scalar_bar_title="contact pressure [Pa]")
+
+
+# ---------------------------------------------------------------------------------------- pressure on the skin
+def gather_contact(positions: np.ndarray, pressures: np.ndarray, comm: MPI.Comm = MPI.COMM_WORLD
+                   ) -> tuple[np.ndarray, np.ndarray] | None:
+    """The contact nodes of all ranks on rank 0: (positions (N, 3) [m], pressures (N,) [Pa]) concatenated in
+    rank order; None on the other ranks. Each rank passes its owned nodes (e.g. ExplicitBodyContact.position
+    and its pressures), so that no node is counted twice."""
+    positions = np.asarray(positions, dtype=float).reshape(-1, 3)
+    pressures = np.asarray(pressures, dtype=float).reshape(-1)
+    if len(positions) != len(pressures):
+        raise ValueError(f"pressures: expected {len(positions)} values (one per position), got {len(pressures)}")
+    gathered = comm.gather((positions, pressures), root=0)
+    if comm.rank != 0:
+        return None
+    return np.concatenate([g[0] for g in gathered]), np.concatenate([g[1] for g in gathered])
+
+
+def idw_at(points: np.ndarray, node_positions: np.ndarray, node_values: np.ndarray, radius: float) -> np.ndarray:
+    """(n,) inverse-distance-weighted mean of the `node_values` of the nodes within `radius` [m] of each of
+    the `points` (n, 3) [m], weights 1 / (d + radius / 1000); 0 where no node is within the radius."""
+    out = np.zeros(len(points))
+    if len(points) == 0 or len(node_positions) == 0:
+        return out
+    pairs = cKDTree(points).sparse_distance_matrix(cKDTree(node_positions), radius, output_type="ndarray")
+    if len(pairs) == 0:
+        return out
+    w = 1.0 / (pairs["v"] + 1e-3 * radius)
+    weight = np.bincount(pairs["i"], w, minlength=len(points))
+    total = np.bincount(pairs["i"], w * node_values[pairs["j"]], minlength=len(points))
+    near = weight > 0.0
+    out[near] = total[near] / weight[near]
+    return out
+
+
+def skin_pressure(ellipsoids, samples: int, node_positions: np.ndarray, node_pressure: np.ndarray,
+                  radius: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Contact pressure on the skin: the surface of the posed `ellipsoids` (`body_surface(ellipsoids, samples)`,
+    points (n, 3) [m] and triangles (m, 3)) with, at each vertex, the inverse-distance-weighted mean pressure
+    [Pa] of the garment nodes in contact (pressure > 0) within `radius` [m] of it (`idw_at`), 0 where there is
+    none. `node_positions` (N, 3) [m] and `node_pressure` (N,) [Pa] are all nodes of the garment (rank 0:
+    `gather_contact`); positions where the nodes touch the skin (contact positions) give the sharpest map.
+    Choose `radius` about 1.5 element sizes: smaller leaves holes between the nodes, larger smears the peaks.
+    Returns (points, triangles, values (n,) [Pa])."""
+    if not (isinstance(radius, (int, float)) and np.isfinite(radius) and radius > 0.0):
+        raise ValueError(f"radius must be a positive length [m], got {radius!r}")
+    positions = np.asarray(node_positions, dtype=float)
+    pressure = np.asarray(node_pressure, dtype=float).reshape(-1)
+    if positions.ndim != 2 or positions.shape[1] != 3:
+        raise ValueError(f"node_positions must have shape (N, 3), got {positions.shape}")
+    if len(pressure) != len(positions):
+        raise ValueError(f"node_pressure: expected {len(positions)} values (one per node), got {len(pressure)}")
+    points, triangles = body_surface(ellipsoids, samples)
+    touching = np.isfinite(pressure) & (pressure > 0.0)
+    return points, triangles, idw_at(points, positions[touching], pressure[touching], float(radius))
+
+
+def render_skin_pressure(path: str | Path, points: np.ndarray, triangles: np.ndarray, values_kPa: np.ndarray,
+                         title: str, clim: tuple[float, float],
+                         garment_surface: tuple[np.ndarray, np.ndarray] | None = None, camera: str = "iso",
+                         zoom: float = 1.0) -> None:
+    """PNG (off-screen, rank 0's data) of the body surface (points (n, 3) [m], triangles (m, 3)) coloured by
+    the contact pressure `values_kPa` (n,) [kPa] over the fixed colour range `clim` = (low, high) [kPa] (pass
+    the same to every frame of a run), with a colour bar "contact pressure [kPa]" and a second scale in mmHg
+    above it (io.save_with_colour_bar), the garment (points, cells) as a translucent grey surface with its edges
+    if given, `title` once, and the camera of io.render_field (`camera` in io.CAMERAS, `zoom`)."""
+    values = np.asarray(values_kPa, dtype=float).reshape(-1)
+    if len(values) != len(points):
+        raise ValueError(f"values_kPa: expected {len(points)} values (one per point), got {len(values)}")
+    low, high = fio.colour_range(values, clim)
+    os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")
+    import pyvista as pv  # optional heavy package, loaded only when a render is made
+    skin = fio.polydata(points, triangles)
+    skin.point_data["pressure_kPa"] = values
+    plotter = pv.Plotter(off_screen=True, window_size=(1200, 800))
+    plotter.add_mesh(skin, scalars="pressure_kPa", cmap="viridis", clim=(low, high), smooth_shading=True,
+                     show_scalar_bar=False)
+    if garment_surface is not None:
+        # where the garment presses, its flat cells lie on or just under the finer skin and are hidden by it:
+        # the grey fill and edges show the garment where it stands off the skin
+        plotter.add_mesh(fio.polydata(*garment_surface), color="gray", opacity=0.15)
+        plotter.add_mesh(fio.polydata(*garment_surface), style="wireframe", color="dimgray", opacity=0.5,
+                         line_width=1)
+    fio.set_camera(plotter, camera, zoom)
+    image = plotter.screenshot(None, return_img=True)
+    plotter.close()
+    fio.save_with_colour_bar(path, image, title, (low, high), "contact pressure [kPa]",
+                             secondary=(f"[mmHg]  (1 kPa = {MMHG_PER_KPA:.2f} mmHg)", MMHG_PER_KPA))
+
+
+# ---------------------------------------------------------------------------------------- OpenSim storage
+def _sto_note_lines(header_note: str) -> list[str]:
+    """The comment lines of a .sto header (ValueError naming header_note if a line could be read as a header
+    key: OpenSim reads "key=value" lines before endheader as metadata)."""
+    lines = [line.rstrip() for line in header_note.splitlines()]
+    for line in lines:
+        if "=" in line or line.strip().lower() == "endheader":
+            raise ValueError(f"header_note: a comment line may not contain '=' nor be 'endheader' (OpenSim would "
+                             f"read it as a header key), got {line!r}")
+    return lines
+
+
+def write_sto(path: str | Path, times: Sequence[float], columns: Mapping[str, Sequence[float]],
+              comm: MPI.Comm = MPI.COMM_WORLD, header_note: str = "") -> None:
+    """Write joint moments in OpenSim's storage format (.sto, rank 0 writes; all ranks pass the same data):
+
+        <file stem>                  the table's name
+        version=1
+        nRows=<len(times)>
+        nColumns=<1 + len(columns)>  (time included)
+        inDegrees=no
+        <the lines of header_note>   the sign convention and units, e.g. "Units are S.I. units (second, N m)"
+        endheader
+        time<TAB><name><TAB>...      then one row per time, tab-separated
+
+    `times` [s] (non-decreasing, finite), `columns` {name: values (len(times),)} [N m], named
+    "<joint>_moment" (no whitespace; "time" is taken). Errors name the offending parameter."""
+    t = np.asarray(times, dtype=float).reshape(-1)
+    if not np.all(np.isfinite(t)) or np.any(np.diff(t) < 0.0):
+        raise ValueError("times must be finite and non-decreasing [s]")
+    table = [t]
+    for name, values in columns.items():
+        if not name or any(c.isspace() for c in name) or name == "time":
+            raise ValueError(f"columns: a column name must be non-empty, without whitespace and not 'time', "
+                             f"got {name!r}")
+        v = np.asarray(values, dtype=float).reshape(-1)
+        if len(v) != len(t):
+            raise ValueError(f"columns[{name!r}]: expected {len(t)} values (one per time), got {len(v)}")
+        table.append(v)
+    notes = _sto_note_lines(header_note)
+    if comm.rank != 0:
+        return
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    header = [path.stem, "version=1", f"nRows={len(t)}", f"nColumns={len(table)}", "inDegrees=no", *notes,
+              "endheader", "\t".join(["time", *columns])]
+    rows = ["\t".join(f"{x:.10g}" for x in row) for row in np.column_stack(table)]
+    path.write_text("\n".join(header + rows) + "\n")
