@@ -7,8 +7,8 @@ A group (e.g. "feet": the two foot segments) is off for t_off <= t < t_on in eac
 from __future__ import annotations
 
 import math
-from itertools import pairwise
 from dataclasses import dataclass
+from itertools import pairwise
 from typing import Mapping, Sequence
 
 

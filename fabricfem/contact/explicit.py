@@ -513,8 +513,8 @@ class ExplicitBodyContact:
             return ellipsoids
         scale = 1.0 if self.transverse_scale is None else float(self.transverse_scale(t))
         active = np.ones(len(ellipsoids), dtype=bool) if self.segment_active is None else self.segment_active(t)
-        return [Ellipsoid(e.center, e.rotation, e.radii * np.array([1.0, scale, scale])) if on
-                else Ellipsoid(PARKED_AT + 10.0 * k, np.eye(3), np.full(3, 1e-3))
+        return [_ellipsoid(e.center, e.rotation, e.radii * np.array([1.0, scale, scale])) if on
+                else _ellipsoid(PARKED_AT + 10.0 * k, np.eye(3), np.full(3, 1e-3))
                 for k, (e, on) in enumerate(zip(ellipsoids, active))]
 
     def _posed(self, t: float) -> list[Ellipsoid]:
@@ -679,8 +679,14 @@ def _posed_segment(segment, positions) -> Ellipsoid:
     perpendicular = offset - np.dot(offset, e1) * e1
     e2 = perpendicular / float(np.linalg.norm(perpendicular))
     e3 = np.array([e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]])
+    return _ellipsoid(center, np.column_stack([e1, e2, e3]), np.array(segment.radii, dtype=float))
+
+
+def _ellipsoid(center: np.ndarray, rotation: np.ndarray, radii: np.ndarray) -> Ellipsoid:
+    """An Ellipsoid from already valid parts, without the checks of its constructor (an explicit step poses the
+    body every step; the first pose of a PoseCache is validated)."""
     posed = object.__new__(Ellipsoid)        # frozen dataclass: fields set as its __post_init__ does
     object.__setattr__(posed, "center", center)
-    object.__setattr__(posed, "rotation", np.column_stack([e1, e2, e3]))
-    object.__setattr__(posed, "radii", np.array(segment.radii, dtype=float))
+    object.__setattr__(posed, "rotation", rotation)
+    object.__setattr__(posed, "radii", radii)
     return posed

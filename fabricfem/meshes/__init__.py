@@ -20,8 +20,16 @@ __all__ += ["MeshResolution", "UnitCellMesh", "unit_cell", "PlainWeave", "YarnFa
             "amplitude_from_crimp", "check_weave"]
 
 # Sewing patterns: panels, stitches, readers (GarmentCode JSON, TOML) and their meshing and placement
-from .pattern import Edge, Panel, Pattern, Stitch, check_pattern, pattern_from_dict, read_garmentcode  # noqa: E402
-from .pattern import read_pattern_toml  # noqa: E402
+from .pattern import (  # noqa: E402
+           Edge,
+           Panel,
+           Pattern,
+           Stitch,
+           check_pattern,
+           pattern_from_dict,
+           read_garmentcode,
+           read_pattern_toml,  # noqa: E402
+)
 from .pattern_mesh import GarmentMesh, SeamPairs, mesh_pattern, wrap_on_cylinder  # noqa: E402
 
 __all__ += ["Edge", "Panel", "Pattern", "Stitch", "check_pattern", "pattern_from_dict", "read_garmentcode",

@@ -44,6 +44,9 @@ class WearRun(Protocol):
         """The body's ellipsoid segments at a record coordinate (the steps' `coordinate`: a joint angle [deg]
         or a time [s])."""
 
+    def body_time(self, step) -> float:
+        """The body time [s] of record `step`."""
+
     def fraction(self, step) -> float:
         """The done fraction in [0, 1] of the run at record `step` (progress and time left)."""
 

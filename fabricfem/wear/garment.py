@@ -213,8 +213,9 @@ class WearHistory:
         return f"{steps} explicit steps, largest KE/SE in the motion {ratio:.2e}"
 
     def summary(self) -> dict:
-        """Peaks and finals per torque monitor (with their time), pressure peak and mean (Pa, kPa, mmHg) with
-        the segment and position of the peak, the largest strain, penetration and seam gap."""
+        """Over the motion phase: peak and final per torque monitor (with their time and axis value), pressure
+        peak and mean (Pa, kPa, mmHg) with the segment and position of the peak; after the sewing: the largest
+        strain, penetration and seam gap."""
         out: dict = {"records": len(self.steps), "completed": self.completed}
         if not self.steps:
             return out
@@ -228,17 +229,20 @@ class WearHistory:
             if motion[k].axis_value is not None:
                 entry.update(peak_at=motion[k].axis_value, final_at=motion[-1].axis_value)
             out[f"torque_{name}"] = entry
-        k = int(np.argmax([s.peak_pressure for s in self.steps]))
-        peak = self.steps[k]
-        contact = [s.mean_pressure for s in self.steps if s.mean_pressure > 0.0]
+        # pressures over the motion; strain and penetration once the seams are sewn (sewing draws the panels
+        # across the body with large transient strains)
+        k = int(np.argmax([s.peak_pressure for s in motion]))
+        peak = motion[k]
+        contact = [s.mean_pressure for s in motion if s.mean_pressure > 0.0]
         mean = float(np.mean(contact)) if contact else 0.0
         out["pressure"] = {"peak_Pa": peak.peak_pressure, "peak_kPa": peak.peak_pressure / 1e3,
                            "peak_mmHg": peak.peak_pressure / PA_PER_MMHG, "peak_time_s": peak.time,
                            "peak_segment": peak.peak_segment, "peak_position_m": list(peak.peak_position),
                            "mean_Pa": mean, "mean_kPa": mean / 1e3, "mean_mmHg": mean / PA_PER_MMHG}
-        out["max_strain"] = max(s.max_strain for s in self.steps)
-        out["max_penetration_m"] = max(s.max_penetration for s in self.steps)
-        out["max_seam_gap_after_sewing_m"] = max((s.seam_gap for s in self.steps if s.phase != "sew"), default=0.0)
+        sewn = [s for s in self.steps if s.phase != "sew"] or self.steps
+        out["max_strain"] = max(s.max_strain for s in sewn)
+        out["max_penetration_m"] = max(s.max_penetration for s in sewn)
+        out["max_seam_gap_after_sewing_m"] = max(s.seam_gap for s in sewn)
         return out
 
 
@@ -314,6 +318,10 @@ class GarmentRun:
         active = (np.ones(len(self.body.segments), dtype=bool) if self.contact.segment_active is None
                   else self.contact.segment_active(time_s))
         return [e for e, on in zip(self.contact.body_at(time_s), active) if on]
+
+    def body_time(self, step: WearStep) -> float:
+        """The body time [s] of record `step`."""
+        return step.time
 
     def fraction(self, step: WearStep) -> float:
         """The done fraction of the run at record `step` (body time over the run's duration)."""

@@ -15,7 +15,7 @@ from dolfinx import fem
 from dolfinx import io as dio
 
 from fabricfem import io as fio
-from fabricfem.wear.outputs import body_surface, plot_torque, render_pressure
+from fabricfem.wear.outputs import body_surface, plot_torque, render_skin_pressure, skin_pressure, write_sto
 
 
 class WearRecorder:
@@ -40,6 +40,7 @@ class WearRecorder:
         self.xdmf_pressure.write_mesh(model.mesh)
         self.frames: list[tuple[float, str]] = []
         self.renders: list[str] = []     # names of the pressure renders written
+        self.skin_frames: list = []      # (name, title, (points, triangles, values [Pa]), garment surface), rank 0
         self.label = getattr(run, "axis_label", "elbow angle [deg]")
         self.unit = "deg" if "[deg]" in self.label else "s"
 
@@ -59,10 +60,24 @@ class WearRecorder:
             self.frames.append((stamp, name))
         while self.render and self.pending and x >= self.pending[0] - 1e-9:
             at = self.pending.pop(0)
-            name = f"pressure_{at:05.2f}{self.unit}.png"
-            title = f"{run.config.name if hasattr(run.config, 'name') else run.name}: {self.label.split(' [')[0]} {x:.2f} {self.unit}"
-            render_pressure(self.out / name, run, title, x)
-            self.renders.append(name)
+            self._keep_skin_frame(step, f"pressure_{at:05.2f}{self.unit}.png")
+
+    def _keep_skin_frame(self, step, name: str) -> None:
+        """The pressure on the body's skin at this record (rank 0 keeps it; rendered at `close` with one colour
+        range across the frames): the garment's nodal pressure [Pa] spread onto the skin within two node
+        spacings (wear.outputs.skin_pressure)."""
+        run = self.run
+        surface = fio.gather_surface(run.model.mesh, run.model.displacement())
+        values = fio.gather_field(run.model.mesh, run.pressure_field())
+        if run.comm.rank != 0:
+            return
+        points, cells = surface
+        spacing = float(np.median(np.linalg.norm(points[cells[:, 0]] - points[cells[:, 1]], axis=1)))
+        radius = 2.0 * max(spacing, 1e-6)
+        skin = skin_pressure(run.posed_bodies(step.coordinate), 2 * self.samples, points, values, radius)
+        what = self.label.split(" [")[0]
+        title = f"{getattr(run, 'name', '') or run.config.name}: {what} {step.coordinate:.2f} {self.unit}, pressure on the skin"
+        self.skin_frames.append((name, title, skin, (points, cells)))
 
     def close(self, history) -> None:
         """Close the XDMF file and write torque.csv, body.pvd and torque.png."""
@@ -75,5 +90,17 @@ class WearRecorder:
                 f.write('<?xml version="1.0"?>\n<VTKFile type="Collection" version="0.1">\n<Collection>\n')
                 f.writelines(f'  <DataSet timestep="{x}" file="{name}"/>\n' for x, name in self.frames)
                 f.write("</Collection>\n</VTKFile>\n")
+        times = [self.run.body_time(s) for s in history.steps]
+        note = ("resisting torque of the garment about each joint axis [N m]: positive when the garment opposes a "
+                "right-handed rotation about the axis (flexion); time: body time [s]")
+        write_sto(self.out / "torque.sto", times,
+                  {f"{name}_moment": [s.torques[name] for s in history.steps] for name in history.monitors}
+                  if history.steps else {}, comm, note)
+        if comm.rank == 0 and self.skin_frames:
+            top = max(float(np.max(skin[2], initial=0.0)) for _, _, skin, _ in self.skin_frames) / 1e3
+            for name, title, (points, triangles, values), garment in self.skin_frames:
+                render_skin_pressure(self.out / name, points, triangles, values / 1e3, title, (0.0, max(top, 1e-9)),
+                                     garment)
+                self.renders.append(name)
         plot_torque(self.out / "torque.png", history.torque_curves(), f"{getattr(history, 'name', '') or ''} resisting torque",
                     xlabel=self.label)

@@ -64,7 +64,7 @@ def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], ren
 
     def on_step(step):
         recorder.record(step)
-        say(f"  {step.line()}  {clock(run.fraction(step))}")
+        say(f"  {step.line()}  {clock(run.fraction(step), getattr(step, 'phase', None))}")
 
     history = run.run(on_step=on_step, stop_on_failure=False)
     history.wall = time.perf_counter() - t0

@@ -223,6 +223,10 @@ class ArmOutputs:
         """The done fraction of the run at record `step` (its angle over the final angle)."""
         return step.angle / self.config.motion.final_angle
 
+    def body_time(self, step) -> float:
+        """The body time [s] of record `step` (the flexion's time at its angle)."""
+        return self.flexion.time_at(math.radians(step.angle))
+
 
 @dataclass
 class SleeveProblem(ArmOutputs):
@@ -394,6 +398,11 @@ class SleeveHistory:
     @property
     def header(self) -> tuple[str, ...]:
         return self.HEADER
+
+    @property
+    def monitors(self) -> list[str]:
+        """The torque monitors of a record (SleeveStep.torques)."""
+        return ["elbow", "elbow_both_segments"]
 
     def torque_curves(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Resisting torque [N m] against the elbow angle [deg], one curve."""
