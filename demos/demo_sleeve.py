@@ -8,7 +8,7 @@ The same scene as a file: `fabricfem run scenes/sleeve.toml`.
 Data flow: configuration (wear.config.SleeveConfig: the tube, the fabric, the flexion, the contact, the route)
 -> mesh (meshes.tube, Q2) -> forms (Naghdi shell) -> route (wear.run.build_run: explicit central differences
 with lumped mass, the sleeve's weight and Lagrange-multiplier contact with Coulomb friction [Man2006, Box 5])
--> outputs (wear.recorder.WearRecorder: cloth.xdmf with displacement and contact pressure per degree,
+-> outputs (wear.recorder.WearRecorder: cloth.xdmf and cloth_pressure.xdmf per degree, torque.sto,
 body.pvd, torque.csv, torque.png, pressure renders). The torque is the resisting torque of the contact forces
 on the forearm about the elbow, positive when the sleeve opposes the flexion.
 """
@@ -29,7 +29,7 @@ def main(out: Path, quick: bool = False, comm=MPI.COMM_WORLD):
     config = SleeveConfig.of(n_around=10, n_along=13, final_angle=6.0 if quick else 57.0,       # mesh I
                              settle_time=0.1 if quick else 0.4, name="sleeve demo")
     run = build_run(config, comm)                                                               # mesh, forms
-    recorder = WearRecorder(run, out, render_angles=[config.motion.final_angle], render=not quick)
+    recorder = WearRecorder(run, out, render_at=[config.motion.final_angle], render=not quick)
     say = print if comm.rank == 0 else (lambda *a, **k: None)
     say(f"sleeve demo: {run.model.ndofs} dofs, {run.describe()}")
     history = run.run(on_step=lambda step: (recorder.record(step), say(f"  {step.angle:5.1f} deg: torque "

@@ -11,12 +11,13 @@ from fabricfem.scenes import build as scene_build
 from fabricfem.scenes import run as scene_run
 
 ROOT = Path(__file__).resolve().parents[1]
-SCENES = {"static": "rollup.toml", "dynamic": "cantilever_vibration.toml", "explicit": "corner_pinned.toml",
-          "sleeve": "sleeve.toml", "compression": "compression_sleeve.toml"}
+SCENES = {"static": "scenes/rollup.toml", "dynamic": "scenes/cantilever_vibration.toml",
+          "explicit": "scenes/corner_pinned.toml", "sleeve": "tests/data/sleeve_kind.toml",
+          "compression": "tests/data/compression_kind.toml", "wear": "scenes/sleeve.toml"}
 
 
 def _scene(kind: str) -> dict:
-    return tomllib.loads((ROOT / "scenes" / SCENES[kind]).read_text())
+    return tomllib.loads((ROOT / SCENES[kind]).read_text())
 
 
 def _set(section: str, **values):
@@ -71,6 +72,12 @@ BAD = [  # (scene kind, mutation, text the one-line error must contain)
     ("sleeve", _set("motion", solver="implicit"), "motion.solver"),
     ("sleeve", _set("mesh", n_around=0), "mesh.n_around"),
     ("sleeve", _set("body", upper_arm_girth=0.5), "upper_arm_girth"),
+    ("wear", _set("garment", n_around=0), "garment.n_around"),
+    ("wear", _set("garment", builder="knit"), "garment.builder"),
+    ("wear", _set("motion", type="dance"), "motion.type"),
+    ("wear", _set("motion", final_angle=200.0), "final_angle"),
+    ("wear", _set("route", solver="quasistatic", mass_damping=-1.0), "route.mass_damping"),
+    ("wear", _set("fabric", density=0.0), "density"),
     ("compression", _set("limb", radii=[0.32, -0.04, 0.036]), "limb.radii"),
     ("compression", _set("limb", center=[0.12, 0.01, 0.0]), "limb.center"),
     ("compression", _set("mesh", n_around=10), "mesh.n_around"),
@@ -87,6 +94,8 @@ def no_meshing(monkeypatch):
     for module in (scene_build, scene_run):
         monkeypatch.setattr(module, "build_mesh", trap)
     monkeypatch.setattr("fabricfem.wear.sleeve.tube", trap)
+    monkeypatch.setattr("fabricfem.scenes.wear.tube", trap)
+    monkeypatch.setattr("fabricfem.scenes.wear.mesh_pattern", trap)
 
 
 def _run_cli(path: Path, capsys) -> tuple[int, list[str]]:

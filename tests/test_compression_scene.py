@@ -13,7 +13,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def compression_data() -> dict:
-    return tomllib.loads((ROOT / "scenes" / "compression_sleeve.toml").read_text())
+    return tomllib.loads((ROOT / "tests" / "data" / "compression_kind.toml").read_text())
 
 
 @pytest.mark.parametrize("mutate, message", [
@@ -46,9 +46,9 @@ def test_default_start_leaves_the_limb_inside():
 def test_run_small_compression_scene(tmp_path, capsys):
     """`fabricfem run` of a coarse compression scene writes its outputs and prints the summary. (16 x 4 cells
     were too coarse: Newton stalled at 0.948 of the limb's size after 4 cuts; 16 x 8 runs in ~8 s.)"""
-    text = (ROOT / "scenes" / "compression_sleeve.toml").read_text()
+    text = (ROOT / "tests" / "data" / "compression_kind.toml").read_text()
     text = (text.replace("n_around = 32", "n_around = 16").replace("n_along = 16", "n_along = 8")
-            .replace("steps = 12", "steps = 4").replace('dir = "results/compression_sleeve"', f'dir = "{tmp_path}"'))
+            .replace("steps = 12", "steps = 4").replace('dir = "results/compression_kind"', f'dir = "{tmp_path}"'))
     path = tmp_path / "scene.toml"
     path.write_text(text)
     assert main(["run", str(path)]) == 0

@@ -24,7 +24,7 @@ QUICK_EXPLICIT = SleeveConfig.of(n_around=10, n_along=13, final_angle=6.0, outpu
 
 
 def sleeve_data() -> dict:
-    return tomllib.loads((ROOT / "scenes" / "sleeve.toml").read_text())
+    return tomllib.loads((ROOT / "tests" / "data" / "sleeve_kind.toml").read_text())
 
 
 def test_sleeve_scene_is_valid():
@@ -134,8 +134,8 @@ def test_sleeve_scene_run_writes_outputs(tmp_path):
     outcome = run_scene(scene_module.validate(data))
     history = outcome.result
     assert history.completed and outcome.exit_code == 0
-    for name in ("cloth.xdmf", "cloth.h5", "body.pvd", "body_0002.vtp", "torque.csv", "torque.png",
-                 "pressure_06.0deg.png"):
+    for name in ("cloth.xdmf", "cloth.h5", "cloth_pressure.xdmf", "body.pvd", "body_0002.vtp", "torque.csv",
+                 "torque.png", "torque.sto", "pressure_06.00deg.png"):
         assert (tmp_path / name).exists(), name
     rows = list(csv.DictReader(open(tmp_path / "torque.csv")))
     assert [float(r["angle_deg"]) for r in rows] == [0.0, 3.0, 6.0]

@@ -32,7 +32,7 @@ THICK_ARM = ArmDimensions(upper_arm_girth=0.36, forearm_girth=0.31)   # radii 0.
 
 
 def sleeve_data() -> dict:
-    return tomllib.loads((ROOT / "scenes" / "sleeve.toml").read_text())
+    return tomllib.loads((ROOT / "tests" / "data" / "sleeve_kind.toml").read_text())
 
 
 def test_arm_field_reaches_the_ellipsoids():

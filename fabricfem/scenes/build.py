@@ -188,5 +188,7 @@ def check_wear_objects(data: dict, path: Path | None) -> None:
         check_objects(wear.compression_data(data))
         return
     fabric = wear.wear_fabric(data, build_fabric)
+    if not fabric.density > 0.0:
+        raise SceneError(f"fabric.density: the explicit engine needs a positive density [kg/m^3], got {fabric.density}")
     wear.plan(data, fabric, path)
     wear.check_garment(data, path)

@@ -1,0 +1,203 @@
+"""The garment engine (fabricfem.wear.garment, fabricfem.contact.seams) and wear scenes (fabricfem.scenes.wear):
+sewing closes the seams and conserves momentum; the sleeve as a wear scene gives the torque history of the
+sleeve before the engine existed (stored from commit 3bc87d0); wear scenes refuse bad input before meshing."""
+import csv
+import math
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+from toml_text import dumps
+
+from fabricfem import cli
+from fabricfem.body.pose import Body, Segment
+from fabricfem.contact.seams import SeamSpec
+from fabricfem.materials import Fabric
+from fabricfem.meshes.pattern import Panel, Pattern, Stitch
+from fabricfem.meshes.pattern_mesh import mesh_pattern
+from fabricfem.scenes import build as scene_build
+from fabricfem.scenes.run import run_scene
+from fabricfem.wear.garment import ExplicitSettings, Timeline, build_garment_run
+
+ROOT = Path(__file__).resolve().parents[1]
+COTTON = Fabric(E1=1.2e6, E2=1.2e6, G12=1e5, nu12=0.0, thickness=1e-3, density=436.0)
+
+
+class Still:
+    names = ("p", "d", "m")
+    time_range = (0.0, 0.0)
+
+    def positions(self, t):
+        return {"p": np.array([10.0, 0.0, 0.0]), "d": np.array([11.0, 0.0, 0.0]), "m": np.array([10.5, 1.0, 0.0])}
+
+
+def far_body() -> Body:
+    """One small ellipsoid 10 m away: the garment never touches it."""
+    return Body([Segment("far", "p", "d", "m", (0.5, 0.1, 0.1))], Still())
+
+
+def test_sewing_closes_the_seam_and_conserves_momentum():
+    """Two flat 0.1 m squares 5 cm apart in z = 0, one stitch between facing edges, sewn in 0.05 s with nothing
+    else acting (no gravity, no contact): after the sewing the stitched nodes coincide (to round-off), the
+    garment's centre of mass has not moved (no external force: conservation of momentum, to round-off of the
+    mass-weighted sums, 1e-12 m) and it is at rest up to the damped sewing motion."""
+    square = np.array([[0.0, 0.0], [0.1, 0.0], [0.1, 0.1], [0.0, 0.1]])
+    pattern = Pattern({"left": Panel("left", square, translation=(0.0, 0.0, 0.0)),
+                       "right": Panel("right", square, translation=(0.15, 0.0, 0.0))},
+                      [Stitch(("left", 1), ("right", 3))])
+    garment = mesh_pattern(pattern, 0.05, comm=MPI.COMM_SELF)
+    seams = [SeamSpec(s.name, s.points_a, s.panel_tag_a, s.points_b, s.panel_tag_b, float(np.mean(s.lengths)))
+             for s in garment.stitches]
+    run = build_garment_run("sewing", garment.fabric, COTTON, far_body(), seams=seams,
+                            timeline=Timeline(record_time=0.01, sewing_time=0.05, settle_time=0.05, motion_time=0.0),
+                            settings=ExplicitSettings(gravity=None), measure_strain=False)
+    nodes = run.contact.nodes
+    centre0 = (nodes.area[:, None] * nodes.reference).sum(axis=0) / nodes.area.sum()
+    history = run.run()
+    d = run.integrator.d.getArray(readonly=True)
+    x = nodes.reference + d[nodes.dofs]
+    centre = (nodes.area[:, None] * x).sum(axis=0) / nodes.area.sum()
+    assert history.steps[0].seam_gap > 0.04                      # open while sewing ...
+    assert history.steps[-1].seam_gap < 1e-12                   # ... closed after it
+    np.testing.assert_allclose(centre, centre0, atol=1e-12)
+    run.destroy()
+
+
+def _stored_sleeve() -> np.ndarray:
+    """(angle [deg], resisting torque [N m]) of scenes/sleeve.toml (mesh I) by the code of commit 3bc87d0."""
+    rows = list(csv.reader(open(ROOT / "tests" / "data" / "sleeve_mesh1_torque_3bc87d0.csv")))
+    return np.array([[float(r[0]), float(r[1])] for r in rows[1:]])
+
+
+def test_sleeve_wear_scene_gives_the_stored_history_over_the_first_ten_degrees(tmp_path):
+    """scenes/sleeve.toml (a wear scene on the explicit engine) flexed to 11 degrees: the elbow torque of every
+    record up to 10 degrees (the settled start and 1..10 deg) equals the history stored before the engine existed
+    within 1e-8 relative to its largest value (the acceptance bound; measured 0, bit for bit). The 11-degree
+    record is left out: the flexion stops there, the stored one went on to 57 degrees."""
+    data = tomllib.loads((ROOT / "scenes" / "sleeve.toml").read_text())
+    data["motion"]["final_angle"] = 11.0
+    data["output"] = {"dir": str(tmp_path), "render": False}
+    path = tmp_path / "sleeve10.toml"
+    path.write_text(dumps(data))
+    outcome = run_scene(scene_build.load(path), MPI.COMM_SELF)
+    steps = outcome.result.steps
+    settled = [s for s in steps if s.phase == "settle"][-1]
+    motion = [s for s in steps if s.phase == "motion" and s.axis_value <= 10.0 + 1e-9]
+    angles = np.array([0.0] + [s.axis_value for s in motion])
+    torques = np.array([settled.torques["elbow"]] + [s.torques["elbow"] for s in motion])
+    stored = _stored_sleeve()
+    stored = stored[stored[:, 0] <= 10.0 + 1e-9]
+    np.testing.assert_allclose(angles, stored[:, 0], atol=1e-9)
+    assert np.max(np.abs(torques - stored[:, 1])) <= 1e-8 * np.max(np.abs(stored[:, 1]))
+    for name in ("cloth.xdmf", "cloth_pressure.xdmf", "torque.csv", "torque.sto", "torque.png", "summary.json"):
+        assert (tmp_path / name).is_file(), name
+
+
+# ------------------------------------------------------------------------------ refusals before meshing
+@pytest.fixture
+def no_meshing(monkeypatch):
+    def trap(*args, **kwargs):
+        raise AssertionError("meshed before refusing the scene")
+    monkeypatch.setattr("fabricfem.scenes.wear.tube", trap)
+    monkeypatch.setattr("fabricfem.scenes.wear.mesh_pattern", trap)
+
+
+def _trousers() -> dict:
+    return tomllib.loads((ROOT / "scenes" / "trousers_standing.toml").read_text())
+
+
+BOW_TIE = """stitches = []
+[panels.front]
+vertices = [[0.0, 0.0], [0.3, 0.3], [0.3, 0.0], [0.0, 0.3]]
+"""
+MISSING_PANEL = """stitches = [["front", 1, "back", 3]]
+[panels.front]
+vertices = [[0.0, 0.0], [0.3, 0.0], [0.3, 0.6], [0.0, 0.6]]
+"""
+EDGE_OUT_OF_RANGE = """stitches = [["front", 7, "back", 3]]
+[panels.front]
+vertices = [[0.0, 0.0], [0.3, 0.0], [0.3, 0.6], [0.0, 0.6]]
+[panels.back]
+vertices = [[0.0, 0.0], [0.3, 0.0], [0.3, 0.6], [0.0, 0.6]]
+"""
+MARKERS = ["waist", "crotch", "chest", "trunk_marker", "pelvis_marker"] + [
+    f"{p}_{s}" for s in "lr" for p in ("hip", "knee", "ankle", "toe", "thigh_marker", "shank_marker", "foot_marker")]
+
+
+def _marker_csv(times, drop: str | None = None, nan_at: tuple[str, int] | None = None) -> str:
+    names = [m for m in MARKERS if m != drop]
+    lines = ["time," + ",".join(f"{m}_x,{m}_y,{m}_z" for m in names)]
+    for k, t in enumerate(times):
+        values = []
+        for j, m in enumerate(names):
+            v = [0.1 * j, 0.01 * j + 0.001 * k, 1.0]
+            if nan_at == (m, k):
+                v[0] = math.nan
+            values += [f"{c}" for c in v]
+        lines.append(f"{t}," + ",".join(values))
+    return "\n".join(lines) + "\n"
+
+
+WEAR_BAD = [  # (files next to the scene, mutation of the trousers scene, text the one-line error must contain)
+    ({"p.toml": MISSING_PANEL}, lambda d: d["garment"].update(pattern="p.toml"), "'back'"),
+    ({"p.toml": EDGE_OUT_OF_RANGE}, lambda d: d["garment"].update(pattern="p.toml"), "7"),
+    ({"p.toml": BOW_TIE}, lambda d: d["garment"].update(pattern="p.toml"), "intersect"),
+    ({}, lambda d: d["garment"].update(pattern="no_such_pattern"), "garment.pattern"),
+    ({"m.csv": _marker_csv([0.0, 0.1, 0.2], drop="knee_r")},
+     lambda d: d.update(motion={"type": "file", "path": "m.csv"}), "knee_r"),
+    ({"m.csv": _marker_csv([0.0, 0.2, 0.1])}, lambda d: d.update(motion={"type": "file", "path": "m.csv"}),
+     "frame"),
+    ({"m.csv": _marker_csv([0.0, 0.1, 0.2], nan_at=("hip_l", 1))},
+     lambda d: d.update(motion={"type": "file", "path": "m.csv"}), "hip_l"),
+    ({}, lambda d: d["torque"][0].update(joint="hip_l"), "hip_l"),
+    ({}, lambda d: d["torque"][0].update(segments=["tail"]), "tail"),
+    ({}, lambda d: d["torque"][0].update(segments=[]), "torque[0].segments"),
+    ({}, lambda d: d["body"].update(type="octopus"), "body.type"),
+    ({}, lambda d: d["body"].update(thigh_length=-0.4), "thigh_length"),
+    ({}, lambda d: d["garment"].update(sewing_tme=0.1), "sewing_tme"),
+    ({}, lambda d: d["donning"].update(remove=["tail"]), "donning.remove"),
+    ({}, lambda d: d["fabric"].update(catalogue="no-such-fabric"), "fabric.catalogue"),
+]
+
+
+@pytest.mark.parametrize("files, mutate, key", WEAR_BAD, ids=[f"{i}-{k}" for i, (_, _, k) in enumerate(WEAR_BAD)])
+def test_bad_wear_scene_refused_before_meshing(files, mutate, key, tmp_path, capsys, no_meshing):
+    data = _trousers()
+    data["output"] = {"dir": str(tmp_path / "out")}
+    mutate(data)
+    for name, text in files.items():
+        (tmp_path / name).write_text(text)
+    path = tmp_path / "bad.toml"
+    path.write_text(dumps(data))
+    code = cli.main(["run", str(path)])
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert code == 2 and len(lines) == 1, lines
+    assert key in lines[0] and "Traceback" not in lines[0], lines[0]
+
+
+def test_shipped_wear_scenes_are_valid():
+    for name in ("sleeve.toml", "trousers_standing.toml", "compression_sleeve.toml"):
+        scene = scene_build.load(ROOT / "scenes" / name)
+        assert scene.kind == "wear", name
+
+
+def _small_compression(path: Path, out: Path) -> dict:
+    text = (path.read_text().replace("n_around = 32", "n_around = 16").replace("n_along = 16", "n_along = 8")
+            .replace("steps = 12", "steps = 4"))
+    data = tomllib.loads(text)
+    data["output"] = {"dir": str(out), "render": False}
+    scene_path = out.parent / f"{out.name}.toml"
+    scene_path.write_text(dumps(data))
+    return run_scene(scene_build.load(scene_path), MPI.COMM_SELF).result
+
+
+def test_compression_wear_scene_gives_the_compression_scene_pressures(tmp_path):
+    """scenes/compression_sleeve.toml (a wear scene, quasi-static donning route) and the same scene in the
+    compression-kind layout (tests/data/compression_kind.toml), both coarsened to 16 x 8 cells and 4 growth steps:
+    the same pressures within 1e-8 relative (the acceptance bound; both run fabricfem.wear.compression)."""
+    wear = _small_compression(ROOT / "scenes" / "compression_sleeve.toml", tmp_path / "wear")
+    kind = _small_compression(ROOT / "tests" / "data" / "compression_kind.toml", tmp_path / "kind")
+    for key in ("min_mmHg", "max_mmHg", "ring_min_mmHg", "ring_max_mmHg", "hoop_tension"):
+        assert wear[key] == pytest.approx(kind[key], rel=1e-8), key
