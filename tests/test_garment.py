@@ -201,3 +201,45 @@ def test_compression_wear_scene_gives_the_compression_scene_pressures(tmp_path):
     kind = _small_compression(ROOT / "tests" / "data" / "compression_kind.toml", tmp_path / "kind")
     for key in ("min_mmHg", "max_mmHg", "ring_min_mmHg", "ring_max_mmHg", "hoop_tension"):
         assert wear[key] == pytest.approx(kind[key], rel=1e-8), key
+
+
+@pytest.mark.mpi
+def test_sewn_sleeve_histories_same_on_one_and_two_ranks():
+    """A sleeve sewn from two flat panels (0.15 and 0.227 m wide, 0.5 m long, rolled onto the 6 cm cylinder
+    around the arm, two seams along the arm) on the flexing arm (settle 0.1 s, 4 degrees, mu = 0.1): the elbow
+    torque, peak pressure and seam-gap histories on COMM_WORLD (2 ranks under mpirun) equal the serial ones
+    (COMM_SELF) within 1e-6 relative to their largest values (the acceptance bound). The ranks differ only in the
+    summation order of the assembly and of the reductions (round-off).
+    Measured: a sewing run whose panels are drawn across the body in 0.06 s (the trousers at h = 8 cm) is
+    chaotic: 2 ranks and 1 rank differ by 3e-12 after the first record and by O(1) after the collisions
+    (docs/findings/2026-11-25-garment-engine.md); the settled and flexing garment is not."""
+    from fabricfem.body.arm import DEFAULT_ARM, default_arm, elbow_flexion
+    from fabricfem.meshes.pattern_mesh import wrap_on_cylinder
+    from fabricfem.wear.garment import TorqueSpec
+    radius, widths = 0.06, (0.15, 2 * math.pi * 0.06 - 0.15)
+
+    def history(comm):
+        panels = {n: Panel(n, np.array([[0.0, 0.0], [w, 0.0], [w, 0.5], [0.0, 0.5]]), grain=(0.0, 1.0))
+                  for n, w in zip("ab", widths)}
+        pattern = Pattern(panels, [Stitch(("a", 1), ("b", 3)), Stitch(("b", 1), ("a", 3))])
+        placements = {n: wrap_on_cylinder((0.0, 0.0, 0.0), (1.0, 0.0, 0.0), radius, zero_direction=(0.0, 1.0, 0.0),
+                                          angle0=a) for n, a in (("a", 0.0), ("b", widths[0] / radius))}
+        garment = mesh_pattern(pattern, 0.06, placements=placements, comm=comm)
+        seams = [SeamSpec(s.name, s.points_a, s.panel_tag_a, s.points_b, s.panel_tag_b, float(np.mean(s.lengths)))
+                 for s in garment.stitches]
+        omega = math.radians(45.0)
+        body = default_arm(elbow_flexion(DEFAULT_ARM, angular_velocity=omega, final_angle=math.radians(4.0)))
+        hold = [t for t in garment.fabric.tags if t.endswith(".0")]       # the shoulder ends (panel edge 0: y = 0)
+        run = build_garment_run("sewn sleeve", garment.fabric, COTTON, body, seams=seams, holds=hold,
+                                torques=[TorqueSpec("elbow", "elbow", (0.0, 0.0, 1.0), ("forearm",))],
+                                timeline=Timeline(record_time=math.radians(1.0) / omega, settle_time=0.1),
+                                settings=ExplicitSettings(gravity=(0.0, -9.81, 0.0)), friction=0.1,
+                                measure_strain=False)
+        h = run.run()
+        run.destroy()
+        return np.array([[s.torques["elbow"], s.peak_pressure, s.seam_gap, s.contact_force] for s in h.steps])
+
+    parallel, serial = history(MPI.COMM_WORLD), history(MPI.COMM_SELF)
+    scale = np.max(np.abs(serial), axis=0)
+    assert serial[-1, 0] > 0.0 and scale[1] > 0.0                     # the forearm touches the sleeve
+    assert np.all(np.abs(parallel - serial) <= 1e-6 * scale + 1e-15), ((parallel - serial) / scale, serial)

@@ -17,7 +17,8 @@ so the correction conserves the group's momentum; the seam force on node i is f_
 [N]. During the sewing time T_sew [s] the stitched nodes are drawn together along straight lines (the
 "sewing phase" of garment CAD tools); after it they coincide and move as one (r = 0). A panel that starts
 coincident with its partner (a placement that allows it) has r(0) = 0 and is held from the first step.
-Rotations are not tied: a seam is a hinge, the directors of the two panels turn independently. The engine
+A stitched node on a held edge (the shoulder end of a sleeve) anchors its group: it counts
+HELD_MASS_FACTOR times its mass in the centre and is not moved. Rotations are not tied: a seam is a hinge, the directors of the two panels turn independently. The engine
 (fabricfem.wear.garment) applies the seams before the body contact, so that a seam drawn across the body
 cannot pull a node into it; coincident stitched nodes get the same contact projection, so frictionless seams
 stay closed exactly (with friction, their stick points may differ and the gap is reported).
@@ -41,6 +42,7 @@ from scipy.spatial import cKDTree
 from fabricfem.contact.nodal import contact_nodes
 
 MATCH_TOLERANCE = 1e-9     # m: a stitch point is a mesh node of its panel within this distance
+HELD_MASS_FACTOR = 1e12    # a held stitched node weighs this much more in its group's centre: the group follows it
 
 
 @dataclass(frozen=True)
@@ -143,9 +145,8 @@ class SeamTies:
         self._owned_node = np.flatnonzero(owned)                 # contact-node indices of owned members
         self._owned_member = position[self._owned_node]          # their member indices
         self._rows = nodes.dofs[self._owned_node]                # (k, 3) local rows in W
-        if nodes.constrained[self._owned_node].any():
-            raise ValueError("seams: a stitched node has a held displacement component; hold the garment away from "
-                             "its seams")
+        # a held stitched node (a seam end on a held edge) anchors its group: the others follow it
+        self._held = nodes.constrained[self._owned_node].any(axis=1)
         self._reference = nodes.reference[self._owned_node]
         self._mass = None            # (members,) m of every member, summed over the ranks on first use
         self._offset0 = None         # (members, 3) r(0)
@@ -190,7 +191,7 @@ class SeamTies:
         dt = integrator.dt
         if self._mass is None:
             m = integrator.denominator.getArray(readonly=True)[self._rows[:, 0]]
-            self._mass = self._gather(m)
+            self._mass = self._gather(np.where(self._held, HELD_MASS_FACTOR * m, m))
             x0 = self._gather(self._reference)
             self._offset0 = x0 - self._centroids(x0, self._mass)
         d = integrator.d.getArray(readonly=True)
@@ -200,7 +201,7 @@ class SeamTies:
         y = self._reference + d[rows] + dt * v[rows] + dt ** 2 * a[rows]
         y_all = self._gather(y)
         target = self._centroids(y_all, self._mass) + (1.0 - self.closure(t + dt)) * self._offset0
-        change = target[self._owned_member] - y
+        change = np.where(self._held[:, None], 0.0, target[self._owned_member] - y)
         a[rows] += change / dt ** 2
         self.force = self._mass[self._owned_member, None] * change / dt ** 2
 
