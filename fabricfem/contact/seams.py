@@ -34,14 +34,11 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
-from mpi4py import MPI
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
-from fabricfem.contact.nodal import contact_nodes
+from fabricfem.contact.node_sets import PanelNodeSet
 
-MATCH_TOLERANCE = 1e-9     # m: a stitch point is a mesh node of its panel within this distance
 HELD_MASS_FACTOR = 1e12    # a held stitched node weighs this much more in its group's centre: the group follows it
 
 
@@ -64,21 +61,6 @@ def smoothstep(s: float) -> float:
     return s * s * (3.0 - 2.0 * s)
 
 
-def _panel_nodes(model, nodes, tag: int) -> tuple[np.ndarray, np.ndarray]:
-    """Owned contact-node indices of the cells tagged `tag` and their reference positions."""
-    cell_tags = model.fmesh.cell_tags
-    if cell_tags is None:
-        raise ValueError("mesh: seams need the panels' cell tags (a garment mesh from fabricfem.meshes.pattern)")
-    cells = cell_tags.indices[cell_tags.values == tag]
-    dofmap = nodes.scalar_space.dofmap
-    scalar = np.unique(dofmap.list.array.reshape(-1, dofmap.dof_layout.num_dofs)[cells].ravel())
-    owned_node = np.full(dofmap.index_map.size_local + dofmap.index_map.num_ghosts, -1, dtype=np.int64)
-    owned_node[nodes.node_index] = np.arange(len(nodes.node_index))
-    node = owned_node[scalar]
-    node = node[node >= 0]
-    return node, nodes.reference[node]
-
-
 class SeamTies:
     """The seams of a garment (module docstring) as an explicit contact hook (`correct`; `forces` is a no-op).
 
@@ -95,62 +77,31 @@ class SeamTies:
         self.model, self.comm = model, model.comm
         self.seams = list(seams)
         self.sewing_time = float(sewing_time)
-        nodes = contact_nodes(model)
-        imap = nodes.scalar_space.dofmap.index_map
-        # global node id (scalar-space global index) of every stitch point, found by the rank that owns it
-        ids, seam_of = [], []
-        for k, seam in enumerate(self.seams):
-            for points, tag, side in ((seam.points_a, seam.tag_a, "a"), (seam.points_b, seam.tag_b, "b")):
-                points = np.asarray(points, dtype=float).reshape(-1, 3)
-                node, X = _panel_nodes(model, nodes, tag)
-                found = np.full(len(points), -1, dtype=np.int64)
-                if len(node):
-                    distance, nearest = cKDTree(X).query(points)
-                    hit = distance < MATCH_TOLERANCE
-                    found[hit] = imap.local_to_global(nodes.node_index[node[nearest[hit]]].astype(np.int32))
-                ids.append(found)
-                seam_of.append(np.full(len(points), k))
+        for seam in self.seams:
             if len(seam.points_a) != len(seam.points_b):
                 raise ValueError(f"seams: stitch {seam.name!r} pairs {len(seam.points_a)} with "
                                  f"{len(seam.points_b)} nodes; a seam needs equal node counts on its two edges")
-        local = np.concatenate(ids) if ids else np.zeros(0, dtype=np.int64)
-        global_ids = np.empty_like(local)
-        self.comm.Allreduce(local, global_ids, op=MPI.MAX)
-        missing = np.flatnonzero(global_ids < 0)
-        if len(missing):
-            seam = self.seams[int(np.concatenate(seam_of)[missing[0]])]
-            raise ValueError(f"seams: stitch {seam.name!r}: {len(missing)} stitch points are not nodes of their "
-                             f"panels (tolerance {MATCH_TOLERANCE} m)")
-        # pairs -> groups (connected components over the member nodes)
+        chunks = [c for s in self.seams for c in ((s.tag_a, s.points_a), (s.tag_b, s.points_b))]
+        self.nodes = PanelNodeSet(model, chunks, [f"seams: stitch {s.name!r}" for s in self.seams for _ in "ab"])
         half = [len(s.points_a) for s in self.seams]
-        a_ids, b_ids, offset = [], [], 0
-        for n in half:
-            a_ids.append(global_ids[offset:offset + n])
-            b_ids.append(global_ids[offset + n:offset + 2 * n])
-            offset += 2 * n
-        a_all = np.concatenate(a_ids) if a_ids else np.zeros(0, dtype=np.int64)
-        b_all = np.concatenate(b_ids) if b_ids else np.zeros(0, dtype=np.int64)
-        members, inverse = np.unique(np.concatenate([a_all, b_all]), return_inverse=True)
-        n_members, n_pairs = len(members), len(a_all)
-        graph = coo_matrix((np.ones(n_pairs), (inverse[:n_pairs], inverse[n_pairs:])), shape=(n_members,) * 2)
-        self.n_groups, self.group = connected_components(graph, directed=False)
-        self.members = members
-        self._pair_a, self._pair_b = inverse[:n_pairs], inverse[n_pairs:]
+        offsets = np.cumsum([0] + [2 * n for n in half])
+        member = self.nodes.point_member
+        a = [member[o:o + n] for o, n in zip(offsets[:-1], half)]
+        b = [member[o + n:o + 2 * n] for o, n in zip(offsets[:-1], half)]
+        self._pair_a = np.concatenate(a) if a else np.zeros(0, dtype=np.int64)
+        self._pair_b = np.concatenate(b) if b else np.zeros(0, dtype=np.int64)
         self._pair_seam = np.repeat(np.arange(len(self.seams)), half)
-        # the members this rank owns: their local rows in W
-        owned_global = imap.local_to_global(nodes.node_index.astype(np.int32))
-        position = np.searchsorted(members, owned_global)
-        position = np.minimum(position, max(n_members - 1, 0))
-        owned = (n_members > 0) & (members[position] == owned_global) if n_members else np.zeros(0, dtype=bool)
-        self._owned_node = np.flatnonzero(owned)                 # contact-node indices of owned members
-        self._owned_member = position[self._owned_node]          # their member indices
-        self._rows = nodes.dofs[self._owned_node]                # (k, 3) local rows in W
+        # pairs -> groups (connected components over the member nodes)
+        n_members, n_pairs = len(self.nodes.members), len(self._pair_a)
+        graph = coo_matrix((np.ones(n_pairs), (self._pair_a, self._pair_b)), shape=(n_members,) * 2)
+        self.n_groups, self.group = connected_components(graph, directed=False)
         # a held stitched node (a seam end on a held edge) anchors its group: the others follow it
-        self._held = nodes.constrained[self._owned_node].any(axis=1)
-        self._reference = nodes.reference[self._owned_node]
+        self._held = self.nodes.held
+        self._owned_member, self._rows, self._reference = (self.nodes.owned_member, self.nodes.rows,
+                                                           self.nodes.reference)
         self._mass = None            # (members,) m of every member, summed over the ranks on first use
         self._offset0 = None         # (members, 3) r(0)
-        self.force = np.zeros((len(self._owned_node), 3))     # seam force on the owned member nodes [N]
+        self.force = np.zeros((len(self._owned_member), 3))   # seam force on the owned member nodes [N]
         self.closed_gap = float(closed_gap)
         self._gap0 = self._pair_gaps(self._gather(self._reference))
         if self.sewing_time == 0.0 and len(self._gap0) and self._gap0.max() > self.closed_gap:
@@ -162,11 +113,7 @@ class SeamTies:
     # ------------------------------------------------------------------ helpers
     def _gather(self, values: np.ndarray) -> np.ndarray:
         """(members, ...) array of per-member values, each filled by the owning rank and summed over the ranks."""
-        full = np.zeros((len(self.members),) + values.shape[1:])
-        full[self._owned_member] = values
-        total = np.empty_like(full)
-        self.comm.Allreduce(full, total, op=MPI.SUM)
-        return total
+        return self.nodes.gather(values)
 
     def _pair_gaps(self, x: np.ndarray) -> np.ndarray:
         """|x_a - x_b| [m] of every stitched pair from the members' positions x (members, 3)."""
