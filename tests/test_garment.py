@@ -243,3 +243,80 @@ def test_sewn_sleeve_histories_same_on_one_and_two_ranks():
     scale = np.max(np.abs(serial), axis=0)
     assert serial[-1, 0] > 0.0 and scale[1] > 0.0                     # the forearm touches the sleeve
     assert np.all(np.abs(parallel - serial) <= 1e-6 * scale + 1e-15), ((parallel - serial) / scale, serial)
+
+
+def test_belt_pulls_a_circular_waistband_with_its_tension():
+    """A belt of tension T = 3 N along the two end edges of the sewn tube (a circle of radius R0 drawn through
+    both panels' node chains): every node of the loop gets the force of a polygonal string under tension,
+    T (sin(g+ / 2) + sin(g- / 2)) towards the axis and T (cos(g+ / 2) - cos(g- / 2)) along the circle, g- and g+
+    the angles to its neighbours (closed form; at the seams the two coincident end nodes share it), to 1e-9."""
+    from types import SimpleNamespace
+
+    from fabricfem.contact.handles import Belt
+    from fabricfem.shell import ShellModel
+    from fabricfem.verify.garment import FABRIC, sewn_tube
+    garment, r0 = sewn_tube(comm=MPI.COMM_SELF)
+    model = ShellModel(garment.fabric, FABRIC)
+    edges = [(f"{p}.0", garment.panel_tags[p], garment.edge_points(p, 0)) for p in "ab"]
+    belt = Belt(model, edges, tension=3.0, start=0.0, ramp=0.0)
+    d, rhs = model.create_vector(), model.create_vector()
+    belt.forces(SimpleNamespace(d=d), 0.0, rhs)
+    f = rhs.getArray()[belt.nodes.rows]
+    x = belt.nodes.reference
+    angle = np.round(np.arctan2(x[:, 2], x[:, 1]) % (2 * np.pi), 12)
+    theta = np.unique(angle)
+    after = np.diff(np.concatenate([theta, [theta[0] + 2 * np.pi]]))        # g+ of each distinct angle
+    before = np.roll(after, 1)                                               # g-
+    radial = np.column_stack([np.zeros(len(x)), np.cos(angle), np.sin(angle)])
+    tangent = np.column_stack([np.zeros(len(x)), -np.sin(angle), np.cos(angle)])
+    k = np.searchsorted(theta, angle)
+    inward = np.bincount(k, -np.sum(f * radial, axis=1))        # the two seam nodes of one angle summed
+    along = np.bincount(k, np.sum(f * tangent, axis=1))
+    np.testing.assert_allclose(inward, 3.0 * (np.sin(after / 2) + np.sin(before / 2)), rtol=1e-9)
+    np.testing.assert_allclose(along, 3.0 * (np.cos(after / 2) - np.cos(before / 2)), atol=1e-9)
+    assert np.max(np.abs(f[:, 0])) < 1e-12                                   # nothing along the axis
+
+
+def test_grip_moves_an_edge_along_its_path_and_lets_go():
+    """A flat 0.1 m square with its top edge gripped and pulled 5 cm along z over 0.05 s (no gravity, no contact):
+    at the end of the pull the gripped nodes have moved by the path's offset (the forward-increment constraint,
+    to round-off: 1e-12 m); after it the grip exerts no force."""
+    from fabricfem.contact.handles import EdgeGrip
+    square = np.array([[0.0, 0.0], [0.1, 0.0], [0.1, 0.1], [0.0, 0.1]])
+    garment = mesh_pattern(Pattern({"p": Panel("p", square)}, []), 0.05, comm=MPI.COMM_SELF)
+    top = garment.edge_points("p", 2)
+    grip = []
+    run = build_garment_run("grip", garment.fabric, COTTON, far_body(),
+                            timeline=Timeline(record_time=0.01, pull_time=0.05, settle_time=0.02, motion_time=0.0),
+                            settings=ExplicitSettings(gravity=None), measure_strain=False,
+                            handles=[lambda model: grip.append(EdgeGrip(model, [("p.2", garment.panel_tags["p"], top)],
+                                                                        [[0, 0, 0], [0, 0, 0.05]], 0.0, 0.05))
+                                     or grip[0]])
+    positions = []
+    run.run(on_step=lambda s: positions.append(grip[0].nodes.positions(run.integrator.d.getArray(readonly=True))))
+    moved = positions[4] - grip[0].nodes.gather(grip[0].nodes.reference)      # after 0.05 s (5 records)
+    np.testing.assert_allclose(moved, np.tile([0.0, 0.0, 0.05], (len(moved), 1)), atol=1e-12)
+    assert np.all(grip[0].force == 0.0)
+    run.destroy()
+
+
+def test_a_motion_file_drives_the_scene_body(tmp_path):
+    """[motion] type = "file": a TRC written from the standing lower body raised by 2 cm at 0.1 s (mm, Z-up) is
+    read, mapped onto the body's joints by name and poses it: the pelvis centre is where the analytic pose puts it
+    (1e-6 m, the TRC's printed precision in mm)."""
+    from fabricfem.body import JointTrajectory
+    from fabricfem.body.lower_body import standing
+    from fabricfem.body.mocap import write_trc
+    from fabricfem.scenes import wear
+    base = standing(duration=0.2)
+    times = np.linspace(0.0, 0.2, 21)
+    lift = np.where(times >= 0.1, 0.02, 0.0)
+    points = {n: np.array([base.positions(t)[n] + [0.0, 0.0, h] for t, h in zip(times, lift)]) for n in base.names}
+    write_trc(tmp_path / "lift.trc", JointTrajectory(times, points), units="mm")
+    data = _trousers()
+    data["motion"] = {"type": "file", "path": "lift.trc", "record_time": 0.02}
+    plan = wear.plan(data, COTTON, tmp_path / "scene.toml")
+    analytic = Body(list(plan.body.segments.values()), JointTrajectory(times, points))
+    for t in (0.05, 0.15):
+        got, want = plan.body.pose(t)["pelvis"], analytic.pose(t)["pelvis"]
+        np.testing.assert_allclose(got.center, want.center, atol=1e-6)

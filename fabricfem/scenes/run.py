@@ -181,14 +181,18 @@ def run_wear_scene(scene: Scene, out: Path, comm=MPI.COMM_WORLD):
         return run_compression_scene(Scene(wear.compression_data(data), scene.path, "compression"), comm)
     fabric = wear.wear_fabric(data, build_fabric)
     plan = wear.plan(data, fabric, scene.path)
-    fmesh, seams, holds = wear.garment_mesh(data, scene.path, comm)
+    fmesh, seams, holds, pattern_garment = wear.garment_mesh(data, scene.path, comm)
+    if plan.handles and pattern_garment is None:
+        raise SceneError("donning: pull_edges and belt_edges name pattern edges; this garment is a tube")
+    handles = wear.edge_handles(plan.handles, pattern_garment) if plan.handles else []
     garment = section(wear.GarmentSection, data["garment"])
     name = scene_name(scene)
     run = build_garment_run(name, fmesh, fabric, plan.body, seams=seams, holds=holds, torques=plan.torques,
                             timeline=plan.timeline, settings=plan.settings,
                             contact_method=plan.contact.method or "lagrange", friction=plan.contact.friction,
                             penalty=plan.contact.penalty,
-                            psri_degrees=tuple(garment.quadrature) if garment.quadrature else (4, 2), axis=plan.axis)
+                            psri_degrees=tuple(garment.quadrature) if garment.quadrature else (4, 2), axis=plan.axis,
+                            handles=handles)
     output = data.get("output", {})
     render_at = output.get("render_at")
     if render_at is None:

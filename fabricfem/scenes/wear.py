@@ -25,6 +25,7 @@ from fabricfem.body.lower_body import LowerBodyDimensions, lower_body, standing,
 from fabricfem.body.mocap import load_motion
 from fabricfem.body.pose import Body, Segment
 from fabricfem.body.schedule import SegmentSchedule
+from fabricfem.contact.handles import Belt, EdgeGrip
 from fabricfem.contact.seams import SeamSpec
 from fabricfem.dynamics.stability import plane_stress_wave_speed
 from fabricfem.fabrics import load_fabric
@@ -116,8 +117,16 @@ class WearDonningSection:
 
     method: str = doc("none | grow", "none")
     remove: list | None = doc("segments switched off while the garment goes on (the thesis removes the feet)", None)
-    restore_at: float | None = doc("time [s] at which the removed segments come back (default: the motion's start)",
-                                   None)
+    restore_at: float | None = doc("time [s] at which the removed segments come back (default: the start of the "
+                                   "belt phase, after the pull and the growth)", None)
+    pull_edges: list | None = doc("pattern edges \"panel.edge\" gripped and pulled along pull_path (the waistband)",
+                                  None)
+    pull_path: list | None = doc("[[dx, dy, dz], ...] offsets [m] of the grip at equal times over pull_time "
+                                 "(the first usually [0, 0, 0])", None)
+    pull_time: float = doc("duration of the pull [s]", 0.0)
+    belt_edges: list | None = doc("pattern edges \"panel.edge\" tensioned as one drawstring (a belt, a cuff)", None)
+    belt_tension: float = doc("the belt's tension [N] (a drawstring force along the edges)", 0.0)
+    belt_time: float = doc("the belt's tension ramps from 0 over this time [s]", 0.0)
     start: float | None = doc("grow: starting size of the body's transverse radii (0, 1]", None)
     time: float = doc("grow, explicit: growth time [s]", 0.1)
     steps: int = doc("grow, quasistatic: growth increments", 10)
@@ -300,6 +309,7 @@ class WearPlan:
     settings: ExplicitSettings
     contact: ContactSpec
     axis: tuple | None
+    handles: list = dataclasses.field(default_factory=list)   # (kind, edge names, options) of the donning handles
 
 
 def _fields(cls, table: dict):
@@ -388,21 +398,24 @@ def plan(data: dict, fabric, scene_path: Path | None = None) -> WearPlan:
     try:
         timeline = Timeline(record_time=record_time, sewing_time=garment.sewing_time,
                             donning_time=donning.time if donning.method == "grow" else 0.0, grow_from=grow_from,
-                            settle_time=settle, motion_time=duration)
+                            settle_time=settle, motion_time=duration, pull_time=donning.pull_time,
+                            belt_time=donning.belt_time if donning.belt_edges else 0.0)
     except ValueError as exc:
         raise SceneError(f"donning: {exc}") from None
+    if donning.pull_edges and not (donning.pull_path and donning.pull_time > 0):
+        raise SceneError("donning.pull_path: pulling edges needs a pull_path of offsets and a pull_time > 0 [s]")
     if donning.remove:
-        t_motion = timeline.records(timeline.sewing_time + timeline.donning_time + timeline.settle_time) * record_time
-        restore = t_motion if donning.restore_at is None else float(donning.restore_at)
+        restore = timeline.start_of("belt") if donning.restore_at is None else float(donning.restore_at)
         try:
             body.check_segments(donning.remove)
             schedule = SegmentSchedule({"removed": (list(donning.remove), [(-1.0, restore)])})
             body = Body(list(body.segments.values()), body.kinematics, schedule)
         except ValueError as exc:
             raise SceneError(f"donning.remove: {exc}") from None
+    handles = handle_specs(donning, timeline)
     settings = ExplicitSettings(mass_damping=damping, rotary_inertia_scale=route.rotary_inertia_scale,
                                 time_step_safety=route.time_step_safety, gravity=gravity if route.gravity else None)
-    return WearPlan(body, torques, timeline, settings, contact, axis)
+    return WearPlan(body, torques, timeline, settings, contact, axis, handles)
 
 
 def read_pattern(data: dict, scene_path: Path | None):
@@ -425,8 +438,17 @@ def read_pattern(data: dict, scene_path: Path | None):
 def check_garment(data: dict, scene_path: Path | None) -> None:
     """The garment's checks before meshing: a pattern is read and checked; a tube's sizes are positive."""
     g = from_table(GarmentSection, data["garment"])
+    donning = from_table(WearDonningSection, data.get("donning", {}))
     if g.builder == "pattern":
-        read_pattern(data, scene_path)
+        pattern = read_pattern(data, scene_path)
+        for key in ("pull_edges", "belt_edges"):
+            for name in getattr(donning, key) or []:
+                panel, _, index = str(name).rpartition(".")
+                if panel not in pattern.panels or not index.isdigit() or int(index) >= len(pattern.panels[panel].edges):
+                    raise SceneError(f"donning.{key}: no pattern edge {name!r} (write \"panel.edge\"; panels "
+                                     f"{sorted(pattern.panels)})")
+    elif donning.pull_edges or donning.belt_edges:
+        raise SceneError("donning: pull_edges and belt_edges name pattern edges; this garment is a tube")
     else:
         for key in ("length", "radius", "n_around", "n_along"):
             if not getattr(g, key) > 0:
@@ -436,12 +458,49 @@ def check_garment(data: dict, scene_path: Path | None) -> None:
                          f"(got h = {g.h}, scale = {g.scale}, sewing_time = {g.sewing_time})")
 
 
+def handle_specs(donning: WearDonningSection, timeline: Timeline) -> list[tuple[str, list[str], dict]]:
+    """The donning handles of [donning]: ("grip", edges, path and times), ("belt", edges, tension and times)."""
+    out = []
+    if donning.pull_edges:
+        start = timeline.start_of("pull")
+        out.append(("grip", list(donning.pull_edges), {"waypoints": donning.pull_path, "start": start,
+                                                        "end": start + donning.pull_time}))
+    if donning.belt_edges:
+        out.append(("belt", list(donning.belt_edges), {"tension": donning.belt_tension,
+                                                        "start": timeline.start_of("belt"),
+                                                        "ramp": donning.belt_time}))
+    return out
+
+
+def edge_handles(specs, garment) -> list:
+    """Builders model -> hook of the handle specs on the pattern garment (fabricfem.contact.handles); SceneError
+    naming an unknown edge "panel.edge"."""
+    builders = []
+    for kind, names, options in specs:
+        edges = []
+        for name in names:
+            panel, _, index = str(name).rpartition(".")
+            if panel not in garment.panel_tags or not index.isdigit():
+                raise SceneError(f"donning.{'pull' if kind == 'grip' else 'belt'}_edges: no pattern edge {name!r} "
+                                 f"(write \"panel.edge\"; panels {sorted(garment.panel_tags)})")
+            try:
+                points = garment.edge_points(panel, int(index))
+            except (KeyError, IndexError, ValueError) as exc:
+                raise SceneError(f"donning: edge {name!r}: {exc}") from None
+            edges.append((name, garment.panel_tags[panel], points))
+        if kind == "grip":
+            builders.append(lambda model, e=edges, o=options: EdgeGrip(model, e, **o))
+        else:
+            builders.append(lambda model, e=edges, o=options: Belt(model, e, **o))
+    return builders
+
+
 def garment_mesh(data: dict, scene_path: Path | None, comm):
-    """(FabricMesh, seams [SeamSpec], hold tags) of [garment]."""
+    """(FabricMesh, seams [SeamSpec], hold tags, the GarmentMesh of a pattern or None) of [garment]."""
     g = from_table(GarmentSection, data["garment"])
     if g.builder == "tube":
         return tube(g.length, g.radius, g.n_around, g.n_along, cell="quadrilateral", order=g.order, comm=comm), [], \
-            list(g.hold)
+            list(g.hold), None
     pattern = read_pattern(data, scene_path)
     rotation = np.eye(3)
     if g.rotate is not None:
@@ -459,7 +518,7 @@ def garment_mesh(data: dict, scene_path: Path | None, comm):
         raise SceneError(f"garment.pattern: {exc}") from None
     seams = [SeamSpec(s.name, s.points_a, s.panel_tag_a, s.points_b, s.panel_tag_b, float(np.mean(s.lengths)))
              for s in garment.stitches]
-    return garment.fabric, seams, list(g.hold)
+    return garment.fabric, seams, list(g.hold), garment
 
 
 def sleeve_data(data: dict) -> dict:

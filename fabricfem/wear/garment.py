@@ -68,9 +68,13 @@ class Timeline:
     grow_from: float = 1.0
     settle_time: float = 0.0
     motion_time: float | None = None
+    pull_time: float = 0.0
+    belt_time: float = 0.0
+
+    PHASES = ("sew", "pull", "don", "belt", "settle", "motion")
 
     def __post_init__(self):
-        for key in ("sewing_time", "donning_time", "settle_time"):
+        for key in ("sewing_time", "donning_time", "settle_time", "pull_time", "belt_time"):
             v = getattr(self, key)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0.0):
                 raise ValueError(f"{key} must be a time >= 0 [s], got {v!r}")
@@ -86,6 +90,17 @@ class Timeline:
     def records(self, duration: float) -> int:
         """Whole record intervals covering `duration` [s]."""
         return math.ceil(duration / self.record_time - 1e-9)
+
+    def durations(self, motion_time: float) -> dict[str, float]:
+        """Duration [s] of each phase in order (PHASES), the motion's given."""
+        return {"sew": self.sewing_time, "pull": self.pull_time, "don": self.donning_time, "belt": self.belt_time,
+                "settle": self.settle_time, "motion": motion_time}
+
+    def start_of(self, phase: str) -> float:
+        """Body time [s] at which `phase` starts (whole record intervals of the phases before it)."""
+        before = self.PHASES[:self.PHASES.index(phase)]
+        durations = self.durations(0.0)
+        return sum(self.records(durations[p]) for p in before) * self.record_time
 
 
 @dataclass(frozen=True)
@@ -266,6 +281,7 @@ class GarmentRun:
     config: object = None
     strain: FastProjection | None = None
     axis: tuple[str, Callable[[float], float]] | None = None   # (label, motion time [s] -> value), e.g. an angle
+    handles: tuple = ()          # the donning handles (fabricfem.contact.handles)
 
     @property
     def axis_label(self) -> str:
@@ -393,7 +409,8 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
                       settings: ExplicitSettings = ExplicitSettings(), contact_method: str = "lagrange",
                       friction: float = 0.0, penalty: float | None = None,
                       psri_degrees: tuple[int, int] = (4, 2), measure_strain: bool = True,
-                      config: object = None, axis: tuple[str, Callable[[float], float]] | None = None) -> GarmentRun:
+                      config: object = None, axis: tuple[str, Callable[[float], float]] | None = None,
+                      handles: Sequence[Callable[[ShellModel], object]] = ()) -> GarmentRun:
     """Shell, seams, body contact, monitors, integrator and phases of a garment run (module docstring).
 
     Args:
@@ -405,6 +422,8 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
         body.schedule (fabricfem.body.schedule.SegmentSchedule, on the run's clock): segments switched off while
             the garment goes on (the thesis removes the feet); they take no contact while off.
         axis: (label, motion time [s] -> value): the records' coordinate (e.g. the elbow angle [deg]); None: time.
+        handles: builders model -> hook of the donning handles (fabricfem.contact.handles: EdgeGrip during the
+            pull phase, Belt from the belt phase), applied after the seams and before the body contact.
     """
     if fabric.density <= 0.0:
         raise ValueError("density: the explicit engine needs a positive fabric density [kg/m^3]")
@@ -420,22 +439,21 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
     if settings.gravity is not None:
         model.add_gravity(tuple(settings.gravity))
     model.compile()
-    t_motion = timeline.sewing_time + timeline.donning_time + timeline.settle_time
     kin = body.kinematics
     motion_time = (kin.time_range[1] - kin.time_range[0]) if timeline.motion_time is None else timeline.motion_time
-    posed = Body(list(body.segments.values()), DelayedKinematics(kin, timeline.records(t_motion) *
-                                                                    timeline.record_time), body.schedule)
+    posed = Body(list(body.segments.values()), DelayedKinematics(kin, timeline.start_of("motion")), body.schedule)
     contact = ExplicitBodyContact(model, posed, friction=friction, method=contact_method, penalty=penalty)
     for spec in torques:
         contact.track_torque(spec.name, spec.joint, spec.axis, spec.segments)
     if timeline.grow_from < 1.0:
-        t_don0, t_don = timeline.records(timeline.sewing_time) * timeline.record_time, timeline.donning_time
+        t_don0, t_don = timeline.start_of("don"), timeline.donning_time
         g0 = timeline.grow_from
         contact.transverse_scale = lambda t: g0 + (1.0 - g0) * smoothstep((t - t_don0) / t_don)
     if posed.schedule is not None:
         names = list(posed.segments)
         contact.segment_active = lambda t: np.isin(names, posed.active(t))
     ties = SeamTies(model, seams, sewing_time=timeline.sewing_time) if seams else None
+    handles = [make(model) for make in handles]
     rayleigh = (settings.mass_damping, 0.0)
     omega = math.hypot(stability.max_frequency_estimate(model, settings.rotary_inertia_scale),
                        contact.penalty_frequency())
@@ -443,17 +461,15 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
     steps_per_record = math.ceil(timeline.record_time / (settings.time_step_safety * dt_estimate))
     dt = timeline.record_time / steps_per_record
     # the seams first, the body contact last: a seam drawn across the body cannot pull a node into it
-    hooks = ([ties] if ties else []) + [contact]
-    t_sewn = timeline.records(timeline.sewing_time) * timeline.record_time
+    hooks = ([ties] if ties else []) + list(handles) + [contact]
+    t_sewn = timeline.start_of("pull")
     # the garment's weight acts once it is sewn (panels would fall while their seams close), ramped on over
     # a tenth of the sewing time
     load = 1.0 if t_sewn == 0.0 else (lambda t: smoothstep((t - t_sewn) / (0.1 * t_sewn)))
     integrator = CentralDifference(model, dt, load_factor=load, rayleigh=rayleigh, dt_crit=dt_estimate,
                                    energy_bound=None, rotary_inertia_scale=settings.rotary_inertia_scale,
                                    contact=hooks)
-    phases = [Phase(n, timeline.records(d)) for n, d in
-              (("sew", timeline.sewing_time), ("don", timeline.donning_time), ("settle", timeline.settle_time),
-               ("motion", motion_time))]
+    phases = [Phase(n, timeline.records(d)) for n, d in timeline.durations(motion_time).items()]
     strain = FastProjection(model, 1.0) if measure_strain else None
     return GarmentRun(name, model, posed, contact, ties, integrator, timeline, phases, dt, dt_estimate,
-                      steps_per_record, tuple(torques), config, strain, axis)
+                      steps_per_record, tuple(torques), config, strain, axis, tuple(handles))
