@@ -123,7 +123,8 @@ def _gaps_inside(points: np.ndarray, ellipsoids: Sequence[Ellipsoid], inside_q: 
     return gaps
 
 
-def project_with_segment(x, ellipsoids: Sequence[Ellipsoid]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def project_with_segment(x, ellipsoids: Sequence[Ellipsoid], strict: bool = True
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """`project_along_gradient` that also returns the segment index (N,) each point was last projected
     out of (for points inside no segment: the segment of smallest normalised radius q, a diagnostic).
 
@@ -196,8 +197,8 @@ def project_with_segment(x, ellipsoids: Sequence[Ellipsoid]) -> tuple[np.ndarray
         gap_left = _gaps_inside(out[candidates], ellipsoids, inside_q).min(axis=0)
         keep = gap_left < -INSIDE_TOLERANCE * scale_of.min()
         candidates, inside_q = candidates[keep], inside_q[:, keep]
-    if len(candidates) == 0:
-        return out, moved, segment
+    if len(candidates) == 0 or not strict:
+        return out, moved, segment      # not strict: the trapped points stay where the last push put them
     raise ValueError("ellipsoids: points remain inside after repeated projections (overlapping segments "
                      "trap them); refine the time step")
 
@@ -365,6 +366,7 @@ class ExplicitBodyContact:
         # t -> (K,) bool of the segments that take contact (an inactive segment is parked far from the garment)
         self.transverse_scale: Callable[[float], float] | None = None
         self.segment_active: Callable[[float], np.ndarray] | None = None
+        self.strict_projection = True   # False: see `correct`
 
     # ------------------------------------------------------------------ set-up and output
     def penalty_frequency(self) -> float:
@@ -576,7 +578,9 @@ class ExplicitBodyContact:
         if self.monitor_penetration:   # the positions d^{n+1} against the body at t_{n+1} (posed last step)
             self._monitor_penetration(self.reference + d[rows], self.body_at(t))
         x_trial = self.reference + d[rows] + dt * v[rows] + dt ** 2 * a[rows]
-        projected, active, seg = project_with_segment(x_trial, ellipsoids)
+        # not strict: a node trapped in the lens of overlapping segments (a walking body's hip) keeps the small
+        # penetration the last push leaves, reported by the records' max_penetration, instead of stopping the run
+        projected, active, seg = project_with_segment(x_trial, ellipsoids, strict=self.strict_projection)
         index = np.flatnonzero(active)                                   # nodes in contact
         m = self._lumped_mass(integrator)[index]                          # M + dt/2 C (per component)
         trial, final, segment = x_trial[index], projected[index], seg[index]

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from fabricfem.body.arm import ArmDimensions, default_arm, elbow_flexion
+from fabricfem.body.blend import BlendedStart
 from fabricfem.body.lower_body import LowerBodyDimensions, lower_body, standing, winter_walking
 from fabricfem.body.mocap import load_motion
 from fabricfem.body.pose import Body, Segment
@@ -106,6 +107,8 @@ class WearMotionSection:
                             "required)", None)
     up: str | None = doc("file: the file's up axis (y: mapped to z; default the reader's)", None)
     fill_gaps: bool = doc("file: fill marker gaps by interpolation instead of refusing them", False)
+    blend_time: float = doc("walking, file (lower body): the body stands during the donning and enters the motion "
+                            "over this time [s] (fabricfem.body.blend; 0: it starts in the motion's first pose)", 0.0)
     mapping: dict | None = doc("file: body joint/marker name -> file marker or joint name (default: the same "
                                "names)", None)
 
@@ -375,14 +378,18 @@ def plan(data: dict, fabric, scene_path: Path | None = None) -> WearPlan:
         body = limb_body(body_spec["center"], body_spec["radii"], duration or 0.0)
     else:
         dims = _fields(LowerBodyDimensions, body_spec)
+        stand = standing(dims, duration=duration or 0.0)
         if motion == "walking":
             kinematics = winter_walking(dims, strides=int(motion_spec.get("strides", 2)),
                                         cycle_time=float(motion_spec.get("cycle_time", 0.987)),
                                         speed=float(motion_spec.get("speed", 1.43)))
         elif motion == "file":
-            kinematics = _motion_file(motion_spec, scene_path, standing(dims).names)
+            kinematics = _motion_file(motion_spec, scene_path, stand.names)
         else:
-            kinematics = standing(dims, duration=duration or 0.0)
+            kinematics = stand
+        if motion in ("walking", "file") and float(motion_spec.get("blend_time", 0.0)) > 0.0:
+            # the garment goes on the standing body; the motion is entered from the standing pose
+            kinematics = BlendedStart(kinematics, stand.positions(0.0), float(motion_spec["blend_time"]))
         body = lower_body(dims, kinematics)
     if motion in ("walking", "file") and duration is not None:
         start, end = body.kinematics.time_range

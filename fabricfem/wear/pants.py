@@ -1,0 +1,98 @@
+"""The pants of the thesis's walking study [Man2006, sec. 5.4]: four panels (left/right x front/back) with a crotch
+cut, sized from the lower body with ordinary trouser ease, written as a GarmentCode pattern [Korosteleva2021].
+
+Topology and placement conventions are those of the four-panel trousers of Garment-Pattern-Generator
+(fabricfem/patterns/pants_straight_sides.json: the same vertex order, edges, stitches, Euler rotations; its
+frame is Y-up, front +z, left +x, centimetres). Each panel, in its own plane (outer side at x = 0, the centre
+towards -x for the left front panel), has the vertices
+
+    v0 = (-a, 0)        waistband, centre end          v3 = (0, -(r + L))   hem, outer end
+    v1 = (-b, 0)        waistband, side end            v4 = (-H, -(r + L))  hem, inner end
+    v2 = (0, -r)        side at the crotch level       v5 = (-T, -r)        crotch point
+
+with the edges v5-v4 (inseam), v4-v3 (hem), v3-v2 (outer side), v2-v1 (hip side), v1-v0 (waistband) and v0-v5
+(the crotch curve, a quadratic Bezier bulging as in the template), and the sizes, from LowerBodyDimensions and
+PantsEase [m]:
+
+    r = waist_height - crotch_height                  rise (0.210 m for the ANSUR II median male)
+    L = crotch_height - ankle_height                  inseam (0.772 m)
+    T = (thigh_girth + ease.thigh) / 2                half the thigh girth with ease: front + back panels
+    H = (calf_girth + ease.knee) / 2                  the hem, straight from the knee down (the feet are off
+                                                      while the pants go on, [Man2006, sec. 5.4])
+    a - b = (waist_girth + ease.waist) / 4            a quarter of the waistband
+    b = ease.side_inset                               the hip side's inset at the waistband
+
+The seat (the panel's width half-way up the rise, four panels) comes out at
+(a + T - b) / 2 x 4 = buttock girth + `seat_ease` (reported). Front and back panels have the same shape, so every
+stitched pair of edges has the same length. The thesis's fabric is the sleeve's cotton (E = 1.2 MPa, G = 0.1 MPa,
+rho = 436 kg/m^3) at 1 or 2 mm.
+"""
+from __future__ import annotations
+
+import copy
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from fabricfem.body.lower_body import DEFAULT_LOWER_BODY, LowerBodyDimensions
+from fabricfem.patterns import pattern_path
+
+CM = 100.0   # GarmentCode units per metre
+
+
+@dataclass(frozen=True)
+class PantsEase:
+    """Trouser ease [m] over the body's girths (ordinary men's trousers: thigh +3-5 cm, bent knee +4-6 cm,
+    seat ~ +10 cm, the notes of the project)."""
+
+    thigh: float = 0.04
+    knee: float = 0.05
+    waist: float = 0.02
+    side_inset: float = 0.02
+    panel_gap: float = 0.01          # m between a panel's inner edge and the body's midline when placed
+    depth: float = 0.03              # m between the body's pelvis and the placed front and back panels
+
+
+def pants_sizes(dims: LowerBodyDimensions = DEFAULT_LOWER_BODY, ease: PantsEase = PantsEase()) -> dict[str, float]:
+    """The panel sizes [m] of the module docstring and the resulting seat ease."""
+    r = dims.waist_height - dims.crotch_height
+    L = dims.crotch_height - dims.ankle_height
+    T = 0.5 * (dims.thigh_girth + ease.thigh)
+    H = 0.5 * (dims.calf_girth + ease.knee)
+    b = ease.side_inset
+    a = b + 0.25 * (dims.waist_girth + ease.waist)
+    if not (0.0 < H <= T and 0.0 < b < a and r > 0.0 and L > 0.0):
+        raise ValueError(f"dimensions: the pants need 0 < hem <= thigh width and a positive rise and inseam, got "
+                         f"rise {r:.3f}, inseam {L:.3f}, thigh {T:.3f}, hem {H:.3f} m")
+    seat = 4.0 * 0.5 * (a + T - b)
+    return {"rise": r, "inseam": L, "thigh": T, "hem": H, "a": a, "b": b, "seat_girth": seat,
+            "seat_ease": seat - dims.buttock_girth}
+
+
+def pants_garmentcode(dims: LowerBodyDimensions = DEFAULT_LOWER_BODY, ease: PantsEase = PantsEase(),
+                      pelvis_depth: float = 0.151) -> dict:
+    """The GarmentCode JSON (a dict) of the pants (module docstring); `pelvis_depth` [m] is the body's front-back
+    semi-axis at the pelvis (the panels are placed `ease.depth` in front of and behind it)."""
+    s = pants_sizes(dims, ease)
+    r, L, T, H, a, b = (s[k] for k in ("rise", "inseam", "thigh", "hem", "a", "b"))
+    template = json.loads(pattern_path("pants_straight_sides").read_text())
+    out = copy.deepcopy(template)
+    left = [[-a, 0.0], [-b, 0.0], [0.0, -r], [0.0, -(r + L)], [-H, -(r + L)], [-T, -r]]   # outer side at x = 0
+    x_shift = (T + ease.panel_gap) * CM
+    z = (pelvis_depth + ease.depth) * CM
+    for name, panel in out["pattern"]["panels"].items():
+        sign = -1.0 if panel["vertices"][0][0] < 0 else 1.0        # the template's mirrored panels
+        panel["vertices"] = [[round((x if sign < 0 else -x) * CM, 6), round(y * CM, 6)] for x, y in left]
+        side = 1.0 if name.startswith("L") else -1.0
+        panel["translation"] = [side * x_shift, 0.0, z if name.endswith("front") else -z]
+    out["pattern"]["description"] = ("fabricfem pants [Man2006, sec. 5.4], four panels sized from the lower body "
+                                     "(fabricfem.wear.pants)")
+    return out
+
+
+def write_pants_pattern(path: str | Path, dims: LowerBodyDimensions = DEFAULT_LOWER_BODY,
+                        ease: PantsEase = PantsEase()) -> Path:
+    """Write `pants_garmentcode(dims, ease)` to `path` (JSON, indent 1)."""
+    path = Path(path)
+    path.write_text(json.dumps(pants_garmentcode(dims, ease), indent=1) + "\n")
+    return path
