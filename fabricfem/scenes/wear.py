@@ -380,9 +380,12 @@ def plan(data: dict, fabric, scene_path: Path | None = None) -> WearPlan:
         dims = _fields(LowerBodyDimensions, body_spec)
         stand = standing(dims, duration=duration or 0.0)
         if motion == "walking":
-            kinematics = winter_walking(dims, strides=int(motion_spec.get("strides", 2)),
-                                        cycle_time=float(motion_spec.get("cycle_time", 0.987)),
-                                        speed=float(motion_spec.get("speed", 1.43)))
+            try:
+                kinematics = winter_walking(dims, strides=int(motion_spec.get("strides", 2)),
+                                            cycle_time=float(motion_spec.get("cycle_time", 0.987)),
+                                            speed=float(motion_spec.get("speed", 1.43)))
+            except ValueError as exc:
+                raise SceneError(f"motion: {exc}") from None
         elif motion == "file":
             kinematics = _motion_file(motion_spec, scene_path, stand.names)
         else:

@@ -42,13 +42,14 @@ def result(case: str, quantity: str, value: float, reference: float, tolerance: 
                       bool(rel <= tolerance), int(ndofs), float(wall_s))
 
 
-def case(name: str, mpi: bool = False):
+def case(name: str, mpi: bool = False, in_tests: bool = True):
     """Register a verification case (a comparison with an independent reference: closed form, ODE solution,
     conservation law); `mpi=True` also runs it under `mpirun -n 2` in the tests. `fabricfem verify` runs them
-    and exits 0 only when every row passes."""
+    and exits 0 only when every row passes. `in_tests=False`: a long computation (minutes) whose parts the tests
+    cover; only `fabricfem verify` runs it."""
     def register(fn):
         CASES[name] = fn
-        fn.case_name, fn.mpi, fn.deviation, fn.in_tests = name, mpi, None, True
+        fn.case_name, fn.mpi, fn.deviation, fn.in_tests = name, mpi, None, in_tests
         return fn
     return register
 
