@@ -5,7 +5,8 @@
 `fabricfem study sleeve-methods [--mesh III] [--methods lagrange,penalty,augmented] [--al-budget 1800]
 [--out results/sleeve_methods_gravity.csv]`,
 `fabricfem study unit-cell [--quick] [--out DIR] [--recompute-stopped [--coarse-only | --fine-only]]
-[--budget SECONDS]`."""
+[--budget SECONDS]`,
+`fabricfem study pants [--quick] [--out results/pants_study]` ([Man2006, sec. 5.4]: 1 and 2 mm pants, mu 0.1 and 0.5)."""
 from __future__ import annotations
 
 import argparse
@@ -29,6 +30,7 @@ from fabricfem.scenes.run import run_scene
 from fabricfem.solvers.newton import SolverError
 from fabricfem.studies import unit_cell as unit_cell_study
 from fabricfem.studies.fabric_link import OUT_DIR, run_fabric_link
+from fabricfem.studies.pants import run_pants_study
 from fabricfem.studies.sleeve import run_methods, run_study, variants
 from fabricfem.studies.sleeve_fit import DEFAULT_LONG_AXIS_FACTOR, FIT_SCALES, fit_configs, run_fit_study
 from fabricfem.verify import load_cases, load_reproductions
@@ -75,7 +77,7 @@ def main(argv: list[str] | None = None) -> int:
                          help="reduced smoke-test runs (stability-map: one k/rho, the smallest mesh, short runs; "
                               "speed-accuracy: t = 0.3 s, two levels per method, one timing)")
     p_study = sub.add_parser("study", help="parameter studies (CSV + PNG per figure)")
-    p_study.add_argument("name", choices=["sleeve", "unit-cell", "fabric-link", "sleeve-fit", "sleeve-methods"],
+    p_study.add_argument("name", choices=["sleeve", "unit-cell", "fabric-link", "sleeve-fit", "sleeve-methods", "pants"],
                          help="study to run (sleeve: [Man2006, sec. 5.3]; unit-cell: [Man2006, sec. 4.3.5], Figs. 21-28, 32-33)")
     p_study.add_argument("--quick", action="store_true", help="coarse mesh and few angle steps (reduced)")
     p_study.add_argument("--out", default="results/sleeve_study")
@@ -153,6 +155,9 @@ def _command(args) -> int:
         return 0
     if args.command == "demo":
         rollup_demo(args.out)
+        return 0
+    if args.command == "study" and args.name == "pants":
+        run_pants_study("results/pants_study" if args.out == "results/sleeve_study" else args.out, args.quick)
         return 0
     if args.command == "study" and args.name == "fabric-link":
         meshes = ((10, 13),) if args.quick else ((10, 13), (20, 26))

@@ -179,6 +179,13 @@ def run_wear_scene(scene: Scene, out: Path, comm=MPI.COMM_WORLD):
                                 comm)
     if route == "compression":
         return run_compression_scene(Scene(wear.compression_data(data), scene.path, "compression"), comm)
+    run, headline, render_at, output = build_wear_run(scene, comm)
+    return run_wear(run, out, headline, render_at, output.get("render", True), output.get("body_samples", 24))
+
+
+def build_wear_run(scene: Scene, comm=MPI.COMM_WORLD):
+    """The explicit engine's GarmentRun of a wear scene, its headline, the render coordinates and [output]."""
+    data = scene.data
     fabric = wear.wear_fabric(data, build_fabric)
     plan = wear.plan(data, fabric, scene.path)
     fmesh, seams, holds, pattern_garment = wear.garment_mesh(data, scene.path, comm)
@@ -201,7 +208,7 @@ def run_wear_scene(scene: Scene, out: Path, comm=MPI.COMM_WORLD):
                      [run.duration * f for f in (1 / 3, 2 / 3, 1.0)])
     headline = (f"{name}: {run.model.ndofs} dofs, {len(seams)} seams, body {list(plan.body.segments)}, "
                 f"{comm.size} rank(s); mu = {plan.contact.friction}, {run.contact.method} contact; {run.describe()}")
-    return run_wear(run, out, headline, render_at, output.get("render", True), output.get("body_samples", 24))
+    return run, headline, render_at, output
 
 
 def run_static_scene(scene: Scene, comm=MPI.COMM_WORLD) -> list[LoadStep]:

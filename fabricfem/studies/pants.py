@@ -1,0 +1,187 @@
+"""The pants study [Man2006, sec. 5.4, Figs. 47-49]: the resisting torque of pants about the right knee while the
+wearer walks (and steps over an obstacle), for crimped cotton pants 1 mm and 2 mm thick (and mu = 0.5).
+
+`fabricfem study pants [--quick] [--out DIR]` runs the variants of scenes/pants_walk.toml on the ranks of
+COMM_WORLD (one variant per rank, longest first to the least loaded rank; each variant on COMM_SELF writes its own
+folder: the garment and body over time, renders of the pressure on the skin at the donning and walking frames,
+torque.csv/.sto, summary.json), then writes on rank 0:
+
+    knee_torque.csv   time [s], right-knee flexion [deg], the resisting knee torque of every variant [N m]
+    knee_torque.sto   OpenSim storage of the same torques (columns knee_r_moment_<variant>)
+    knee_torque.png   the torques against time, the knee flexion on a second axis (Fig. 49's analogue)
+    summary.json      per variant: peak and mean torque over the walk (and over the crossing stride); the thesis's
+                      claim (2 mm gives the larger torque) as the measured peak and mean ratios 2 mm / 1 mm
+
+The knee flexion is measured on the posed body: the angle between the right thigh's and shank's long axes
+(e1 of fabricfem.body.pose), independent of the motion source. A finished variant (its summary.json completed
+with the same scene hash) is read back, not rerun.
+"""
+from __future__ import annotations
+
+import copy
+import json
+import math
+import time
+import tomllib
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from fabricfem import io as fio
+from fabricfem.scenes import build as scene_build
+from fabricfem.scenes.run import build_wear_run, scene_sha256
+from fabricfem.scenes.schema import Scene
+from fabricfem.wear.outputs import write_sto
+from fabricfem.wear.run import run_wear
+
+SCENE = Path(__file__).resolve().parents[2] / "scenes" / "pants_walk.toml"
+# label -> (thickness [m], friction): the thesis's two thicknesses at mu = 0.1, and the friction variant
+VARIANTS = {"1mm_mu0.1": (1e-3, 0.1), "2mm_mu0.1": (2e-3, 0.1), "1mm_mu0.5": (1e-3, 0.5)}
+
+
+def variant_data(base: dict, thickness: float, friction: float, out: Path, quick: bool) -> dict:
+    """The scene data of one variant (its own output folder; quick: one stride on a coarse mesh)."""
+    data = copy.deepcopy(base)
+    data["fabric"]["thickness"] = thickness
+    data.setdefault("contact", {})["friction"] = friction
+    data["output"] = {**data.get("output", {}), "dir": str(out)}
+    if quick:
+        data["garment"]["h"] = 0.1
+        data["motion"]["strides"] = 1
+        data["motion"]["duration"] = 0.2
+    return data
+
+
+def knee_flexion(body, times: np.ndarray) -> np.ndarray:
+    """Right-knee flexion [deg] of the posed body at `times` [s]: the angle between thigh_r's and shank_r's axes."""
+    out = np.empty(len(times))
+    for k, t in enumerate(times):     # one pose per record (a few hundred)
+        p = body.kinematics.positions(float(t))
+        thigh, shank = p["knee_r"] - p["hip_r"], p["ankle_r"] - p["knee_r"]
+        c = np.dot(thigh, shank) / (np.linalg.norm(thigh) * np.linalg.norm(shank))
+        out[k] = math.degrees(math.acos(min(max(c, -1.0), 1.0)))
+    return out
+
+
+def _finished(out: Path, sha: str) -> bool:
+    try:
+        summary = json.loads((out / "summary.json").read_text())
+    except (OSError, ValueError):
+        return False
+    return summary.get("status") == "completed" and summary.get("scene_sha256") == sha
+
+
+def _run_variant(data: dict, out: Path) -> None:
+    """Run one variant on COMM_SELF into `out` (io.OutputFolder: status and hash in summary.json), with the knee
+    flexion of its records in knee.csv."""
+    comm = MPI.COMM_SELF
+    scene = Scene(data, None, "wear")
+    folder = fio.OutputFolder(out, scene_sha256(scene), comm)
+    run, headline, render_at, output = build_wear_run(scene, comm)
+    # donning frames (end of the sewing, the pull and the belt) and walking frames (the thirds of the motion)
+    starts = {p: run.timeline.start_of(p) for p in run.timeline.PHASES}
+    frames = [starts["pull"], starts["don"], starts["settle"]] + [starts["motion"] + f * (run.duration -
+                                                                                        starts["motion"])
+                                                                  for f in (1 / 3, 2 / 3, 1.0)]
+    body = run.body
+    history = run_wear(run, out, headline, sorted({round(t, 6) for t in frames if t > 0}), output.get("render", True))
+    times = np.array([s.time for s in history.steps])
+    fio.write_csv(out / "knee.csv", ["time_s", "knee_flexion_deg"], np.column_stack([times, knee_flexion(body, times)]),
+                  comm)
+    status = f"stopped early: {history.failure}" if history.failure else "completed"
+    folder.finish(status, history.summary())
+
+
+def _read_variant(out: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
+    """(times [s], knee torque [N m], knee flexion [deg], phases) of a finished variant's outputs."""
+    rows = np.genfromtxt(out / "torque.csv", delimiter=",", names=True, dtype=None, encoding=None)
+    knee = np.loadtxt(out / "knee.csv", delimiter=",", skiprows=1, ndmin=2)
+    return (np.asarray(rows["time_s"], dtype=float), np.asarray(rows["knee_r_torque_Nm"], dtype=float), knee[:, 1],
+            [str(p) for p in rows["phase"]])
+
+
+def run_pants_study(out: str | Path = "results/pants_study", quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD,
+                    variants: dict[str, tuple[float, float]] | None = None, scene: Path = SCENE) -> dict:
+    """Run the variants (module docstring) and write the study's outputs; returns the summary (rank 0)."""
+    out = Path(out)
+    variants = variants or VARIANTS
+    base = tomllib.loads(Path(scene).read_text())
+    say = (lambda m: print(m, flush=True)) if comm.rank == 0 else (lambda m: None)
+    t0 = time.perf_counter()
+    datas = {label: variant_data(base, th, mu, out / label, quick) for label, (th, mu) in variants.items()}
+    for label, data in datas.items():          # every variant validated before anything runs
+        scene_build.validate(copy.deepcopy(data), f"variant {label}")
+    labels = list(datas)
+    say(f"pants study{' (quick)' if quick else ''}: {len(labels)} variants on {comm.size} rank(s): {labels}")
+    for k, label in enumerate(labels):
+        if k % comm.size != comm.rank:
+            continue
+        target = out / label
+        if _finished(target, scene_sha256(Scene(datas[label], None, "wear"))):
+            print(f"[rank {comm.rank}] {label}: finished before, read back", flush=True)
+            continue
+        print(f"[rank {comm.rank}] {label}: started", flush=True)
+        _run_variant(datas[label], target)
+        print(f"[rank {comm.rank}] {label}: done ({time.perf_counter() - t0:.0f} s)", flush=True)
+    comm.barrier()
+    if comm.rank != 0:
+        return {}
+    curves = {label: _read_variant(out / label) for label in labels}
+    summary = write_study(out, curves, quick)
+    say(f"pants study: wrote {out}/knee_torque.csv, .sto, .png, summary.json ({time.perf_counter() - t0:.0f} s)")
+    for line in summary["lines"]:
+        say(line)
+    return summary
+
+
+def write_study(out: Path, curves: dict, quick: bool) -> dict:
+    """knee_torque.csv/.sto/.png and summary.json of the finished variants (rank 0)."""
+    labels = list(curves)
+    times = curves[labels[0]][0]
+    motion = np.array([p == "motion" for p in curves[labels[0]][3]])
+    n = min(len(c[0]) for c in curves.values())
+    columns = {label: curves[label][1][:n] for label in labels}
+    knee = curves[labels[0]][2][:n]
+    fio.write_csv(out / "knee_torque.csv", ["time_s", "knee_flexion_deg", *(f"{lab}_knee_torque_Nm" for lab in labels)],
+                  np.column_stack([times[:n], knee, *columns.values()]), MPI.COMM_SELF)
+    write_sto(out / "knee_torque.sto", times[:n], {f"knee_r_moment_{lab}": v for lab, v in columns.items()},
+              MPI.COMM_SELF, "resisting torque of the pants about the right knee's flexion axis (+y) [N m]: positive "
+              "when the pants oppose knee flexion; time: body time [s] (donning, then the walk)")
+    _plot(out / "knee_torque.png", times[:n], columns, knee, motion[:n], quick)
+    stats = {}
+    for label, tau in columns.items():
+        walk = tau[motion[:n]]
+        stats[label] = {"peak_Nm": float(np.max(np.abs(walk))) if len(walk) else 0.0,
+                        "mean_Nm": float(np.mean(walk)) if len(walk) else 0.0}
+    lines = [f"{lab}: peak {s['peak_Nm']:.4e} N m, mean {s['mean_Nm']:.4e} N m over the walk"
+             for lab, s in stats.items()]
+    summary = {"variants": stats, "quick": quick}
+    if "1mm_mu0.1" in stats and "2mm_mu0.1" in stats and stats["1mm_mu0.1"]["peak_Nm"] > 0:
+        one, two = stats["1mm_mu0.1"], stats["2mm_mu0.1"]
+        summary["ratio_2mm_to_1mm"] = {"peak": two["peak_Nm"] / one["peak_Nm"],
+                                       "mean": two["mean_Nm"] / one["mean_Nm"] if one["mean_Nm"] else math.nan}
+        lines.append(f"2 mm / 1 mm: peak ratio {summary['ratio_2mm_to_1mm']['peak']:.3f}, mean ratio "
+                     f"{summary['ratio_2mm_to_1mm']['mean']:.3f} (the thesis: 2 mm larger over the whole walk)")
+    summary["lines"] = lines
+    (out / "summary.json").write_text(json.dumps(summary, indent=1))
+    return summary
+
+
+def _plot(path: Path, times: np.ndarray, columns: dict, knee: np.ndarray, motion: np.ndarray, quick: bool) -> None:
+    import matplotlib  # optional heavy package, loaded only when a plot is drawn
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for label, tau in columns.items():
+        ax.plot(times[motion], tau[motion], "--" if "mu0.5" in label else "-", label=label.replace("_", ", "))
+    ax.set(xlabel="time [s]", ylabel="resisting knee torque [N m]",
+           title="pants: right-knee torque while walking" + (" [quick]" if quick else ""))
+    ax.grid(True, alpha=0.3)
+    twin = ax.twinx()
+    twin.plot(times[motion], knee[motion], color="gray", lw=1, alpha=0.6, label="knee flexion")
+    twin.set_ylabel("right-knee flexion [deg]")
+    ax.legend(loc="upper left")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
