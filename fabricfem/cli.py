@@ -1,4 +1,5 @@
-"""Command line: `fabricfem run SCENE`, `fabricfem verify [CASE ...] [--json]`, `fabricfem demo`,
+"""Command line: `fabricfem run SCENE [--accuracy 2%] [--quantity NAME]`, `fabricfem plan SCENE --accuracy 2%`,
+`fabricfem sweep SCENE --vary key=v1,v2 [--vary ...] [--out DIR] [--ranks-per-variant K] [--plot QUANTITY]`, `fabricfem verify [CASE ...] [--json]`, `fabricfem demo`,
 `fabricfem bench ...`,
 `fabricfem study sleeve [--quick] [--out DIR] [--fine III] [--meshes I,II,III,IV] [--fabrics I,II,III]
 [--mesh-frictions 0.1,0.5] [--only mesh_mu0.5,fit]`,
@@ -25,7 +26,8 @@ from fabricfem.benchmarks.speed_accuracy import speed_accuracy
 from fabricfem.benchmarks.unit_cell_perf import unit_cell_perf
 from fabricfem.demo import rollup_demo
 from fabricfem.dynamics.newmark import DynamicsError
-from fabricfem.scenes.run import run_scene
+from fabricfem.scenes.run import run_scene, scene_name
+from fabricfem.scenes.sweep import parse_vary, run_sweep
 from fabricfem.solvers.newton import SolverError
 from fabricfem.studies import unit_cell as unit_cell_study
 from fabricfem.studies.fabric_link import OUT_DIR, run_fabric_link
@@ -62,6 +64,14 @@ def main(argv: list[str] | None = None) -> int:
     p_reproduce.add_argument("--markdown", metavar="PATH", help="also write the table as Markdown to PATH")
     p_run = sub.add_parser("run", help="run a scene file (TOML), e.g. scenes/rollup.toml")
     p_run.add_argument("scene", help="path of the scene file")
+    p_sweep = sub.add_parser("sweep", help="run the variants of a scene as one MPI batch (fabricfem.scenes.sweep)")
+    p_sweep.add_argument("scene", help="path of the scene file")
+    p_sweep.add_argument("--vary", action="append", required=True, metavar="KEY=V1,V2,...",
+                         help="a dotted scene key and its values (TOML), e.g. fabric.E1=1e6,2e6; repeat for a product")
+    p_sweep.add_argument("--out", default=None, help="output folder (default results/<scene name>_sweep)")
+    p_sweep.add_argument("--ranks-per-variant", type=int, default=1, help="MPI ranks of each variant's group")
+    p_sweep.add_argument("--plot", default=None, metavar="QUANTITY",
+                         help="summary.json entry drawn against the first varied key in sweep.png")
     p_scenes = sub.add_parser("scenes", help="the scene-file reference: every section and key with type, default, unit")
     p_scenes.add_argument("--markdown", metavar="PATH", help="write it to PATH (docs/scenes.md) instead of printing")
     p_demo = sub.add_parser("demo", help="the default demo: a fabric strip rolled up by an end moment")
@@ -144,6 +154,12 @@ def _command(args) -> int:
         if outcome.exit_code:
             _print(f"fabricfem run: {outcome.status}", file=sys.stderr)
         return outcome.exit_code
+    if args.command == "sweep":
+        scene = scene_module.load(args.scene)
+        varies = [parse_vary(text) for text in args.vary]
+        rows = run_sweep(scene, varies, args.out or f"results/{scene_name(scene)}_sweep", args.ranks_per_variant,
+                         args.plot)
+        return 0 if all(row["status"] == "completed" for row in rows) else 1
     if args.command == "scenes":
         text = scene_module.schema.reference_markdown()
         if args.markdown:
