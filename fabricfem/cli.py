@@ -26,6 +26,7 @@ from fabricfem.benchmarks.speed_accuracy import speed_accuracy
 from fabricfem.benchmarks.unit_cell_perf import unit_cell_perf
 from fabricfem.demo import rollup_demo
 from fabricfem.dynamics.newmark import DynamicsError
+from fabricfem.scenes.accuracy import parse_target, plan, run_accurate
 from fabricfem.scenes.run import run_scene, scene_name
 from fabricfem.scenes.sweep import parse_vary, run_sweep
 from fabricfem.solvers.newton import SolverError
@@ -64,6 +65,14 @@ def main(argv: list[str] | None = None) -> int:
     p_reproduce.add_argument("--markdown", metavar="PATH", help="also write the table as Markdown to PATH")
     p_run = sub.add_parser("run", help="run a scene file (TOML), e.g. scenes/rollup.toml")
     p_run.add_argument("scene", help="path of the scene file")
+    p_run.add_argument("--accuracy", default=None, metavar="TARGET",
+                       help="relative error target (2%% or 0.02): run the cheapest mesh level that meets it")
+    p_run.add_argument("--quantity", default=None, help="the monitored quantity of the target (default [accuracy])")
+    p_plan = sub.add_parser("plan", help="the mesh levels of a scene with their estimated errors and costs, and "
+                                         "the level an accuracy target chooses (no full run)")
+    p_plan.add_argument("scene", help="path of the scene file")
+    p_plan.add_argument("--accuracy", default=None, metavar="TARGET", help="relative error target (2%% or 0.02)")
+    p_plan.add_argument("--quantity", default=None, help="the monitored quantity (default [accuracy] quantity)")
     p_sweep = sub.add_parser("sweep", help="run the variants of a scene as one MPI batch (fabricfem.scenes.sweep)")
     p_sweep.add_argument("scene", help="path of the scene file")
     p_sweep.add_argument("--vary", action="append", required=True, metavar="KEY=V1,V2,...",
@@ -144,10 +153,18 @@ def _command(args) -> int:
                 _print(f"{name:<26} {(fn.__doc__ or '').strip().splitlines()[0]}")
             return 0
         return report(registry, args.cases, args.command, args.json, args.markdown)
+    if args.command == "plan":
+        scene = scene_module.load(args.scene)
+        plan(scene, None if args.accuracy is None else parse_target(args.accuracy), args.quantity)
+        return 0
     if args.command == "run":
         scene = scene_module.load(args.scene)
+        target = None if args.accuracy is None else parse_target(args.accuracy)
         try:
-            outcome = run_scene(scene)
+            if target is not None or args.quantity is not None or scene.get("accuracy", {}).get("target"):
+                _, outcome = run_accurate(scene, target, args.quantity)
+            else:
+                outcome = run_scene(scene)
         except (SolverError, DynamicsError) as exc:   # the run stopped: summary.json says "failed: ..."
             _print(f"fabricfem run: stopped: {' '.join(str(exc).split())}", file=sys.stderr)
             return 1

@@ -27,10 +27,9 @@ from pathlib import Path
 from mpi4py import MPI
 
 from fabricfem import io
-from fabricfem.scenes.build import estimated_dofs, mesh_section, validate
+from fabricfem.scenes.build import estimated_cost, validate
 from fabricfem.scenes.run import run_scene, scene_sha256
 from fabricfem.scenes.schema import Scene, SceneError
-from fabricfem.scenes.sections import DynamicsSection, ModelSection, section
 
 # summary.json entries that describe the run, not its result (left out of the default plot quantity)
 BOOKKEEPING = {"ranks", "ndofs", "wall_s", "time_integration_wall_s", "peak_memory_mib", "peak_memory_total_mib",
@@ -135,23 +134,6 @@ def variants(base: Scene, varies: list[tuple[str, list]], out: str | Path) -> li
         scene.path = base.path
         result.append(Variant(name, values, scene))
     return result
-
-
-def estimated_cost(scene: Scene) -> float | None:
-    """Relative cost of a scene before meshing: dofs x time steps (dynamic: end_time / dt, dt = "auto" scaled
-    by the cell size / dt_fraction), dofs^1.5 for a static solve (direct solver); None when unknown (wear)."""
-    data = scene.data
-    if scene.kind not in ("static", "dynamic"):
-        return None
-    dofs = estimated_dofs(data["mesh"], section(ModelSection, data.get("model")).kind)
-    if scene.kind == "static":
-        return dofs ** 1.5
-    d = section(DynamicsSection, data["dynamics"])
-    if d.dt != "auto":
-        return dofs * d.end_time / d.dt
-    m = mesh_section(data["mesh"])
-    cells = max(m.nx or 0, m.ny or 0, m.n_around or 0, m.n_along or 0)
-    return dofs * d.end_time * cells / d.dt_fraction
 
 
 def longest_first(costs: list[float | None]) -> list[int]:
