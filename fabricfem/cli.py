@@ -155,7 +155,7 @@ def _command(args) -> int:
         return report(registry, args.cases, args.command, args.json, args.markdown)
     if args.command == "plan":
         scene = scene_module.load(args.scene)
-        plan(scene, None if args.accuracy is None else parse_target(args.accuracy), args.quantity)
+        plan(scene, None if args.accuracy is None else parse_target(args.accuracy), args.quantity).require()
         return 0
     if args.command == "run":
         scene = scene_module.load(args.scene)

@@ -12,7 +12,7 @@ max_{j >= k} |q_j - q_0| / |q_0| (e_0 = |q_-1 - q_0| / |q_0|), and a target that
 Cost: the measured wall times [s] of the pilots; a finer level's predicted wall time is
 wall_0 (dofs_k steps_k / dofs_0 steps_0)^a with a from the two finest pilots, clamped to [1, 2] (work per step
 is linear in the dofs up to the direct solver's fill). The cheapest level whose estimated error is at most the
-target is chosen (levels up to `finer_levels` above the scene's mesh); none: SceneError with the estimates.
+target is chosen (levels up to `finer_levels` above the scene's mesh); none: refused (`Plan.require`).
 """
 from __future__ import annotations
 
@@ -91,6 +91,16 @@ class Plan:
                          f"{_cells(lv.scene):>9} {lv.dofs:>8d} {_fmt(lv.step, '.4g'):>10} "
                          f"{_fmt(lv.value, '.6g'):>13} {_fmt(lv.error, '.2e'):>10} {cost:>10}{mark}")
         return "\n".join(lines)
+
+    def require(self) -> Level:
+        """The chosen level; SceneError with the best estimate when no level meets the target."""
+        if self.chosen is None:
+            best = min((lv for lv in self.levels if lv.error is not None), key=lambda lv: lv.error)
+            raise SceneError(f"accuracy.target: no level reaches {self.target:.3g} ({self.quantity}: best estimate "
+                             f"{best.error:.3g} at level {best.k:+d}"
+                             + (f"; not asymptotic: {self.note}" if not self.asymptotic else "")
+                             + "); refine the scene's mesh, raise accuracy.finer_levels or the target")
+        return self.chosen
 
     def summary(self) -> dict:
         """The entries added to the delivered run's summary.json."""
@@ -194,7 +204,7 @@ def richardson(values: list[float], ratio: float = 2.0) -> tuple[float | None, f
 def plan(scene: Scene, target: float | None = None, quantity: str | None = None, comm=MPI.COMM_WORLD,
          say=None) -> Plan:
     """Solve the pilots, estimate the error of every level and choose the cheapest one that meets the target
-    (module docstring); SceneError with the estimates when no level does."""
+    (module docstring; `Plan.chosen` is None when no level does, `Plan.require` refuses)."""
     say = say or ((lambda m: print(m, flush=True)) if comm.rank == 0 else (lambda m: None))
     quantity, target = target_of(scene, target, quantity)
     key = accuracy_summary_key(scene.data, quantity)
@@ -226,16 +236,11 @@ def plan(scene: Scene, target: float | None = None, quantity: str | None = None,
     meeting = [lv for lv in levels if lv.error is not None and lv.error <= target]
     result.chosen = min(meeting, key=lambda lv: lv.work) if meeting else None
     say(result.table())
-    if result.chosen is None:
-        best = min((lv for lv in levels if lv.error is not None), key=lambda lv: lv.error)
-        raise SceneError(f"accuracy.target: no level reaches {target:.3g} ({quantity}: best estimate "
-                         f"{best.error:.3g} at level {best.k:+d}"
-                         + (f"; not asymptotic: {note}" if not asymptotic else "")
-                         + "); refine the scene's mesh, raise accuracy.finer_levels or the target")
     c = result.chosen
-    say(f"accuracy: chose level {c.k:+d} ({_cells(c.scene)} cells, {c.dofs} dofs): estimated error "
-        f"{c.error:.2e} <= {target:.3g}, {'measured' if c.value is not None else 'predicted'} wall "
-        f"{c.cost_s:.3g} s" + ("" if asymptotic else f" (NOT ASYMPTOTIC: {note}; conservative choice)"))
+    if c is not None:
+        say(f"accuracy: chose level {c.k:+d} ({_cells(c.scene)} cells, {c.dofs} dofs): estimated error "
+            f"{c.error:.2e} <= {target:.3g}, {'measured' if c.value is not None else 'predicted'} wall "
+            f"{c.cost_s:.3g} s" + ("" if asymptotic else f" (NOT ASYMPTOTIC: {note}; conservative choice)"))
     return result
 
 
@@ -251,7 +256,7 @@ def run_accurate(scene: Scene, target: float | None = None, quantity: str | None
     its renders) and add the plan's estimate to its summary.json; writes accuracy_plan.csv beside it. Returns
     (plan, SceneOutcome)."""
     chosen = plan(scene, target, quantity, comm)
-    data = copy.deepcopy(chosen.chosen.scene.data)
+    data = copy.deepcopy(chosen.require().scene.data)
     data["output"] = {**scene.get("output", {}), "dir": str(output_dir(scene))}
     data.setdefault("scene", {})["name"] = scene_name(scene)
     delivered = validate(data, source=f"accuracy level {chosen.chosen.k:+d}")
