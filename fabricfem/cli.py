@@ -20,6 +20,7 @@ from mpi4py import MPI
 
 from fabricfem import scenes as scene_module
 from fabricfem.benchmarks import stability_map
+from fabricfem.benchmarks.accuracy import accuracy_bench
 from fabricfem.benchmarks.rollup_profile import rollup_profile
 from fabricfem.benchmarks.sleeve_profile import sleeve_profile
 from fabricfem.benchmarks.speed_accuracy import speed_accuracy
@@ -87,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     p_demo.add_argument("--out", default="results/demo", help="output folder (XDMF, PNG, CSV)")
     p_bench = sub.add_parser("bench", help="benchmarks (results/ CSV and PNG)")
     p_bench.add_argument("name", nargs="?", default="rollup-profile", choices=["rollup-profile", "stability-map", "speed-accuracy", "unit-cell",
-                                          "sleeve-profile"],
+                                          "sleeve-profile", "accuracy"],
                          help="benchmark to run")
     p_bench.add_argument("--out", default="results/bench")
     p_bench.add_argument("--quick", action="store_true",
@@ -269,6 +270,9 @@ def _command(args) -> int:
             return 0
         if args.name == "speed-accuracy":
             speed_accuracy(args.out, quick=args.quick)
+            return 0
+        if args.name == "accuracy":
+            accuracy_bench(args.out)
             return 0
         if args.name == "sleeve-profile":
             sleeve_profile(args.out, quick=args.quick)

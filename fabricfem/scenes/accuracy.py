@@ -172,17 +172,20 @@ def level_scene(scene: Scene, k: int, out: Path) -> Level:
     return Level(k, level, estimated_dofs(data["mesh"], section(ModelSection, data.get("model")).kind), step, steps)
 
 
-def solve(level: Level, key: str, comm=MPI.COMM_WORLD) -> None:
-    """Solve a level (or read back its completed run of the same scene) and store its quantity and wall time."""
+def solve(level: Level, key: str, comm=MPI.COMM_WORLD) -> bool:
+    """Solve a level (or read back its completed run of the same scene) and store its quantity and wall time;
+    True when it was solved now."""
     folder = Path(level.scene["output"]["dir"])
-    summary = read_summary(folder)
-    if not (summary.get("status") == "completed" and summary.get("scene_sha256") == scene_sha256(level.scene)):
+    summary = comm.bcast(read_summary(folder) if comm.rank == 0 else None, root=0)
+    solved = not (summary.get("status") == "completed" and summary.get("scene_sha256") == scene_sha256(level.scene))
+    if solved:
         outcome = run_scene(level.scene, comm)
         if outcome.status != "completed":
             raise SceneError(f"accuracy level {level.k:+d}: the run {outcome.status}")
         summary = comm.bcast(read_summary(folder) if comm.rank == 0 else None, root=0)
     level.value, level.wall_s = float(summary[key]), float(summary["wall_s"])
     level.cost_s = level.wall_s
+    return solved
 
 
 def richardson(values: list[float], ratio: float = 2.0) -> tuple[float | None, float | None, str]:
@@ -214,8 +217,9 @@ def plan(scene: Scene, target: float | None = None, quantity: str | None = None,
     clock = io.Progress("accuracy pilots")
     pilots = levels[:len(PILOTS)]
     for i, lv in enumerate(pilots):
-        say(f"accuracy: level {lv.k:+d} ({_cells(lv.scene)} cells, {lv.dofs} dofs) {clock(i / len(pilots))}")
-        solve(lv, key, comm)
+        solved = solve(lv, key, comm)
+        say(f"accuracy: level {lv.k:+d} ({_cells(lv.scene)} cells, {lv.dofs} dofs) "
+            f"{'solved' if solved else 'read back'}: {lv.value:.6g} {clock((i + 1) / len(pilots))}")
     values = [lv.value for lv in pilots]
     order, extrapolated, note = richardson(values)
     asymptotic = not note and extrapolated not in (None, 0.0)
