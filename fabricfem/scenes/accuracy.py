@@ -79,11 +79,11 @@ class Plan:
 
     def table(self) -> str:
         """The plan as printed: one line per level, the estimate and the choice."""
-        lines = [f"accuracy plan: {self.quantity} to {self.target:.3g} relative; "
-                 + (f"observed order p = {self.order:.2f}, extrapolated {self.extrapolated:.6g}" if self.asymptotic
-                    else f"NOT ASYMPTOTIC ({self.note}): only the solved levels, conservative estimates"),
-                 f"  {'level':>5} {'model':>8} {'cells':>9} {'dofs':>8} {'step [s]':>10} {'value':>13} "
-                 f"{'est. error':>10} {'wall [s]':>10}"]
+        estimate = (f"observed order p = {self.order:.2f}, extrapolated {self.extrapolated:.6g}" if self.asymptotic
+                    else f"NOT ASYMPTOTIC ({self.note}): only the solved levels, conservative estimates")
+        lines = [f"accuracy plan: {self.quantity} to {self.target:.3g} relative; {estimate}",
+                 (f"  {'level':>5} {'model':>8} {'cells':>9} {'dofs':>8} {'step [s]':>10} {'value':>13} "
+                  f"{'est. error':>10} {'wall [s]':>10}")]
         for lv in self.levels:
             mark = " <- chosen" if lv is self.chosen else ""
             cost = "" if lv.cost_s is None else f"{lv.cost_s:.3g}" + ("" if lv.value is not None else " (pred.)")

@@ -213,7 +213,7 @@ def run_sweep(base: Scene, varies: list[tuple[str, list]], out: str | Path, rank
         try:
             outcome = run_scene(v.scene, sub)
             status = outcome.status
-        except Exception as exc:   # any failure of one variant: recorded in its summary.json, the others go on
+        except Exception as exc:  # noqa: BLE001 (any failure of one variant: recorded, the others go on)
             status = statuses[v.name] = f"failed: {' '.join(str(exc).split())}"
         say(f"[group {group}] {v.name}: {status} in {time.perf_counter() - t0:.1f} s {clock((n + 1) / len(mine))}")
     sub.Free()

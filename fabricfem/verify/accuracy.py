@@ -77,7 +77,7 @@ def _scene(data: dict, out: Path) -> Scene:
 def choices(root: Path, comm=MPI.COMM_SELF) -> list[dict]:
     """One row per scene and target: the chosen level, its estimated and true errors, its work and wall time, and
     the cheapest level meeting the target by brute force (None: no level does)."""
-    quiet = lambda message: None   # noqa: E731 (the plan's table is in the rows)
+    quiet = lambda message: None   # the plan's table is in the rows
     rows = []
     for data, reference in ((ROLLUP, rollup_tip_ux), (CORNER, None)):
         scene = _scene(data, root / data["scene"]["name"])
