@@ -1,4 +1,5 @@
-"""Command line: `fabricfem run SCENE`, `fabricfem verify [CASE ...] [--json]`, `fabricfem demo`,
+"""Command line: `fabricfem run SCENE [--accuracy 2%] [--quantity NAME]`, `fabricfem plan SCENE --accuracy 2%`,
+`fabricfem sweep SCENE --vary key=v1,v2 [--vary ...] [--out DIR] [--ranks-per-variant K] [--plot QUANTITY]`, `fabricfem verify [CASE ...] [--json]`, `fabricfem demo`,
 `fabricfem bench ...`,
 `fabricfem study sleeve [--quick] [--out DIR] [--fine III] [--meshes I,II,III,IV] [--fabrics I,II,III]
 [--mesh-frictions 0.1,0.5] [--only mesh_mu0.5,fit]`,
@@ -20,13 +21,16 @@ from mpi4py import MPI
 
 from fabricfem import scenes as scene_module
 from fabricfem.benchmarks import stability_map
+from fabricfem.benchmarks.accuracy import accuracy_bench
 from fabricfem.benchmarks.rollup_profile import rollup_profile
 from fabricfem.benchmarks.sleeve_profile import sleeve_profile
 from fabricfem.benchmarks.speed_accuracy import speed_accuracy
 from fabricfem.benchmarks.unit_cell_perf import unit_cell_perf
 from fabricfem.demo import rollup_demo
 from fabricfem.dynamics.newmark import DynamicsError
-from fabricfem.scenes.run import run_scene
+from fabricfem.scenes.accuracy import parse_target, plan, run_accurate
+from fabricfem.scenes.run import run_scene, scene_name
+from fabricfem.scenes.sweep import parse_vary, run_sweep
 from fabricfem.solvers.newton import SolverError
 from fabricfem.studies import unit_cell as unit_cell_study
 from fabricfem.studies.fabric_link import OUT_DIR, run_fabric_link
@@ -64,13 +68,29 @@ def main(argv: list[str] | None = None) -> int:
     p_reproduce.add_argument("--markdown", metavar="PATH", help="also write the table as Markdown to PATH")
     p_run = sub.add_parser("run", help="run a scene file (TOML), e.g. scenes/rollup.toml")
     p_run.add_argument("scene", help="path of the scene file")
+    p_run.add_argument("--accuracy", default=None, metavar="TARGET",
+                       help="relative error target (2%% or 0.02): run the cheapest mesh level that meets it")
+    p_run.add_argument("--quantity", default=None, help="the monitored quantity of the target (default [accuracy])")
+    p_plan = sub.add_parser("plan", help="the mesh levels of a scene with their estimated errors and costs, and "
+                                         "the level an accuracy target chooses (no full run)")
+    p_plan.add_argument("scene", help="path of the scene file")
+    p_plan.add_argument("--accuracy", default=None, metavar="TARGET", help="relative error target (2%% or 0.02)")
+    p_plan.add_argument("--quantity", default=None, help="the monitored quantity (default [accuracy] quantity)")
+    p_sweep = sub.add_parser("sweep", help="run the variants of a scene as one MPI batch (fabricfem.scenes.sweep)")
+    p_sweep.add_argument("scene", help="path of the scene file")
+    p_sweep.add_argument("--vary", action="append", required=True, metavar="KEY=V1,V2,...",
+                         help="a dotted scene key and its values (TOML), e.g. fabric.E1=1e6,2e6; repeat for a product")
+    p_sweep.add_argument("--out", default=None, help="output folder (default results/<scene name>_sweep)")
+    p_sweep.add_argument("--ranks-per-variant", type=int, default=1, help="MPI ranks of each variant's group")
+    p_sweep.add_argument("--plot", default=None, metavar="QUANTITY",
+                         help="summary.json entry drawn against the first varied key in sweep.png")
     p_scenes = sub.add_parser("scenes", help="the scene-file reference: every section and key with type, default, unit")
     p_scenes.add_argument("--markdown", metavar="PATH", help="write it to PATH (docs/scenes.md) instead of printing")
     p_demo = sub.add_parser("demo", help="the default demo: a fabric strip rolled up by an end moment")
     p_demo.add_argument("--out", default="results/demo", help="output folder (XDMF, PNG, CSV)")
     p_bench = sub.add_parser("bench", help="benchmarks (results/ CSV and PNG)")
     p_bench.add_argument("name", nargs="?", default="rollup-profile", choices=["rollup-profile", "stability-map", "speed-accuracy", "unit-cell",
-                                          "sleeve-profile"],
+                                          "sleeve-profile", "accuracy"],
                          help="benchmark to run")
     p_bench.add_argument("--out", default="results/bench")
     p_bench.add_argument("--quick", action="store_true",
@@ -136,16 +156,30 @@ def _command(args) -> int:
                 _print(f"{name:<26} {(fn.__doc__ or '').strip().splitlines()[0]}")
             return 0
         return report(registry, args.cases, args.command, args.json, args.markdown)
+    if args.command == "plan":
+        scene = scene_module.load(args.scene)
+        plan(scene, None if args.accuracy is None else parse_target(args.accuracy), args.quantity).require()
+        return 0
     if args.command == "run":
         scene = scene_module.load(args.scene)
+        target = None if args.accuracy is None else parse_target(args.accuracy)
         try:
-            outcome = run_scene(scene)
+            if target is not None or args.quantity is not None or scene.get("accuracy", {}).get("target"):
+                _, outcome = run_accurate(scene, target, args.quantity)
+            else:
+                outcome = run_scene(scene)
         except (SolverError, DynamicsError) as exc:   # the run stopped: summary.json says "failed: ..."
             _print(f"fabricfem run: stopped: {' '.join(str(exc).split())}", file=sys.stderr)
             return 1
         if outcome.exit_code:
             _print(f"fabricfem run: {outcome.status}", file=sys.stderr)
         return outcome.exit_code
+    if args.command == "sweep":
+        scene = scene_module.load(args.scene)
+        varies = [parse_vary(text) for text in args.vary]
+        rows = run_sweep(scene, varies, args.out or f"results/{scene_name(scene)}_sweep", args.ranks_per_variant,
+                         args.plot)
+        return 0 if all(row["status"] == "completed" for row in rows) else 1
     if args.command == "scenes":
         text = scene_module.schema.reference_markdown()
         if args.markdown:
@@ -241,6 +275,9 @@ def _command(args) -> int:
             return 0
         if args.name == "speed-accuracy":
             speed_accuracy(args.out, quick=args.quick)
+            return 0
+        if args.name == "accuracy":
+            accuracy_bench(args.out)
             return 0
         if args.name == "sleeve-profile":
             sleeve_profile(args.out, quick=args.quick)

@@ -83,6 +83,11 @@ BAD = [  # (scene kind, mutation, text the one-line error must contain)
     ("compression", _set("mesh", n_around=10), "mesh.n_around"),
     ("compression", _set("donning", steps=0), "donning.steps"),
     ("compression", _set("donning", start=1.5), "donning.start"),
+    ("static", _set("accuracy", quantity="probe_ux_m", target=0.0), "accuracy.target"),
+    ("static", _set("accuracy", quantity="probe_ux_m", target=1.0), "accuracy.target"),
+    ("static", _set("accuracy", quantity="tip_angle", target=0.02), "accuracy.quantity"),
+    ("explicit", _set("accuracy", quantity="corner_uy", target=0.02), "accuracy.quantity"),
+    ("compression", _set("accuracy", quantity="x", target=0.02), "accuracy"),
 ]
 
 

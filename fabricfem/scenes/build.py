@@ -129,6 +129,23 @@ def estimated_dofs(mesh: dict, model_kind: str = "naghdi") -> int:
     return int(nodes * (5 if model_kind == "naghdi" else 3))
 
 
+def estimated_cost(scene: Scene) -> float | None:
+    """Relative cost of a scene before meshing: dofs x time steps (dynamic: end_time / dt, dt = "auto" scaled
+    by the cell size / dt_fraction), dofs^1.5 for a static solve (direct solver); None when unknown (wear)."""
+    data = scene.data
+    if scene.kind not in ("static", "dynamic"):
+        return None
+    dofs = estimated_dofs(data["mesh"], section(ModelSection, data.get("model")).kind)
+    if scene.kind == "static":
+        return dofs ** 1.5
+    d = section(DynamicsSection, data["dynamics"])
+    if d.dt != "auto":
+        return dofs * d.end_time / d.dt
+    m = mesh_section(data["mesh"])
+    cells = max(m.nx or 0, m.ny or 0, m.n_around or 0, m.n_along or 0)
+    return dofs * d.end_time * cells / d.dt_fraction
+
+
 def check_size(data: dict) -> None:
     """Refuse, with the numbers, a mesh whose estimated memory exceeds the machine's physical memory (unless
     mesh.allow_large)."""

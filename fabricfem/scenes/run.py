@@ -253,6 +253,7 @@ def run_static_scene(scene: Scene, comm=MPI.COMM_WORLD) -> list[LoadStep]:
     if probe is not None:
         value = model.node_value(probe)
         summary["probe_displacement_m"] = list(value)
+        summary.update({f"probe_u{c}_m": float(v) for c, v in zip("xyz", value)})
         say(f"probe {tuple(probe)}: displacement {value} m")
     io.write_json(out / "summary.json", summary, comm)
     say(f"wrote {out}/solution.xdmf, history.csv, summary.json" +
@@ -448,7 +449,8 @@ def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD) -> DynamicRun:
                "newton_iterations": int(sum(history.newton_iterations)),
                "projection_iterations": int(sum(iterations)), "max_projection_iterations": max(iterations, default=0),
                "peak_memory_mib": memory["max_mib"], "peak_memory_total_mib": memory["total_mib"],
-               "peak_memory_per_rank_mib": memory["per_rank_mib"]}
+               "peak_memory_per_rank_mib": memory["per_rank_mib"],
+               **{f"final_{m}": float(history.monitors[m][-1]) for m in user}}
     outputs = {"xdmf": xdmf, "csv": out / f"{name}.csv", "png": out / f"{name}.png",
                "summary": out / "summary.json"}
     io.write_json(outputs["summary"], summary, comm)

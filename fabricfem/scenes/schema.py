@@ -110,6 +110,7 @@ from fabricfem.scenes import wear as wear_module
 from fabricfem.scenes.errors import SceneError
 from fabricfem.scenes.errors import suggest as _suggest
 from fabricfem.scenes.sections import (
+    AccuracySection,
     DonningSection,
     DynamicsSection,
     FabricSection,
@@ -135,7 +136,8 @@ SECTION_CLASSES: dict[str, tuple] = {
     "support": (SupportSection,), "load": (LoadSection,), "solver": (SolverSection,), "output": (OutputSection,),
     "body": (ArmDimensions,), "motion": (FlexionSpec,), "contact": (ContactSpec,), "route": (RouteSpec,),
     "limb": (LimbSection,), "donning": (DonningSection,), "dynamics": (DynamicsSection,),
-    "dynamics.obstacles": (ObstacleSection,), "dynamics.monitors": (MonitorSection,)}
+    "dynamics.obstacles": (ObstacleSection,), "dynamics.monitors": (MonitorSection,),
+    "accuracy": (AccuracySection,)}
 TYPED_SECTIONS = {"body": "default_arm", "motion": "elbow_flexion"}   # sections with a required `type` key
 
 
@@ -356,7 +358,44 @@ def validate(data: dict, source: str = "scene") -> Scene:
         _check_compression(data)
     if dynamic:
         _check_dynamics(data)
+    if "accuracy" in data:
+        if kind not in ("static", "dynamic"):
+            raise SceneError(f"accuracy: an accuracy target is for static and dynamic scenes, not {kind!r} ones")
+        accuracy = data["accuracy"]
+        if "target" in accuracy:
+            check_target("accuracy.target", accuracy["target"])
+        if "quantity" in accuracy:
+            accuracy_summary_key(data, accuracy["quantity"])
+        if accuracy.get("finer_levels", 0) < 0:
+            raise SceneError(f"accuracy.finer_levels: must be >= 0, got {accuracy['finer_levels']!r}")
     return Scene(data, kind=kind)
+
+
+def check_target(where: str, target) -> float:
+    """A relative error target in (0, 1), or SceneError naming `where`."""
+    if isinstance(target, bool) or not isinstance(target, (int, float)) or not 0.0 < target < 1.0:
+        raise SceneError(f"{where}: a relative error target must lie in (0, 1) (e.g. 0.02 or 2%), got {target!r}")
+    return float(target)
+
+
+def accuracy_quantities(data: dict) -> dict[str, str]:
+    """{quantity name: its summary.json key} that an accuracy target may name (AccuracySection.quantity)."""
+    if "dynamics" in data:
+        names = {m["name"]: f"final_{m['name']}" for m in data["dynamics"].get("monitors", [])}
+        return {**names, **{k: k for k in ("kinetic_J", "strain_J", "max_strain_final")}}
+    if data.get("output", {}).get("probe") is None:
+        return {}
+    return {f"probe_u{c}_m": f"probe_u{c}_m" for c in "xyz"}
+
+
+def accuracy_summary_key(data: dict, quantity: str) -> str:
+    """The summary.json key of an accuracy quantity; SceneError naming it when the scene does not monitor it."""
+    allowed = accuracy_quantities(data)
+    if quantity not in allowed:
+        hint = "" if allowed else " (a static scene needs output.probe)"
+        raise SceneError(f"accuracy.quantity: {quantity!r} is not a monitored output of this scene"
+                         f"{_suggest(str(quantity), allowed)}; allowed: {sorted(allowed)}{hint}")
+    return allowed[quantity]
 
 
 def _positive(where: str, value) -> None:

@@ -224,6 +224,18 @@ class MonitorSection:
                                "max_displacement", None)
 
 
+@dataclasses.dataclass(frozen=True)
+class AccuracySection:
+    """[accuracy]: run the cheapest mesh level whose estimated error of a monitored quantity is below a target
+    (fabricfem.scenes.accuracy; static and dynamic scenes)."""
+
+    quantity: str | None = doc("static: probe_ux_m | probe_uy_m | probe_uz_m (needs output.probe); dynamic: a "
+                               "[[dynamics.monitors]] name (its value at end_time) or kinetic_J | strain_J | "
+                               "max_strain_final", None)
+    target: float | None = doc("relative error target, in (0, 1) (e.g. 0.02)", None)
+    finer_levels: int = doc("levels finer than the scene's mesh that may be chosen (cell counts x 2, x 4, ...)", 2)
+
+
 def section(cls, table: dict | None):
     """The section dataclass of a validated table (None or {} gives the defaults)."""
     return from_table(cls, table or {})

@@ -1,0 +1,277 @@
+"""An accuracy target chooses the mesh: `fabricfem plan SCENE --accuracy 2%`, `fabricfem run SCENE --accuracy 2%`.
+
+Levels: level k is the scene with every cell count of its [mesh] (nx, ny or n_around, n_along) times 2^k and, for
+a dynamic scene with a numeric dt, dt / 2^k (dt = "auto" follows the mesh by itself; output_every x 2^k keeps the
+record times). The pilots k = -2, -1, 0 are solved (each into `<out>/accuracy/level<k>/`, read back when that
+folder holds a completed run of the same level scene); the quantity q (a monitored output, `AccuracySection`)
+of the three gives the observed order p = log(|q_-2 - q_-1| / |q_-1 - q_0|) / log 2 and the Richardson
+extrapolation q* = q_0 + (q_0 - q_-1) / (2^p - 1). Estimated relative error of level k: |q_k - q*| / |q*| for a
+pilot, e_0 2^(-p k) for a finer level. The sequence is "not asymptotic" when the differences change sign, do not
+shrink, or p lies outside [P_MIN, P_MAX]; then only pilots can be chosen, each with the conservative estimate
+max_{j >= k} |q_j - q_0| / |q_0| (e_0 = |q_-1 - q_0| / |q_0|), and a target that no pilot meets is refused.
+Cost: the measured wall times [s] of the pilots; a finer level's predicted wall time is
+wall_0 (dofs_k steps_k / dofs_0 steps_0)^a with a from the two finest pilots, clamped to [1, 2] (work per step
+is linear in the dofs up to the direct solver's fill). The cheapest level whose estimated error is at most the
+target is chosen (levels up to `finer_levels` above the scene's mesh); none: refused (`Plan.require`).
+"""
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from mpi4py import MPI
+
+from fabricfem import io
+from fabricfem.scenes.build import critical_time_step_estimate, estimated_dofs, validate
+from fabricfem.scenes.run import output_dir, run_scene, scene_name, scene_sha256
+from fabricfem.scenes.schema import Scene, SceneError, accuracy_summary_key, check_target
+from fabricfem.scenes.sections import AccuracySection, DynamicsSection, ModelSection, section
+from fabricfem.scenes.sweep import read_summary
+
+P_MIN, P_MAX = 0.5, 6.0          # plausible observed orders of a mesh sequence
+PILOTS = (-2, -1, 0)             # levels solved to estimate the error
+MESH_COUNTS = {"plate": ("nx", "ny"), "tube": ("n_around", "n_along")}
+
+
+@dataclass
+class Level:
+    """One level of a scene: k (cell counts x 2^k), its scene, dofs, time step [s] (dynamic), the quantity and
+    wall time [s] when solved, the estimated relative error and the measured or predicted wall time [s]."""
+
+    k: int
+    scene: Scene
+    dofs: int
+    step: float | None
+    steps: int
+    value: float | None = None
+    wall_s: float | None = None
+    error: float | None = None
+    cost_s: float | None = None
+
+    @property
+    def work(self) -> float:
+        """dofs x time steps (1 step for a static solve)."""
+        return float(self.dofs * self.steps)
+
+
+@dataclass
+class Plan:
+    """The accuracy plan of a scene: the levels (pilots solved), the observed order p, the extrapolated value,
+    whether the pilots are in the asymptotic range (and why not), and the chosen level (None: target not met)."""
+
+    quantity: str
+    target: float
+    levels: list[Level]
+    order: float | None
+    extrapolated: float | None
+    asymptotic: bool
+    note: str
+    chosen: Level | None = None
+    header: tuple = field(default=("level", "model", "cells", "dofs", "step_s", "value", "estimated_error",
+                                   "wall_s", "solved"))
+
+    def rows(self) -> list[list]:
+        """One row per level (the columns of `header`)."""
+        return [[lv.k, section(ModelSection, lv.scene.get("model")).kind, _cells(lv.scene), lv.dofs, lv.step,
+                 lv.value, lv.error, lv.cost_s, lv.value is not None] for lv in self.levels]
+
+    def table(self) -> str:
+        """The plan as printed: one line per level, the estimate and the choice."""
+        estimate = (f"observed order p = {self.order:.2f}, extrapolated {self.extrapolated:.6g}" if self.asymptotic
+                    else f"NOT ASYMPTOTIC ({self.note}): only the solved levels, conservative estimates")
+        lines = [f"accuracy plan: {self.quantity} to {self.target:.3g} relative; {estimate}",
+                 (f"  {'level':>5} {'model':>8} {'cells':>9} {'dofs':>8} {'step [s]':>10} {'value':>13} "
+                  f"{'est. error':>10} {'wall [s]':>10}")]
+        for lv in self.levels:
+            mark = " <- chosen" if lv is self.chosen else ""
+            cost = "" if lv.cost_s is None else f"{lv.cost_s:.3g}" + ("" if lv.value is not None else " (pred.)")
+            lines.append(f"  {lv.k:>+5d} {section(ModelSection, lv.scene.get('model')).kind:>8} "
+                         f"{_cells(lv.scene):>9} {lv.dofs:>8d} {_fmt(lv.step, '.4g'):>10} "
+                         f"{_fmt(lv.value, '.6g'):>13} {_fmt(lv.error, '.2e'):>10} {cost:>10}{mark}")
+        return "\n".join(lines)
+
+    def require(self) -> Level:
+        """The chosen level; SceneError with the best estimate when no level meets the target."""
+        if self.chosen is None:
+            best = min((lv for lv in self.levels if lv.error is not None), key=lambda lv: lv.error)
+            raise SceneError(f"accuracy.target: no level reaches {self.target:.3g} ({self.quantity}: best estimate "
+                             f"{best.error:.3g} at level {best.k:+d}"
+                             + (f"; not asymptotic: {self.note}" if not self.asymptotic else "")
+                             + "); refine the scene's mesh, raise accuracy.finer_levels or the target")
+        return self.chosen
+
+    def summary(self) -> dict:
+        """The entries added to the delivered run's summary.json."""
+        c = self.chosen
+        return {"accuracy_quantity": self.quantity, "accuracy_target": self.target, "accuracy_level": c.k,
+                "accuracy_estimated_error": c.error, "accuracy_order": self.order,
+                "accuracy_extrapolated": self.extrapolated, "accuracy_asymptotic": self.asymptotic,
+                "accuracy_note": self.note, "accuracy_predicted_wall_s": c.cost_s}
+
+
+def _fmt(value, spec: str) -> str:
+    return "-" if value is None else format(value, spec)
+
+
+def _cells(scene: Scene) -> str:
+    mesh = scene["mesh"]
+    return "x".join(str(mesh[key]) for key in MESH_COUNTS[mesh["type"]])
+
+
+def parse_target(text: str) -> float:
+    """A relative target from `2%` or `0.02`; ValueError naming --accuracy."""
+    try:
+        value = float(text.strip().rstrip("%")) / (100.0 if text.strip().endswith("%") else 1.0)
+    except ValueError:
+        raise ValueError(f"--accuracy: a relative error target like 2% or 0.02, got {text!r}") from None
+    return check_target("--accuracy", value)
+
+
+def target_of(scene: Scene, target: float | None = None, quantity: str | None = None) -> tuple[str, float]:
+    """(quantity, target) from the arguments, else the scene's [accuracy]; SceneError naming what is missing."""
+    spec = section(AccuracySection, scene.get("accuracy"))
+    quantity = quantity if quantity is not None else spec.quantity
+    target = target if target is not None else spec.target
+    if scene.kind not in ("static", "dynamic"):
+        raise SceneError(f"--accuracy: an accuracy target is for static and dynamic scenes, not {scene.kind!r} ones")
+    if target is None:
+        raise SceneError("accuracy.target: give a relative error target (--accuracy 2% or [accuracy] target)")
+    if quantity is None:
+        raise SceneError("accuracy.quantity: name the monitored quantity (--quantity NAME or [accuracy] quantity)")
+    accuracy_summary_key(scene.data, quantity)
+    return quantity, check_target("accuracy.target", target)
+
+
+def level_scene(scene: Scene, k: int, out: Path) -> Level:
+    """Level k of `scene` (module docstring) writing into `out`, validated; SceneError naming the mesh key when
+    a cell count cannot be divided by 2^-k."""
+    data = copy.deepcopy(scene.data)
+    data.pop("accuracy", None)
+    mesh = data["mesh"]
+    for key in MESH_COUNTS[mesh["type"]]:
+        scaled = mesh[key] * 2.0 ** k
+        if scaled != int(scaled) or scaled < 1:
+            raise SceneError(f"mesh.{key}: {mesh[key]} cells cannot be halved {-k} times for the accuracy levels; "
+                             f"give counts divisible by {2 ** -min(PILOTS)}")
+        mesh[key] = int(scaled)
+    steps, step = 1, None
+    if "dynamics" in data:
+        dyn = data["dynamics"]
+        if dyn["dt"] != "auto":
+            dyn["dt"] = dyn["dt"] / 2.0 ** k
+        if dyn.get("output_every") is not None:
+            dyn["output_every"] = max(1, round(dyn["output_every"] * 2.0 ** k))
+        d = section(DynamicsSection, dyn)
+        step = d.dt if d.dt != "auto" else (d.dt_fraction * (critical_time_step_estimate(data) or math.nan))
+        steps = max(1, math.ceil(d.end_time / step * (1.0 - 1e-12))) if math.isfinite(step) else 1
+    data.setdefault("output", {}).update(dir=str(out), render=False)
+    level = validate(data, source=f"accuracy level {k:+d}")
+    level.path = scene.path
+    return Level(k, level, estimated_dofs(data["mesh"], section(ModelSection, data.get("model")).kind), step, steps)
+
+
+def solve(level: Level, key: str, comm=MPI.COMM_WORLD) -> bool:
+    """Solve a level (or read back its completed run of the same scene) and store its quantity and wall time;
+    True when it was solved now."""
+    folder = Path(level.scene["output"]["dir"])
+    summary = comm.bcast(read_summary(folder) if comm.rank == 0 else None, root=0)
+    solved = not (summary.get("status") == "completed" and summary.get("scene_sha256") == scene_sha256(level.scene))
+    if solved:
+        outcome = run_scene(level.scene, comm)
+        if outcome.status != "completed":
+            raise SceneError(f"accuracy level {level.k:+d}: the run {outcome.status}")
+        summary = comm.bcast(read_summary(folder) if comm.rank == 0 else None, root=0)
+    level.value, level.wall_s = float(summary[key]), float(summary["wall_s"])
+    level.cost_s = level.wall_s
+    return solved
+
+
+def richardson(values: list[float], ratio: float = 2.0) -> tuple[float | None, float | None, str]:
+    """(observed order p, extrapolated value, "" or why the sequence is not asymptotic) of three values on
+    meshes refined by `ratio`, coarse to fine."""
+    d1, d2 = values[1] - values[0], values[2] - values[1]
+    if d2 == 0.0:
+        return None, values[2], "" if d1 == 0.0 else "the finest difference is zero"
+    if d1 * d2 < 0.0:
+        return None, None, "the differences change sign"
+    if abs(d2) >= abs(d1):
+        return None, None, "the differences do not shrink"
+    p = math.log(abs(d1) / abs(d2)) / math.log(ratio)
+    if not P_MIN <= p <= P_MAX:
+        return p, None, f"observed order {p:.2f} outside [{P_MIN:g}, {P_MAX:g}]"
+    return p, values[2] + d2 / (ratio ** p - 1.0), ""
+
+
+def plan(scene: Scene, target: float | None = None, quantity: str | None = None, comm=MPI.COMM_WORLD,
+         say=None) -> Plan:
+    """Solve the pilots, estimate the error of every level and choose the cheapest one that meets the target
+    (module docstring; `Plan.chosen` is None when no level does, `Plan.require` refuses)."""
+    say = say or ((lambda m: print(m, flush=True)) if comm.rank == 0 else (lambda m: None))
+    quantity, target = target_of(scene, target, quantity)
+    key = accuracy_summary_key(scene.data, quantity)
+    finer = section(AccuracySection, scene.get("accuracy")).finer_levels
+    root = output_dir(scene) / "accuracy"
+    levels = [level_scene(scene, k, root / f"level{k:+d}") for k in (*PILOTS, *range(1, finer + 1))]
+    clock = io.Progress("accuracy pilots")
+    pilots = levels[:len(PILOTS)]
+    for i, lv in enumerate(pilots):
+        solved = solve(lv, key, comm)
+        say(f"accuracy: level {lv.k:+d} ({_cells(lv.scene)} cells, {lv.dofs} dofs) "
+            f"{'solved' if solved else 'read back'}: {lv.value:.6g} {clock((i + 1) / len(pilots))}")
+    values = [lv.value for lv in pilots]
+    order, extrapolated, note = richardson(values)
+    asymptotic = not note and extrapolated not in (None, 0.0)
+    if asymptotic:
+        e0 = abs(values[-1] - extrapolated) / abs(extrapolated)
+        for lv in levels:
+            lv.error = abs(lv.value - extrapolated) / abs(extrapolated) if lv.value is not None else \
+                e0 * 2.0 ** (-order * lv.k) if e0 > 0.0 else 0.0
+    else:
+        scale = abs(values[-1]) or 1.0
+        for i, lv in enumerate(pilots):
+            lv.error = (abs(values[-2] - values[-1]) if i == len(pilots) - 1 else
+                        max(abs(v - values[-1]) for v in values[i:])) / scale
+    a = _cost_exponent(pilots[-2], pilots[-1])
+    for lv in levels[len(PILOTS):]:
+        lv.cost_s = pilots[-1].wall_s * (lv.work / pilots[-1].work) ** a
+    result = Plan(quantity, target, levels, order, extrapolated, asymptotic, note or "")
+    meeting = [lv for lv in levels if lv.error is not None and lv.error <= target]
+    result.chosen = min(meeting, key=lambda lv: lv.work) if meeting else None
+    say(result.table())
+    c = result.chosen
+    if c is not None:
+        say(f"accuracy: chose level {c.k:+d} ({_cells(c.scene)} cells, {c.dofs} dofs): estimated error "
+            f"{c.error:.2e} <= {target:.3g}, {'measured' if c.value is not None else 'predicted'} wall "
+            f"{c.cost_s:.3g} s" + ("" if asymptotic else f" (NOT ASYMPTOTIC: {note}; conservative choice)"))
+    return result
+
+
+def _cost_exponent(coarse: Level, fine: Level) -> float:
+    """a of wall ~ work^a from two solved levels, clamped to [1, 2] (set-up time dominates tiny levels)."""
+    if fine.work <= coarse.work or not (coarse.wall_s and fine.wall_s):
+        return 1.0
+    return min(2.0, max(1.0, math.log(fine.wall_s / coarse.wall_s) / math.log(fine.work / coarse.work)))
+
+
+def run_accurate(scene: Scene, target: float | None = None, quantity: str | None = None, comm=MPI.COMM_WORLD):
+    """`fabricfem run SCENE --accuracy X`: plan, then run the chosen level into the scene's output folder (with
+    its renders) and add the plan's estimate to its summary.json; writes accuracy_plan.csv beside it. Returns
+    (plan, SceneOutcome)."""
+    chosen = plan(scene, target, quantity, comm)
+    data = copy.deepcopy(chosen.require().scene.data)
+    data["output"] = {**scene.get("output", {}), "dir": str(output_dir(scene))}
+    data.setdefault("scene", {})["name"] = scene_name(scene)
+    delivered = validate(data, source=f"accuracy level {chosen.chosen.k:+d}")
+    delivered.path = scene.path
+    outcome = run_scene(delivered, comm)
+    out = output_dir(scene)
+    io.update_json(out / "summary.json", chosen.summary(), comm)
+    io.write_csv(out / "accuracy_plan.csv", list(chosen.header), chosen.rows(), comm)
+    if comm.rank == 0:
+        key = accuracy_summary_key(scene.data, chosen.quantity)
+        value = read_summary(out).get(key)
+        print(f"accuracy: {chosen.quantity} = {value} at level {chosen.chosen.k:+d}, estimated relative error "
+              f"{chosen.chosen.error:.2e} (target {chosen.target:.3g}); wrote {out}/accuracy_plan.csv", flush=True)
+    return chosen, outcome

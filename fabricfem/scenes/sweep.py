@@ -1,0 +1,286 @@
+"""`fabricfem sweep SCENE --vary key=v1,v2,... [--vary ...]`: the variants of a scene as one MPI batch.
+
+Each `--vary` names a dotted scene key (`fabric.E1`, `dynamics.dt_fraction`, `mesh.nx`, `load.0.value` for an
+array of tables) and its values, parsed as TOML values (`1e6`, `true`, `"triangle"`, `[0, 0, -9.81]`; a bare word
+is a string). The variants are the cartesian product of the lists, in the order given (the last key varies
+fastest). Each is the scene with those keys replaced, validated completely (fabricfem.scenes.build.validate)
+before anything runs: a bad key or value is refused naming the variant and the key. A variant runs into its own
+folder `<out>/<name>/` (name from its key=value pairs) with fabricfem.scenes.run.run_scene on a sub-communicator
+(MPI.COMM_WORLD.Split: `ranks_per_variant` ranks per group), longest first (`estimated_cost`) to the least loaded
+group (`schedule`). Resumable: a variant whose folder holds a summary.json with status "completed" and the
+variant's scene hash (run.scene_sha256) is read back, not rerun. Rank 0 writes `<out>/sweep.csv` (the variant's
+keys, its status and the scalar entries of its summary.json; numeric lists flattened as `<key>_<i>`) and
+`<out>/sweep.png` (one summary quantity against the first varied key, one curve per combination of the others).
+"""
+from __future__ import annotations
+
+import copy
+import itertools
+import json
+import math
+import re
+import time
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+from mpi4py import MPI
+
+from fabricfem import io
+from fabricfem.scenes.build import estimated_cost, validate
+from fabricfem.scenes.run import run_scene, scene_sha256
+from fabricfem.scenes.schema import Scene, SceneError
+
+# summary.json entries that describe the run, not its result (left out of the default plot quantity)
+BOOKKEEPING = {"ranks", "ndofs", "wall_s", "time_integration_wall_s", "peak_memory_mib", "peak_memory_total_mib",
+               "steps", "load_steps", "dt_s", "dt_crit_s", "end_time_s", "newton_iterations"}
+
+
+@dataclass
+class Variant:
+    """One variant of a sweep: its name (folder), its varied {key: value} and its validated scene."""
+
+    name: str
+    values: dict
+    scene: Scene
+
+
+def parse_value(text: str):
+    """A TOML value (`1e6`, `true`, `"a"`, `[1, 2]`), or the text itself when it is not one (a bare word)."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text.strip()
+
+
+def _split_values(text: str) -> list[str]:
+    """Split `v1,v2,...` at the commas outside brackets and quotes."""
+    parts, depth, quote, start = [], 0, "", 0
+    for i, c in enumerate(text):
+        if quote:
+            quote = "" if c == quote else quote
+        elif c in "\"'":
+            quote = c
+        elif c in "[{":
+            depth += 1
+        elif c in "]}":
+            depth -= 1
+        elif c == "," and depth == 0:
+            parts.append(text[start:i])
+            start = i + 1
+    parts.append(text[start:])
+    return [p.strip() for p in parts if p.strip()]
+
+
+def parse_vary(text: str) -> tuple[str, list]:
+    """(key, values) of one `--vary key=v1,v2,...`; ValueError naming it when malformed."""
+    key, sep, values = text.partition("=")
+    key = key.strip()
+    if not sep or not key or not _split_values(values):
+        raise ValueError(f"--vary {text!r}: expected key=v1,v2,... (e.g. fabric.E1=1e6,2e6)")
+    return key, [parse_value(v) for v in _split_values(values)]
+
+
+def set_key(data: dict, key: str, value) -> None:
+    """Replace the dotted `key` of scene data (`section.key`, `section.index.key` in an array of tables); the
+    section must exist (and an indexed table); SceneError naming the key otherwise."""
+    parts = key.split(".")
+    if len(parts) < 2:
+        raise SceneError(f"{key}: a sweep key is section.key (e.g. fabric.E1)")
+    node = data
+    for i, part in enumerate(parts[:-1]):
+        where = ".".join(parts[:i + 1])
+        if isinstance(node, list):
+            if not part.isdigit() or int(part) >= len(node):
+                raise SceneError(f"{key}: [[{'.'.join(parts[:i])}]] has {len(node)} table(s); write "
+                                 f"{'.'.join(parts[:i])}.<0..{len(node) - 1}>.key")
+            node = node[int(part)]
+        elif isinstance(node, dict) and part in node:
+            node = node[part]
+        elif isinstance(node, dict) and i == 0:
+            node = node.setdefault(part, {})     # an optional section left out of the scene (defaults)
+        else:
+            raise SceneError(f"{key}: the scene has no {where}")
+        if isinstance(node, list) and i == len(parts) - 2:
+            raise SceneError(f"{key}: [[{where}]] is an array of tables; write {where}.<index>.{parts[-1]}")
+    node[parts[-1]] = value
+
+
+def variant_name(values: dict) -> str:
+    """Folder name of a variant: its key=value pairs joined by '_' (characters other than letters, digits and
+    `.=+-` replaced by '-')."""
+    pairs = "_".join(f"{k}={v}" for k, v in values.items())
+    return re.sub(r"[^A-Za-z0-9.=+\-_]", "-", pairs)
+
+
+def variants(base: Scene, varies: list[tuple[str, list]], out: str | Path) -> list[Variant]:
+    """The cartesian product of `varies` over the base scene, each validated (fabricfem.scenes.build.validate)
+    with its output folder `<out>/<name>`; SceneError naming the variant and the key."""
+    keys = [k for k, _ in varies]
+    if len(set(keys)) != len(keys):
+        raise SceneError(f"--vary: a key is given twice: {keys}")
+    result = []
+    for combination in itertools.product(*(values for _, values in varies)):
+        values = dict(zip(keys, combination))
+        name = variant_name(values)
+        data = copy.deepcopy(base.data)
+        try:
+            for key, value in values.items():
+                set_key(data, key, value)
+            data.setdefault("output", {})["dir"] = str(Path(out) / name)
+            scene = validate(data, source=f"variant {name}")
+        except SceneError as exc:
+            raise SceneError(f"variant {name}: {exc}") from None
+        scene.path = base.path
+        result.append(Variant(name, values, scene))
+    return result
+
+
+def longest_first(costs: list[float | None]) -> list[int]:
+    """Indices by decreasing cost; unknown costs (None) after the known ones, in the order given."""
+    return sorted(range(len(costs)), key=lambda i: (costs[i] is None, -(costs[i] or 0.0), i))
+
+
+def schedule(costs: list[float | None], groups: int) -> list[int]:
+    """Group of each variant: longest first (unknown costs: the order given, after the known ones), each to the
+    least loaded group; the same on every rank."""
+    load = [0.0] * groups
+    owner = [0] * len(costs)
+    for i in longest_first(costs):
+        g = min(range(groups), key=lambda k: (load[k], k))
+        owner[i] = g
+        load[g] += costs[i] if costs[i] is not None else 1.0
+    return owner
+
+
+def read_summary(folder: Path) -> dict:
+    """The summary.json of a variant's folder ({} when missing or unreadable)."""
+    try:
+        data = json.loads((Path(folder) / "summary.json").read_text())
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
+def finished(variant: Variant) -> bool:
+    """True when the variant's folder holds a completed run of exactly this scene (status and scene hash)."""
+    summary = read_summary(Path(variant.scene["output"]["dir"]))
+    return summary.get("status") == "completed" and summary.get("scene_sha256") == scene_sha256(variant.scene)
+
+
+def scalar_entries(summary: dict) -> dict:
+    """The scalar entries of a summary (numbers, strings, booleans), numeric lists flattened as <key>_<i>."""
+    row = {}
+    for key, value in summary.items():
+        if isinstance(value, (int, float, str, bool)) or value is None:
+            row[key] = value
+        elif isinstance(value, list) and value and all(isinstance(v, (int, float)) for v in value):
+            row.update({f"{key}_{i}": v for i, v in enumerate(value)})
+    return row
+
+
+def run_sweep(base: Scene, varies: list[tuple[str, list]], out: str | Path, ranks_per_variant: int = 1,
+              plot: str | None = None, comm: MPI.Comm = MPI.COMM_WORLD) -> list[dict]:
+    """Run the variants of `base` (module docstring) and write <out>/sweep.csv and sweep.png (rank 0).
+    Returns the table's rows (on every rank): {"variant", <keys>, "status", <summary entries>}. A variant that
+    fails is recorded with its status ("failed: ...") and the others go on; ValueError naming
+    --ranks-per-variant when it does not divide the number of ranks."""
+    out = Path(out)
+    if ranks_per_variant < 1 or comm.size % ranks_per_variant:
+        raise ValueError(f"--ranks-per-variant: {ranks_per_variant} must be a positive divisor of the "
+                         f"{comm.size} rank(s)")
+    todo = variants(base, varies, out)
+    groups = comm.size // ranks_per_variant
+    group = comm.rank // ranks_per_variant
+    costs = [estimated_cost(v.scene) for v in todo]
+    owner = schedule(costs, groups)
+    sub = comm.Split(color=group, key=comm.rank)
+    leader = sub.rank == 0
+    say = (lambda m: print(m, flush=True)) if leader else (lambda m: None)
+    if comm.rank == 0:
+        print(f"sweep: {len(todo)} variants of {base.path or 'the scene'} on {groups} group(s) of "
+              f"{ranks_per_variant} rank(s) into {out}", flush=True)
+    clock = io.Progress()
+    mine = [i for i in longest_first(costs) if owner[i] == group]
+    statuses = {}                       # this group's failures that left no summary.json (raised before the run)
+    for n, i in enumerate(mine):
+        v = todo[i]
+        if finished(v):
+            say(f"[group {group}] {v.name}: completed before, read back (not rerun)")
+            continue
+        say(f"[group {group}] {v.name}: started {clock(n / len(mine))}")
+        t0 = time.perf_counter()
+        try:
+            outcome = run_scene(v.scene, sub)
+            status = outcome.status
+        except Exception as exc:  # noqa: BLE001 (any failure of one variant: recorded, the others go on)
+            status = statuses[v.name] = f"failed: {' '.join(str(exc).split())}"
+        say(f"[group {group}] {v.name}: {status} in {time.perf_counter() - t0:.1f} s {clock((n + 1) / len(mine))}")
+    sub.Free()
+    statuses = {name: status for part in comm.allgather(statuses if leader else {})
+                for name, status in part.items()}
+    rows = []
+    for v in todo:
+        summary = read_summary(Path(v.scene["output"]["dir"]))
+        status = statuses.get(v.name, summary.get("status", "missing"))
+        rows.append({"variant": v.name, **v.values, "status": status,
+                     **{k: val for k, val in scalar_entries(summary).items() if k not in v.values and k != "status"}})
+    if comm.rank == 0:
+        header = list(dict.fromkeys(k for row in rows for k in row))
+        io.write_csv(out / "sweep.csv", header, [[_cell(row.get(k)) for k in header] for row in rows], MPI.COMM_SELF)
+        quantity = plot or default_quantity(rows, {"variant", *todo[0].values})
+        numeric = sorted({k for row in rows for k, v in row.items() if isinstance(v, (int, float))})
+        if quantity is not None and quantity not in numeric:
+            print(f"sweep: --plot {quantity!r} is not a numeric entry of the variants' summary.json (no plot); "
+                  f"entries: {numeric}", flush=True)
+            quantity = None
+        if quantity is not None:
+            plot_sweep(out / "sweep.png", rows, [k for k, _ in varies], quantity)
+        print(f"sweep: wrote {out}/sweep.csv" + (f", sweep.png ({quantity})" if quantity else ""), flush=True)
+    return rows
+
+
+def _cell(value) -> str:
+    """CSV text of a table cell: repr of floats (round trip), '' for missing."""
+    if value is None:
+        return ""
+    return repr(value) if isinstance(value, float) else str(value)
+
+
+def default_quantity(rows: list[dict], exclude: set[str]) -> str | None:
+    """The first numeric summary entry that is not bookkeeping (BOOKKEEPING, memory) nor in `exclude` (the
+    varied keys), or None."""
+    for key in dict.fromkeys(k for row in rows for k in row if k not in exclude):
+        values = [row.get(key) for row in rows]
+        if (key not in BOOKKEEPING and not key.startswith("peak_memory") and
+                all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values if v is not None)
+                and any(v is not None for v in values)):
+            return key
+    return None
+
+
+def plot_sweep(path: Path, rows: list[dict], keys: list[str], quantity: str) -> None:
+    """PNG of `quantity` against the first varied key, one curve per combination of the other keys."""
+    import matplotlib  # optional heavy package, loaded only when a plot is drawn
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
+    first, others = keys[0], keys[1:]
+    curves: dict[str, list[tuple]] = {}
+    for row in rows:
+        label = ", ".join(f"{k}={row[k]}" for k in others) or quantity
+        x, y = row[first], row.get(quantity)
+        if isinstance(y, (int, float)) and math.isfinite(y):
+            curves.setdefault(label, []).append((x, y))
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    numeric = all(isinstance(row[first], (int, float)) for row in rows)
+    for label, points in curves.items():
+        xs, ys = zip(*(sorted(points) if numeric else points))
+        ax.plot(xs if numeric else [str(x) for x in xs], ys, "o-", label=label)
+    ax.set_xlabel(first)
+    ax.set_ylabel(quantity)
+    ax.grid(True, alpha=0.3)
+    if len(curves) > 1:
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
