@@ -152,6 +152,7 @@ class ObstacleWalk:
         self.dimensions, self.strides, self.crossing_stride = dimensions, strides, crossing_stride
         self.cycle_time, self.lead, self.max_rise = cycle_time, lead, max_rise
         self.clearance, self.trail_clearance = clearance, trail_clearance
+        self.speed, self.crossing_speed = speed, crossing_speed
         self.stride_length = speed * cycle_time
         self.pace = _Pace(self.stride_length, strides, crossing_stride, speed, crossing_speed)
         self._thigh, self._knee, self._ankle = (fourier_curve(c) for c in
