@@ -57,7 +57,7 @@ LEAD_ANKLE_DEG, TRAIL_ANKLE_DEG = 39.4, -26.0
 LEAD_PEAKS_DEG = (95.0, 120.0)     # hip, knee [StepAscent2009]
 TRAIL_PEAKS_DEG = (60.0, 128.0)    # assumed
 RISE_MARGIN = 0.005     # m: added to the computed rise (covers the sampling of the foot outline)
-MAX_RISE = 0.3          # m: module docstring of `obstacle_walk`
+MAX_RISE = 0.3          # m: why, in the docstring of `obstacle_walk`
 OUTLINE_POINTS = 1024   # samples of the foot outline in the clearance computation
 PHASE_GRID = 1001       # samples of u in [0, 1] for the box placement and the rise
 
