@@ -5,10 +5,11 @@ Modules: `ellipsoid` (implicit surface eq. 3.61, gap, exact closest point, surfa
 `motion` (kinematics sources, joint-torque convention), `conventions` (units and axes of motion files),
 `mocap` (C3D, TRC, CSV readers and writers, marker mapping), `bvh` (BVH parse, forward kinematics,
 write), `arm` (the default arm of the sleeve study, sec. 5.3), `lower_body` (the eight-segment lower
-body, standing and two-leg gait).
+body, standing and two-leg gait), `crossing` (four strides, one over an obstacle, sec. 5.4).
 """
 from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions, default_arm, elbow_flexion
 from fabricfem.body.bvh import BvhSkeleton, forward_kinematics, parse_bvh, read_bvh, write_bvh
+from fabricfem.body.crossing import ObstacleWalk, obstacle_walk
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.body.lower_body import (
                                        DEFAULT_LOWER_BODY,
@@ -56,6 +57,7 @@ __all__ = [
                                        "LowerBodyDimensions",
                                        "LowerBodyGait",
                                        "Mean",
+                                       "ObstacleWalk",
                                        "Offset",
                                        "Segment",
                                        "SegmentSchedule",
@@ -66,6 +68,7 @@ __all__ = [
                                        "load_motion",
                                        "lower_body",
                                        "map_points",
+                                       "obstacle_walk",
                                        "parse_bvh",
                                        "read_bvh",
                                        "read_c3d",
