@@ -378,7 +378,7 @@ def plan(data: dict, fabric, scene_path: Path | None = None) -> WearPlan:
         body = limb_body(body_spec["center"], body_spec["radii"], duration or 0.0)
     else:
         dims = _fields(LowerBodyDimensions, body_spec)
-        stand = standing(dims, duration=duration or 0.0)
+        stand = standing(dims, duration=float(duration) if duration else 1.0)
         if motion == "walking":
             try:
                 kinematics = winter_walking(dims, strides=int(motion_spec.get("strides", 2)),
@@ -389,7 +389,7 @@ def plan(data: dict, fabric, scene_path: Path | None = None) -> WearPlan:
         elif motion == "file":
             kinematics = _motion_file(motion_spec, scene_path, stand.names)
         else:
-            kinematics = stand
+            kinematics, duration = stand, float(duration or 0.0)
         if motion in ("walking", "file") and float(motion_spec.get("blend_time", 0.0)) > 0.0:
             # the garment goes on the standing body; the motion is entered from the standing pose
             kinematics = BlendedStart(kinematics, stand.positions(0.0), float(motion_spec["blend_time"]))
