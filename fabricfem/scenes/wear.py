@@ -22,6 +22,7 @@ import numpy as np
 
 from fabricfem.body.arm import ArmDimensions, default_arm, elbow_flexion
 from fabricfem.body.blend import BlendedStart
+from fabricfem.body.crossing import obstacle_walk
 from fabricfem.body.lower_body import LowerBodyDimensions, lower_body, standing, winter_walking
 from fabricfem.body.mocap import load_motion
 from fabricfem.body.pose import Body, Segment
@@ -43,7 +44,7 @@ from fabricfem.wear.garment import ExplicitSettings, Timeline, TorqueSpec
 
 GRAVITY = 9.81                     # m/s^2
 BODY_TYPES = ("arm", "default_arm", "limb", "lower_body")
-MOTION_TYPES = ("elbow_flexion", "still", "walking", "file")
+MOTION_TYPES = ("elbow_flexion", "still", "walking", "obstacle_walk", "file")
 BUILDERS = ("tube", "pattern")
 
 
@@ -93,15 +94,22 @@ class WearBodySection:
 @dataclasses.dataclass(frozen=True)
 class WearMotionSection:
     """[motion]: what drives the body: elbow_flexion (arm; FlexionSpec's keys), still (the start pose held),
-    walking (lower body: Winter's normative gait, both legs) or file (a C3D, TRC, BVH or CSV motion capture with
+    walking (lower body: Winter's normative gait, both legs), obstacle_walk (Winter's gait with one stride over a
+    box, fabricfem.body.crossing) or file (a C3D, TRC, BVH or CSV motion capture with
     a mapping of its markers or joints to the body's joint and marker names)."""
 
-    type: str = doc("elbow_flexion | still | walking | file")
+    type: str = doc("elbow_flexion | still | walking | obstacle_walk | file")
     duration: float | None = doc("still: length of the motion phase [s]; file, walking: at most this long", None)
     record_time: float | None = doc("record interval [s] (elbow_flexion: output_angle_step / angular velocity)", None)
-    strides: int = doc("walking: gait cycles", 2)
-    cycle_time: float = doc("walking: duration of one gait cycle [s]", 0.987)
-    speed: float = doc("walking: forward speed of the pelvis [m/s]", 1.43)
+    strides: int = doc("walking, obstacle_walk: gait cycles", 2)
+    cycle_time: float = doc("walking, obstacle_walk: duration of one gait cycle [s]", 0.987)
+    speed: float = doc("walking, obstacle_walk: forward speed of the pelvis [m/s]", 1.43)
+    crossing_stride: int = doc("obstacle_walk: the stride that steps over the obstacle", 3)
+    obstacle_height: float = doc("obstacle_walk: height of the obstacle [m]", 0.5)
+    obstacle_depth: float = doc("obstacle_walk: depth of the obstacle along the walk [m]", 0.1)
+    clearance: float = doc("obstacle_walk: lead foot's clearance over the obstacle [m]", 0.12)
+    trail_clearance: float = doc("obstacle_walk: trail foot's clearance over the obstacle [m]", 0.05)
+    crossing_speed: float = doc("obstacle_walk: pelvis speed during the crossing stride [m/s]", 0.6)
     path: str | None = doc("file: the motion file (.c3d, .trc, .bvh, .csv), relative to the scene file", None)
     units: str | None = doc("file: length unit of the file (mm, cm, m, in; default the file's metadata; BVH: "
                             "required)", None)
@@ -386,15 +394,22 @@ def plan(data: dict, fabric, scene_path: Path | None = None) -> WearPlan:
                                             speed=float(motion_spec.get("speed", 1.43)))
             except ValueError as exc:
                 raise SceneError(f"motion: {exc}") from None
+        elif motion == "obstacle_walk":
+            keys = ("strides", "crossing_stride", "obstacle_height", "obstacle_depth", "clearance", "trail_clearance",
+                    "cycle_time", "speed", "crossing_speed")
+            try:
+                kinematics = obstacle_walk(dims, **{k: motion_spec[k] for k in keys if k in motion_spec})
+            except ValueError as exc:
+                raise SceneError(f"motion: {exc}") from None
         elif motion == "file":
             kinematics = _motion_file(motion_spec, scene_path, stand.names)
         else:
             kinematics, duration = stand, float(duration or 0.0)
-        if motion in ("walking", "file") and float(motion_spec.get("blend_time", 0.0)) > 0.0:
+        if motion in ("walking", "obstacle_walk", "file") and float(motion_spec.get("blend_time", 0.0)) > 0.0:
             # the garment goes on the standing body; the motion is entered from the standing pose
             kinematics = BlendedStart(kinematics, stand.positions(0.0), float(motion_spec["blend_time"]))
         body = lower_body(dims, kinematics)
-    if motion in ("walking", "file") and duration is not None:
+    if motion in ("walking", "obstacle_walk", "file") and duration is not None:
         start, end = body.kinematics.time_range
         duration = min(float(duration), end - start)
     for i, spec in enumerate(data.get("torque", [])):
