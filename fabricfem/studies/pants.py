@@ -94,11 +94,15 @@ def _run_variant(data: dict, out: Path) -> None:
 
 
 def _read_variant(out: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
-    """(times [s], knee torque [N m], knee flexion [deg], phases) of a finished variant's outputs."""
+    """(times [s], knee torque about the flexion axis [N m], knee flexion [deg], phases, magnitude of the knee
+    moment [N m]: the thesis's "instantaneous moment magnitude about the knee") of a finished variant's outputs."""
     rows = np.genfromtxt(out / "torque.csv", delimiter=",", names=True, dtype=None, encoding=None)
     knee = np.loadtxt(out / "knee.csv", delimiter=",", skiprows=1, ndmin=2)
-    return (np.asarray(rows["time_s"], dtype=float), np.asarray(rows["knee_r_torque_Nm"], dtype=float), knee[:, 1],
-            [str(p) for p in rows["phase"]])
+    flexion = np.asarray(rows["knee_r_torque_Nm"], dtype=float)
+    names = rows.dtype.names
+    magnitude = np.sqrt(sum(np.asarray(rows[f"{c}_torque_Nm"], dtype=float) ** 2
+                            for c in ("knee_r", "knee_r_x", "knee_r_z") if f"{c}_torque_Nm" in names))
+    return (np.asarray(rows["time_s"], dtype=float), flexion, knee[:, 1], [str(p) for p in rows["phase"]], magnitude)
 
 
 def run_pants_study(out: str | Path = "results/pants_study", quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD,
