@@ -325,38 +325,3 @@ def test_a_motion_file_drives_the_scene_body(tmp_path):
     for t in (0.05, 0.15):
         got, want = plan.body.pose(t)["pelvis"], analytic.pose(t)["pelvis"]
         np.testing.assert_allclose(got.center, want.center, atol=1e-6)
-
-
-@pytest.mark.mpi
-def test_pants_donning_same_on_one_and_two_ranks():
-    """The pants of scenes/pants_walk.toml on a coarse mesh (h = 0.15 m): sewn around the thin standing body (0.3 s),
-    pulled up by the waistband (0.3 s): the knee torque, peak pressure, contact force and seam-gap histories of
-    the sewing and the pull on 2 ranks equal the serial ones within 1e-6 relative to their largest values. Measured beyond this window
-    (docs/findings/2026-11-25-garment-engine.md): while the body grows into the pants with friction and during the
-    walk, stick-slip and the crease pushes between overlapping segments amplify the round-off of the summation
-    order by about 3 per record, to O(1) after 20 records; the histories are then alike in their statistics,
-    not record by record. A pull against the full-size body (no growth) is violent (0.5 MPa peaks) and differs
-    from the first contact on."""
-    from fabricfem.scenes import wear
-    from fabricfem.verify.pants import quick_pants_data
-    data = quick_pants_data(h=0.15)
-    data["donning"] = {k: v for k, v in data["donning"].items() if not k.startswith("belt")}
-    data["donning"]["time"] = 0.02          # the run ends one record into the growth
-    data["motion"] = {"type": "still", "duration": 0.02, "record_time": 0.02}
-
-    def history(comm):
-        fabric = wear.wear_fabric(data, scene_build.build_fabric)
-        plan = wear.plan(data, fabric)
-        fmesh, seams, holds, garment = wear.garment_mesh(data, None, comm)
-        run = build_garment_run("mpi", fmesh, fabric, plan.body, seams=seams, torques=plan.torques,
-                                timeline=plan.timeline, settings=plan.settings, friction=plan.contact.friction,
-                                measure_strain=False, handles=wear.edge_handles(plan.handles, garment))
-        h = run.run()
-        run.destroy()
-        return np.array([[s.torques["knee_r"], s.peak_pressure, s.contact_force, s.seam_gap] for s in h.steps
-                         if s.phase in ("sew", "pull")])
-
-    parallel, serial = history(MPI.COMM_WORLD), history(MPI.COMM_SELF)
-    scale = np.max(np.abs(serial), axis=0)
-    assert scale[2] > 0.0                                             # the pants touch the body
-    assert np.all(np.abs(parallel - serial) <= 1e-6 * scale + 1e-15), ((parallel - serial) / scale)

@@ -29,7 +29,9 @@ import numpy as np
 from mpi4py import MPI
 
 from fabricfem import io as fio
+from fabricfem.body.blend import BlendedStart
 from fabricfem.scenes import build as scene_build
+from fabricfem.scenes import wear
 from fabricfem.scenes.run import build_wear_run, scene_sha256
 from fabricfem.scenes.schema import Scene
 from fabricfem.wear.outputs import write_sto
@@ -62,6 +64,21 @@ def knee_flexion(body, times: np.ndarray) -> np.ndarray:
         c = np.dot(thigh, shank) / (np.linalg.norm(thigh) * np.linalg.norm(shank))
         out[k] = math.degrees(math.acos(min(max(c, -1.0), 1.0)))
     return out
+
+
+def crossing_window(data: dict) -> tuple[float, float] | None:
+    """Body-time window [s] of the crossing stride of an obstacle walk (its motion delayed by the donning phases
+    and the blend), None for another motion."""
+    if data["motion"].get("type") != "obstacle_walk":
+        return None
+    fabric = wear.wear_fabric(data, scene_build.build_fabric)
+    plan = wear.plan(data, fabric)
+    walk = plan.body.kinematics
+    blend = 0.0
+    if isinstance(walk, BlendedStart):
+        walk, blend = walk.motion, walk.blend_time
+    start = plan.timeline.start_of("motion") + blend - walk.time_range[0]
+    return (start + walk.crossing_window[0], start + walk.crossing_window[1])
 
 
 def _finished(out: Path, sha: str) -> bool:
@@ -132,55 +149,71 @@ def run_pants_study(out: str | Path = "results/pants_study", quick: bool = False
     if comm.rank != 0:
         return {}
     curves = {label: _read_variant(out / label) for label in labels}
-    summary = write_study(out, curves, quick)
+    summary = write_study(out, curves, quick, crossing_window(datas[labels[0]]))
     say(f"pants study: wrote {out}/knee_torque.csv, .sto, .png, summary.json ({time.perf_counter() - t0:.0f} s)")
     for line in summary["lines"]:
         say(line)
     return summary
 
 
-def write_study(out: Path, curves: dict, quick: bool) -> dict:
-    """knee_torque.csv/.sto/.png and summary.json of the finished variants (rank 0)."""
+def write_study(out: Path, curves: dict, quick: bool, crossing: tuple[float, float] | None = None) -> dict:
+    """knee_torque.csv/.sto/.png and summary.json of the finished variants (rank 0); `crossing`: the body-time
+    window [s] of the crossing stride."""
     labels = list(curves)
-    times = curves[labels[0]][0]
-    motion = np.array([p == "motion" for p in curves[labels[0]][3]])
     n = min(len(c[0]) for c in curves.values())
-    columns = {label: curves[label][1][:n] for label in labels}
+    times = curves[labels[0]][0][:n]
+    motion = np.array([p == "motion" for p in curves[labels[0]][3][:n]])
+    flexion = {label: curves[label][1][:n] for label in labels}
+    magnitude = {label: curves[label][4][:n] for label in labels}
     knee = curves[labels[0]][2][:n]
-    fio.write_csv(out / "knee_torque.csv", ["time_s", "knee_flexion_deg", *(f"{lab}_knee_torque_Nm" for lab in labels)],
-                  np.column_stack([times[:n], knee, *columns.values()]), MPI.COMM_SELF)
-    write_sto(out / "knee_torque.sto", times[:n], {f"knee_r_moment_{lab}": v for lab, v in columns.items()},
+    fio.write_csv(out / "knee_torque.csv",
+                  ["time_s", "knee_flexion_deg", *(f"{lab}_knee_moment_magnitude_Nm" for lab in labels),
+                   *(f"{lab}_knee_flexion_torque_Nm" for lab in labels)],
+                  np.column_stack([times, knee, *magnitude.values(), *flexion.values()]), MPI.COMM_SELF)
+    write_sto(out / "knee_torque.sto", times, {f"knee_r_moment_{lab}": v for lab, v in flexion.items()},
               MPI.COMM_SELF, "resisting torque of the pants about the right knee's flexion axis (+y) [N m]: positive "
               "when the pants oppose knee flexion; time: body time [s] (donning, then the walk)")
-    _plot(out / "knee_torque.png", times[:n], columns, knee, motion[:n], quick)
-    stats = {}
-    for label, tau in columns.items():
-        walk = tau[motion[:n]]
-        stats[label] = {"peak_Nm": float(np.max(np.abs(walk))) if len(walk) else 0.0,
-                        "mean_Nm": float(np.mean(walk)) if len(walk) else 0.0}
-    lines = [f"{lab}: peak {s['peak_Nm']:.4e} N m, mean {s['mean_Nm']:.4e} N m over the walk"
-             for lab, s in stats.items()]
-    summary = {"variants": stats, "quick": quick}
-    if "1mm_mu0.1" in stats and "2mm_mu0.1" in stats and stats["1mm_mu0.1"]["peak_Nm"] > 0:
-        one, two = stats["1mm_mu0.1"], stats["2mm_mu0.1"]
-        summary["ratio_2mm_to_1mm"] = {"peak": two["peak_Nm"] / one["peak_Nm"],
-                                       "mean": two["mean_Nm"] / one["mean_Nm"] if one["mean_Nm"] else math.nan}
-        lines.append(f"2 mm / 1 mm: peak ratio {summary['ratio_2mm_to_1mm']['peak']:.3f}, mean ratio "
-                     f"{summary['ratio_2mm_to_1mm']['mean']:.3f} (the thesis: 2 mm larger over the whole walk)")
+    _plot(out / "knee_torque.png", times, magnitude, knee, motion, quick, crossing)
+    windows = {"walk": motion}
+    if crossing is not None:
+        windows["crossing"] = motion & (times >= crossing[0]) & (times <= crossing[1])
+    stats = {label: {w: {"peak_Nm": float(np.max(magnitude[label][mask], initial=0.0)),
+                         "mean_Nm": float(np.mean(magnitude[label][mask])) if mask.any() else 0.0}
+                     for w, mask in windows.items()} for label in labels}
+    lines = [f"{lab}: knee moment magnitude over the walk: peak {s['walk']['peak_Nm']:.4e} N m, mean "
+             f"{s['walk']['mean_Nm']:.4e} N m" for lab, s in stats.items()]
+    summary = {"variants": stats, "quick": quick, "crossing_window_s": crossing}
+    if "1mm_mu0.1" in stats and "2mm_mu0.1" in stats:
+        one, two = magnitude["1mm_mu0.1"], magnitude["2mm_mu0.1"]
+        ratios = {}
+        for w, mask in windows.items():
+            a, b = stats["1mm_mu0.1"][w], stats["2mm_mu0.1"][w]
+            ratios[w] = {"peak": b["peak_Nm"] / a["peak_Nm"] if a["peak_Nm"] else math.nan,
+                         "mean": b["mean_Nm"] / a["mean_Nm"] if a["mean_Nm"] else math.nan,
+                         "share_of_records_2mm_larger": float(np.mean(two[mask] > one[mask])) if mask.any() else 0.0}
+            lines.append(f"2 mm / 1 mm over the {w}: peak ratio {ratios[w]['peak']:.3f}, mean ratio "
+                         f"{ratios[w]['mean']:.3f}, 2 mm larger in {100 * ratios[w]['share_of_records_2mm_larger']:.0f}"
+                         f" % of the records (the thesis, Fig. 49: the thicker pants give the greater torque)")
+        summary["ratio_2mm_to_1mm"] = ratios
     summary["lines"] = lines
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     return summary
 
 
-def _plot(path: Path, times: np.ndarray, columns: dict, knee: np.ndarray, motion: np.ndarray, quick: bool) -> None:
+def _plot(path: Path, times: np.ndarray, columns: dict, knee: np.ndarray, motion: np.ndarray, quick: bool,
+          crossing: tuple[float, float] | None) -> None:
+    """The knee moment magnitude of every variant against time over the walk, the knee flexion on a second axis,
+    the crossing stride shaded (Fig. 49's analogue)."""
     import matplotlib  # optional heavy package, loaded only when a plot is drawn
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
     fig, ax = plt.subplots(figsize=(8, 4.5))
     for label, tau in columns.items():
         ax.plot(times[motion], tau[motion], "--" if "mu0.5" in label else "-", label=label.replace("_", ", "))
-    ax.set(xlabel="time [s]", ylabel="resisting knee torque [N m]",
-           title="pants: right-knee torque while walking" + (" [quick]" if quick else ""))
+    if crossing is not None:
+        ax.axvspan(*crossing, color="orange", alpha=0.12, label="crossing stride")
+    ax.set(xlabel="body time [s]", ylabel="knee moment magnitude [N m]",
+           title="pants: moment about the right knee while walking" + (" [quick]" if quick else ""))
     ax.grid(True, alpha=0.3)
     twin = ax.twinx()
     twin.plot(times[motion], knee[motion], color="gray", lw=1, alpha=0.6, label="knee flexion")
