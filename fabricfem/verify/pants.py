@@ -2,6 +2,7 @@
 at and below the right knee."""
 from __future__ import annotations
 
+import json
 import tomllib
 from pathlib import Path
 
@@ -12,7 +13,7 @@ from fabricfem.body.lower_body import lower_body
 from fabricfem.contact.torque import TorqueMonitor
 from fabricfem.scenes import wear
 from fabricfem.scenes.build import build_fabric
-from fabricfem.verify import Timer, case, result
+from fabricfem.verify import Timer, case, reproduction, result
 from fabricfem.wear.garment import build_garment_run
 
 KNEE_AXIS = (0.0, 1.0, 0.0)      # knee flexion of the lower body (x forward, y left, z up): the shank swings back
@@ -106,3 +107,33 @@ def pants_donning() -> list:
                    timer.elapsed, scale=1.0),
             result("pants-donning", "waistband contact force / 2 pi [N] vs belt tension", carried, belt.tension,
                    5e-2, ndofs, timer.elapsed)]
+
+
+STUDY_DIRS = (Path("docs/figures/pants"), Path("results/pants_study"))
+
+
+@reproduction("pants-knee-torque", in_tests=False)
+def pants_knee_torque() -> list:
+    """[Man2006, sec. 5.4, Fig. 49]: "the thicker pants exert greater resistance torques than do the pants with
+    the thinner fabric" (the moment magnitude about the right knee of the contact forces at the knee and below,
+    1 and 2 mm cotton pants, a walk of four strides stepping over a 0.5 m obstacle). Read from the pants study's
+    summary (`fabricfem study pants`; docs/figures/pants or results/pants_study): per window (the walk, the
+    crossing stride) the share of records in which the 2 mm pants give the larger moment (reference 1: all,
+    tolerance 0.1) and whether the peak and the mean of 2 mm exceed those of 1 mm (1 when they do: the measured
+    ratio is in the row's name). Without a study the rows say so (value 0)."""
+    with Timer() as timer:
+        found = [d / "summary.json" for d in STUDY_DIRS if (d / "summary.json").exists()]
+        summary = json.loads(found[0].read_text()) if found else {}
+    ratios = summary.get("ratio_2mm_to_1mm", {})
+    if not ratios:
+        return [result("pants-knee-torque", "no pants study found (run: fabricfem study pants)", 0.0, 1.0, 0.0, 0,
+                       timer.elapsed)]
+    tag = " [quick study]" if summary.get("quick") else ""
+    rows = []
+    for window, r in ratios.items():
+        rows.append(result("pants-knee-torque", f"{window}{tag}: share of records with the 2 mm moment larger",
+                           r["share_of_records_2mm_larger"], 1.0, 0.1, 0, timer.elapsed))
+        for what in ("peak", "mean"):
+            rows.append(result("pants-knee-torque", f"{window}{tag}: {what} 2 mm > 1 mm (ratio {r[what]:.3f})",
+                               1.0 if r[what] > 1.0 else 0.0, 1.0, 0.0, 0, timer.elapsed))
+    return rows

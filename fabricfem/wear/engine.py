@@ -19,6 +19,23 @@ import numpy as np
 from fabricfem.solvers.newton import SolverError
 
 
+@dataclass
+class RunHistory:
+    """What every wear run's history holds besides its steps' kind (the sleeve's SleeveHistory, the garment's
+    WearHistory): the records, dofs, wall time [s], timings, the smallest start gap [m] and why it stopped early."""
+
+    steps: list = field(default_factory=list, kw_only=True)
+    ndofs: int = field(default=0, kw_only=True)
+    wall: float = field(default=0.0, kw_only=True)
+    timings: dict = field(default_factory=dict, kw_only=True)
+    initial_gap: float = field(default=math.nan, kw_only=True)   # m, smallest garment-body gap at the start
+    failure: str = field(default="", kw_only=True)                # "" when the run reached its end
+
+    @property
+    def completed(self) -> bool:
+        return not self.failure
+
+
 class WearError(SolverError):
     """A wear run could not proceed (the explicit state blew up, a phase failed)."""
 

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable, Sequence
 
 import numpy as np
@@ -42,7 +42,7 @@ from fabricfem.dynamics.explicit import CentralDifference
 from fabricfem.dynamics.strain_limit import FastProjection
 from fabricfem.materials import Fabric
 from fabricfem.shell import ShellModel
-from fabricfem.wear.engine import Phase, kinetic_ratio, run_phases
+from fabricfem.wear.engine import Phase, RunHistory, kinetic_ratio, run_phases
 
 PA_PER_MMHG = 133.322387415      # Pa per mmHg
 
@@ -175,18 +175,10 @@ class WearStep:
 
 
 @dataclass
-class WearHistory:
-    name: str
-    steps: list[WearStep] = field(default_factory=list)
-    ndofs: int = 0
-    wall: float = 0.0
-    timings: dict = field(default_factory=dict)
-    initial_gap: float = math.nan
-    failure: str = ""
+class WearHistory(RunHistory):
+    """The records (WearStep) of a garment run."""
 
-    @property
-    def completed(self) -> bool:
-        return not self.failure
+    name: str
 
     @property
     def times(self) -> np.ndarray:

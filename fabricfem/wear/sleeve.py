@@ -76,7 +76,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -95,7 +95,7 @@ from fabricfem.shell import ShellModel
 from fabricfem.solvers.newton import NewtonSolver, SolverError
 from fabricfem.solvers.system import CompositeSystem
 from fabricfem.wear.config import SleeveConfig
-from fabricfem.wear.engine import Phase, WearError, run_phases
+from fabricfem.wear.engine import Phase, RunHistory, WearError, run_phases
 
 GRAVITY = 9.81                       # m/s^2
 ELBOW_AXIS = (0.0, 0.0, 1.0)          # flexion axis of the default arm
@@ -370,18 +370,10 @@ class SleeveStep:
 
 
 @dataclass
-class SleeveHistory:
-    config: SleeveConfig
-    steps: list[SleeveStep] = field(default_factory=list)
-    ndofs: int = 0
-    wall: float = 0.0
-    timings: dict = field(default_factory=dict)
-    initial_gap: float = math.nan   # m, smallest sleeve-arm gap at the start pose
-    failure: str = ""               # why the flexion stopped early ("" when it reached the final angle)
+class SleeveHistory(RunHistory):
+    """The records (SleeveStep) of a sleeve flexion."""
 
-    @property
-    def completed(self) -> bool:
-        return not self.failure
+    config: SleeveConfig
 
     @property
     def angles(self) -> np.ndarray:
