@@ -1,0 +1,45 @@
+"""The pants study's outputs (fabricfem.studies.pants) from synthetic variant histories, and its crossing window."""
+import csv
+import json
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from fabricfem.body.crossing import obstacle_walk
+from fabricfem.studies.pants import SCENE, crossing_window, write_study
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_write_study_reports_the_thesis_ratios(tmp_path):
+    """Two variants whose moment magnitudes are 1 and 2 x sin^2 over the walk (and 0 during the donning): the
+    study's summary gives the peak and mean ratios 2 (exact), the share of walking records with 2 mm larger 1 (all
+    but the zeros), and writes the CSV (a column per variant) and the .sto and PNG."""
+    t = np.linspace(0.0, 2.0, 101)
+    phases = ["don" if x < 0.5 else "motion" for x in t]
+    base = np.sin(3 * t) ** 2 + 0.1
+    base[t < 0.5] = 0.0
+    curves = {"1mm_mu0.1": (t, -base, 30 + 0 * t, phases, base),
+              "2mm_mu0.1": (t, -2 * base, 30 + 0 * t, phases, 2 * base)}
+    summary = write_study(tmp_path, curves, quick=True, crossing=(1.0, 1.5))
+    walk = summary["ratio_2mm_to_1mm"]["walk"]
+    assert walk["peak"] == 2.0 and abs(walk["mean"] - 2.0) < 1e-14 and walk["share_of_records_2mm_larger"] == 1.0
+    assert summary["ratio_2mm_to_1mm"]["crossing"]["peak"] == 2.0
+    rows = list(csv.reader(open(tmp_path / "knee_torque.csv")))
+    assert rows[0][:4] == ["time_s", "knee_flexion_deg", "1mm_mu0.1_knee_moment_magnitude_Nm",
+                           "2mm_mu0.1_knee_moment_magnitude_Nm"] and len(rows) == 102
+    for name in ("knee_torque.sto", "knee_torque.png", "summary.json"):
+        assert (tmp_path / name).is_file()
+    assert json.loads((tmp_path / "summary.json").read_text())["quick"] is True
+
+
+def test_crossing_window_of_the_pants_scene():
+    """The crossing stride's body-time window is the walk's own window shifted by the donning phases and the blend
+    from the standing pose (1.0 s + 0.3 s in scenes/pants_walk.toml)."""
+    data = tomllib.loads(Path(SCENE).read_text())
+    t0, t1 = crossing_window(data)
+    own = obstacle_walk(strides=4).crossing_window
+    shift = t0 - own[0]
+    assert abs((t1 - t0) - (own[1] - own[0])) < 0.05          # the body's hip spacing changes the stride little
+    assert abs(shift - 1.3) < 0.05
