@@ -71,6 +71,9 @@ def main(argv: list[str] | None = None) -> int:
     p_run.add_argument("--accuracy", default=None, metavar="TARGET",
                        help="relative error target (2%% or 0.02): run the cheapest mesh level that meets it")
     p_run.add_argument("--quantity", default=None, help="the monitored quantity of the target (default [accuracy])")
+    p_run.add_argument("--out", default=None, help="output folder (default: the scene's [output] dir)")
+    p_run.add_argument("--resume", action="store_true",
+                       help="wear scenes: continue from the output folder's checkpoint after a kill or Ctrl-C")
     p_plan = sub.add_parser("plan", help="the mesh levels of a scene with their estimated errors and costs, and "
                                          "the level an accuracy target chooses (no full run)")
     p_plan.add_argument("scene", help="path of the scene file")
@@ -167,7 +170,7 @@ def _command(args) -> int:
             if target is not None or args.quantity is not None or scene.get("accuracy", {}).get("target"):
                 _, outcome = run_accurate(scene, target, args.quantity)
             else:
-                outcome = run_scene(scene)
+                outcome = run_scene(scene, out=None if args.out is None else Path(args.out), resume=args.resume)
         except (SolverError, DynamicsError) as exc:   # the run stopped: summary.json says "failed: ..."
             _print(f"fabricfem run: stopped: {' '.join(str(exc).split())}", file=sys.stderr)
             return 1

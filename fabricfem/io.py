@@ -280,14 +280,14 @@ class OutputFolder:
 
     SUMMARY = "summary.json"
 
-    def __init__(self, path: str | Path, scene_sha256: str, comm=MPI.COMM_WORLD):
+    def __init__(self, path: str | Path, scene_sha256: str, comm=MPI.COMM_WORLD, keep: bool = False):
         self.path, self.comm, self.scene_sha256 = Path(path), comm, scene_sha256
         self.started = time.time()
         error = None
         if comm.rank == 0:
             try:
                 self.path.mkdir(parents=True, exist_ok=True)
-                for name in self._read().get("outputs", []):
+                for name in ([] if keep else self._read().get("outputs", [])):   # keep: a resumed run
                     stale = self.path / name
                     if "/" not in name and stale.is_file():
                         stale.unlink()

@@ -44,6 +44,7 @@ from fabricfem.shell import ShellModel
 from fabricfem.solvers.loadstep import LoadStep, solve_load_path
 from fabricfem.solvers.newton import NewtonSolver
 from fabricfem.solvers.system import base_model
+from fabricfem.wear.checkpoint import Checkpoint
 from fabricfem.wear.compression import fit_sleeve, pressure_report
 from fabricfem.wear.garment import build_garment_run
 from fabricfem.wear.run import run_sleeve_scene, run_wear
@@ -139,14 +140,20 @@ def scene_sha256(scene: Scene) -> str:
     return hashlib.sha256(json.dumps(scene.data, sort_keys=True, default=str).encode()).hexdigest()
 
 
-def run_scene(scene: Scene, comm=MPI.COMM_WORLD) -> SceneOutcome:
-    """Run a scene by its kind (static load stepping, dynamic, sleeve, compression) into its output folder
-    (io.OutputFolder: the previous run's outputs are removed first, summary.json records the status)."""
+def run_scene(scene: Scene, comm=MPI.COMM_WORLD, out: Path | None = None, resume: bool = False) -> SceneOutcome:
+    """Run a scene by its kind (static load stepping, dynamic, sleeve, compression, wear) into its output folder
+    (`out`, default [output] dir; io.OutputFolder: the previous run's outputs are removed first, summary.json
+    records the status). A wear scene on the explicit engine writes checkpoints (every CHECKPOINT_EVERY records)
+    and, with `resume`, continues from the folder's checkpoint (fabricfem.wear.checkpoint)."""
+    if out is not None:
+        scene = Scene({**scene.data, "output": {**scene.data.get("output", {}), "dir": str(out)}}, scene.path,
+                      scene.kind)
     out = output_dir(scene)
-    folder = io.OutputFolder(out, scene_sha256(scene), comm)
+    sha = scene_sha256(Scene({k: v for k, v in scene.data.items() if k != "output"}, None, scene.kind))
+    folder = io.OutputFolder(out, scene_sha256(scene), comm, keep=resume)
     try:
         if scene.kind == "wear":
-            result = run_wear_scene(scene, out, comm)
+            result = run_wear_scene(scene, out, comm, resume, sha)
         elif scene.kind == "sleeve":
             config = sleeve_config(scene.data)
             output = section(OutputSection, scene.get("output"))
@@ -167,7 +174,10 @@ def run_scene(scene: Scene, comm=MPI.COMM_WORLD) -> SceneOutcome:
     return SceneOutcome(result, status, out)
 
 
-def run_wear_scene(scene: Scene, out: Path, comm=MPI.COMM_WORLD):
+CHECKPOINT_EVERY = 25       # records between the checkpoints of a wear run on the explicit engine
+
+
+def run_wear_scene(scene: Scene, out: Path, comm=MPI.COMM_WORLD, resume: bool = False, sha: str = ""):
     """`fabricfem run` for wear scenes (fabricfem.scenes.wear): the sleeve's and the compression sleeve's own
     routes, or the explicit engine (fabricfem.wear.garment) for any garment on any body."""
     data = scene.data
@@ -180,7 +190,11 @@ def run_wear_scene(scene: Scene, out: Path, comm=MPI.COMM_WORLD):
     if route == "compression":
         return run_compression_scene(Scene(wear.compression_data(data), scene.path, "compression"), comm)
     run, headline, render_at, output = build_wear_run(scene, comm)
-    return run_wear(run, out, headline, render_at, output.get("render", True), output.get("body_samples", 24))
+    checkpoint = Checkpoint(out, comm, sha or scene_sha256(scene), CHECKPOINT_EVERY)
+    if resume and not checkpoint.exists():
+        raise SceneError(f"resume: no checkpoint in {out}/checkpoint (run the scene without --resume first)")
+    return run_wear(run, out, headline, render_at, output.get("render", True), output.get("body_samples", 24),
+                    checkpoint, resume)
 
 
 def build_wear_run(scene: Scene, comm=MPI.COMM_WORLD):

@@ -89,7 +89,9 @@ def run_phases(integrator, contact, phases: list[Phase], steps_per_record: int,
                make_record: Callable[[Phase, int, int], object], history,
                on_step: Callable[[object], None] | None = None, stop_on_failure: bool = True,
                timed: Callable[[Phase], bool] = lambda phase: phase.report == "each",
-               on_phase_end: Callable[[Phase], None] | None = None, label: str = "wear") -> dict:
+               on_phase_end: Callable[[Phase], None] | None = None, label: str = "wear", start_record: int = 0,
+               after_record: Callable[[int], None] | None = None,
+               should_stop: Callable[[], str] | None = None) -> dict:
     """Run `phases` with `integrator` (initialised) and append the records of `make_record(phase, k, steps)`
     (k: the interval index in the phase, steps: central-difference steps since the previous record) to
     `history.steps`; `on_step(record)` after each. Before each record interval the contact's time averages are
@@ -98,16 +100,25 @@ def run_phases(integrator, contact, phases: list[Phase], steps_per_record: int,
     A non-finite displacement or velocity raises WearError naming the phase, the time and the step (or, with
     stop_on_failure=False, sets `history.failure` and returns). Returns the wall-time breakdown
     (`step_breakdown`) of the phases for which `timed(phase)` holds, with the process's CPU time per step;
-    `on_phase_end(phase)` is called after each completed phase (the settling diagnostics of the sleeve)."""
+    `on_phase_end(phase)` is called after each completed phase (the settling diagnostics of the sleeve).
+
+    Resuming and stopping (phases that report each record): the first `start_record` record intervals are
+    skipped (a restored state, fabricfem.wear.checkpoint); `after_record(n)` is called after the n-th interval's
+    record (a checkpoint); `should_stop()` is asked then too: a non-empty reason (an interrupt) ends the run
+    there, `history.failure` set to it, the outputs up to this record valid."""
     output_time, pending = 0.0, 0
     loop, cpu, steps_timed = 0.0, 0.0, 0
     internal = contact_hooks = pose = 0.0
+    done = 0                     # record intervals run or skipped so far, over all phases
     for phase in phases:
         clock = timed(phase)
         base_int, base_contact = dict(integrator.timings), dict(contact.timings)
         start, cpu_start = time.perf_counter(), time.process_time()
         output_phase = 0.0
         for k in range(phase.records):
+            if done < start_record:
+                done += 1
+                continue
             contact.reset_means()
             try:
                 for _ in range(steps_per_record):
@@ -123,6 +134,7 @@ def run_phases(integrator, contact, phases: list[Phase], steps_per_record: int,
                 history.failure = message
                 return {}
             pending += steps_per_record
+            done += 1
             if phase.report == "each":
                 tic = time.perf_counter()
                 record = make_record(phase, k, pending)
@@ -130,7 +142,13 @@ def run_phases(integrator, contact, phases: list[Phase], steps_per_record: int,
                 history.steps.append(record)
                 if on_step:
                     on_step(record)
+                if after_record is not None:
+                    after_record(done)
                 output_phase += time.perf_counter() - tic
+                reason = should_stop() if should_stop is not None else ""
+                if reason:
+                    history.failure = f"{reason} at t = {integrator.t:.6g} s (record {done})"
+                    return {}
         if phase.report == "end":
             if on_phase_end is not None:
                 on_phase_end(phase)

@@ -356,21 +356,27 @@ class GarmentRun:
                               op=MPI.SUM)
         return best[0], segment, position, (sums[0] / sums[1] if sums[1] > 0 else 0.0)
 
-    def run(self, on_step: Callable[[WearStep], None] | None = None, stop_on_failure: bool = True) -> WearHistory:
-        """Run the phases; `on_step(step)` after every record; returns the history (module docstring)."""
+    def run(self, on_step: Callable[[WearStep], None] | None = None, stop_on_failure: bool = True,
+            checkpoint=None, resume: bool = False, recorder=None,
+            should_stop: Callable[[], str] | None = None) -> WearHistory:
+        """Run the phases; `on_step(step)` after every record; returns the history (module docstring).
+
+        `checkpoint` (fabricfem.wear.checkpoint.Checkpoint): written every `checkpoint.every` records (with the
+        `recorder`'s state); `resume`: continue from it (the records before it are restored, not rerun);
+        `should_stop()`: asked after every record, a non-empty reason ends the run there (an interrupt)."""
         integ, contact, t0 = self.integrator, self.contact, time.perf_counter()
         history = WearHistory(self.name, ndofs=self.model.ndofs)
         integ.initialize(t0=0.0)
-        history.initial_gap = contact.min_gap(integ.d.getArray(readonly=True), 0.0)
-        if history.initial_gap <= 0.0 and self.timeline.grow_from == 1.0:
-            raise ValueError(f"body: the body penetrates the garment at the start (min gap {history.initial_gap:.3e} m);"
-                             f" place the garment around it or grow the body (donning grow_from < 1)")
+        done = 0
+        if resume and checkpoint is not None and checkpoint.exists():
+            history, done = checkpoint.load(self, recorder)
+        else:
+            history.initial_gap = contact.min_gap(integ.d.getArray(readonly=True), 0.0)
+            if history.initial_gap <= 0.0 and self.timeline.grow_from == 1.0:
+                raise ValueError(f"body: the body penetrates the garment at the start (min gap "
+                                 f"{history.initial_gap:.3e} m); place the garment around it or grow the body "
+                                 f"(donning grow_from < 1)")
         history.timings = {"dt": self.dt, "dt_estimate": self.dt_estimate}
-        start_of = {}
-        t_phase = 0.0
-        for phase in self.phases:
-            start_of[phase.name] = t_phase
-            t_phase += phase.records * self.timeline.record_time
 
         def record(phase: Phase, k: int, steps: int) -> WearStep:
             means = contact.mean_torques()
@@ -389,9 +395,15 @@ class GarmentRun:
                 kinetic_energy=integ.kinetic_energy(), strain_energy=integ.strain_energy(),
                 wall=time.perf_counter() - t0, axis_value=self.axis_at(integ.t, phase))
 
+        save = None
+        if checkpoint is not None:
+            def save(n: int) -> None:
+                if n % checkpoint.every == 0:
+                    checkpoint.save(self, history, n, recorder)
         history.timings.update(run_phases(integ, contact, self.phases, self.steps_per_record, record, history,
                                           on_step, stop_on_failure, timed=lambda p: p.name == "motion",
-                                          label=self.name))
+                                          label=self.name, start_record=done, after_record=save,
+                                          should_stop=should_stop))
         history.wall = time.perf_counter() - t0
         return history
 

@@ -22,7 +22,8 @@ class WearRecorder:
     """Writes the records of one WearRun into `out` (all ranks construct it and call `record` and `close`);
     `render_at`: record coordinates of the pressure renders."""
 
-    def __init__(self, run, out: Path, render_at: list[float], render: bool = True, body_samples: int = 24):
+    def __init__(self, run, out: Path, render_at: list[float], render: bool = True, body_samples: int = 24,
+                 part: str = ""):
         self.run, self.out = run, Path(out)
         self.render, self.samples = render, body_samples
         self.pending = sorted(render_at)
@@ -34,9 +35,11 @@ class WearRecorder:
         self.u_out = fem.Function(model.V2, name="displacement")
         self.p_out = fem.Function(fem.FunctionSpace(model.mesh, ("Lagrange", 2)), name="contact_pressure")
         # one field per file: meshio's XDMF reader keeps one function per time step
-        self.xdmf = dio.XDMFFile(comm, str(self.out / "cloth.xdmf"), "w")
+        # a resumed run (fabricfem.wear.checkpoint) writes its records into new files (`part`, e.g. "_from_2.4s"):
+        # the records after the last checkpoint of the killed run are written again, at the same times
+        self.xdmf = dio.XDMFFile(comm, str(self.out / f"cloth{part}.xdmf"), "w")
         self.xdmf.write_mesh(model.mesh)
-        self.xdmf_pressure = dio.XDMFFile(comm, str(self.out / "cloth_pressure.xdmf"), "w")
+        self.xdmf_pressure = dio.XDMFFile(comm, str(self.out / f"cloth_pressure{part}.xdmf"), "w")
         self.xdmf_pressure.write_mesh(model.mesh)
         self.frames: list[tuple[float, str]] = []
         self.renders: list[str] = []     # names of the pressure renders written
@@ -54,13 +57,21 @@ class WearRecorder:
         if run.comm.rank == 0:
             import pyvista as pv  # optional heavy package, loaded only when a render is made
             points, triangles = body_surface(run.posed_bodies(x), self.samples)
-            name = f"body_{len(self.frames):04d}.vtp"
+            name = f"body_{len(self.frames):04d}.vtp"   # frame k of record k, also after a resume
             faces = np.hstack([np.full((len(triangles), 1), 3), triangles]).ravel()
             pv.PolyData(points, faces).save(str(self.out / name))
             self.frames.append((stamp, name))
         while self.render and self.pending and x >= self.pending[0] - 1e-9:
             at = self.pending.pop(0)
             self._keep_skin_frame(step, f"pressure_{at:05.2f}{self.unit}.png")
+
+    def state(self) -> dict:
+        """What a checkpoint keeps of the recorder: the body frames and the skin frames kept for the renders."""
+        return {"frames": list(self.frames), "skin_frames": list(self.skin_frames), "pending": list(self.pending)}
+
+    def restore(self, state: dict) -> None:
+        """Continue from a checkpoint's `state`."""
+        self.frames, self.skin_frames, self.pending = state["frames"], state["skin_frames"], state["pending"]
 
     def _keep_skin_frame(self, step, name: str) -> None:
         """The pressure on the body's skin at this record (rank 0 keeps it; rendered at `close` with one colour

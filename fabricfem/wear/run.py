@@ -1,7 +1,9 @@
 """Run a garment on a moving wearer by its route, through the wearer contract (fabricfem.wear.contract)."""
 from __future__ import annotations
 
+import signal
 import time
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable
 
@@ -51,22 +53,32 @@ def run_sleeve_scene(config: SleeveConfig, out: Path, render: bool = True, rende
 
 
 def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], render: bool = True,
-             body_samples: int = 24):
+             body_samples: int = 24, checkpoint=None, resume: bool = False):
     """Run any WearRun with progress lines (rank 0), write the WearRecorder's outputs under `out`, print the
     closing summary (peak and final torque per monitor, pressures, strain, penetration, seam gap) and return the
-    history."""
+    history. The explicit engine's runs also take a `checkpoint` (fabricfem.wear.checkpoint.Checkpoint), `resume`
+    from it, and stop at the next record on Ctrl-C (SIGINT, on any rank) with valid outputs and a checkpoint."""
     comm = run.comm
     say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
     t0 = time.perf_counter()
     say(headline)
-    recorder = WearRecorder(run, out, [float(a) for a in render_at], render, body_samples)
+    resuming = bool(resume and checkpoint is not None and checkpoint.exists())
+    recorder = WearRecorder(run, out, [float(a) for a in render_at], render, body_samples,
+                            part="_resumed" if resuming else "")
     clock = fio.Progress()
 
     def on_step(step):
         recorder.record(step)
         say(f"  {step.line()}  {clock(run.fraction(step), getattr(step, 'phase', None))}")
 
-    history = run.run(on_step=on_step, stop_on_failure=False)
+    if checkpoint is None:
+        history = run.run(on_step=on_step, stop_on_failure=False)
+    else:
+        with interrupt_flag(comm) as interrupted:
+            history = run.run(on_step=on_step, stop_on_failure=False, checkpoint=checkpoint, resume=resuming,
+                              recorder=recorder, should_stop=interrupted)
+        if history.failure.startswith("interrupted"):
+            checkpoint.save(run, history, len(history.steps), recorder)   # one record interval per record
     history.wall = time.perf_counter() - t0
     recorder.close(history)
     run.destroy()
@@ -81,6 +93,22 @@ def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], ren
     say(f"wrote {out}/cloth.xdmf, body.pvd (+ body_*.vtp), torque.csv, torque.sto, torque.png"
         + "".join(f", {name}" for name in recorder.renders))
     return history
+
+
+@contextmanager
+def interrupt_flag(comm: MPI.Comm):
+    """While inside: Ctrl-C (SIGINT) on any rank sets a flag instead of raising; the yielded callable returns
+    "interrupted (SIGINT)" once any rank got it (all ranks agree: an MPI reduction per call), "" before."""
+    got = [0]
+
+    def handler(signum, frame):
+        got[0] = 1
+
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield lambda: "interrupted (SIGINT)" if comm.allreduce(got[0], op=MPI.MAX) else ""
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def format_summary(summary: dict) -> list[str]:
