@@ -370,6 +370,7 @@ class GarmentRun:
         done = 0
         if resume and checkpoint is not None and checkpoint.exists():
             history, done = checkpoint.load(self, recorder)
+            history.failure = ""          # the interrupt that ended the saved run
         else:
             history.initial_gap = contact.min_gap(integ.d.getArray(readonly=True), 0.0)
             if history.initial_gap <= 0.0 and self.timeline.grow_from == 1.0:

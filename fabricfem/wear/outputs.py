@@ -54,7 +54,8 @@ def plot_torque(path, curves: dict[str, tuple[np.ndarray, np.ndarray]], title: s
     ax.set_ylabel("resisting torque [N m]")
     ax.set_title(title)
     ax.grid(True, alpha=0.3)
-    ax.legend()
+    if curves:
+        ax.legend()
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
