@@ -120,7 +120,7 @@ def _cells(level) -> str:
     return f"{mesh['nx']}x{mesh['ny']}"
 
 
-@case(NAME)
+@case(NAME, in_tests=False)   # 25 s; tests/test_accuracy.py covers its parts
 def accuracy_choice() -> list:
     """Accuracy target: the chosen mesh level's true error is below 10%, 3%, 1% and its work within 2x of the
     cheapest level that meets the target (rolled strip vs closed form, corner-pinned cloth vs a fine mesh)."""
