@@ -160,6 +160,7 @@ WEAR_BAD = [  # (files next to the scene, mutation of the trousers scene, text t
     ({}, lambda d: d["donning"].update(remove=["tail"]), "donning.remove"),
     ({}, lambda d: d["fabric"].update(catalogue="no-such-fabric"), "fabric.catalogue"),
     ({}, lambda d: d.update(motion={"type": "walking", "cycle_time": 0.0}), "cycle_time"),
+    ({}, lambda d: d.update(motion={"type": "obstacle_walk", "obstacle_height": 1.5}), "obstacle_height"),
     ({}, lambda d: d["fabric"].update(thickness=0.0), "thickness"),
     ({}, lambda d: d["donning"].update(pull_edges=["Lfront.9"], pull_path=[[0, 0, 0], [0, 0, 0.1]], pull_time=0.1),
      "donning.pull_edges"),

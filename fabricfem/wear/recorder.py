@@ -1,9 +1,11 @@
 """The recorder of a wear run: what `fabricfem run` writes while a garment moves on its wearer.
 
 Under the output folder: cloth.xdmf (garment displacement [m]) and cloth_pressure.xdmf (contact pressure on the
-body [Pa] per unit deformed cloth area) per record, for ParaView and meshio; the XDMF time is the body time [s], or the angle [deg] of a quasi-static sleeve), body_NNNN.vtp + body.pvd
+body [Pa] per unit deformed cloth area) per record, for ParaView and meshio (the XDMF time is the body time [s],
+or the angle [deg] of a quasi-static sleeve), body_NNNN.vtp + body.pvd
 (the posed body surfaces per record), torque.csv (the history's header), torque.png, torque.sto (OpenSim storage
-of the resisting torques against the body time), and pressure renders at the requested coordinates. It reads the
+of the resisting torques against the body time), renders of the pressure on the skin at the requested
+coordinates and at the record of the largest pressure of the motion (pressure_peak.png). It reads the
 run only through the wearer contract (fabricfem.wear.contract.WearRun).
 """
 from __future__ import annotations
@@ -44,6 +46,7 @@ class WearRecorder:
         self.frames: list[tuple[float, str]] = []
         self.renders: list[str] = []     # names of the pressure renders written
         self.skin_frames: list = []      # (name, title, (points, triangles, values [Pa]), garment surface), rank 0
+        self.peak = 0.0                  # Pa, the largest peak pressure of the motion's records so far
         self.label = getattr(run, "axis_label", "elbow angle [deg]")
         self.unit = "deg" if "[deg]" in self.label else "s"
 
@@ -64,14 +67,22 @@ class WearRecorder:
         while self.render and self.pending and x >= self.pending[0] - 1e-9:
             at = self.pending.pop(0)
             self._keep_skin_frame(step, f"pressure_{at:05.2f}{self.unit}.png")
+        peak = getattr(step, "peak_pressure", None)
+        if self.render and peak is not None and getattr(step, "phase", "motion") == "motion" and peak > self.peak:
+            # the peak pressure map: the skin at the record of the largest pressure of the motion so far
+            self.peak = peak
+            self.skin_frames = [f for f in self.skin_frames if f[0] != "pressure_peak.png"]
+            self._keep_skin_frame(step, "pressure_peak.png")
 
     def state(self) -> dict:
         """What a checkpoint keeps of the recorder: the body frames and the skin frames kept for the renders."""
-        return {"frames": list(self.frames), "skin_frames": list(self.skin_frames), "pending": list(self.pending)}
+        return {"frames": list(self.frames), "skin_frames": list(self.skin_frames), "pending": list(self.pending),
+                "peak": self.peak}
 
     def restore(self, state: dict) -> None:
         """Continue from a checkpoint's `state`."""
         self.frames, self.skin_frames, self.pending = state["frames"], state["skin_frames"], state["pending"]
+        self.peak = state["peak"]
 
     def _keep_skin_frame(self, step, name: str) -> None:
         """The pressure on the body's skin at this record (rank 0 keeps it; rendered at `close` with one colour
