@@ -85,7 +85,7 @@ def format_breakdown(timings: dict) -> str:
     return f"{timings['ms_per_step']:.2f} ms/step over {timings['steps']} steps ({shares})"
 
 
-def run_phases(integrator, contact, phases: list[Phase], steps_per_record: int,
+def run_phases(integrator, contact, phases: list[Phase], steps_per_record: int | Callable[[], int],
                make_record: Callable[[Phase, int, int], object], history,
                on_step: Callable[[object], None] | None = None, stop_on_failure: bool = True,
                timed: Callable[[Phase], bool] = lambda phase: phase.report == "each",
@@ -102,6 +102,9 @@ def run_phases(integrator, contact, phases: list[Phase], steps_per_record: int,
     (`step_breakdown`) of the phases for which `timed(phase)` holds, with the process's CPU time per step;
     `on_phase_end(phase)` is called after each completed phase (the settling diagnostics of the sleeve).
 
+    `steps_per_record` may be a callable, asked before every record interval (an adaptive step: it sets the
+    integrator's dt and returns the number of steps of the interval).
+
     Resuming and stopping (phases that report each record): the first `start_record` record intervals are
     skipped (a restored state, fabricfem.wear.checkpoint); `after_record(n)` is called after the n-th interval's
     record (a checkpoint); `should_stop()` is asked then too: a non-empty reason (an interrupt) ends the run
@@ -111,6 +114,7 @@ def run_phases(integrator, contact, phases: list[Phase], steps_per_record: int,
     internal = contact_hooks = pose = 0.0
     done = 0                     # record intervals run or skipped so far, over all phases
     for phase in phases:
+        steps_run = 0
         clock = timed(phase)
         base_int, base_contact = dict(integrator.timings), dict(contact.timings)
         start, cpu_start = time.perf_counter(), time.process_time()
@@ -120,8 +124,9 @@ def run_phases(integrator, contact, phases: list[Phase], steps_per_record: int,
                 done += 1
                 continue
             contact.reset_means()
+            n_steps = steps_per_record() if callable(steps_per_record) else steps_per_record
             try:
-                for _ in range(steps_per_record):
+                for _ in range(n_steps):
                     integrator.step()
                     integrator.step_count += 1
                 if not (math.isfinite(integrator.d.norm()) and math.isfinite(integrator.v.norm())):
@@ -133,8 +138,9 @@ def run_phases(integrator, contact, phases: list[Phase], steps_per_record: int,
                     raise WearError(message, reason="EXPLICIT_BLOW_UP") from exc
                 history.failure = message
                 return {}
-            pending += steps_per_record
+            pending += n_steps
             done += 1
+            steps_run += n_steps
             if phase.report == "each":
                 tic = time.perf_counter()
                 record = make_record(phase, k, pending)
@@ -164,7 +170,7 @@ def run_phases(integrator, contact, phases: list[Phase], steps_per_record: int,
         if clock:
             loop += time.perf_counter() - start
             cpu += time.process_time() - cpu_start
-            steps_timed += phase.records * steps_per_record
+            steps_timed += steps_run
             internal += integrator.timings["internal_forces"] - base_int["internal_forces"]
             contact_hooks += integrator.timings["contact"] - base_int["contact"]
             pose += contact.timings["pose_torque"] - base_contact["pose_torque"]

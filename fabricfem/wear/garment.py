@@ -274,6 +274,9 @@ class GarmentRun:
     strain: FastProjection | None = None
     axis: tuple[str, Callable[[float], float]] | None = None   # (label, motion time [s] -> value), e.g. an angle
     handles: tuple = ()          # the donning handles (fabricfem.contact.handles)
+    safety: float = 0.8          # dt = safety x the estimated critical step
+    _last_strain: float = 0.0    # largest Green strain of the last record (adaptive_steps)
+    _steps_now: int = 0          # steps per record in use
 
     @property
     def axis_label(self) -> str:
@@ -327,9 +330,37 @@ class GarmentRun:
                   else self.contact.segment_active(time_s))
         return [e for e, on in zip(self.contact.body_at(time_s), active) if on]
 
+    def adaptive_steps(self) -> int:
+        """Steps of the next record interval, with dt set for it: the St. Venant-Kirchhoff membrane stiffens under
+        stretch, its tangent modulus E (1 + 3 E_g) at the Green strain E_g (dP/dlambda of P = E lambda
+        (lambda^2 - 1) / 2), so the critical step estimated on the reference state, dt_est [Man2006, eq. 2.87],
+        shrinks by sqrt(1 + 3 E_g). When the step in use comes within 5 % of dt_est / sqrt(1 + 3 E_g) at the
+        largest strain of the last record, the record interval is split into more, shorter steps (dt = safety x
+        that estimate); a garment that relaxes returns to the initial step. Without a strain meter: the fixed
+        steps."""
+        base = self.steps_per_record
+        if self.strain is None or self._last_strain <= 0.0:
+            n = base
+        else:
+            limit = self.dt_estimate / math.sqrt(1.0 + 3.0 * self._last_strain)
+            record_time = self.timeline.record_time
+            n = base if record_time / base < 0.95 * limit else max(base, math.ceil(record_time / (self.safety * limit)))
+        if n != self._steps_now:
+            self._steps_now = n
+            self.integrator.dt = self.timeline.record_time / n
+            self.integrator._denominator = None          # M + dt/2 C of the new step
+            if self.seams is not None:
+                self.seams._mass = None                   # its masses are M + dt/2 C too
+        return n
+
     def body_time(self, step: WearStep) -> float:
         """The body time [s] of record `step`."""
         return step.time
+
+    def _note_strain(self, strain: float) -> float:
+        """Keep the record's largest strain for the next interval's step (`adaptive_steps`)."""
+        self._last_strain = float(strain)
+        return strain
 
     def fraction(self, step: WearStep) -> float:
         """The done fraction of the run at record `step` (body time over the run's duration)."""
@@ -392,7 +423,7 @@ class GarmentRun:
                 contact_force=float(np.linalg.norm(contact.total_force())),
                 seam_gap=self.seams.max_gap(d) if self.seams else 0.0,
                 seam_forces=self.seams.line_forces() if self.seams else {},
-                max_strain=max(strains["max_warp"], strains["max_weft"]), time_steps=steps,
+                max_strain=self._note_strain(max(strains["max_warp"], strains["max_weft"])), time_steps=steps,
                 kinetic_energy=integ.kinetic_energy(), strain_energy=integ.strain_energy(),
                 wall=time.perf_counter() - t0, axis_value=self.axis_at(integ.t, phase))
 
@@ -401,7 +432,7 @@ class GarmentRun:
             def save(n: int) -> None:
                 if n % checkpoint.every == 0:
                     checkpoint.save(self, history, n, recorder)
-        history.timings.update(run_phases(integ, contact, self.phases, self.steps_per_record, record, history,
+        history.timings.update(run_phases(integ, contact, self.phases, self.adaptive_steps, record, history,
                                           on_step, stop_on_failure, timed=lambda p: p.name == "motion",
                                           label=self.name, start_record=done, after_record=save,
                                           should_stop=should_stop))
@@ -480,4 +511,5 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
     phases = [Phase(n, timeline.records(d)) for n, d in timeline.durations(motion_time).items()]
     strain = FastProjection(model, 1.0) if measure_strain else None
     return GarmentRun(name, model, posed, contact, ties, integrator, timeline, phases, dt, dt_estimate,
-                      steps_per_record, tuple(torques), config, strain, axis, tuple(handles))
+                      steps_per_record, tuple(torques), config, strain, axis, tuple(handles),
+                      settings.time_step_safety, 0.0, steps_per_record)
