@@ -19,7 +19,9 @@ import math
 import numpy as np
 
 
-def _smoothstep(s: float) -> float:
+def smoothstep(s: float) -> float:
+    """3 s^2 - 2 s^3 on [0, 1], 0 before, 1 after: a transition that starts and ends at rest (the blends here, the
+    seams' sewing closure, the body's growth and the belt's ramp of fabricfem.wear)."""
     s = min(max(s, 0.0), 1.0)
     return s * s * (3.0 - 2.0 * s)
 
@@ -45,5 +47,5 @@ class BlendedStart:
     def positions(self, t: float) -> dict[str, np.ndarray]:
         if t >= self.blend_time:
             return self.motion.positions(self._t0 + t - self.blend_time)
-        w = _smoothstep(t / self.blend_time)
+        w = smoothstep(t / self.blend_time)
         return {n: self._start[n] + w * (self._first[n] - self._start[n]) for n in self.names}

@@ -24,8 +24,8 @@ from typing import Sequence
 
 import numpy as np
 
+from fabricfem.body.blend import smoothstep
 from fabricfem.contact.node_sets import PanelNodeSet
-from fabricfem.contact.seams import smoothstep
 
 
 def _chunks(edges: Sequence[tuple[str, int, np.ndarray]]) -> tuple[list, list]:

@@ -37,6 +37,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from fabricfem.body.blend import smoothstep
 from fabricfem.contact.node_sets import PanelNodeSet
 
 HELD_MASS_FACTOR = 1e12    # a held stitched node weighs this much more in its group's centre: the group follows it
@@ -53,12 +54,6 @@ class SeamSpec:
     points_b: np.ndarray
     tag_b: int
     length: float
-
-
-def smoothstep(s: float) -> float:
-    """3 s^2 - 2 s^3 on [0, 1], 0 before, 1 after: a sewing closure that starts and ends at rest."""
-    s = min(max(s, 0.0), 1.0)
-    return s * s * (3.0 - 2.0 * s)
 
 
 class SeamTies:

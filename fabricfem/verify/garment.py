@@ -11,6 +11,7 @@ from fabricfem.contact.seams import SeamSpec
 from fabricfem.materials import Fabric
 from fabricfem.meshes.pattern import Panel, Pattern, Stitch
 from fabricfem.meshes.pattern_mesh import mesh_pattern, wrap_on_cylinder
+from fabricfem.scenes.wear import StillPose
 from fabricfem.verify import Timer, case, result
 from fabricfem.wear.compression import laplace_pressure
 from fabricfem.wear.garment import ExplicitSettings, Timeline, build_garment_run
@@ -19,18 +20,6 @@ WIDTHS = (0.12, 0.20)     # m, the two panels (unequal: the seams are not at opp
 LENGTH = 0.15             # m, along the tube
 STRETCH = 1.2             # cylinder circumference / (w1 + w2)
 FABRIC = Fabric(E1=1.2e6, E2=0.8e6, G12=1e5, nu12=0.2, thickness=1e-3, density=436.0, name="sewn-tube fabric")
-
-
-class _Still:
-    """Joint and marker positions held still (the cylinder does not move; it grows during the donning)."""
-
-    def __init__(self, points: dict):
-        self._points = points
-        self.names = tuple(points)
-        self.time_range = (0.0, 0.0)
-
-    def positions(self, t: float) -> dict:
-        return self._points
 
 
 def sewn_tube(h: float = 0.03, comm=MPI.COMM_WORLD):
@@ -63,8 +52,8 @@ def sewn_tube_laplace() -> list:
         garment, r0 = sewn_tube()
         r = STRETCH * r0
         body = Body([Segment("cylinder", "p", "d", "m", (20.0, r, r))],
-                    _Still({"p": np.array([-19.9, 0.0, 0.0]), "d": np.array([20.1, 0.0, 0.0]),
-                            "m": np.array([0.0, 1.0, 0.0])}))
+                    StillPose({"p": np.array([-19.9, 0.0, 0.0]), "d": np.array([20.1, 0.0, 0.0]),
+                               "m": np.array([0.0, 1.0, 0.0])}))
         seams = [SeamSpec(s.name, s.points_a, s.panel_tag_a, s.points_b, s.panel_tag_b, float(np.mean(s.lengths)))
                  for s in garment.stitches]
         timeline = Timeline(record_time=0.02, donning_time=0.06, grow_from=0.7, settle_time=0.2, motion_time=0.0)

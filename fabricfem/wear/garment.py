@@ -34,9 +34,10 @@ from typing import Callable, Sequence
 import numpy as np
 from mpi4py import MPI
 
+from fabricfem.body.blend import smoothstep
 from fabricfem.body.pose import Body
 from fabricfem.contact.explicit import ExplicitBodyContact
-from fabricfem.contact.seams import SeamSpec, SeamTies, smoothstep
+from fabricfem.contact.seams import SeamSpec, SeamTies
 from fabricfem.dynamics import stability
 from fabricfem.dynamics.explicit import CentralDifference
 from fabricfem.dynamics.strain_limit import FastProjection
