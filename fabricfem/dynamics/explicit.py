@@ -17,6 +17,12 @@ are multiplied by s (fabricfem.dynamics.mass), which lowers the thickness-shear 
 (fabricfem.dynamics.stability) and leaves static answers unchanged; the critical step is estimated
 with s.
 
+Mass scaling (`mass_scale` S >= 1, default 1): every lumped mass (translations and rotations) is multiplied by
+S, which lowers every frequency by sqrt(S) and lengthens the critical step by sqrt(S) [Belytschko2000, ch. 6]; the
+damping C and the loads (gravity) stay those of the physical mass, so a quasi-static answer is unchanged
+while the inertia forces grow by S: the kinetic over the strain energy of the scaled model is the check.
+The critical step to check against (`dt_crit`) must then be given for the scaled mass.
+
 Contact (`contact`, optional): an object with `forces(integrator, t, rhs)` (penalty: adds nodal contact
 forces at d^{n+1} to the right-hand side before the division by the diagonal) and
 `correct(integrator, t)` (forward-increment Lagrange multipliers, [Man2006, Box 5]: modifies a^{n+1} after
@@ -44,6 +50,7 @@ class CentralDifference(TimeIntegrator):
         dt_crit: critical time step [s] to check against (default: stability.critical_time_step(model, rayleigh)).
         damping_update_every: re-evaluate K_M(d^n) of the stiffness-proportional damping every this many steps.
         rotary_inertia_scale: s >= 1 multiplying the rotational lumped masses (module docstring).
+        mass_scale: S >= 1 multiplying every lumped mass, not the damping nor the loads (module docstring).
         contact: explicit contact layer or a sequence of them (module docstring), e.g.
             fabricfem.contact.explicit.ExplicitBodyContact, fabricfem.contact.seams.SeamTies.
     """
@@ -51,10 +58,13 @@ class CentralDifference(TimeIntegrator):
     def __init__(self, model, dt: float, load_factor: LoadFactor = 1.0, rayleigh: tuple[float, float] = (0.0, 0.0),
                  air_drag: float = 0.0, force: bool = False, dt_crit: float | None = None,
                  energy_bound: float | str | None = "auto", damping_update_every: int = 1,
-                 rotary_inertia_scale: float = 1.0, contact=None):
+                 rotary_inertia_scale: float = 1.0, contact=None, mass_scale: float = 1.0):
         scale = rotary_scale(rotary_inertia_scale)
+        if isinstance(mass_scale, bool) or not (isinstance(mass_scale, (int, float)) and mass_scale >= 1.0):
+            raise ValueError(f"mass_scale must be a number >= 1, got {mass_scale!r}")
         if dt_crit is None:
-            dt_crit = stability.critical_time_step(model, rayleigh, rotary_inertia_scale=scale)
+            dt_crit = stability.critical_time_step(model, rayleigh, rotary_inertia_scale=scale,
+                                                   mass_scale=mass_scale)
         if not (dt_crit > 0):
             raise ValueError(f"dt_crit must be positive, got {dt_crit!r}")
         if isinstance(dt, (int, float)) and dt > dt_crit and not force:
@@ -68,6 +78,9 @@ class CentralDifference(TimeIntegrator):
             self.ops = InertiaDamping(self.model, lumped=True, rayleigh=rayleigh, air_drag=air_drag,
                                       rotary_inertia_scale=scale)
         self.rotary_inertia_scale = scale
+        self.mass_scale = float(mass_scale)
+        if self.mass_scale != 1.0:
+            self.ops.mass_diag.scale(self.mass_scale)     # C = a M of the physical mass: damping_diag unchanged
         self.contact = contact
         self._hooks = [] if contact is None else list(contact) if isinstance(contact, (list, tuple)) else [contact]
         self.dt_crit = float(dt_crit)

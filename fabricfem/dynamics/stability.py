@@ -94,11 +94,15 @@ def initial_bending_stiffness(model) -> float:
 
 
 def critical_time_step(model, rayleigh: tuple[float, float] = (0.0, 0.0), omega_max: float | None = None,
-                       rotary_inertia_scale: float = 1.0) -> float:
+                       rotary_inertia_scale: float = 1.0, mass_scale: float = 1.0) -> float:
     """dt_crit = 2 / omega_max [Man2006, eq. 2.86], reduced for Rayleigh damping (a [1/s], b [s]); omega_max
-    from `max_frequency_estimate(model, rotary_inertia_scale)` unless given."""
+    from `max_frequency_estimate(model, rotary_inertia_scale)` unless given, divided by sqrt(mass_scale) for
+    lumped masses scaled by mass_scale (the damping C = a M of the physical mass: a / mass_scale on the
+    scaled one) [Belytschko2000, ch. 6]."""
     omega = max_frequency_estimate(model, rotary_inertia_scale) if omega_max is None else float(omega_max)
+    omega /= np.sqrt(mass_scale)
     a, b = rayleigh
+    a = a / mass_scale
     xi = a / (2.0 * omega) + b * omega / 2.0
     return float(2.0 / omega * (np.sqrt(1.0 + xi ** 2) - xi))
 

@@ -157,6 +157,8 @@ class RouteSpec:
     mass_damping: float = param("Rayleigh alpha of C = alpha M [1/s]", 10.0)
     rotary_inertia_scale: float = param("explicit: factor >= 1 on the rotational lumped masses", 100.0)
     time_step_safety: float = param("explicit: dt = safety x estimated critical step, in (0, 1)", 0.8)
+    mass_scale: float = param("explicit: factor >= 1 on every lumped mass (not on the weight nor the damping), dt x "
+                              "sqrt(factor); check the kinetic / strain energy ratio of the run", 1.0)
     dynamic_similarity: bool = param("explicit: flex at omega c / c_ref with damping alpha c / c_ref", False)
     similarity_reference: tuple[float, float] = param("(E_ref [Pa], rho_ref [kg/m^3]): fabric I", (1.2e6, 436.0))
     newton_max_iterations: int = param("Newton iterations per solve", 60)
@@ -175,6 +177,9 @@ class RouteSpec:
         if isinstance(self.rotary_inertia_scale, bool) or not (isinstance(self.rotary_inertia_scale, (int, float))
                                                               and self.rotary_inertia_scale >= 1.0):
             raise ValueError(f"rotary_inertia_scale must be a number >= 1, got {self.rotary_inertia_scale!r}")
+        if isinstance(self.mass_scale, bool) or not (isinstance(self.mass_scale, (int, float))
+                                                    and math.isfinite(self.mass_scale) and self.mass_scale >= 1.0):
+            raise ValueError(f"mass_scale must be a number >= 1, got {self.mass_scale!r}")
         _positive_int(self, "newton_max_iterations")
         E_ref, rho_ref = self.similarity_reference
         if not (math.isfinite(E_ref) and E_ref > 0.0 and math.isfinite(rho_ref) and rho_ref > 0.0):

@@ -111,6 +111,7 @@ class ExplicitSettings:
     mass_damping: float = 10.0                 # alpha [1/s]
     rotary_inertia_scale: float = 100.0        # s >= 1
     time_step_safety: float = 0.8              # dt = safety x estimated critical step
+    mass_scale: float = 1.0                    # S >= 1 on every lumped mass (CentralDifference), dt x sqrt(S)
     gravity: tuple[float, float, float] | None = (0.0, 0.0, -9.81)   # m/s^2, None: off
 
 
@@ -497,7 +498,7 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
     rayleigh = (settings.mass_damping, 0.0)
     omega = math.hypot(stability.max_frequency_estimate(model, settings.rotary_inertia_scale),
                        contact.penalty_frequency())
-    dt_estimate = stability.critical_time_step(model, rayleigh, omega_max=omega)
+    dt_estimate = stability.critical_time_step(model, rayleigh, omega_max=omega, mass_scale=settings.mass_scale)
     steps_per_record = math.ceil(timeline.record_time / (settings.time_step_safety * dt_estimate))
     dt = timeline.record_time / steps_per_record
     # the seams first, the body contact last: a seam drawn across the body cannot pull a node into it
@@ -508,6 +509,7 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
     load = 1.0 if t_sewn == 0.0 else (lambda t: smoothstep((t - t_sewn) / (0.1 * t_sewn)))
     integrator = CentralDifference(model, dt, load_factor=load, rayleigh=rayleigh, dt_crit=dt_estimate,
                                    energy_bound=None, rotary_inertia_scale=settings.rotary_inertia_scale,
+                                   mass_scale=settings.mass_scale,
                                    contact=hooks)
     phases = [Phase(n, timeline.records(d)) for n, d in timeline.durations(motion_time).items()]
     strain = FastProjection(model, 1.0) if measure_strain else None

@@ -643,7 +643,9 @@ class ExplicitSleeve(ArmOutputs):
     def describe(self) -> str:
         config = self.config
         return (f"explicit central differences, dt = {self.dt:.3g} s (estimated critical step {self.dt_estimate:.3g} s "
-                f"with rotary-inertia scale {config.route.rotary_inertia_scale:g}, {self.dt_estimate_unscaled:.3g} s "
+                f"with rotary-inertia scale {config.route.rotary_inertia_scale:g}"
+                + (f" and mass scale {config.route.mass_scale:g}" if config.route.mass_scale != 1.0 else "")
+                + f", {self.dt_estimate_unscaled:.3g} s "
                 f"without), mass damping {config.damping:g} 1/s, records every {config.motion.output_angle_step:g} deg"
                 + (f", dynamic similarity: flexion at {config.flexion_speed:.4g} deg/s (c / c_ref = "
                    f"{config.similarity_factor:.4g})" if config.route.dynamic_similarity else ""))
@@ -682,12 +684,14 @@ def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> Exp
     omega_p = contact.penalty_frequency()
     omega = math.hypot(stability.max_frequency_estimate(model, config.route.rotary_inertia_scale), omega_p)
     omega_1 = math.hypot(stability.max_frequency_estimate(model, 1.0), omega_p)
-    dt_estimate = stability.critical_time_step(model, rayleigh, omega_max=omega)
+    mass_scale = config.route.mass_scale
+    dt_estimate = stability.critical_time_step(model, rayleigh, omega_max=omega, mass_scale=mass_scale)
     dt_unscaled = stability.critical_time_step(model, rayleigh, omega_max=omega_1)
     steps_per_record = math.ceil(record_time / (config.route.time_step_safety * dt_estimate))
     dt = record_time / steps_per_record
     integrator = CentralDifference(model, dt, rayleigh=rayleigh, dt_crit=dt_estimate, energy_bound=None,
-                                   rotary_inertia_scale=config.route.rotary_inertia_scale, contact=contact)
+                                   rotary_inertia_scale=config.route.rotary_inertia_scale, contact=contact,
+                                   mass_scale=mass_scale)
     return ExplicitSleeve(config, model, contact, body, flexion, integrator, dt, dt_estimate, dt_unscaled,
                           steps_per_record, settle_records)
 
