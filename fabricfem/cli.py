@@ -26,6 +26,7 @@ from fabricfem.benchmarks.rollup_profile import rollup_profile
 from fabricfem.benchmarks.sleeve_profile import sleeve_profile
 from fabricfem.benchmarks.speed_accuracy import speed_accuracy
 from fabricfem.benchmarks.unit_cell_perf import unit_cell_perf
+from fabricfem.benchmarks.wear_speed import wear_bench
 from fabricfem.demo import rollup_demo
 from fabricfem.dynamics.newmark import DynamicsError
 from fabricfem.scenes.accuracy import parse_target, plan, run_accurate
@@ -93,12 +94,16 @@ def main(argv: list[str] | None = None) -> int:
     p_demo.add_argument("--out", default="results/demo", help="output folder (XDMF, PNG, CSV)")
     p_bench = sub.add_parser("bench", help="benchmarks (results/ CSV and PNG)")
     p_bench.add_argument("name", nargs="?", default="rollup-profile", choices=["rollup-profile", "stability-map", "speed-accuracy", "unit-cell",
-                                          "sleeve-profile", "accuracy"],
+                                          "sleeve-profile", "accuracy", "wear"],
                          help="benchmark to run")
     p_bench.add_argument("--out", default="results/bench")
     p_bench.add_argument("--quick", action="store_true",
                          help="reduced smoke-test runs (stability-map: one k/rho, the smallest mesh, short runs; "
                               "speed-accuracy: t = 0.3 s, two levels per method, one timing)")
+    p_bench.add_argument("--meshes", default="I,III", help="wear: sleeve meshes, comma-separated (I, II, III, IV)")
+    p_bench.add_argument("--variants", default="reference,kernels,mass x4,mass x16",
+                         help="wear: variants, comma-separated (fabricfem.benchmarks.wear_speed.VARIANTS)")
+    p_bench.add_argument("--repeats", type=int, default=3, help="wear: runs of every variant (medians)")
     p_study = sub.add_parser("study", help="parameter studies (CSV + PNG per figure)")
     p_study.add_argument("name", choices=["sleeve", "unit-cell", "fabric-link", "sleeve-fit", "sleeve-methods", "pants"],
                          help="study to run (sleeve: [Man2006, sec. 5.3]; unit-cell: [Man2006, sec. 4.3.5], Figs. 21-28, 32-33)")
@@ -281,6 +286,14 @@ def _command(args) -> int:
             return 0
         if args.name == "accuracy":
             accuracy_bench(args.out)
+            return 0
+        if args.name == "wear":
+            try:
+                wear_bench(args.out, meshes=tuple(args.meshes.split(",")), variants=tuple(args.variants.split(",")),
+                           repeats=args.repeats, quick=args.quick)
+            except ValueError as exc:
+                _print(f"fabricfem bench wear: {exc}", file=sys.stderr)
+                return 2
             return 0
         if args.name == "sleeve-profile":
             sleeve_profile(args.out, quick=args.quick)

@@ -25,6 +25,7 @@ from petsc4py import PETSc
 from fabricfem import probe
 from fabricfem.forms import loads as load_forms
 from fabricfem.forms import shell as shell_forms
+from fabricfem.forms.jit import KERNEL_JIT
 from fabricfem.materials import Fabric, SquareRootBending
 
 Locator = str | Callable[[np.ndarray], np.ndarray]
@@ -433,9 +434,9 @@ class ShellModel:
         if self._director_loads:   # moments: configuration-dependent load, in R and (linearised) in J
             self.residual_form = internal - self.load_factor * sum(self._director_loads[1:], self._director_loads[0])
         self.jacobian_form = ufl.derivative(self.residual_form, self.w, self.w_trial)
-        self._R = fem.form(self.residual_form)
-        self._R_internal = fem.form(internal) if self._director_loads else self._R
-        self._J = fem.form(self.jacobian_form)
+        self._R = fem.form(self.residual_form, jit_params=KERNEL_JIT)
+        self._R_internal = fem.form(internal, jit_params=KERNEL_JIT) if self._director_loads else self._R
+        self._J = fem.form(self.jacobian_form, jit_params=KERNEL_JIT)
         self.F_ref = fem_petsc.create_vector(self._R)
         with self.F_ref.localForm() as f:
             f.set(0.0)

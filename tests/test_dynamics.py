@@ -264,3 +264,32 @@ def test_critical_time_step_estimate_includes_the_nonlinear_bending_tangent():
                 estimate = max_frequency_estimate(model, rotary_inertia_scale=s)
                 discrete = discrete_max_frequency(model, rotary_inertia_scale=s, iterations=1000)
                 assert discrete <= estimate <= 1.12 * discrete, (cell, k_over_rho, s, estimate, discrete)
+
+
+@pytest.mark.mpi
+def test_mass_scaling_keeps_the_physical_weight_and_damping():
+    """Mass scaling S [Belytschko2000, ch. 6]: a free membrane sheet falling under its weight with C = a M of the
+    physical mass, all lumped masses x S: S dv/dt = g - a v, so v(t) = (g / a)(1 - exp(-a t / S)) and the
+    fall z(t) = -(g / a)(t - S / a (1 - exp(-a t / S))) (closed form; the displacement update d + dt v +
+    dt^2 a / 2 leaves out dt^3 / 6 of the jerk -(a / S)(g / S) per step: t dt^2 (a / S)(g / S) / 6 = 3.2e-7 m
+    (1.1e-6 relative) at t = 1 s, dt = 5 ms; tolerance 3e-6); the critical step grows by sqrt(S) exactly
+    (undamped)."""
+    rho, t, g, a, S = 500.0, 1e-3, 9.81, 2.0, 16.0
+    model = ShellModel(plate(0.2, 0.2, 2, 2, cell="quadrilateral"), Fabric.isotropic(1e5, 0.3, t, density=rho),
+                       model="membrane")
+    model.add_gravity((0.0, 0.0, -g))
+    model.compile()
+    assert critical_time_step(model, mass_scale=S) == pytest.approx(np.sqrt(S) * critical_time_step(model),
+                                                                     rel=1e-14)
+    dt = 0.005
+    integrator = CentralDifference(model, dt, rayleigh=(a, 0.0), mass_scale=S)
+    physical = lumped_mass(model)
+    assert integrator.ops.mass_diag.norm() == pytest.approx(S * physical.norm(), rel=1e-14)
+    n = 200
+    corner = node_monitor(model, np.array([0.0, 0.0, 0.0]), "u", 2)
+    history = integrator.run(n, monitors={"z": corner}, output_every=n)
+    time_ = history.time[-1]
+    expected = -(g / a) * (time_ - S / a * (1.0 - np.exp(-a * time_ / S)))
+    assert history.monitors["z"][-1] == pytest.approx(expected, rel=3e-6)
+    with pytest.raises(ValueError, match="mass_scale"):
+        CentralDifference(model, dt, mass_scale=0.5)

@@ -1,0 +1,178 @@
+"""The wearer engine's speed against its accuracy: `fabricfem bench wear` (issue 22).
+
+For each sleeve mesh (I-IV of [Man2006, sec. 5.3]: 10x13 ... 30x39 Q2) the explicit flexion of the default sleeve
+(settle 0.4 s under gravity, then 45 deg/s to 57 deg, mu = 0.1) runs with
+
+* `reference`: the settings of the code before issue 22 (FFCx kernels compiled with dolfinx's default flags
+  `-O2`, no mass scaling): the baseline of every ratio, measured in the same run;
+* `kernels`: the shell kernels compiled with fabricfem.forms.jit.KERNEL_FLAGS (the default now);
+* `mass xS`: the default plus mass scaling S (fabricfem.dynamics.explicit: every lumped mass x S, the weight and
+  the damping of the physical mass, critical step x sqrt(S)).
+
+Per run: wall time of the run (build and JIT excluded), explicit steps, ms per step, the breakdown of
+fabricfem.wear.engine.step_breakdown (of the flexion loop), the largest kinetic / strain energy ratio of the
+flexion records (the quasi-static check of explicit codes) and the accuracy of the resisting elbow torque curve
+against the reference's: RMS over the records from 10 to 57 deg of (T - T_ref), divided by the mean |T_ref| over
+them (issue 22's measure; its bound is 3 %). Times are medians over `repeats` runs of each variant, the variants
+alternating so that the machine's load spreads over all of them; speed-ups are ratios of medians against
+`reference` on the same mesh and communicator.
+
+Writes wear_speed.csv (one row per mesh and variant) and wear_speed.png (speed-up against torque error) under
+`out` (rank 0). SI units; times in seconds.
+"""
+from __future__ import annotations
+
+import csv
+import statistics
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from fabricfem.forms.jit import DOLFINX_DEFAULT_FLAGS, KERNEL_FLAGS, kernel_flags
+from fabricfem.wear.config import SleeveConfig
+from fabricfem.wear.engine import TIMING_PARTS, kinetic_ratio
+from fabricfem.wear.run import build_run
+
+MESHES = {"I": (10, 13), "II": (15, 20), "III": (20, 26), "IV": (30, 39)}
+# variant -> (compiler flags of the shell kernels, SleeveConfig changes)
+VARIANTS = {"reference": (DOLFINX_DEFAULT_FLAGS, {}), "kernels": (KERNEL_FLAGS, {}),
+            "mass x4": (KERNEL_FLAGS, {"mass_scale": 4.0}), "mass x16": (KERNEL_FLAGS, {"mass_scale": 16.0})}
+ACCURACY_FROM = 10.0    # deg: the torque curve is compared from here to the final angle (issue 22)
+COLUMNS = ("mesh", "variant", "ranks", "runs", "steps", "ms_per_step", "wall_s", "speedup", "step_speedup",
+           *(f"{p}_share" for p in TIMING_PARTS), "kinetic_ratio", "torque_rms_error", "torque_final_Nm")
+
+
+@dataclass
+class Measured:
+    """The runs of one variant on one mesh."""
+
+    walls: list = field(default_factory=list)        # s, per run
+    steps: int = 0
+    shares: list = field(default_factory=list)       # per run: part -> share of the flexion loop
+    angles: np.ndarray | None = None                 # deg, records of the last run
+    torques: np.ndarray | None = None                # N m
+    kinetic_ratio: float = 0.0
+
+
+def torque_rms_error(angles: np.ndarray, torques: np.ndarray, ref_angles: np.ndarray, ref_torques: np.ndarray,
+                     start: float = ACCURACY_FROM) -> float:
+    """RMS of T - T_ref over the reference records at >= `start` deg (T interpolated linearly in the angle),
+    divided by the mean |T_ref| over them."""
+    mask = ref_angles >= start - 1e-9
+    if not mask.any():
+        raise ValueError(f"no reference record at or beyond {start} deg")
+    diff = np.interp(ref_angles[mask], angles, torques) - ref_torques[mask]
+    return float(np.sqrt(np.mean(diff ** 2)) / np.mean(np.abs(ref_torques[mask])))
+
+
+def run_variant(mesh: str, variant: str, final_angle: float, comm: MPI.Comm) -> tuple[float, object, object]:
+    """One explicit flexion: (wall [s] of the run, its history, its integrator's step count)."""
+    flags, changes = VARIANTS[variant]
+    n_around, n_along = MESHES[mesh]
+    config = SleeveConfig.of(n_around=n_around, n_along=n_along, final_angle=float(final_angle), **changes)
+    with kernel_flags(flags):
+        run = build_run(config, comm)
+    comm.Barrier()
+    t0 = time.perf_counter()
+    history = run.run()
+    wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
+    steps = run.integrator.step_count
+    run.destroy()
+    return wall, history, steps
+
+
+def measure_mesh(mesh: str, variants: list[str], repeats: int, final_angle: float, comm: MPI.Comm,
+                 say) -> dict[str, Measured]:
+    """`repeats` rounds of every variant on `mesh`, alternating."""
+    measured = {v: Measured() for v in variants}
+    for k in range(repeats):
+        for v in variants:
+            wall, history, steps = run_variant(mesh, v, final_angle, comm)
+            m = measured[v]
+            m.walls.append(wall)
+            m.steps = steps
+            m.shares.append({p: history.timings[f"{p}_share"] for p in TIMING_PARTS})
+            m.angles = np.array([s.angle for s in history.steps])
+            m.torques = np.array([s.torque for s in history.steps])
+            m.kinetic_ratio = kinetic_ratio(np.array([s.kinetic_energy for s in history.steps]),
+                                            np.array([s.strain_energy for s in history.steps]))
+            say(f"  mesh {mesh}, {v}, run {k + 1}/{repeats}: {wall:.1f} s, {steps} steps, "
+                f"{1e3 * wall / steps:.2f} ms/step, torque at {m.angles[-1]:g} deg {m.torques[-1]:.4e} N m")
+    return measured
+
+
+def rows_of(mesh: str, measured: dict[str, Measured], ranks: int) -> list[list]:
+    """CSV rows of one mesh: medians, ratios against `reference`, torque errors against `reference`'s curve."""
+    ref = measured["reference"]
+    ref_wall = statistics.median(ref.walls)
+    ref_step_ms = ref_wall / ref.steps
+    rows = []
+    for v, m in measured.items():
+        wall = statistics.median(m.walls)
+        shares = [statistics.median(s[p] for s in m.shares) for p in TIMING_PARTS]
+        rows.append([mesh, v, ranks, len(m.walls), m.steps, 1e3 * wall / m.steps, wall, ref_wall / wall,
+                     ref_step_ms / (wall / m.steps), *shares, m.kinetic_ratio,
+                     torque_rms_error(m.angles, m.torques, ref.angles, ref.torques), float(m.torques[-1])])
+    return rows
+
+
+def plot(path: Path, rows: list[list]):
+    """Speed-up against the torque curve's RMS error, one marker per mesh and variant, the 3 % bound."""
+    import matplotlib  # optional heavy package, loaded only when a plot is drawn
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
+    fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    markers = dict(zip(VARIANTS, "osv^"))
+    for mesh in dict.fromkeys(r[0] for r in rows):
+        for r in (r for r in rows if r[0] == mesh):
+            ax.scatter(max(100.0 * r[-2], 1e-3), r[7], marker=markers.get(r[1], "x"),
+                       label=f"mesh {mesh}, {r[1]}")
+    ax.axvline(3.0, color="k", ls=":", lw=0.8, label="3 % bound")
+    ax.set_xscale("log")
+    ax.set_xlabel("torque curve RMS error against the reference, 10-57 deg [%]")
+    ax.set_ylabel("speed-up against the reference (wall, same run)")
+    ax.set_title("explicit sleeve: speed against accuracy")
+    ax.legend(fontsize=6, ncol=2)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def wear_bench(out: str | Path = "results/bench", meshes: tuple[str, ...] = ("I", "III"),
+               variants: tuple[str, ...] = tuple(VARIANTS), repeats: int = 3, final_angle: float = 57.0,
+               quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD) -> list[list]:
+    """Run the cases (module docstring) and write wear_speed.csv / .png under `out`.
+    quick: mesh I to 15 deg, reference and kernels, one run each (smoke test)."""
+    for mesh in meshes:
+        if mesh not in MESHES:
+            raise ValueError(f"meshes: unknown mesh {mesh!r}, expected some of {sorted(MESHES)}")
+    for v in variants:
+        if v not in VARIANTS:
+            raise ValueError(f"variants: unknown variant {v!r}, expected some of {list(VARIANTS)}")
+    if isinstance(repeats, bool) or not (isinstance(repeats, int) and repeats >= 1):
+        raise ValueError(f"repeats must be a positive integer, got {repeats!r}")
+    if quick:
+        meshes, variants, repeats, final_angle = ("I",), ("reference", "kernels"), 1, 15.0
+    variants = ["reference", *(v for v in variants if v != "reference")]
+    say = (lambda m: print(m, flush=True)) if comm.rank == 0 else (lambda m: None)
+    rows = []
+    for mesh in meshes:
+        say(f"bench wear: mesh {mesh}, {len(variants)} variants x {repeats} run(s) to {final_angle:g} deg on "
+            f"{comm.size} rank(s)")
+        rows += rows_of(mesh, measure_mesh(mesh, variants, repeats, final_angle, comm, say), comm.size)
+    if comm.rank == 0:
+        out = Path(out)
+        out.mkdir(parents=True, exist_ok=True)
+        with open(out / "wear_speed.csv", "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(COLUMNS)
+            w.writerows(rows)
+        plot(out / "wear_speed.png", rows)
+    for r in rows:
+        say(f"mesh {r[0]} {r[1]:>9s}: {r[6]:7.1f} s, {r[4]} steps, {r[5]:.2f} ms/step, speed-up {r[7]:.2f} "
+            f"(per step {r[8]:.2f}), KE/SE {r[-3]:.3g}, torque RMS error {100 * r[-2]:.2f} %")
+    say(f"wrote {Path(out) / 'wear_speed.csv'} and .png")
+    return rows
