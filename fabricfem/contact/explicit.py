@@ -586,7 +586,12 @@ class ExplicitBodyContact:
         trial, final, segment = x_trial[index], projected[index], seg[index]
         normal_force = np.linalg.norm(m * (final - trial), axis=1) / dt ** 2   # |lambda_N| [N]
         slip = np.zeros(len(index), dtype=bool)
-        if self.mu > 0.0 and len(index):
+        # also without a node in contact: _store_stick_points then clears the stick points of the nodes that just
+        # lost contact. Skipping it for an empty `index` left them stale, and a node touching down again later
+        # took the old stick point as its own (friction from a stale anchor instead of a fresh touch-down); the
+        # emptiness is per rank, so this also made 2 ranks differ from 1 (the pants' knee torque by 4e-4 at the
+        # first contact record).
+        if self.mu > 0.0:
             projected_c = final
             stick, known = self._stick_points(ellipsoids, index, segment, projected_c)
             n = np.zeros_like(projected_c)
