@@ -1,9 +1,9 @@
-"""The wearer engine's speed against its accuracy: `fabricfem bench wear` (issue 22).
+"""The wearer engine's speed against its accuracy: `fabricfem bench wear`.
 
 For each sleeve mesh (I-IV of [Man2006, sec. 5.3]: 10x13 ... 30x39 Q2) the explicit flexion of the default sleeve
 (settle 0.4 s under gravity, then 45 deg/s to 57 deg, mu = 0.1) runs with
 
-* `reference`: the settings of the code before issue 22 (FFCx kernels compiled with dolfinx's default flags
+* `reference`: the settings of the code before the -O3 kernels (FFCx kernels compiled with dolfinx's default flags
   `-O2`, no mass scaling): the baseline of every ratio, measured in the same run;
 * `kernels`: the shell kernels compiled with fabricfem.forms.jit.KERNEL_FLAGS (the default now);
 * `mass xS`: the default plus mass scaling S (fabricfem.dynamics.explicit: every lumped mass x S, the weight and
@@ -13,7 +13,7 @@ Per run: wall time of the run (build and JIT excluded), explicit steps, ms per s
 fabricfem.wear.engine.step_breakdown (of the flexion loop), the largest kinetic / strain energy ratio of the
 flexion records (the quasi-static check of explicit codes) and the accuracy of the resisting elbow torque curve
 against the reference's: RMS over the records from 10 to 57 deg of (T - T_ref), divided by the mean |T_ref| over
-them (issue 22's measure; its bound is 3 %). Times are medians over `repeats` runs of each variant, the variants
+them (the -O3 kernels' measure; bound 3 %). Times are medians over `repeats` runs of each variant, the variants
 alternating so that the machine's load spreads over all of them; speed-ups are ratios of medians against
 `reference` on the same mesh and communicator.
 
@@ -40,7 +40,7 @@ MESHES = {"I": (10, 13), "II": (15, 20), "III": (20, 26), "IV": (30, 39)}
 # variant -> (compiler flags of the shell kernels, SleeveConfig changes)
 VARIANTS = {"reference": (DOLFINX_DEFAULT_FLAGS, {}), "kernels": (KERNEL_FLAGS, {}),
             "mass x4": (KERNEL_FLAGS, {"mass_scale": 4.0}), "mass x16": (KERNEL_FLAGS, {"mass_scale": 16.0})}
-ACCURACY_FROM = 10.0    # deg: the torque curve is compared from here to the final angle (issue 22)
+ACCURACY_FROM = 10.0    # deg: the torque curve is compared from here to the final angle
 COLUMNS = ("mesh", "variant", "ranks", "runs", "steps", "ms_per_step", "wall_s", "speedup", "step_speedup",
            *(f"{p}_share" for p in TIMING_PARTS), "kinetic_ratio", "torque_rms_error", "torque_final_Nm")
 
