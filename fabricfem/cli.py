@@ -74,7 +74,8 @@ def main(argv: list[str] | None = None) -> int:
     p_run.add_argument("--quantity", default=None, help="the monitored quantity of the target (default [accuracy])")
     p_run.add_argument("--out", default=None, help="output folder (default: the scene's [output] dir)")
     p_run.add_argument("--resume", action="store_true",
-                       help="wear scenes: continue from the output folder's checkpoint after a kill or Ctrl-C")
+                       help="wear and dynamic scenes: continue from the output folder's checkpoint after a kill "
+                            "or Ctrl-C")
     p_plan = sub.add_parser("plan", help="the mesh levels of a scene with their estimated errors and costs, and "
                                          "the level an accuracy target chooses (no full run)")
     p_plan.add_argument("scene", help="path of the scene file")

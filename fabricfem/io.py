@@ -10,7 +10,9 @@ import datetime
 import json
 import math
 import os
+import pickle
 import resource
+import shutil
 import time
 from pathlib import Path
 from typing import Sequence
@@ -25,9 +27,10 @@ class SurfaceSeries:
     """Displacement (and optional scalar fields) of a shell over time in one XDMF file.
 
     dolfinx 0.5 writes functions of the mesh's own (P1) degree, so fields are interpolated to P1.
+    append=True continues an existing file of the same mesh and rank count (a resumed run, see `snapshot`).
     """
 
-    def __init__(self, path: str | Path, mesh):
+    def __init__(self, path: str | Path, mesh, append: bool = False):
         self.path = Path(path)
         if mesh.comm.rank == 0:
             self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -35,15 +38,88 @@ class SurfaceSeries:
         self.mesh = mesh
         self.V1 = fem.VectorFunctionSpace(mesh, ("Lagrange", 1), dim=3)
         self.u1 = fem.Function(self.V1, name="displacement")
-        self.file = io.XDMFFile(mesh.comm, str(self.path), "w")
-        self.file.write_mesh(mesh)
+        self.file = io.XDMFFile(mesh.comm, str(self.path), "a" if append else "w")
+        if not append:
+            self.file.write_mesh(mesh)
 
     def write(self, displacement: fem.Function, time: float):
         self.u1.interpolate(displacement)
         self.file.write_function(self.u1, time)
 
+    def snapshot(self, folder: Path, tag: str) -> list[str]:
+        """Close the file (the HDF5 file is complete on disk), copy the .xdmf and .h5 into `folder` as
+        <tag>.xdmf and <tag>.h5 (rank 0), reopen it for appending; returns the copies' names. A run killed later
+        may leave a broken HDF5 file: the copy is the series up to now (`restore`)."""
+        comm = self.mesh.comm
+        self.file.close()
+        names = [f"{tag}{suffix}" for suffix in (".xdmf", ".h5")]
+        if comm.rank == 0:
+            for suffix, name in zip((".xdmf", ".h5"), names):
+                tmp = folder / f"{name}.tmp"
+                shutil.copyfile(self.path.with_suffix(suffix), tmp)
+                os.replace(tmp, folder / name)
+        comm.barrier()
+        self.file = io.XDMFFile(comm, str(self.path), "a")
+        return names
+
+    @staticmethod
+    def restore(path: str | Path, folder: Path, tag: str, comm=MPI.COMM_WORLD) -> None:
+        """Put the `snapshot` <tag>.xdmf/.h5 of `folder` back as `path` (.xdmf) and its .h5 (rank 0)."""
+        path = Path(path)
+        if comm.rank == 0:
+            for suffix in (".xdmf", ".h5"):
+                shutil.copyfile(folder / f"{tag}{suffix}", path.with_suffix(suffix))
+        comm.barrier()
+
     def close(self):
         self.file.close()
+
+
+class Checkpoint:
+    """Per-rank checkpoint files of one run under `<folder>/checkpoint/` (what a state holds is the caller's).
+
+    `write(state)` pickles the rank's `state` dict with the scene's SHA-256 and the rank count to
+    rank<r>.pkl through a temporary name and a rename, so a kill leaves the previous checkpoint whole; `read()`
+    returns it, refusing (ValueError naming the folder) a checkpoint of another scene (hash) or rank count.
+    `every` [records] between writes (positive integer)."""
+
+    def __init__(self, folder: str | Path, comm, scene_sha256: str, every: int = 10):
+        if isinstance(every, bool) or not (isinstance(every, int) and every >= 1):
+            raise ValueError(f"checkpoint_every must be a positive number of records, got {every!r}")
+        self.folder = Path(folder) / "checkpoint"
+        self.comm, self.sha, self.every = comm, scene_sha256, every
+        if comm.rank == 0:
+            self.folder.mkdir(parents=True, exist_ok=True)
+        comm.barrier()
+
+    @property
+    def path(self) -> Path:
+        return self.folder / f"rank{self.comm.rank}.pkl"
+
+    def exists(self) -> bool:
+        """Whether every rank finds its checkpoint file."""
+        return bool(self.comm.allreduce(int(self.path.is_file()), op=MPI.MIN))
+
+    def write(self, state: dict) -> None:
+        """Write this rank's `state` (all ranks call it; returns when every rank has written)."""
+        state = {**state, "sha": self.sha, "ranks": self.comm.size}
+        tmp = self.path.with_suffix(".tmp")
+        with open(tmp, "wb") as f:
+            pickle.dump(state, f)
+        os.replace(tmp, self.path)
+        self.comm.barrier()
+
+    def read(self) -> dict:
+        """This rank's saved state, after the checks of the class docstring."""
+        with open(self.path, "rb") as f:
+            state = pickle.load(f)
+        if state["sha"] != self.sha:
+            raise ValueError(f"resume: the checkpoint in {self.folder} belongs to another scene (hash "
+                             f"{state['sha'][:12]}..., this scene {self.sha[:12]}...); run without --resume")
+        if state["ranks"] != self.comm.size:
+            raise ValueError(f"resume: the checkpoint in {self.folder} was written by {state['ranks']} rank(s), this "
+                             f"run has {self.comm.size}")
+        return state
 
 
 def xdmf_fields(path: str | Path) -> dict[str, list[float]]:

@@ -73,6 +73,7 @@ class History:
     dissipated: list[float] = field(default_factory=list)
     monitors: dict[str, list[float]] = field(default_factory=dict)
     newton_iterations: list[int] = field(default_factory=list)
+    stopped: str = ""       # why `TimeIntegrator.run` ended before n_steps (an interrupt), "" otherwise
 
     @property
     def total(self) -> np.ndarray:
@@ -106,6 +107,11 @@ def progress_printer(comm, every: int | None = None, stream=None) -> Callable[[i
         print(f"step {step}/{n_steps}  t = {t:.6g} s  elapsed {elapsed:.1f} s  left ~{left:.1f} s",
               file=stream or sys.stdout, flush=True)
     return report
+
+
+def _owned(vec: PETSc.Vec) -> np.ndarray:
+    """A copy of this rank's owned entries of `vec`."""
+    return vec.getArray(readonly=True).copy()
 
 
 def _as_load_function(load_factor: LoadFactor) -> Callable[[float], float]:
@@ -164,6 +170,7 @@ class TimeIntegrator:
         self.t = 0.0
         self.t0 = 0.0
         self.step_count = 0
+        self.run_step = 0  # user steps of the current `run` done
         self.external_work = 0.0
         self.dissipated = 0.0
         self._initialized = False
@@ -248,28 +255,42 @@ class TimeIntegrator:
             cv_mean.destroy()
 
     def run(self, n_steps: int, monitors: dict[str, Callable[[], float]] | None = None,
-            xdmf: str | Path | None = None, csv: str | Path | None = None, output_every: int = 1,
-            progress: bool | Callable[[int, int, float, float], None] = False) -> History:
+            xdmf: str | Path | SurfaceSeries | None = None, csv: str | Path | None = None, output_every: int = 1,
+            progress: bool | Callable[[int, int, float, float], None] = False, history: History | None = None,
+            after_record: Callable[[History], None] | None = None,
+            should_stop: Callable[[], str] | None = None) -> History:
         """Integrate n_steps steps; record energies and monitors every `output_every` steps (and at 0).
 
-        xdmf: write the displacement time series (fabricfem.io.SurfaceSeries); csv: write the History table
-        (fabricfem.io.write_csv); progress: True for progress_printer on rank 0, or a callable.
-        Raises DynamicsError (naming step and time) when the solve fails or the state blows up.
+        xdmf: write the displacement time series (fabricfem.io.SurfaceSeries, or an open one, left open);
+        csv: write the History table (fabricfem.io.write_csv); progress: True for progress_printer on rank 0, or a
+        callable. Raises DynamicsError (naming step and time) when the solve fails or the state blows up.
+
+        Checkpoints: `history` continues a run whose records so far it holds, from the state of its last record
+        restored by `restore` (a checkpoint's `state()`): step 0 is not recorded again and the steps continue
+        after the restored user step. `after_record(history)` is called after every record (a checkpoint);
+        `should_stop()` then too: a non-empty reason (an interrupt) ends the run there, in `history.stopped`.
         """
         if not (isinstance(n_steps, (int, np.integer)) and n_steps >= 1):
             raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
         if not (isinstance(output_every, (int, np.integer)) and output_every >= 1):
             raise ValueError(f"output_every must be a positive integer, got {output_every!r}")
-        if not self._initialized:
+        resumed = history is not None
+        if not (resumed or self._initialized):
             self.initialize(t0=self.t)
         monitors = dict(monitors or {})
         report = progress_printer(self.model.comm) if progress is True else (progress or None)
-        history = History(monitors={name: [] for name in monitors})
+        if not resumed:
+            history = History(monitors={name: [] for name in monitors})
+        history.stopped = ""
         series = None
-        if xdmf is not None:
+        if isinstance(xdmf, SurfaceSeries):
+            series = xdmf
+        elif xdmf is not None:
             series = SurfaceSeries(xdmf, self.model.mesh)
-        energy0 = self.kinetic_energy() + self.strain_energy()
-        max_work = 0.0
+        if not resumed:
+            self.energy0 = self.kinetic_energy() + self.strain_energy()
+            self.max_work = 0.0
+            self.run_step = 0
 
         def record(iterations: int):
             history.time.append(self.t)
@@ -283,28 +304,39 @@ class TimeIntegrator:
             if series is not None:
                 series.write(self.model.displacement(), self.t)
 
-        record(0)
+        if not resumed:
+            record(0)
         d_old = self.d.duplicate()
         cv_old = self._cv.duplicate()
         start = time.perf_counter()
         try:
-            for k in range(1, int(n_steps) + 1):
+            for k in range(self.run_step + 1, int(n_steps) + 1):
                 self.d.copy(d_old)
                 self._cv.copy(cv_old)
                 lam_old = float(self.model.load_factor.value)
                 iterations = self.step()
                 self.step_count += 1
+                self.run_step = k
                 if not self.accounts_substeps:
                     self._account(d_old, lam_old, cv_old)
-                self._check(energy0, max_work := max(max_work, abs(self.external_work)))
-                if k % output_every == 0 or k == n_steps:
+                self.max_work = max(self.max_work, abs(self.external_work))
+                self._check(self.energy0, self.max_work)
+                recorded = k % output_every == 0 or k == n_steps
+                if recorded:
                     record(iterations)
+                    if after_record is not None:
+                        after_record(history)
                 if report:
                     report(k, int(n_steps), self.t, time.perf_counter() - start)
+                if recorded and should_stop is not None and k < n_steps:
+                    reason = should_stop()
+                    if reason:
+                        history.stopped = f"{reason} at t = {self.t:.6g} s (step {k} of {n_steps})"
+                        break
         finally:
             d_old.destroy()
             cv_old.destroy()
-            if series is not None:
+            if series is not None and series is not xdmf:
                 series.close()
         if csv is not None:
             header, rows = history.columns()
@@ -327,6 +359,42 @@ class TimeIntegrator:
                 f"time integration blew up at {where}: kinetic + strain energy {energy:.4g} J exceeds "
                 f"{self.energy_bound:g} x (initial energy + |external work|) = {self.energy_bound * scale:.4g} J",
                 self.step_count, self.t)
+
+    # ---------------------------------------------------------- checkpoint
+    resumable = True    # whether `state` holds everything the next step reads (see GeneralizedAlphaIntegrator)
+
+    def state(self) -> dict:
+        """What the next step and the run loop read, this rank's part (a checkpoint; between steps of `run`):
+        d, v, a, C v of the last step, the frozen damping state, t, t0, the step counts, the load factor, the
+        work and dissipation so far and the blow-up check's reference energies."""
+        state = {"d": _owned(self.d), "v": _owned(self.v), "a": _owned(self.a), "cv": _owned(self._cv),
+                 "frozen": _owned(self.ops.w_frozen.vector) if self.ops.stiffness_ufl is not None else None}
+        state.update({name: getattr(self, name, None) for name in self._state_scalars})
+        state["load_factor"] = float(self.model.load_factor.value)
+        return state
+
+    _state_scalars = ("t", "t0", "step_count", "external_work", "dissipated", "energy0", "max_work", "run_step")
+
+    def restore(self, state: dict):
+        """Continue from a `state()` of an integrator built from the same model on the same ranks (then `run`
+        with the saved history); the model's state w is set to d."""
+        if not self.resumable:
+            raise DynamicsError(f"{type(self).__name__}: {self.not_resumable}", self.step_count, self.t)
+        for name, vec in (("d", self.d), ("v", self.v), ("a", self.a), ("cv", self._cv)):
+            target = vec.getArray()
+            if target.shape != state[name].shape:
+                raise ValueError(f"resume: the checkpoint's state does not fit this run's mesh ({name})")
+            target[:] = state[name]
+        for name in self._state_scalars:
+            setattr(self, name, state[name])
+        self.model.set_load_factor(state["load_factor"])
+        self._sync_model()
+        if state["frozen"] is not None:
+            frozen = self.d.duplicate()
+            frozen.getArray()[:] = state["frozen"]
+            self.ops.freeze(frozen)
+            frozen.destroy()
+        self._initialized = True
 
     def destroy(self):
         for vec in (self.d, self.v, self.a, self._work, self._cv):
@@ -488,6 +556,9 @@ class StepHalving:
     def _substep(self, h: float) -> SubStep:
         raise NotImplementedError
 
+    _state_scalars = TimeIntegrator._state_scalars + ("current_dt", "substeps", "halvings", "doublings",
+                                                      "_successes")
+
     def _destroy_step_halving(self):
         self._sub_d_old.destroy()
         self._sub_cv_old.destroy()
@@ -531,6 +602,12 @@ class NewmarkIntegrator(StepHalving, TimeIntegrator):
         options = {"snes_atol": 1e-12 * max(model.F_ref.norm(), 1e-300), "snes_stol": 1e-8}
         options.update(newton_options or {})
         self.solver = NewtonSolver(self.effective, options)
+
+    _state_scalars = StepHalving._state_scalars + ("_coefficient_dt",)
+
+    def restore(self, state: dict):
+        super().restore(state)
+        self.effective.set_coefficients(self._coefficient_dt, self.beta, self.gamma)
 
     def _substep(self, h: float) -> SubStep:
         """One Newmark step of size h from (t, d, v, a); on Newton failure nothing but model.w is changed."""

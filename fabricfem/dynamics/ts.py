@@ -74,6 +74,11 @@ class GeneralizedAlphaIntegrator(StepHalving, TimeIntegrator):
             TS (a failed SNES solve rejects the step and retries with dt / 2, keeping the step's start state).
     """
 
+    resumable = False
+    not_resumable = ("PETSc TS ALPHA2 keeps its algorithmic acceleration inside TS and recomputes it at a restart "
+                     "(module docstring), so a run restored from a checkpoint would not repeat the uninterrupted "
+                     "steps; rerun the scene without --resume")
+
     def __init__(self, model, dt: float, rho_inf: float = 1.0, load_factor: LoadFactor = 1.0,
                  rayleigh: tuple[float, float] = (0.0, 0.0), air_drag: float = 0.0, lumped: bool = False,
                  newton_options: dict | None = None, energy_bound: float | str | None = "auto",

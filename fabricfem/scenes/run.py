@@ -10,6 +10,7 @@ iterations), <dir>/<name>.png (monitors and energies over time) and <dir>/summar
 """
 from __future__ import annotations
 
+import copy
 import hashlib
 import json
 import math
@@ -47,7 +48,7 @@ from fabricfem.solvers.system import base_model
 from fabricfem.wear.checkpoint import Checkpoint
 from fabricfem.wear.compression import fit_sleeve, pressure_report
 from fabricfem.wear.garment import build_garment_run
-from fabricfem.wear.run import run_sleeve_scene, run_wear
+from fabricfem.wear.run import interrupt_flag, run_sleeve_scene, run_wear
 
 
 def _components(values, n: int, where: str):
@@ -143,8 +144,9 @@ def scene_sha256(scene: Scene) -> str:
 def run_scene(scene: Scene, comm=MPI.COMM_WORLD, out: Path | None = None, resume: bool = False) -> SceneOutcome:
     """Run a scene by its kind (static load stepping, dynamic, sleeve, compression, wear) into its output folder
     (`out`, default [output] dir; io.OutputFolder: the previous run's outputs are removed first, summary.json
-    records the status). A wear scene on the explicit engine writes checkpoints (every CHECKPOINT_EVERY records)
-    and, with `resume`, continues from the folder's checkpoint (fabricfem.wear.checkpoint)."""
+    records the status). A wear scene on the explicit engine and a dynamic scene write checkpoints (every
+    CHECKPOINT_EVERY records, [dynamics] checkpoint_every) and, with `resume`, continue from the folder's
+    checkpoint (fabricfem.wear.checkpoint, `run_dynamic_scene`)."""
     if out is not None:
         scene = Scene({**scene.data, "output": {**scene.data.get("output", {}), "dir": str(out)}}, scene.path,
                       scene.kind)
@@ -159,7 +161,7 @@ def run_scene(scene: Scene, comm=MPI.COMM_WORLD, out: Path | None = None, resume
             output = section(OutputSection, scene.get("output"))
             result = run_sleeve_scene(config, out, output.render, output.render_angles, output.body_samples, comm)
         elif scene.kind == "dynamic":
-            result = run_dynamic_scene(scene, comm)
+            result = run_dynamic_scene(scene, comm, resume, sha)
         elif scene.kind == "compression":
             result = run_compression_scene(scene, comm)
         else:
@@ -174,7 +176,7 @@ def run_scene(scene: Scene, comm=MPI.COMM_WORLD, out: Path | None = None, resume
     return SceneOutcome(result, status, out)
 
 
-CHECKPOINT_EVERY = 25       # records between the checkpoints of a wear run on the explicit engine
+CHECKPOINT_EVERY = 25       # records between the checkpoints of a wear run (explicit engine) or a dynamic scene
 
 
 def run_wear_scene(scene: Scene, out: Path, comm=MPI.COMM_WORLD, resume: bool = False, sha: str = ""):
@@ -314,6 +316,7 @@ class DynamicRun:
     peak_memory_mib: float
     summary: dict = field(default_factory=dict)
     outputs: dict[str, Path] = field(default_factory=dict)
+    failure: str = ""           # why the run stopped before end_time (an interrupt), "" when it completed
 
 
 def _load_function(ramp_time: float):
@@ -321,6 +324,11 @@ def _load_function(ramp_time: float):
     if ramp_time > 0.0:
         return lambda t: min(t / ramp_time, 1.0)
     return 1.0
+
+
+# [dynamics] integrator -> its class (build_integrator)
+INTEGRATORS = {"explicit": CentralDifference, "newmark": NewmarkIntegrator,
+               "generalized-alpha": GeneralizedAlphaIntegrator}
 
 
 def build_integrator(spec: dict, model):
@@ -408,20 +416,29 @@ def _progress(comm, n_steps: int, say):
     return report
 
 
-def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD) -> DynamicRun:
-    """Integrate a [dynamics] scene from rest to end_time; write <name>.xdmf/.csv/.png and summary.json."""
+def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD, resume: bool = False, sha: str = "") -> DynamicRun:
+    """Integrate a [dynamics] scene from rest to end_time; write <name>.xdmf/.csv/.png and summary.json.
+
+    Checkpoints (`DynamicCheckpoint`) every [dynamics] checkpoint_every records (default CHECKPOINT_EVERY);
+    `resume` continues from the output folder's checkpoint; Ctrl-C (SIGINT, any rank) stops the run at the next
+    record with valid outputs and a checkpoint there (`DynamicRun.failure` says so). `sha`: the scene's hash
+    the checkpoint is checked against (default scene_sha256(scene))."""
     say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
     spec = scene["dynamics"]
     d = section(DynamicsSection, spec)
     name = scene_name(scene)
     out = output_dir(scene)
     t0 = time.perf_counter()
+    checkpoint = DynamicCheckpoint(out, comm, sha or scene_sha256(scene), d.checkpoint_every)
+    # before meshing: an integrator that cannot resume, a missing or a foreign checkpoint fail fast
+    saved = checkpoint.read(INTEGRATORS.get(d.integrator)) if resume else None
     obstacles = build_obstacles(d.obstacles)
     model = build_model(scene, comm)
-    system = model
+    system, contact = model, None
     if obstacles:   # penalty contact with the fixed rigid obstacles: a ResidualTerm of the shell
         model.compile()
-        system = ContactProblem(model, obstacles, penalty=d.contact_penalty).system
+        contact = ContactProblem(model, obstacles, penalty=d.contact_penalty)
+        system = contact.system
     integrator, n_steps, dt, dt_crit = build_integrator(spec, system)
     limit = d.strain_limit
     # the projection's strain form also measures the strains (limit 1 when nothing is limited, as in
@@ -432,14 +449,26 @@ def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD) -> DynamicRun:
     monitors = build_monitors(d.monitors, model, meter)
     monitors["max_strain"] = meter.max_strain
     output_every = int(d.output_every if d.output_every is not None else max(1, n_steps // 100))
+    xdmf = out / f"{name}.xdmf"
+    checkpoint.attach(xdmf, integrator, log, contact)
+    history = checkpoint.restore(saved) if resume else None
     say(f"{name}: {model.model} model, {model.ndofs} dofs, {comm.size} rank(s); {d.integrator} "
         f"dt = {dt:.4g} s" + (f" (critical {dt_crit:.4g} s)" if dt_crit else "") +
         f", {n_steps} steps to t = {float(d.end_time):g} s" + (f", strain limit {limit:g}" if limit else "")
-        + (f", {len(obstacles)} obstacle(s)" if obstacles else ""))
-    xdmf = out / f"{name}.xdmf"
+        + (f", {len(obstacles)} obstacle(s)" if obstacles else "")
+        + (f"; resumed at t = {history.time[-1]:.6g} s (record {len(history.time) - 1})" if resume else ""))
+    series = io.SurfaceSeries(xdmf, model.mesh, append=resume)
+    checkpoint.series = series
     start = time.perf_counter()
-    history = integrator.run(n_steps, monitors=monitors, xdmf=xdmf, output_every=output_every,
-                             progress=_progress(comm, n_steps, say))
+    try:
+        with interrupt_flag(comm) as interrupted:
+            history = integrator.run(n_steps, monitors=monitors, xdmf=series, output_every=output_every,
+                                     progress=_progress(comm, n_steps, say), history=history,
+                                     after_record=checkpoint.after_record, should_stop=interrupted)
+        if history.stopped and checkpoint.records != len(history.time) - 1:
+            checkpoint.save(history)        # the interrupted run resumes from its last record
+    finally:
+        series.close()
     run_wall = time.perf_counter() - start
     header, rows = history.columns()
     header.append("newton_iterations")
@@ -474,9 +503,92 @@ def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD) -> DynamicRun:
         + (f"; projection iterations {sum(iterations)} (max {max(iterations, default=0)} per step)" if limit else "")
         + f"; peak memory {memory['max_mib']:.0f} MiB (max over {comm.size} rank(s))")
     say(f"wrote {', '.join(str(p) for p in outputs.values())}")
+    if history.stopped:
+        say(f"STOPPED EARLY: {history.stopped}; continue with --resume")
     integrator.destroy()
     projection.destroy()
-    return DynamicRun(history, n_steps, dt, dt_crit, wall, memory["max_mib"], summary, outputs)
+    return DynamicRun(history, n_steps, dt, dt_crit, wall, memory["max_mib"], summary, outputs, history.stopped)
+
+
+class DynamicCheckpoint:
+    """The checkpoints of a dynamic scene's run (fabricfem.io.Checkpoint files under <out>/checkpoint/).
+
+    Every `every` records (default CHECKPOINT_EVERY) each rank saves the integrator's `state()` (d, v, a, t, step
+    counts, work and dissipation, the step-halving state of Newmark; fabricfem.dynamics.newmark.TimeIntegrator),
+    the strain-limit projection's log (its iterations per step; the projection keeps nothing else between steps),
+    the obstacle contact's multipliers and stick points, the History so far and the record count; the XDMF series
+    is closed and copied beside it (series_<records>.xdmf/.h5, rank 0; io.SurfaceSeries.snapshot) before the
+    state is written, and older copies are removed after. `read()` checks the files (before the model is built),
+    `restore(state)` puts the copy back as <name>.xdmf/.h5 (a kill may have left a broken HDF5 file) and
+    restores the state: the run appends the later records to it. An
+    integrator whose state cannot be saved exactly (PETSc TS, generalized-alpha) is refused naming it, and its
+    runs write no checkpoints."""
+
+    CONTACT_STATE = ("multiplier", "_stick_local", "_stick_segment", "active", "sliding", "segment", "time")
+
+    def __init__(self, out: Path, comm, sha: str, every: int | None):
+        every = CHECKPOINT_EVERY if every is None else every
+        try:
+            self.files = io.Checkpoint(out, comm, sha, every)
+        except ValueError as exc:
+            raise SceneError(f"dynamics.checkpoint_every: {exc}") from None
+        self.out, self.comm, self.every = Path(out), comm, every
+        self.xdmf, self.integrator, self.log, self.contact = None, None, [], None
+        self.series: io.SurfaceSeries | None = None
+        self.records = 0            # records of the last checkpoint written or read
+
+    def attach(self, xdmf: Path, integrator, log: list, contact=None) -> None:
+        """The run's XDMF file, integrator, strain-limit log (fabricfem.dynamics.strain_limit.attach) and
+        obstacle contact (or None) whose state the checkpoints hold."""
+        self.xdmf, self.integrator, self.log, self.contact = Path(xdmf), integrator, log, contact
+
+    def after_record(self, history) -> None:
+        if self.integrator.resumable and (len(history.time) - 1) % self.every == 0:
+            self.save(history)
+
+    def save(self, history) -> None:
+        """Write the checkpoint of the run's state after its last record (all ranks)."""
+        if not self.integrator.resumable:
+            return
+        records = len(history.time) - 1
+        tag = f"series_{records}"
+        self.series.snapshot(self.files.folder, tag)
+        contact = {k: copy.deepcopy(getattr(self.contact, k)) for k in self.CONTACT_STATE
+                   if self.contact is not None and hasattr(self.contact, k)}
+        self.files.write({"records": records, "history": history, "integrator": self.integrator.state(),
+                          "projection_log": list(self.log), "contact": contact, "series": tag})
+        if self.comm.rank == 0:
+            for old in self.files.folder.glob("series_*"):
+                if old.stem != tag:
+                    old.unlink()
+        self.records = records
+
+    def read(self, integrator_class=None) -> dict:
+        """This rank's saved state; SceneError when the run's `integrator_class` cannot resume, when there is no
+        checkpoint or it is of another scene or rank count."""
+        if integrator_class is not None and not integrator_class.resumable:
+            raise SceneError(f"resume: the {integrator_class.__name__} integrator cannot resume from a checkpoint: "
+                             f"{integrator_class.not_resumable}")
+        if not self.files.exists():
+            raise SceneError(f"resume: no checkpoint in {self.files.folder} (run the scene without --resume first)")
+        try:
+            return self.files.read()
+        except ValueError as exc:
+            raise SceneError(str(exc)) from None
+
+    def restore(self, state: dict):
+        """Restore a `read` state into the attached run (class docstring); returns the History of its records."""
+        integ = self.integrator
+        if not integ.resumable:
+            raise SceneError(f"resume: the {type(integ).__name__} integrator cannot resume from a checkpoint: "
+                             f"{integ.not_resumable}")
+        integ.restore(state["integrator"])
+        self.log[:] = state["projection_log"]
+        for key, value in state["contact"].items():
+            setattr(self.contact, key, copy.deepcopy(value))
+        io.SurfaceSeries.restore(self.xdmf, self.files.folder, state["series"], self.comm)
+        self.records = state["records"]
+        return state["history"]
 
 
 def run_compression_scene(scene, comm=MPI.COMM_WORLD) -> dict | None:

@@ -192,6 +192,7 @@ class DynamicsSection:
     obstacles: list = doc("[[dynamics.obstacles]] rigid obstacles", default_factory=list)
     monitors: list = doc("[[dynamics.monitors]] CSV columns", default_factory=list)
     contact_penalty: float | None = doc("obstacle penalty [Pa/m] (default 10 E t / h^2)", None)
+    checkpoint_every: int | None = doc("records between checkpoints (default 25; fabricfem run --resume)", None)
 
 
 @dataclasses.dataclass(frozen=True)

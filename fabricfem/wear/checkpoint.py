@@ -7,63 +7,33 @@ and the scene's SHA-256. A file is written to a temporary name and renamed, so a
 checkpoint whole. `load` restores a run built from the same scene on the same number of ranks; a checkpoint of
 another scene (another hash) or another rank count is refused with a message naming it. The central-difference
 step from a restored state is the step from the saved one (the same arithmetic on the same numbers), so a
-resumed run gives the records of an uninterrupted run exactly.
+resumed run gives the records of an uninterrupted run exactly. The files, their atomic writes and the checks
+are those of fabricfem.io.Checkpoint (shared with the dynamic scenes, fabricfem.scenes.run).
 """
 from __future__ import annotations
 
-import os
-import pickle
-from pathlib import Path
-
 import numpy as np
-from mpi4py import MPI
+
+from fabricfem import io
 
 
-class Checkpoint:
-    """The checkpoint files of one run under `folder` (module docstring); `every` [records] between writes."""
-
-    def __init__(self, folder: str | Path, comm, scene_sha256: str, every: int = 10):
-        if not (isinstance(every, int) and every >= 1):
-            raise ValueError(f"checkpoint_every must be a positive number of records, got {every!r}")
-        self.folder = Path(folder) / "checkpoint"
-        self.comm, self.sha, self.every = comm, scene_sha256, every
-        if comm.rank == 0:
-            self.folder.mkdir(parents=True, exist_ok=True)
-        comm.barrier()
-
-    @property
-    def path(self) -> Path:
-        return self.folder / f"rank{self.comm.rank}.pkl"
-
-    def exists(self) -> bool:
-        """Whether every rank finds its checkpoint file."""
-        return bool(self.comm.allreduce(int(self.path.is_file()), op=MPI.MIN))
+class Checkpoint(io.Checkpoint):
+    """The checkpoint files of one garment run under `folder` (module docstring); `every` [records] between
+    writes."""
 
     def save(self, run, history, records: int, recorder=None) -> None:
         """Write the state after `records` record intervals (all ranks)."""
         integ, contact = run.integrator, run.contact
-        state = {"sha": self.sha, "ranks": self.comm.size, "records": records, "history": history,
-                 "d": integ.d.getArray(readonly=True).copy(), "v": integ.v.getArray(readonly=True).copy(),
-                 "a": integ.a.getArray(readonly=True).copy(), "t": integ.t, "step_count": integ.step_count,
-                 "stick_local": contact._stick_local.copy(), "stick_segment": contact._stick_segment.copy(),
-                 "anchors": [getattr(h, "_anchor", None) for h in run.handles],
-                 "recorder": recorder.state() if recorder is not None else None}
-        tmp = self.path.with_suffix(".tmp")
-        with open(tmp, "wb") as f:
-            pickle.dump(state, f)
-        os.replace(tmp, self.path)
-        self.comm.barrier()
+        self.write({"records": records, "history": history,
+                    "d": integ.d.getArray(readonly=True).copy(), "v": integ.v.getArray(readonly=True).copy(),
+                    "a": integ.a.getArray(readonly=True).copy(), "t": integ.t, "step_count": integ.step_count,
+                    "stick_local": contact._stick_local.copy(), "stick_segment": contact._stick_segment.copy(),
+                    "anchors": [getattr(h, "_anchor", None) for h in run.handles],
+                    "recorder": recorder.state() if recorder is not None else None})
 
     def load(self, run, recorder=None):
         """Restore the saved state into `run` (and `recorder`); returns (history, records done)."""
-        with open(self.path, "rb") as f:
-            state = pickle.load(f)
-        if state["sha"] != self.sha:
-            raise ValueError(f"resume: the checkpoint in {self.folder} belongs to another scene (hash "
-                             f"{state['sha'][:12]}..., this scene {self.sha[:12]}...); run without --resume")
-        if state["ranks"] != self.comm.size:
-            raise ValueError(f"resume: the checkpoint in {self.folder} was written by {state['ranks']} rank(s), this "
-                             f"run has {self.comm.size}")
+        state = self.read()
         integ, contact = run.integrator, run.contact
         for name in ("d", "v", "a"):
             target = getattr(integ, name).getArray()
