@@ -35,23 +35,30 @@ def _unit_rows(v: np.ndarray) -> np.ndarray:
     return v / np.linalg.norm(v, axis=1, keepdims=True)
 
 
-def _ray_to_surface(y: np.ndarray, radii: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _ray_to_surface(y: np.ndarray, radii: np.ndarray, u: np.ndarray, radii2: np.ndarray | None = None,
+                    c: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Signed length s of the ray y - s u to the ellipsoid surface (local frame, unit directions u).
 
     Solves the quadratic F(y - s u) = 1 with F(y) = sum y_i^2 / r_i^2 and takes the root of smallest
-    |s|. Returns (s, hit); hit is False where the line misses the ellipsoid (s is then 0).
+    |s|. Returns (s, hit); hit is False where the line misses the ellipsoid (s is then 0). `radii`
+    (3,) or one row per point; a caller that has them passes r^2 (`radii2`) and c = F(y) - 1 (the same
+    values as computed here).
     """
-    a = np.sum((u / radii) ** 2, axis=1)
-    b = -2.0 * np.sum(y * u / radii ** 2, axis=1)
-    c = np.sum((y / radii) ** 2, axis=1) - 1.0
+    if radii2 is None:
+        radii2 = radii ** 2
+    if c is None:
+        c = ((y / radii) ** 2).sum(axis=1) - 1.0
+    ur = u / radii
+    a = (ur * ur).sum(axis=1)
+    b = -2.0 * (y * u / radii2).sum(axis=1)
     disc = b * b - 4.0 * a * c
     hit = disc >= 0.0
     sq = np.sqrt(np.where(hit, disc, 0.0))
     # numerically stable roots: q = -(b + sign(b) sq) / 2, s1 = q / a, s2 = c / q
     q = -0.5 * (b + np.copysign(sq, b))
     s1 = q / a
-    with np.errstate(divide="ignore", invalid="ignore"):
-        s2 = np.where(q != 0.0, c / q, s1)
+    nonzero = q != 0.0
+    s2 = np.where(nonzero, c / np.where(nonzero, q, 1.0), s1)
     s = np.where(np.abs(s1) < np.abs(s2), s1, s2)
     return np.where(hit, s, 0.0), hit
 

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Callable, Mapping, Protocol, runtime_checkable
 
 import numpy as np
@@ -55,10 +56,21 @@ def _vector(name: str, value) -> np.ndarray:
 def rotation_about(axis, angle: float) -> np.ndarray:
     """Rotation matrix for a right-handed rotation by `angle` [rad] about the unit vector `axis`
     (Rodrigues: R = I + sin a K + (1 - cos a) K^2)."""
+    return _rodrigues(_axis_matrices(axis), angle)
+
+
+def _axis_matrices(axis) -> tuple[np.ndarray, np.ndarray]:
+    """(K, K^2) of `rotation_about` for the axis normalised: K v = a x v."""
     a = _vector("axis", axis)
     a = a / np.linalg.norm(a)
     K = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
-    return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * (K @ K)
+    return K, K @ K
+
+
+def _rodrigues(matrices: tuple[np.ndarray, np.ndarray], angle: float) -> np.ndarray:
+    """R = I + sin a K + (1 - cos a) K^2 from the (K, K^2) of `_axis_matrices` and the angle [rad]."""
+    K, K2 = matrices
+    return np.eye(3) + math.sin(angle) * K + (1.0 - math.cos(angle)) * K2
 
 
 def joint_torque(points, forces, joint, axis) -> float:
@@ -138,7 +150,7 @@ class ElbowFlexion:
     def angle(self, t: float) -> float:
         """Flexion angle alpha(t) [rad]."""
         t = _finite_time(t)
-        return float(np.clip(self.angular_velocity * (t - self.t_start), 0.0, self.final_angle))
+        return min(max(self.angular_velocity * (t - self.t_start), 0.0), self.final_angle)
 
     def angular_velocity_vector(self, t: float) -> np.ndarray:
         """Angular velocity of the forearm [rad/s] (omega a while flexing, 0 before and after)."""
@@ -147,17 +159,30 @@ class ElbowFlexion:
         return self.unit_axis * (self.angular_velocity if moving else 0.0)
 
     def positions(self, t: float) -> dict[str, np.ndarray]:
+        fixed = self._fixed_points
+        rot = _rodrigues(self._axis_matrices, self.angle(t))
+        return {
+            "shoulder": fixed["shoulder"].copy(),
+            "elbow": fixed["elbow"].copy(),
+            "wrist": fixed["elbow"] + rot @ fixed["wrist_arm"],
+            "upper_arm_marker": fixed["upper_arm_marker"].copy(),
+            "forearm_marker": fixed["elbow"] + rot @ fixed["forearm_marker_arm"],
+        }
+
+    @cached_property
+    def _fixed_points(self) -> dict[str, np.ndarray]:
+        """The points [m] that `positions` needs at every time: the shoulder, the elbow, the upper-arm marker,
+        and the wrist and forearm marker relative to the elbow in the extended pose."""
         shoulder, elbow, wrist = (np.asarray(p, dtype=float) for p in (self.shoulder, self.elbow, self.wrist))
         offset = np.asarray(self.marker_offset, dtype=float)
-        rot = rotation_about(self.unit_axis, self.angle(t))
         forearm_marker0 = 0.5 * (elbow + wrist) + offset
-        return {
-            "shoulder": shoulder.copy(),
-            "elbow": elbow.copy(),
-            "wrist": elbow + rot @ (wrist - elbow),
-            "upper_arm_marker": 0.5 * (shoulder + elbow) + offset,
-            "forearm_marker": elbow + rot @ (forearm_marker0 - elbow),
-        }
+        return {"shoulder": shoulder, "elbow": elbow, "wrist_arm": wrist - elbow,
+                "upper_arm_marker": 0.5 * (shoulder + elbow) + offset, "forearm_marker_arm": forearm_marker0 - elbow}
+
+    @cached_property
+    def _axis_matrices(self) -> tuple[np.ndarray, np.ndarray]:
+        """(K, K^2) of the flexion axis (`rotation_about`), computed once."""
+        return _axis_matrices(self.unit_axis)
 
     def resisting_torque(self, points, forces) -> float:
         """Clothing resistance to flexion [N m]: -tau about the elbow and flexion axis (positive when

@@ -19,6 +19,7 @@ points that move with the segments), with a penalty alternative.
 """
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass
 from typing import Callable, Sequence
@@ -37,7 +38,7 @@ from fabricfem.contact.nodal import (
     pressure_function,
     pressure_on_body,
 )
-from fabricfem.contact.torque import TorqueMonitor
+from fabricfem.contact.torque import TorqueMonitor, local_torques
 
 MAX_PROJECTION_PASSES = 8
 MAX_CREASE_ITERATIONS = 20   # bisector pushes out of overlapping segments after the passes (project_with_segment)
@@ -82,58 +83,116 @@ def _normalised_radius(x: np.ndarray, e: Ellipsoid) -> np.ndarray:
 
 def _normalised_radii(x: np.ndarray, ellipsoids: Sequence[Ellipsoid]) -> np.ndarray:
     """(K, N) q of every point against every segment with one matrix product: q_k = |x A_k - c_k A_k|^2 with
-    A_k = R_k diag(1 / r_k). Equal to `_normalised_radius` up to rounding (~1e-16), which only matters for
-    points within rounding of the surface; those are not "inside" for the projection's tolerance
-    (INSIDE_TOLERANCE), so the prefilter q < 1 selects the same points that the ray casts would move."""
-    A = np.concatenate([e.rotation / e.radii for e in ellipsoids], axis=1)           # (3, 3K)
-    b = np.concatenate([(e.center @ e.rotation) / e.radii for e in ellipsoids])      # (3K,)
-    y = x @ A - b
-    return np.sum((y * y).reshape(len(x), len(ellipsoids), 3), axis=2).T
+    A_k = R_k diag(1 / r_k) (q = f + 1 [Man2006, eq. 3.61], q < 1 strictly inside). Equal to
+    sum_i y_i^2 / r_i^2 with y = R^T (x - c) up to rounding (~1e-16), which only matters for points within
+    rounding of the surface; those are not "inside" for the projection's tolerance (INSIDE_TOLERANCE), so the
+    prefilter q < 1 selects the same points that the ray casts would move."""
+    return _Segments(ellipsoids).normalised_radii(x)
 
 
 def _ray_gap(x: np.ndarray, e: Ellipsoid) -> np.ndarray:
-    """Signed gap [m] of `Ellipsoid.gap(x, ray_casts=1)` (the same arithmetic: one cast along grad f at x,
-    the ray towards the centre where it misses) without the input checks and the foot-point normal, which
-    the projection does not use."""
-    y = (x - e.center) @ e.rotation
-    r = e.radii
-    outside = np.sum((y / r) ** 2, axis=1) >= 1.0
-    grad = y / r ** 2
-    norm = np.linalg.norm(grad, axis=1)
-    at_center = norm == 0.0
-    if at_center.any():
-        u = np.where(at_center[:, None], np.eye(3)[int(np.argmin(r))], grad / np.where(at_center, 1.0, norm)[:, None])
-    else:
-        u = grad / norm[:, None]
-    s, hit = _ray_to_surface(y, r, u)
-    if not hit.all():
-        u_center = np.where(hit[:, None], u, y)
-        u_center = u_center / np.linalg.norm(u_center, axis=1, keepdims=True)
-        s = np.where(hit, s, _ray_to_surface(y, r, u_center)[0])
-    return np.abs(s) * np.where(outside, 1.0, -1.0)
+    """Signed gap [m] of `Ellipsoid.gap(x, ray_casts=1)` (`_Segments.ray_gap`) without the input checks and the
+    foot-point normal, which the projection does not use."""
+    one = _Segments([e])
+    k = np.zeros(len(x), dtype=np.int64)
+    return one.ray_gap(one.to_local(x, k), k)
 
 
-def _gaps_inside(points: np.ndarray, ellipsoids: Sequence[Ellipsoid], inside_q: np.ndarray) -> np.ndarray:
-    """(K, n) ray-cast gaps [m] of `points` against the segments each is inside of (inside_q, (K, n) bool);
-    +inf against the others (the gap is >= 0 there, no ray cast needed)."""
-    gaps = np.full((len(ellipsoids), len(points)), np.inf)
-    for k, e in enumerate(ellipsoids):  # loop over the few segments, vectorised over the points
-        if inside_q[k].any():
-            gaps[k, inside_q[k]] = _ray_gap(points[inside_q[k]], e)
-    return gaps
+class _Segments:
+    """The K posed segments stacked, so that the functions of (point, segment) pairs run as one vectorised
+    evaluation instead of a loop over the segments: centres c (K, 3) [m], rotations R (K, 3, 3), radii r and
+    r^2 (K, 3) [m, m^2], the smallest radius of each segment [m] and the matrices of `_normalised_radii`.
+
+    Each pair function has the arithmetic of the `Ellipsoid` method it replaces (the same products, quotients
+    and sums of three in the same order), so the two agree to the last bit; `k` is the (P,) segment index of
+    each of the P points."""
+
+    def __init__(self, ellipsoids: Sequence[Ellipsoid]):
+        self.count = len(ellipsoids)
+        self.center = np.array([e.center for e in ellipsoids])
+        self.rotation = np.array([e.rotation for e in ellipsoids])
+        self.radii = np.array([e.radii for e in ellipsoids])
+        self.radii2 = self.radii ** 2
+        self.scale = self.radii.min(axis=1)
+        self._A = np.concatenate(self.rotation / self.radii[:, None, :], axis=1)                    # (3, 3K)
+        self._b = (np.matmul(self.center[:, None, :], self.rotation)[:, 0] / self.radii).reshape(-1)  # (3K,)
+
+    def normalised_radii(self, x: np.ndarray) -> np.ndarray:
+        """(K, N) q of the points x (N, 3) against every segment (`_normalised_radii`)."""
+        y = x @ self._A - self._b
+        return (y * y).reshape(len(x), self.count, 3).sum(axis=2).T
+
+    def to_local(self, x: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """y = R_k^T (x - c_k) [m] (`Ellipsoid.to_local`), (P, 3)."""
+        return np.matmul((x - self.center[k])[:, None, :], self.rotation[k])[:, 0]
+
+    def to_global(self, y: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """x = c_k + R_k y [m] (`Ellipsoid.to_global`), (P, 3)."""
+        return self._rotate(y, k) + self.center[k]
+
+    def _rotate(self, v: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """R_k v of local vectors v (P, 3) (the products of v @ R_k^T)."""
+        return np.matmul(self.rotation[k], v[:, :, None])[:, :, 0]
+
+    def normal(self, y: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """Unit outward normal grad f / |grad f| (`Ellipsoid.normal`) at the points of local coordinates y."""
+        return _unit(self._rotate(2.0 * y / self.radii2[k], k))
+
+    def ray_gap(self, y: np.ndarray, k: np.ndarray) -> np.ndarray:
+        """Signed gap [m] of the points of local coordinates y: `Ellipsoid.gap(x, ray_casts=1)` (one cast along
+        grad f at the point, the ray towards the centre where it misses) without the foot-point normal."""
+        r, r2 = self.radii[k], self.radii2[k]
+        yr = y / r
+        q = (yr * yr).sum(axis=1)
+        grad = y / r2
+        norm = _length(grad)
+        at_center = norm == 0.0
+        if at_center.any():
+            shortest = np.eye(3)[np.argmin(r, axis=1)]
+            u = np.where(at_center[:, None], shortest, grad / np.where(at_center, 1.0, norm)[:, None])
+        else:
+            u = grad / norm[:, None]
+        s, hit = _ray_to_surface(y, r, u, r2, q - 1.0)
+        if not hit.all():
+            u_center = _unit(np.where(hit[:, None], u, y))
+            s = np.where(hit, s, _ray_to_surface(y, r, u_center, r2, q - 1.0)[0])
+        return np.abs(s) * np.where(q >= 1.0, 1.0, -1.0)
+
+    def gaps_inside(self, points: np.ndarray, inside_q: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Ray-cast gaps (K, n) [m] of `points` (n, 3) against the segments each is inside of (inside_q, (K, n)
+        bool), +inf against the others (the gap is >= 0 there, no ray cast needed); with the local coordinates
+        (P, 3) of the P inside pairs and the (K, n) index of each pair among them (-1: no pair)."""
+        k, j = np.nonzero(inside_q)
+        y = self.to_local(points[j], k)
+        gaps = np.full(inside_q.shape, np.inf)
+        gaps[k, j] = self.ray_gap(y, k)
+        pair = np.full(inside_q.shape, -1)
+        pair[k, j] = np.arange(len(k))
+        return gaps, y, pair
 
 
-def project_with_segment(x, ellipsoids: Sequence[Ellipsoid], strict: bool = True
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _length(v: np.ndarray) -> np.ndarray:
+    """|v| of the rows of v (N, 3) (the sum of squares of np.linalg.norm, without its dispatch)."""
+    return np.sqrt((v * v).sum(axis=1))
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    """v / |v| row by row (`fabricfem.body.ellipsoid._unit_rows`)."""
+    return v / _length(v)[:, None]
+
+
+def project_with_segment(x, ellipsoids: Sequence[Ellipsoid], strict: bool = True,
+                         segments: _Segments | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """`project_along_gradient` that also returns the segment index (N,) each point was last projected
     out of (for points inside no segment: the segment of smallest normalised radius q, a diagnostic).
+    `segments`: the ellipsoids already stacked (`_Segments`), if the caller has them.
 
-    Vectorised search: q = f + 1 (eq. 3.61) of every point and segment first (one small matrix product per
-    segment); only the points with q < 1 for some segment (the candidates) get the ray casts of
-    `Ellipsoid.gap`, and a later pass re-checks only the points moved by the previous one (the others have
-    not moved). The gap of a point with q >= 1 is >= 0 (`Ellipsoid.gap`), so casting rays only from the
-    points inside a segment, against that segment, gives the same projections as casting them from every
-    point against every segment.
+    Vectorised search: q = f + 1 (eq. 3.61) of every point and segment first (one matrix product); only the
+    points with q < 1 for some segment (the candidates) get the ray casts of `Ellipsoid.gap`, one evaluation
+    over all (point, segment) pairs with q < 1, and a later pass re-checks only the points moved by the
+    previous one (the others have not moved). The gap of a point with q >= 1 is >= 0 (`Ellipsoid.gap`), so
+    casting rays only from the points inside a segment, against that segment, gives the same projections as
+    casting them from every point against every segment.
     """
     x = _points("x", x)
     out = x.copy()
@@ -141,61 +200,68 @@ def project_with_segment(x, ellipsoids: Sequence[Ellipsoid], strict: bool = True
     moved = np.zeros(n, dtype=bool)
     if n == 0 or not ellipsoids:
         return out, moved, np.zeros(n, dtype=np.int64)
-    q = _normalised_radii(x, ellipsoids)
-    segment = np.argmin(q, axis=0).astype(np.int64)
+    stack = _Segments(ellipsoids) if segments is None else segments
+    q = stack.normalised_radii(x)
+    segment = q.argmin(axis=0)
     inside_q = q < 1.0
     candidates = np.flatnonzero(inside_q.any(axis=0))
     inside_q = inside_q[:, candidates]        # (K, candidates): inside segment k by q
-    scale_of = np.array([e.radii.min() for e in ellipsoids])
     for k_pass in range(MAX_PROJECTION_PASSES):
         if len(candidates) == 0:
             return out, moved, segment
         points = out[candidates]
-        gaps = _gaps_inside(points, ellipsoids, inside_q)
-        deepest = np.argmin(gaps, axis=0)
+        gaps, local, pair = stack.gaps_inside(points, inside_q)
+        deepest = gaps.argmin(axis=0)
         if k_pass == 0:
             segment[candidates] = deepest
-        g = gaps[deepest, np.arange(len(points))]
-        inside = g < -INSIDE_TOLERANCE * scale_of[deepest]
+        columns = np.arange(len(points))
+        g = gaps[deepest, columns]
+        inside = g < -INSIDE_TOLERANCE * stack.scale[deepest]
         if not inside.any():
             return out, moved, segment
-        for k, e in enumerate(ellipsoids):  # loop over the few segments, vectorised over the points
-            mask = inside & (deepest == k)
-            if mask.any():
-                direction = e.normal(points[mask])          # grad f / |grad f| at the trial point
-                points[mask] = points[mask] - g[mask, None] * direction
+        # grad f / |grad f| at the trial point, against the deepest segment
+        direction = stack.normal(local[pair[deepest[inside], columns[inside]]], deepest[inside])
+        points[inside] = points[inside] - g[inside, None] * direction
         out[candidates] = points
         candidates = candidates[inside]
         segment[candidates] = deepest[inside]
         moved[candidates] = True
         # the next pass re-checks the moved points (the others have not moved)
-        inside_q = _normalised_radii(out[candidates], ellipsoids) < 1.0
+        inside_q = stack.normalised_radii(out[candidates]) < 1.0
         keep = inside_q.any(axis=0)
         candidates, inside_q = candidates[keep], inside_q[:, keep]
-    # crease fallback: a point in the lens where two segments overlap (the inner side of a flexed elbow) is
-    # sent back and forth by the one-segment projections above; push it out of all the segments it is inside
-    # of at once, along the bisector d of their outward normals (in the cone of the normals, where a contact
-    # force between the cloth and two rigid bodies lies), by the largest |g_k| / (d . n_k)
+    return _push_out_of_creases(out, moved, segment, candidates, inside_q, stack, strict)
+
+
+def _push_out_of_creases(out: np.ndarray, moved: np.ndarray, segment: np.ndarray, candidates: np.ndarray,
+                         inside_q: np.ndarray, stack: _Segments, strict: bool
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Crease fallback of `project_with_segment` for the points `candidates` still inside after its passes
+    (inside_q: (K, candidates) q < 1). A point in the lens where two segments overlap (the inner side of a flexed
+    elbow) is sent back and forth by the one-segment projections; push it out of all the segments it is inside
+    of at once, along the bisector d of their outward normals (in the cone of the normals, where a contact
+    force between the cloth and two rigid bodies lies), by the largest |g_k| / (d . n_k)."""
     for _ in range(MAX_CREASE_ITERATIONS):
         if len(candidates) == 0:
             return out, moved, segment
         points = out[candidates]
+        gaps, local, pair = stack.gaps_inside(points, inside_q)
+        gaps = np.minimum(gaps, 0.0)   # 0 where not inside
+        k, j = np.nonzero(inside_q)
+        normals = np.zeros((stack.count,) + points.shape)
+        normals[k, j] = stack.normal(local[pair[k, j]], k)
         direction = np.zeros_like(points)
-        gaps = np.minimum(_gaps_inside(points, ellipsoids, inside_q), 0.0)   # 0 where not inside
-        normals = np.zeros((len(ellipsoids),) + points.shape)
-        for k, e in enumerate(ellipsoids):
-            if inside_q[k].any():
-                normals[k, inside_q[k]] = e.normal(points[inside_q[k]])
-                direction += normals[k]
-        direction /= np.maximum(np.linalg.norm(direction, axis=1, keepdims=True), 1e-300)
+        for normal in normals:  # loop over the few segments, vectorised over the points
+            direction += normal
+        direction /= np.maximum(_length(direction)[:, None], 1e-300)
         cosine = np.einsum("kni,ni->kn", normals, direction)
         reach = np.where(inside_q & (gaps < 0.0), -gaps / np.maximum(cosine, 1e-3), 0.0)
         out[candidates] = points + reach.max(axis=0)[:, None] * direction
         segment[candidates] = np.argmin(gaps, axis=0)
-        inside_q = _normalised_radii(out[candidates], ellipsoids) < 1.0
+        inside_q = stack.normalised_radii(out[candidates]) < 1.0
         # rounding of a point projected onto a surface is not "inside" (as in the passes above)
-        gap_left = _gaps_inside(out[candidates], ellipsoids, inside_q).min(axis=0)
-        keep = gap_left < -INSIDE_TOLERANCE * scale_of.min()
+        gap_left = stack.gaps_inside(out[candidates], inside_q)[0].min(axis=0)
+        keep = gap_left < -INSIDE_TOLERANCE * stack.scale.min()
         candidates, inside_q = candidates[keep], inside_q[:, keep]
     if len(candidates) == 0 or not strict:
         return out, moved, segment      # not strict: the trapped points stay where the last push put them
@@ -317,7 +383,9 @@ class ExplicitBodyContact:
 
     Cost: per step one pose of the body (`PoseCache`: the pose at t_{n+2} of one step is the
     joint position at t_{n+1} of the next), the normalised radius q of every node against every segment, and
-    ray casts, friction and torque sums on the nodes in contact only (numpy, no loop over nodes).
+    ray casts, friction and torque sums on the nodes in contact only (numpy, no loop over nodes; the segments
+    stacked once per step, `_Segments`, so that the ray casts, normals and frames of all (node, segment) pairs
+    are one evaluation, not one per segment).
     `timings["pose_torque"]` [s] accumulates the time spent posing the body and summing torques.
     """
 
@@ -473,39 +541,32 @@ class ExplicitBodyContact:
         """Add dt x (torques, normal forces) of the nodes `index` in contact (their positions, forces on the
         cloth, segments and normal forces) to the interval's impulses."""
         tic = time.perf_counter()
-        step_torques = []
-        for name, monitor in self._monitors.items():
-            tau = monitor.value(position, force, segment, lambda: self.poses.joint(monitor.joint, self.time), None)
+        step_torques = local_torques(list(self._monitors.values()), position, force, segment,
+                                     lambda joint: self.poses.joint(joint, self.time))
+        for name, tau in zip(self._monitors, step_torques):
             self._torque_impulse[name] += dt * tau
-            step_torques.append(tau)
         if self.trace is not None:
             self.trace.append((self.time, *step_torques, float(normal_force.sum())))
         self._normal_impulse[index] += dt * normal_force
         self._elapsed += dt
         self.timings["pose_torque"] += time.perf_counter() - tic
 
-    def _stick_points(self, ellipsoids, index: np.ndarray, segment: np.ndarray,
+    def _stick_points(self, stack: _Segments, index: np.ndarray, segment: np.ndarray,
                       fallback: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Stick points at the current pose (global) of the nodes `index` touching `segment`, and the mask of
-        those that have one on that segment (the others get `fallback`)."""
+        """Stick points at the current pose (global) [m] of the nodes `index` touching `segment` (the posed
+        segments stacked), and the mask of those that have one on that segment (the others get `fallback`)."""
         points = fallback.copy()
-        stick_segment = self._stick_segment[index]
-        known = np.zeros(len(index), dtype=bool)
-        for k, e in enumerate(ellipsoids):  # loop over the few segments
-            mask = (stick_segment == k) & (segment == k)
-            if mask.any():
-                points[mask] = e.to_global(self._stick_local[index[mask]])
-            known |= mask
+        known = self._stick_segment[index] == segment
+        if known.any():
+            points[known] = stack.to_global(self._stick_local[index[known]], segment[known])
         return points, known
 
-    def _store_stick_points(self, ellipsoids, index: np.ndarray, points: np.ndarray, segment: np.ndarray):
-        """Stick points (global) of the nodes `index` in contact with `segment`; every other node loses its."""
+    def _store_stick_points(self, stack: _Segments, index: np.ndarray, points: np.ndarray, segment: np.ndarray):
+        """Stick points (global) [m] of the nodes `index` in contact with `segment`, kept in the segments' frames;
+        every other node loses its."""
         self._stick_segment[:] = -1
         self._stick_segment[index] = segment
-        for k, e in enumerate(ellipsoids):
-            mask = segment == k
-            if mask.any():
-                self._stick_local[index[mask]] = e.to_local(points[mask])
+        self._stick_local[index] = stack.to_local(points, segment)
 
     def body_at(self, t: float) -> list[Ellipsoid]:
         """The segments as the contact sees them at time t [s]: posed, grown by `transverse_scale` and with the
@@ -550,13 +611,14 @@ class ExplicitBodyContact:
         force = (area * p)[:, None] * n
         slip = np.zeros(len(x), dtype=bool)
         if self.mu > 0.0:
-            stick, known = self._stick_points(ellipsoids, index, seg, x)
+            stack = _Segments(ellipsoids)
+            stick, known = self._stick_points(stack, index, seg, x)
             fr = friction_law.return_map(x, stick, n, p, self.mu, self.penalty, self.penalty)
             traction = np.where(known[:, None], fr.traction, 0.0)
             slip = fr.slip & known
             force = force + area[:, None] * traction
             stick_new = friction_law.updated_stick_point(x, traction, self.penalty)
-            self._store_stick_points(ellipsoids, index[inside], stick_new[inside], seg[inside])
+            self._store_stick_points(stack, index[inside], stick_new[inside], seg[inside])
         rhs.getArray()[self.dofs[index]] += force
         contact = index[inside]
         self._set_step(x_all, contact, force[inside], area[inside] * p[inside], segment, slip[inside],
@@ -580,11 +642,13 @@ class ExplicitBodyContact:
         x_trial = self.reference + d[rows] + dt * v[rows] + dt ** 2 * a[rows]
         # not strict: a node trapped in the lens of overlapping segments (a walking body's hip) keeps the small
         # penetration the last push leaves, reported by the records' max_penetration, instead of stopping the run
-        projected, active, seg = project_with_segment(x_trial, ellipsoids, strict=self.strict_projection)
+        stack = _Segments(ellipsoids)
+        projected, active, seg = project_with_segment(x_trial, ellipsoids, strict=self.strict_projection,
+                                                      segments=stack)
         index = np.flatnonzero(active)                                   # nodes in contact
         m = self._lumped_mass(integrator)[index]                          # M + dt/2 C (per component)
         trial, final, segment = x_trial[index], projected[index], seg[index]
-        normal_force = np.linalg.norm(m * (final - trial), axis=1) / dt ** 2   # |lambda_N| [N]
+        normal_force = _length(m * (final - trial)) / dt ** 2             # |lambda_N| [N]
         slip = np.zeros(len(index), dtype=bool)
         # also without a node in contact: _store_stick_points then clears the stick points of the nodes that just
         # lost contact. Skipping it for an empty `index` left them stale, and a node touching down again later
@@ -593,15 +657,11 @@ class ExplicitBodyContact:
         # first contact record).
         if self.mu > 0.0:
             projected_c = final
-            stick, known = self._stick_points(ellipsoids, index, segment, projected_c)
-            n = np.zeros_like(projected_c)
-            for k, e in enumerate(ellipsoids):   # normals at the contact points, per segment
-                mask = segment == k
-                if mask.any():
-                    n[mask] = e.normal(projected_c[mask])
+            stick, known = self._stick_points(stack, index, segment, projected_c)
+            n = stack.normal(stack.to_local(projected_c, segment), segment)   # normals at the contact points
             diff = stick - projected_c
-            d_t = diff - np.sum(diff * n, axis=1)[:, None] * n                   # P (s - x^c)
-            f_t = np.linalg.norm(m * d_t, axis=1) / dt ** 2
+            d_t = diff - (diff * n).sum(axis=1)[:, None] * n                  # P (s - x^c)
+            f_t = _length(m * d_t) / dt ** 2
             limit = self.mu * normal_force                                       # eq. 3.52: |t| <= mu lambda_N
             slip = known & (f_t > limit)
             scale = np.where(slip, limit / np.where(f_t > 0.0, f_t, 1.0), 1.0)
@@ -609,7 +669,7 @@ class ExplicitBodyContact:
             final = projected_c + d_t
             # the stick point stays where it is on the segment when sticking, moves with the node when slipping
             # and is created at the contact point for a node touching down
-            self._store_stick_points(ellipsoids, index, np.where((slip | ~known)[:, None], final, stick), segment)
+            self._store_stick_points(stack, index, np.where((slip | ~known)[:, None], final, stick), segment)
         a_c = (final - trial) / dt ** 2
         a[rows[index]] += a_c
         position = x_trial
@@ -678,17 +738,26 @@ def _posed_segment(segment, positions) -> Ellipsoid:
     """`Segment.pose` (fabricfem.body.pose.segment_frame, [Man2006, sec. 5.1]) with the same arithmetic but
     without re-validating the inputs of every explicit step (the rigid motion keeps the frame proper; the
     first pose of a PoseCache is validated): x^c = J1 + f (J2 - J1), e1 = (J2 - J1) / |J2 - J1|,
-    e2 = the unit part of M - x^c normal to e1, e3 = e1 x e2."""
-    j1 = np.asarray(positions[segment.proximal], dtype=float)
-    axis = np.asarray(positions[segment.distal], dtype=float) - j1
-    length = float(np.linalg.norm(axis))
-    center = j1 + segment.center_fraction * axis
-    e1 = axis / length
-    offset = np.asarray(positions[segment.marker], dtype=float) - center
-    perpendicular = offset - np.dot(offset, e1) * e1
-    e2 = perpendicular / float(np.linalg.norm(perpendicular))
-    e3 = np.array([e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]])
-    return _ellipsoid(center, np.column_stack([e1, e2, e3]), np.array(segment.radii, dtype=float))
+    e2 = the unit part of M - x^c normal to e1, e3 = e1 x e2. On Python floats: the products and sums of three
+    of numpy's dot and norm in the same order, without the calls on 3-vectors."""
+    j1, j2, marker = (np.asarray(positions[name], dtype=float).tolist()
+                      for name in (segment.proximal, segment.distal, segment.marker))
+    axis = [b - a for a, b in zip(j1, j2)]
+    length = math.sqrt(_dot(axis, axis))
+    center = [a + segment.center_fraction * d for a, d in zip(j1, axis)]
+    e1 = [d / length for d in axis]
+    offset = [m - c for m, c in zip(marker, center)]
+    along = _dot(offset, e1)
+    perpendicular = [o - along * e for o, e in zip(offset, e1)]
+    width = math.sqrt(_dot(perpendicular, perpendicular))
+    e2 = [p / width for p in perpendicular]
+    e3 = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]]
+    return _ellipsoid(np.array(center), np.array(list(zip(e1, e2, e3))), np.array(segment.radii, dtype=float))
+
+
+def _dot(a: list[float], b: list[float]) -> float:
+    """a . b of two 3-vectors as numpy sums them: (a0 b0 + a1 b1) + a2 b2."""
+    return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]
 
 
 def _ellipsoid(center: np.ndarray, rotation: np.ndarray, radii: np.ndarray) -> Ellipsoid:

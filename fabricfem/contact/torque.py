@@ -74,12 +74,28 @@ class TorqueMonitor:
               joint_position: Callable[[], np.ndarray], comm: MPI.Comm | None) -> float:
         """tau [N m] of the nodal forces on the cloth `force_on_cloth` (the body takes -f) at `position`, summed
         over the ranks of `comm` (None: this rank's nodes only); `joint_position()` gives J [m]."""
-        mask = self.on_segments[segment]
-        local = 0.0
-        if mask.any():
-            arm = position[mask] - joint_position()
-            local = float(np.dot(_cross(arm, -force_on_cloth[mask]).sum(axis=0), self.axis))
+        local = local_torques([self], position, force_on_cloth, segment, lambda joint: joint_position())[0]
         return local if comm is None else float(comm.allreduce(local, op=MPI.SUM))
+
+
+def local_torques(monitors: Sequence[TorqueMonitor], position: np.ndarray, force_on_cloth: np.ndarray,
+                  segment: np.ndarray, joint_position: Callable[[str], np.ndarray]) -> list[float]:
+    """This rank's torques [N m] of `monitors` (`TorqueMonitor.value` with comm None) for the nodal forces on the
+    cloth `force_on_cloth` (N, 3) [N] at `position` (N, 3) [m] touching `segment` (N,). The moments
+    (x_i - J) x (-f_i) of the nodes are computed once per joint (`joint_position(name)` gives J [m], asked only
+    when a node touches the monitor's segments) and summed per monitor over the nodes on its segments."""
+    moments: dict[str, np.ndarray] = {}
+    out = []
+    for monitor in monitors:
+        mask = monitor.on_segments[segment]
+        if not mask.any():
+            out.append(0.0)
+            continue
+        if monitor.joint not in moments:
+            moments[monitor.joint] = _cross(position - joint_position(monitor.joint), -force_on_cloth)
+        moment = moments[monitor.joint]
+        out.append(float(np.dot((moment if mask.all() else moment[mask]).sum(axis=0), monitor.axis)))
+    return out
 
 
 def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
