@@ -22,6 +22,7 @@ from mpi4py import MPI
 from fabricfem import scenes as scene_module
 from fabricfem.benchmarks import stability_map
 from fabricfem.benchmarks.accuracy import accuracy_bench
+from fabricfem.benchmarks.commits import compare_commits
 from fabricfem.benchmarks.rollup_profile import rollup_profile
 from fabricfem.benchmarks.sleeve_profile import sleeve_profile
 from fabricfem.benchmarks.speed_accuracy import speed_accuracy
@@ -95,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     p_demo.add_argument("--out", default="results/demo", help="output folder (XDMF, PNG, CSV)")
     p_bench = sub.add_parser("bench", help="benchmarks (results/ CSV and PNG)")
     p_bench.add_argument("name", nargs="?", default="rollup-profile", choices=["rollup-profile", "stability-map", "speed-accuracy", "unit-cell",
-                                          "sleeve-profile", "accuracy", "wear"],
+                                          "sleeve-profile", "accuracy", "wear", "commits"],
                          help="benchmark to run")
     p_bench.add_argument("--out", default="results/bench")
     p_bench.add_argument("--quick", action="store_true",
@@ -104,7 +105,13 @@ def main(argv: list[str] | None = None) -> int:
     p_bench.add_argument("--meshes", default="I,III", help="wear: sleeve meshes, comma-separated (I, II, III, IV)")
     p_bench.add_argument("--variants", default="reference,kernels,mass x4,mass x16",
                          help="wear: variants, comma-separated (fabricfem.benchmarks.wear_speed.VARIANTS)")
-    p_bench.add_argument("--repeats", type=int, default=3, help="wear: runs of every variant (medians)")
+    p_bench.add_argument("--repeats", type=int, default=3, help="wear, commits: runs of every variant (medians)")
+    p_bench.add_argument("--old", help="commits: the baseline commit (e.g. a sha or a tag)")
+    p_bench.add_argument("--new", default="HEAD", help="commits: the commit compared with it")
+    p_bench.add_argument("--scene", help="commits: the wear scene to time")
+    p_bench.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                         help="commits: replace a dotted scene key (repeatable), e.g. motion.strides=1")
+    p_bench.add_argument("--ranks", type=int, default=1, help="commits: MPI ranks of every run")
     p_study = sub.add_parser("study", help="parameter studies (CSV + PNG per figure)")
     p_study.add_argument("name", choices=["sleeve", "unit-cell", "fabric-link", "sleeve-fit", "sleeve-methods", "pants"],
                          help="study to run (sleeve: [Man2006, sec. 5.3]; unit-cell: [Man2006, sec. 4.3.5], Figs. 21-28, 32-33)")
@@ -287,6 +294,15 @@ def _command(args) -> int:
             return 0
         if args.name == "accuracy":
             accuracy_bench(args.out)
+            return 0
+        if args.name == "commits":
+            try:
+                if not (args.old and args.scene):
+                    raise ValueError("--old and --scene are required")
+                compare_commits(args.scene, args.old, args.new, tuple(args.set), args.repeats, args.ranks, args.out)
+            except ValueError as exc:
+                _print(f"fabricfem bench commits: {exc}", file=sys.stderr)
+                return 2
             return 0
         if args.name == "wear":
             try:
