@@ -436,7 +436,7 @@ class ShellModel:
         self.jacobian_form = ufl.derivative(self.residual_form, self.w, self.w_trial)
         self._R = fem.form(self.residual_form, jit_params=KERNEL_JIT)
         self._R_internal = fem.form(internal, jit_params=KERNEL_JIT) if self._director_loads else self._R
-        self._J = fem.form(self.jacobian_form, jit_params=KERNEL_JIT)
+        self._J_form = None       # compiled on first use (`_J`): explicit runs never need the tangent
         self.F_ref = fem_petsc.create_vector(self._R)
         with self.F_ref.localForm() as f:
             f.set(0.0)
@@ -464,6 +464,15 @@ class ShellModel:
         """Copy a solver vector into the Function the forms read (never alias the two: see docs)."""
         x.copy(self.w.vector)
         self.w.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+
+    @property
+    def _J(self):
+        """The compiled tangent form (dolfinx's default compiler flags: its kernel is the slowest to compile and
+        assembled once per Newton iteration, not once per explicit step)."""
+        self.compile()
+        if self._J_form is None:
+            self._J_form = fem.form(self.jacobian_form)
+        return self._J_form
 
     def _assemble_internal(self, x: PETSc.Vec, b: PETSc.Vec, lift: bool):
         """b = R(x) (with the moments' work when lift, i.e. for the residual; R_int alone otherwise)."""

@@ -1,9 +1,11 @@
-"""C compiler flags of the FFCx kernels on the hot paths (the shell's residual and tangent).
+"""C compiler flags of the FFCx kernels on the hot path: the shell's residual (internal forces), assembled once
+per explicit step.
 
 dolfinx compiles generated kernels with `-O2` by default; `-O3 -march=native` vectorises the quadrature
 loops for the machine that runs them (the kernels are compiled on it, at first use, and cached by flags).
 No `-ffast-math`: IEEE semantics are kept, results differ from `-O2` only by the contraction of
-multiply-adds (round-off). Measured in docs/findings/2026-11-25-wear-speed.md.
+multiply-adds (round-off). The tangent keeps dolfinx's flags: `-O3` doubles its compile time (13.7 -> 24.3 s)
+for a kernel assembled once per Newton iteration. Measured in docs/findings/2026-11-25-wear-speed.md.
 """
 from __future__ import annotations
 
