@@ -192,7 +192,10 @@ def test_sigint_then_resume_from_the_command_line(tmp_path):
 
 # ------------------------------------------------------------------------------------------- dynamic scenes
 ROOT = Path(__file__).resolve().parents[1]
-MPI_ENV = {**os.environ, "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
+# the launcher's environment: without the variables of this process's own (singleton) MPI, which an mpirun
+# started from it would take for its own and fail on, silently (seen under pytest-xdist)
+MPI_ENV = {**{k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "OPAL_", "PRTE_"))},
+           "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
            "OMPI_MCA_rmaps_base_oversubscribe": "1"}
 
 

@@ -193,7 +193,7 @@ PROGRESS_TAG = 4711
 
 def _variant_path(out: Path, cfg: SleeveConfig) -> Path:
     """Checkpoint of one finished variant: <out>/variants/<sha1 of the configuration>.csv."""
-    key = hashlib.sha1(repr(sorted(cfg.flat().items())).encode()).hexdigest()[:16]
+    key = hashlib.sha1(repr(sorted(cfg.key_items().items())).encode()).hexdigest()[:16]
     return Path(out) / "variants" / f"{key}.csv"
 
 

@@ -205,7 +205,7 @@ def summary_row(scale: float, arm: ArmDimensions, curves: dict[str, tuple[np.nda
 def _key(config: SleeveConfig) -> str:
     """The configuration as a string; the arm's long_axis_factor is left out at its default 0.5 so that runs
     checkpointed before the factor existed keep their key."""
-    items = config.flat()
+    items = config.key_items()
     if items["arm"].get("long_axis_factor") == DEFAULT_LONG_AXIS_FACTOR:
         del items["arm"]["long_axis_factor"]
     return repr(sorted(items.items()))

@@ -187,6 +187,9 @@ class RouteSpec:
                              f"got {self.similarity_reference!r}")
 
 
+# parameter -> default, of the parameters added after study runs were checkpointed (SleeveConfig.key_items)
+ADDED_LATER = {"mass_scale": 1.0}
+
 SECTIONS = {"tube": TubeSpec, "material": FabricSpec, "motion": FlexionSpec, "contact": ContactSpec,
             "route": RouteSpec}
 
@@ -282,6 +285,15 @@ class SleeveConfig:
             out.update(dataclasses.asdict(getattr(self, part)))
         out.update(arm=dataclasses.asdict(self.arm), name=self.name)
         return out
+
+    def key_items(self) -> dict:
+        """`flat()` without the parameters added after runs were stored under their configuration's hash
+        (ADDED_LATER) where they hold their default: such runs keep their checkpoint names."""
+        items = self.flat()
+        for name, default in ADDED_LATER.items():
+            if items.get(name) == default:
+                del items[name]
+        return items
 
     # ---------------------------------------------------------------------------- derived quantities
     @property
