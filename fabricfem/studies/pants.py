@@ -1,5 +1,5 @@
 """The pants study [Man2006, sec. 5.4, Figs. 47-49]: the resisting torque of pants about the right knee while the
-wearer walks (and steps over an obstacle), for crimped cotton pants 1 mm and 2 mm thick (and mu = 0.5).
+wearer walks (and steps over an obstacle), for crimped cotton pants 1 mm and 2 mm thick (and mu = 0.5; and 1 mm on a coarser mesh, h = 10 cm instead of 7 cm).
 
 `fabricfem study pants [--quick] [--out DIR]` runs the variants of scenes/pants_walk.toml on the ranks of
 COMM_WORLD (one variant per rank, longest first to the least loaded rank; each variant on COMM_SELF writes its own
@@ -38,15 +38,22 @@ from fabricfem.wear.outputs import write_sto
 from fabricfem.wear.run import run_wear
 
 SCENE = Path(__file__).resolve().parents[2] / "scenes" / "pants_walk.toml"
-# label -> (thickness [m], friction): the thesis's two thicknesses at mu = 0.1, and the friction variant
-VARIANTS = {"1mm_mu0.1": (1e-3, 0.1), "2mm_mu0.1": (2e-3, 0.1), "1mm_mu0.5": (1e-3, 0.5)}
+# label -> (thickness [m], friction, mesh size h [m] or None: the scene's): the thesis's two thicknesses at
+# mu = 0.1, the friction variant, and 1 mm at mu = 0.1 on a coarser mesh (how far the default h is from mesh
+# convergence)
+VARIANTS = {"1mm_mu0.1": (1e-3, 0.1, None), "2mm_mu0.1": (2e-3, 0.1, None), "1mm_mu0.5": (1e-3, 0.5, None),
+            "1mm_mu0.1_h10cm": (1e-3, 0.1, 0.10)}
 
 
-def variant_data(base: dict, thickness: float, friction: float, out: Path, quick: bool) -> dict:
-    """The scene data of one variant (its own output folder; quick: one stride on a coarse mesh)."""
+def variant_data(base: dict, thickness: float, friction: float, out: Path, quick: bool,
+                 h: float | None = None) -> dict:
+    """The scene data of one variant (its own output folder; `h`: its mesh size [m]; quick: one stride on a
+    coarse mesh)."""
     data = copy.deepcopy(base)
     data["fabric"]["thickness"] = thickness
     data.setdefault("contact", {})["friction"] = friction
+    if h is not None:
+        data["garment"]["h"] = h
     data["output"] = {**data.get("output", {}), "dir": str(out)}
     if quick:
         data["garment"]["h"] = 0.1
@@ -123,14 +130,15 @@ def _read_variant(out: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[s
 
 
 def run_pants_study(out: str | Path = "results/pants_study", quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD,
-                    variants: dict[str, tuple[float, float]] | None = None, scene: Path = SCENE) -> dict:
+                    variants: dict[str, tuple[float, float, float | None]] | None = None,
+                    scene: Path = SCENE) -> dict:
     """Run the variants (module docstring) and write the study's outputs; returns the summary (rank 0)."""
     out = Path(out)
     variants = variants or VARIANTS
     base = tomllib.loads(Path(scene).read_text())
     say = (lambda m: print(m, flush=True)) if comm.rank == 0 else (lambda m: None)
     t0 = time.perf_counter()
-    datas = {label: variant_data(base, th, mu, out / label, quick) for label, (th, mu) in variants.items()}
+    datas = {label: variant_data(base, th, mu, out / label, quick, h) for label, (th, mu, h) in variants.items()}
     for label, data in datas.items():          # every variant validated before anything runs
         scene_build.validate(copy.deepcopy(data), f"variant {label}")
     labels = list(datas)
