@@ -102,8 +102,11 @@ def main(argv: list[str] | None = None) -> int:
     p_bench.add_argument("--quick", action="store_true",
                          help="reduced smoke-test runs (stability-map: one k/rho, the smallest mesh, short runs; "
                               "speed-accuracy: t = 0.3 s, two levels per method, one timing)")
-    p_bench.add_argument("--meshes", default="I,III", help="wear: sleeve meshes, comma-separated (I, II, III, IV)")
-    p_bench.add_argument("--variants", default="reference,kernels,mass x4,mass x16",
+    p_bench.add_argument("--meshes", default="I,III",
+                         help="wear: sleeve meshes and the pants scene, comma-separated (I, II, III, IV, pants)")
+    p_bench.add_argument("--duration", type=float, default=None,
+                         help="wear: the pants' walk [s] (default: the scene's four strides)")
+    p_bench.add_argument("--variants", default="reference,kernels,eigenvalue step,mass x4,mass x16",
                          help="wear: variants, comma-separated (fabricfem.benchmarks.wear_speed.VARIANTS)")
     p_bench.add_argument("--repeats", type=int, default=3, help="wear, commits: runs of every variant (medians)")
     p_bench.add_argument("--old", help="commits: the baseline commit (e.g. a sha or a tag)")
@@ -307,7 +310,7 @@ def _command(args) -> int:
         if args.name == "wear":
             try:
                 wear_bench(args.out, meshes=tuple(args.meshes.split(",")), variants=tuple(args.variants.split(",")),
-                           repeats=args.repeats, quick=args.quick)
+                           repeats=args.repeats, quick=args.quick, duration=args.duration)
             except ValueError as exc:
                 _print(f"fabricfem bench wear: {exc}", file=sys.stderr)
                 return 2

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from fabricfem.benchmarks.commits import compare_commits
-from fabricfem.benchmarks.wear_speed import torque_rms_error, wear_bench
+from fabricfem.benchmarks.wear_speed import mean_moment_error, pants_moment, torque_rms_error, wear_bench
+from fabricfem.wear.garment import WearStep
 
 
 def test_torque_rms_error_of_an_offset_and_of_a_shifted_grid():
@@ -21,6 +22,22 @@ def test_torque_rms_error_of_an_offset_and_of_a_shifted_grid():
     assert torque_rms_error(angles, spoiled, angles, ref) == 0.0
 
 
+def test_pants_accuracy_measure_is_the_mean_knee_moment_magnitude():
+    """The pants' measure: the magnitude sqrt(Mx^2 + My^2 + Mz^2) of the three knee monitors on the motion records
+    only (3-4-12 gives 13 exactly), and |mean M - mean M_ref| / mean M_ref (a 10 % larger mean gives 0.1)."""
+    def step(phase, t, m):
+        return WearStep(phase, t, {"knee_r": m[0], "knee_r_x": m[1], "knee_r_z": m[2], "other": 100.0}, 0.0, "",
+                        (0.0, 0.0, 0.0), 0.0, 0.0, 0.0, 0.0, {}, 0.0, 1, 0.0, 0.0, 0.0)
+
+    class History:
+        steps = [step("settle", 0.9, (5.0, 0.0, 0.0)), step("motion", 1.0, (3.0, 4.0, 12.0)),
+                 step("motion", 1.1, (0.0, -6.0, 8.0))]
+    times, moments = pants_moment(History())
+    np.testing.assert_allclose(times, [1.0, 1.1])
+    np.testing.assert_allclose(moments, [13.0, 10.0], rtol=1e-15)
+    assert mean_moment_error(1.1 * moments, moments) == pytest.approx(0.1, rel=1e-12)
+
+
 def test_bad_benchmark_input_is_refused_naming_it(tmp_path):
     with pytest.raises(ValueError, match="meshes"):
         wear_bench(tmp_path, meshes=("V",))
@@ -28,6 +45,8 @@ def test_bad_benchmark_input_is_refused_naming_it(tmp_path):
         wear_bench(tmp_path, variants=("mass x3",))
     with pytest.raises(ValueError, match="repeats"):
         wear_bench(tmp_path, repeats=0)
+    with pytest.raises(ValueError, match="duration"):
+        wear_bench(tmp_path, meshes=("pants",), duration=0.0)
     with pytest.raises(ValueError, match="scene"):
         compare_commits(tmp_path / "missing.toml", "HEAD")
     scene = tmp_path / "s.toml"
