@@ -6,7 +6,8 @@ a dynamic scene with a numeric dt, dt / 2^k (dt = "auto" follows the mesh by its
 record times). The pilots k = -2, -1, 0 are solved (each into `<out>/accuracy/level<k>/`, read back when that
 folder holds a completed run of the same level scene); the quantity q (a monitored output, `AccuracySection`)
 of the three gives the observed order, the extrapolated value q* and the estimated relative error of every level
-(fabricfem.scenes.richardson: a pilot's |q_k - q*| / |q*|, a finer level's e_0 2^(-p k)). When the sequence is
+(fabricfem.scenes.richardson: a pilot's |q_k - q*| / |q*|, a finer level's e_0 2^(-p k); plausible orders
+ORDERS by scene kind). When the sequence is
 not asymptotic only pilots can be chosen, with the conservative estimates of fabricfem.scenes.richardson, and a
 target that no pilot meets is refused.
 
@@ -36,7 +37,7 @@ from petsc4py import PETSc
 
 from fabricfem import io
 from fabricfem.scenes.build import critical_time_step_estimate, estimated_dofs, validate
-from fabricfem.scenes.richardson import richardson
+from fabricfem.scenes.richardson import ORDERS, richardson
 from fabricfem.scenes.run import output_dir, run_scene, scene_name, scene_sha256
 from fabricfem.scenes.schema import Scene, SceneError, accuracy_summary_key, check_target
 from fabricfem.scenes.sections import AccuracySection, DynamicsSection, ModelSection, section
@@ -233,7 +234,7 @@ def _membrane_pilots(scene: Scene, key: str, root: Path, comm, say) -> tuple[lis
         try:
             fresh = solve(level, key, comm)
         except (SolverError, SceneError, PETSc.Error) as exc:   # a membrane without tension is singular
-            why = " ".join(str(exc).split())[:120]
+            why = f"PETSc error {exc.ierr} in the solve" if isinstance(exc, PETSc.Error) else " ".join(str(exc).split())
             return solved, f"membrane: level {k:+d} did not solve ({why}); not a candidate from there on"
         say(f"accuracy: membrane level {k:+d} ({_cells(level.scene)} cells, {level.dofs} dofs) "
             f"{'solved' if fresh else 'read back'}: {level.value:.6g}")
@@ -258,7 +259,7 @@ def plan(scene: Scene, target: float | None = None, quantity: str | None = None,
         solved = solve(lv, key, comm)
         say(f"accuracy: level {lv.k:+d} ({_cells(lv.scene)} cells, {lv.dofs} dofs) "
             f"{'solved' if solved else 'read back'}: {lv.value:.6g} {clock((i + 1) / len(pilots))}")
-    estimate = richardson([lv.value for lv in pilots])
+    estimate = richardson([lv.value for lv in pilots], orders=ORDERS[scene.kind])
     for lv, error in zip(pilots, estimate.errors):
         lv.error = error
     for lv in levels[len(PILOTS):]:

@@ -20,6 +20,10 @@ from dataclasses import dataclass
 P_MIN, P_MAX = 0.5, 6.0   # plausible observed orders of a mesh sequence
 P_FORMAL = 2.0            # the order assumed by the conservative estimate (second-order elements and integrators)
 FS = 3.0                  # safety factor of the grid convergence index when the order is unreliable [Roache1994]
+# plausible observed orders by scene kind: a static shell's Q2 elements may converge faster than order 2 (nodal
+# superconvergence); a dynamic scene's step follows the mesh and its integrators are second order, so an observed
+# order above 2 there is not the asymptotic rate
+ORDERS = {"static": (P_MIN, P_MAX), "dynamic": (P_MIN, P_FORMAL)}
 
 
 @dataclass

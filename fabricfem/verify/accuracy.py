@@ -175,5 +175,6 @@ def accuracy_choice() -> list:
                           r["ndofs"], timer.elapsed))
         ratio = r["chosen_work"] / r["brute_work"] if r["brute_work"] else math.inf
         out.append(result(NAME, f"{label}: work of level {r['chosen_level']:+d} / cheapest meeting it (level "
-                                f"{r['brute_level']:+d} {r['brute_model']}) <= 2", ratio, 1.0, 1.0, r["ndofs"], timer.elapsed))
+                                f"{r['brute_level']:+d} {r['brute_model']}) <= 2", ratio, 1.0, 1.0, r["ndofs"],
+                          timer.elapsed))
     return out
