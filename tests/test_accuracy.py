@@ -11,6 +11,7 @@ import pytest
 from toml_text import dumps
 
 from fabricfem import cli
+from fabricfem.benchmarks.sleeve_accuracy import SLEEVE_FIGURES, sleeve_choices, verdict
 from fabricfem.scenes.build import load as load_scene
 from fabricfem.scenes.accuracy import parse_target, plan
 from fabricfem.scenes.richardson import richardson
@@ -134,3 +135,26 @@ def test_membrane_not_chosen_where_bending_matters(tmp_path, capsys):
     assert drape.require().model == "naghdi" and "did not solve" in drape.model_note
     assert all(lv.model == "naghdi" for lv in drape.levels)
     assert "did not solve" in capsys.readouterr().out
+
+
+def test_sleeve_series_choice_is_refused_and_says_why():
+    """The sleeve's torque at 57 degrees on meshes I-III (stored study) is not asymptotic for either friction
+    coefficient; every target is refused, and where mesh III happens to meet 10% against mesh IV the refusal is
+    said to be conservative."""
+    rows = sleeve_choices((0.10, 0.03, 0.01))
+    assert len(rows) == 6 and all(r["chosen"] is None and not r["asymptotic"] for r in rows)
+    mu01, mu05 = rows[0], rows[3]
+    assert "observed order 4.27 outside [0.5, 2]" in mu01["note"] and "change sign" in mu05["note"]
+    assert mu01["estimated_errors_static_orders"].split()[-1] == "0.033"   # the static range would be fooled
+    assert mu01["true_errors"].split()[-1] == "0.226"
+    assert "conservative: mesh III meets it" in verdict(mu05) and "NOT ASYMPTOTIC" in verdict(mu05)
+    assert all(r["brute"] is None for r in rows if r is not mu05)
+
+
+def test_sleeve_series_bad_files(tmp_path):
+    with pytest.raises(ValueError, match="mesh_mu0.1.csv: the sleeve study's mesh series is missing"):
+        sleeve_choices((0.1,), tmp_path)
+    text = (SLEEVE_FIGURES / "mesh_mu0.1.csv").read_text().splitlines()
+    (tmp_path / "mesh_mu0.1.csv").write_text("\n".join(line for line in text if "mesh IV" not in line))
+    with pytest.raises(ValueError, match="no row of mesh IV at 57 degrees"):
+        sleeve_choices((0.1,), tmp_path)
