@@ -14,7 +14,6 @@ P_FORMAL = 2, e3 = |q2 - q3| / |q3|), and a coarser level's |q_k - q3| / |q3| + 
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 P_MIN, P_MAX = 0.5, 6.0   # plausible observed orders of a mesh sequence
