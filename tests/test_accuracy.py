@@ -120,10 +120,17 @@ STRETCH = {   # a plate pulled by an edge traction, in-plane (uz = 0 everywhere)
 
 def test_membrane_chosen_for_pure_tension(tmp_path, capsys):
     """The stretched plate: the membrane pilots agree with the shell's extrapolated value, so the plan chooses
-    the membrane (fewer dofs per node) at 10%; the plan table has the model column."""
-    chosen = plan(load_scene(_write(tmp_path, STRETCH, "stretch")), 0.10).require()
+    the membrane (fewer dofs per node) at 10%; the plan table has the model column; run --accuracy delivers the
+    membrane and says so in summary.json."""
+    path = _write(tmp_path, STRETCH, "stretch")
+    chosen = plan(load_scene(path), 0.10).require()
     out = capsys.readouterr().out
     assert chosen.model == "membrane" and chosen.error <= 0.10 and " membrane " in out and " naghdi " in out
+    assert cli.main(["run", str(path), "--accuracy", "10%"]) == 0
+    summary = json.loads((tmp_path / "stretch" / "summary.json").read_text())
+    assert summary["accuracy_model"] == "membrane" and summary["status"] == "completed"
+    off = {**STRETCH, "accuracy": {**STRETCH["accuracy"], "membrane": False}}
+    assert plan(load_scene(_write(tmp_path, off, "shell_only")), 0.10).require().model == "naghdi"
 
 
 def test_membrane_not_chosen_where_bending_matters(tmp_path, capsys):
