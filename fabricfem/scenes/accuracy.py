@@ -36,6 +36,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fabricfem import io
+from fabricfem.dynamics.newmark import DynamicsError
 from fabricfem.scenes.build import critical_time_step_estimate, estimated_dofs, validate
 from fabricfem.scenes.richardson import ORDERS, richardson
 from fabricfem.scenes.run import output_dir, run_scene, scene_name, scene_sha256
@@ -233,7 +234,7 @@ def _membrane_pilots(scene: Scene, key: str, root: Path, comm, say) -> tuple[lis
         level = level_scene(scene, k, root / f"membrane{k:+d}", data)
         try:
             fresh = solve(level, key, comm)
-        except (SolverError, SceneError, PETSc.Error) as exc:   # a membrane without tension is singular
+        except (SolverError, DynamicsError, SceneError, PETSc.Error) as exc:   # a membrane without tension: singular
             why = f"PETSc error {exc.ierr} in the solve" if isinstance(exc, PETSc.Error) else " ".join(str(exc).split())
             return solved, f"membrane: level {k:+d} did not solve ({why}); not a candidate from there on"
         say(f"accuracy: membrane level {k:+d} ({_cells(level.scene)} cells, {level.dofs} dofs) "
