@@ -399,8 +399,9 @@ def test_fabric_name_uses_the_stored_fabric_everywhere(tmp_path):
         # penalty default 10 E t / h^2 (fabricfem.contact.nodal.default_penalty) scales with E
         assert p_named.contact.penalty == pytest.approx(4.0 * p_base.contact.penalty, rel=1e-12)
         # every frequency of the step estimate (membrane, bending, shear, penalty) scales with sqrt(E / rho) at
-        # equal geometry and thickness: the estimate halves (damping alpha c / c_ref scales likewise)
-        assert p_named.dt_estimate == pytest.approx(0.5 * p_base.dt_estimate, rel=1e-9)
+        # equal geometry and thickness: the critical step halves (damping alpha c / c_ref scales likewise; 1e-5:
+        # the largest eigenvalue is converged to SLEPc's rtol 1e-6)
+        assert p_named.dt_estimate == pytest.approx(0.5 * p_base.dt_estimate, rel=1e-5)
     finally:
         p_base.integrator.destroy()
         p_named.integrator.destroy()

@@ -107,9 +107,10 @@ def critical_time_step(model, rayleigh: tuple[float, float] = (0.0, 0.0), omega_
     return float(2.0 / omega * (np.sqrt(1.0 + xi ** 2) - xi))
 
 
-def discrete_max_frequency(model, iterations: int = 200, rtol: float = 1e-6, rotary_inertia_scale: float = 1.0) -> float:
-    """Largest omega of K(d) phi = omega^2 M_L phi on the free dofs (current state, lumped mass with the
-    rotational entries scaled by `rotary_inertia_scale`), by SLEPc."""
+def discrete_max_frequency(model, iterations: int = 2000, rtol: float = 1e-6, rotary_inertia_scale: float = 1.0) -> float:
+    """Largest omega [rad/s] of K(d) phi = omega^2 M_L phi on the free dofs (current state, lumped mass with the
+    rotational entries scaled by `rotary_inertia_scale`), by SLEPc's Krylov-Schur on M^-1/2 K M^-1/2 with a
+    32-vector subspace (the largest eigenvalues of a uniform mesh are clustered: one vector converges slowly)."""
     from slepc4py import SLEPc  # optional package, loaded only for the eigenvalue estimate
 
     model.compile()
@@ -129,7 +130,7 @@ def discrete_max_frequency(model, iterations: int = 200, rtol: float = 1e-6, rot
     eps.setOperators(K)
     eps.setProblemType(SLEPc.EPS.ProblemType.HEP)
     eps.setWhichEigenpairs(SLEPc.EPS.Which.LARGEST_REAL)
-    eps.setDimensions(1)
+    eps.setDimensions(1, min(32, max(K.getSize()[0] - 1, 1)))
     eps.setTolerances(rtol, iterations)
     eps.solve()
     if eps.getConverged() < 1:
@@ -138,6 +139,22 @@ def discrete_max_frequency(model, iterations: int = 200, rtol: float = 1e-6, rot
     for obj in (eps, K, m, inv_sqrt):
         obj.destroy()
     return float(np.sqrt(value))
+
+
+CRITICAL_STEP_METHODS = ("eigenvalue", "estimate")
+
+
+def max_frequency(model, rotary_inertia_scale: float = 1.0, method: str = "eigenvalue") -> float:
+    """omega_max [rad/s] of the model in its current state for the critical step [Man2006, eq. 2.86]:
+    "eigenvalue" solves for the largest eigenvalue of the assembled system (`discrete_max_frequency`, the
+    global estimate of explicit codes [Belytschko2000, ch. 6]); "estimate" is the element formula
+    `max_frequency_estimate`, an overestimate by 1.28-1.48 on the sleeve's Q2 meshes (measured in
+    docs/findings/2026-11-25-wear-speed.md)."""
+    if method == "eigenvalue":
+        return discrete_max_frequency(model, rotary_inertia_scale=rotary_inertia_scale)
+    if method == "estimate":
+        return max_frequency_estimate(model, rotary_inertia_scale)
+    raise ValueError(f"critical_step must be one of {CRITICAL_STEP_METHODS}, got {method!r}")
 
 
 def measured_critical_time_step(run_is_stable: Callable[[float], bool], dt_low: float, dt_high: float,
@@ -165,4 +182,4 @@ def measured_critical_time_step(run_is_stable: Callable[[float], bool], dt_low: 
 
 
 __all__ = ["plane_stress_wave_speed", "min_edge_length", "max_frequency_estimate", "critical_time_step",
-           "discrete_max_frequency", "measured_critical_time_step"]
+           "discrete_max_frequency", "max_frequency", "CRITICAL_STEP_METHODS", "measured_critical_time_step"]

@@ -439,7 +439,8 @@ def plan(data: dict, fabric, scene_path: Path | None = None) -> WearPlan:
             raise SceneError(f"donning.remove: {exc}") from None
     handles = handle_specs(donning, timeline)
     settings = ExplicitSettings(mass_damping=damping, rotary_inertia_scale=route.rotary_inertia_scale,
-                                time_step_safety=route.time_step_safety, mass_scale=route.mass_scale, gravity=gravity if route.gravity else None)
+                                time_step_safety=route.time_step_safety, mass_scale=route.mass_scale,
+                                critical_step=route.critical_step, gravity=gravity if route.gravity else None)
     return WearPlan(body, torques, timeline, settings, contact, axis, handles)
 
 

@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass, field, fields, replace
 
 from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
-from fabricfem.dynamics.stability import plane_stress_wave_speed
+from fabricfem.dynamics.stability import CRITICAL_STEP_METHODS, plane_stress_wave_speed
 from fabricfem.fabrics import load_fabric
 from fabricfem.materials import Fabric
 from fabricfem.parameters import param
@@ -157,6 +157,8 @@ class RouteSpec:
     mass_damping: float = param("Rayleigh alpha of C = alpha M [1/s]", 10.0)
     rotary_inertia_scale: float = param("explicit: factor >= 1 on the rotational lumped masses", 100.0)
     time_step_safety: float = param("explicit: dt = safety x estimated critical step, in (0, 1)", 0.8)
+    critical_step: str = param("explicit: the critical step from the largest eigenvalue of the assembled system "
+                               "(eigenvalue) or from the element formula (estimate, 1.3-1.5 x shorter)", "eigenvalue")
     mass_scale: float = param("explicit: factor >= 1 on every lumped mass (not on the weight nor the damping), dt x "
                               "sqrt(factor); check the kinetic / strain energy ratio of the run", 1.0)
     dynamic_similarity: bool = param("explicit: flex at omega c / c_ref with damping alpha c / c_ref", False)
@@ -173,6 +175,8 @@ class RouteSpec:
         _positive(self, "time_step_safety", "max_rotation_step", "max_displacement_step")
         if self.time_step_safety >= 1.0:
             raise ValueError(f"time_step_safety must lie in (0, 1), got {self.time_step_safety!r}")
+        if self.critical_step not in CRITICAL_STEP_METHODS:
+            raise ValueError(f"critical_step must be one of {CRITICAL_STEP_METHODS}, got {self.critical_step!r}")
         _non_negative(self, " [1/s]", "mass_damping")
         if isinstance(self.rotary_inertia_scale, bool) or not (isinstance(self.rotary_inertia_scale, (int, float))
                                                               and self.rotary_inertia_scale >= 1.0):
@@ -188,7 +192,8 @@ class RouteSpec:
 
 
 # parameter -> default, of the parameters added after study runs were checkpointed (SleeveConfig.key_items)
-ADDED_LATER = {"mass_scale": 1.0}
+# (critical_step: the runs stored before it used the element formula)
+ADDED_LATER = {"mass_scale": 1.0, "critical_step": "estimate"}
 
 SECTIONS = {"tube": TubeSpec, "material": FabricSpec, "motion": FlexionSpec, "contact": ContactSpec,
             "route": RouteSpec}

@@ -111,6 +111,7 @@ class ExplicitSettings:
     mass_damping: float = 10.0                 # alpha [1/s]
     rotary_inertia_scale: float = 100.0        # s >= 1
     time_step_safety: float = 0.8              # dt = safety x estimated critical step
+    critical_step: str = "eigenvalue"          # omega_max by fabricfem.dynamics.stability.max_frequency
     mass_scale: float = 1.0                    # S >= 1 on every lumped mass (CentralDifference), dt x sqrt(S)
     gravity: tuple[float, float, float] | None = (0.0, 0.0, -9.81)   # m/s^2, None: off
 
@@ -496,7 +497,7 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
     ties = SeamTies(model, seams, sewing_time=timeline.sewing_time) if seams else None
     handles = [make(model) for make in handles]
     rayleigh = (settings.mass_damping, 0.0)
-    omega = math.hypot(stability.max_frequency_estimate(model, settings.rotary_inertia_scale),
+    omega = math.hypot(stability.max_frequency(model, settings.rotary_inertia_scale, settings.critical_step),
                        contact.penalty_frequency())
     dt_estimate = stability.critical_time_step(model, rayleigh, omega_max=omega, mass_scale=settings.mass_scale)
     steps_per_record = math.ceil(timeline.record_time / (settings.time_step_safety * dt_estimate))

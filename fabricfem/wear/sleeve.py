@@ -642,7 +642,8 @@ class ExplicitSleeve(ArmOutputs):
     # the wearer contract (fabricfem.wear.contract.WearRun)
     def describe(self) -> str:
         config = self.config
-        return (f"explicit central differences, dt = {self.dt:.3g} s (estimated critical step {self.dt_estimate:.3g} s "
+        return (f"explicit central differences, dt = {self.dt:.3g} s (critical step {self.dt_estimate:.3g} s by "
+                f"{config.route.critical_step} "
                 f"with rotary-inertia scale {config.route.rotary_inertia_scale:g}"
                 + (f" and mass scale {config.route.mass_scale:g}" if config.route.mass_scale != 1.0 else "")
                 + f", {self.dt_estimate_unscaled:.3g} s "
@@ -682,8 +683,9 @@ def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> Exp
     track_elbow_torques(contact, body)
     rayleigh = (config.damping, 0.0)
     omega_p = contact.penalty_frequency()
-    omega = math.hypot(stability.max_frequency_estimate(model, config.route.rotary_inertia_scale), omega_p)
-    omega_1 = math.hypot(stability.max_frequency_estimate(model, 1.0), omega_p)
+    method = config.route.critical_step
+    omega = math.hypot(stability.max_frequency(model, config.route.rotary_inertia_scale, method), omega_p)
+    omega_1 = math.hypot(stability.max_frequency(model, 1.0, method), omega_p)
     mass_scale = config.route.mass_scale
     dt_estimate = stability.critical_time_step(model, rayleigh, omega_max=omega, mass_scale=mass_scale)
     dt_unscaled = stability.critical_time_step(model, rayleigh, omega_max=omega_1)
