@@ -1,6 +1,7 @@
-"""The accuracy target (fabricfem.scenes.accuracy): Richardson with the observed order, the refusals, and
-`fabricfem plan` / `run --accuracy` on a small rolled strip (the verify case accuracy-choice checks the choice
-against brute force)."""
+"""The accuracy target (fabricfem.scenes.accuracy): Richardson with the observed order (any refinement ratios), the
+refusals, `fabricfem plan` / `run --accuracy` on a small rolled strip, and the membrane as a model level: chosen for
+a plate in pure tension, not for the rolled strip (edge moments) nor the drape (it does not solve). The verify case
+accuracy-choice checks the choice against brute force."""
 import json
 import math
 import tomllib
@@ -10,22 +11,42 @@ import pytest
 from toml_text import dumps
 
 from fabricfem import cli
-from fabricfem.scenes.accuracy import parse_target, richardson
+from fabricfem.benchmarks.sleeve_accuracy import SLEEVE_FIGURES, sleeve_choices, verdict
+from fabricfem.scenes.build import load as load_scene
+from fabricfem.scenes.accuracy import parse_target, plan
+from fabricfem.scenes.richardson import richardson
+from fabricfem.verify.accuracy import DRAPE
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def test_richardson_recovers_order_and_limit():
-    values = [1.0 + 0.3 * h ** 2 for h in (0.4, 0.2, 0.1)]
-    p, limit, note = richardson(values)
-    assert note == "" and p == pytest.approx(2.0) and limit == pytest.approx(1.0, abs=1e-12)
+@pytest.mark.parametrize("sizes, order", [((4.0, 2.0, 1.0), 2.0), ((1 / 10, 1 / 15, 1 / 20), 1.5)])
+def test_richardson_recovers_order_and_limit(sizes, order):
+    """Constant and non-constant refinement ratios (the sleeve's meshes I-III: 10, 15, 20 cells around)."""
+    values = [1.0 + 0.3 * h ** order for h in sizes]
+    e = richardson(values, sizes)
+    assert e.asymptotic and e.order == pytest.approx(order, rel=1e-9)
+    assert e.extrapolated == pytest.approx(1.0, abs=1e-12)
+    assert e.errors == pytest.approx([v - 1.0 for v in values], rel=1e-9)
+    assert e.finer(2.0) == pytest.approx(e.errors[-1] / 2.0 ** order)
 
 
 @pytest.mark.parametrize("values, why", [([1.0, 1.2, 1.1], "change sign"), ([1.0, 1.1, 1.3], "do not shrink"),
                                          ([1.0, 1.5, 1.5 + 1e-6], "outside")])
 def test_not_asymptotic_says_why(values, why):
-    _, limit, note = richardson(values)
-    assert why in note and limit is None
+    """Not asymptotic: no extrapolation, no finer level, and the conservative estimates (ratio 2, formal order 2:
+    the finest's error is its difference to the next coarser, a coarser level's adds its distance to the finest)."""
+    e = richardson(values)
+    assert why in e.note and e.extrapolated is None and e.finer(2.0) is None
+    e3 = abs(values[1] - values[2]) / abs(values[2])
+    assert e.errors == pytest.approx([abs(values[0] - values[2]) / abs(values[2]) + e3, 2 * e3, e3])
+
+
+def test_richardson_order_range_and_sizes():
+    values = [1.0 + 0.3 * h ** 4 for h in (1 / 10, 1 / 15, 1 / 20)]
+    assert "outside [0.5, 2]" in richardson(values, (1 / 10, 1 / 15, 1 / 20), orders=(0.5, 2.0)).note
+    with pytest.raises(ValueError, match="sizes"):
+        richardson(values, (1.0, 2.0, 4.0))
 
 
 def test_parse_target():
@@ -75,3 +96,72 @@ def test_bad_accuracy_requests_one_line_exit_2(args, text, tmp_path, capsys):
         code = cli.main(["run", str(path), *args])
     err = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
     assert code == 2 and len(err) == 1 and text in err[0], err
+
+
+def _write(tmp_path: Path, data: dict, name: str) -> Path:
+    data = json.loads(json.dumps(data))
+    data["output"].update(dir=str(tmp_path / name), render=False)
+    path = tmp_path / f"{name}.toml"
+    path.write_text(dumps(data))
+    return path
+
+
+STRETCH = {   # a plate pulled by an edge traction, in-plane (uz = 0 everywhere): pure tension
+    "scene": {"name": "stretch", "kind": "static"},
+    "mesh": {"type": "plate", "lx": 0.2, "ly": 0.1, "nx": 8, "ny": 4},
+    "fabric": {"E1": 5e6, "E2": 3e6, "G12": 2e5, "nu12": 0.3, "thickness": 5e-4, "density": 600.0},
+    "support": [{"edge": "left", "u": [0, 0, 0], "theta": [0, 0]}, {"edge": "all", "u": ["free", "free", 0]}],
+    "load": [{"type": "edge_traction", "edge": "right", "value": [100.0, 0.0, 0.0]}],
+    "solver": {"targets": [1.0], "initial_step": 1.0},
+    "output": {"probe": [0.2, 0.0, 0.0]},
+    "accuracy": {"quantity": "probe_ux_m", "finer_levels": 1},
+}
+
+
+def test_membrane_chosen_for_pure_tension(tmp_path, capsys):
+    """The stretched plate: the membrane pilots agree with the shell's extrapolated value, so the plan chooses
+    the membrane (fewer dofs per node) at 10%; the plan table has the model column; run --accuracy delivers the
+    membrane and says so in summary.json."""
+    path = _write(tmp_path, STRETCH, "stretch")
+    chosen = plan(load_scene(path), 0.10).require()
+    out = capsys.readouterr().out
+    assert chosen.model == "membrane" and chosen.error <= 0.10 and " membrane " in out and " naghdi " in out
+    assert cli.main(["run", str(path), "--accuracy", "10%"]) == 0
+    summary = json.loads((tmp_path / "stretch" / "summary.json").read_text())
+    assert summary["accuracy_model"] == "membrane" and summary["status"] == "completed"
+    off = {**STRETCH, "accuracy": {**STRETCH["accuracy"], "membrane": False}}
+    assert plan(load_scene(_write(tmp_path, off, "shell_only")), 0.10).require().model == "naghdi"
+
+
+def test_membrane_not_chosen_where_bending_matters(tmp_path, capsys):
+    """The rolled strip: edge moments, the membrane is not considered; the drape: the membrane pilot does not
+    solve (no bending stiffness), the shell is chosen."""
+    strip = plan(load_scene(_strip(tmp_path)), 0.05)
+    assert strip.require().model == "naghdi" and "edge moments" in strip.model_note
+    drape = plan(load_scene(_write(tmp_path, DRAPE, "drape")), 0.03)
+    assert drape.require().model == "naghdi" and "did not solve" in drape.model_note
+    assert all(lv.model == "naghdi" for lv in drape.levels)
+    assert "did not solve" in capsys.readouterr().out
+
+
+def test_sleeve_series_choice_is_refused_and_says_why():
+    """The sleeve's torque at 57 degrees on meshes I-III (stored study) is not asymptotic for either friction
+    coefficient; every target is refused, and where mesh III happens to meet 10% against mesh IV the refusal is
+    said to be conservative."""
+    rows = sleeve_choices((0.10, 0.03, 0.01))
+    assert len(rows) == 6 and all(r["chosen"] is None and not r["asymptotic"] for r in rows)
+    mu01, mu05 = rows[0], rows[3]
+    assert "observed order 4.27 outside [0.5, 2]" in mu01["note"] and "change sign" in mu05["note"]
+    assert mu01["estimated_errors_static_orders"].split()[-1] == "0.033"   # the static range would be fooled
+    assert mu01["true_errors"].split()[-1] == "0.226"
+    assert "conservative: mesh III meets it" in verdict(mu05) and "NOT ASYMPTOTIC" in verdict(mu05)
+    assert all(r["brute"] is None for r in rows if r is not mu05)
+
+
+def test_sleeve_series_bad_files(tmp_path):
+    with pytest.raises(ValueError, match="mesh_mu0.1.csv: the sleeve study's mesh series is missing"):
+        sleeve_choices((0.1,), tmp_path)
+    text = (SLEEVE_FIGURES / "mesh_mu0.1.csv").read_text().splitlines()
+    (tmp_path / "mesh_mu0.1.csv").write_text("\n".join(line for line in text if "mesh IV" not in line))
+    with pytest.raises(ValueError, match="no row of mesh IV at 57 degrees"):
+        sleeve_choices((0.1,), tmp_path)

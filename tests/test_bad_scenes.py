@@ -88,6 +88,8 @@ BAD = [  # (scene kind, mutation, text the one-line error must contain)
     ("static", _set("accuracy", quantity="tip_angle", target=0.02), "accuracy.quantity"),
     ("explicit", _set("accuracy", quantity="corner_uy", target=0.02), "accuracy.quantity"),
     ("compression", _set("accuracy", quantity="x", target=0.02), "accuracy"),
+    ("static", _set("accuracy", quantity="probe_ux_m", membrane="yes"), "accuracy.membrane"),
+    ("static", _first("support", edge="al"), "did you mean 'all'"),
 ]
 
 

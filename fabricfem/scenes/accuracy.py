@@ -1,18 +1,29 @@
-"""An accuracy target chooses the mesh: `fabricfem plan SCENE --accuracy 2%`, `fabricfem run SCENE --accuracy 2%`.
+"""An accuracy target chooses the mesh and the model: `fabricfem plan SCENE --accuracy 2%`, `fabricfem run SCENE
+--accuracy 2%`.
 
 Levels: level k is the scene with every cell count of its [mesh] (nx, ny or n_around, n_along) times 2^k and, for
 a dynamic scene with a numeric dt, dt / 2^k (dt = "auto" follows the mesh by itself; output_every x 2^k keeps the
 record times). The pilots k = -2, -1, 0 are solved (each into `<out>/accuracy/level<k>/`, read back when that
 folder holds a completed run of the same level scene); the quantity q (a monitored output, `AccuracySection`)
-of the three gives the observed order p = log(|q_-2 - q_-1| / |q_-1 - q_0|) / log 2 and the Richardson
-extrapolation q* = q_0 + (q_0 - q_-1) / (2^p - 1). Estimated relative error of level k: |q_k - q*| / |q*| for a
-pilot, e_0 2^(-p k) for a finer level. The sequence is "not asymptotic" when the differences change sign, do not
-shrink, or p lies outside [P_MIN, P_MAX]; then only pilots can be chosen, each with the conservative estimate
-max_{j >= k} |q_j - q_0| / |q_0| (e_0 = |q_-1 - q_0| / |q_0|), and a target that no pilot meets is refused.
+of the three gives the observed order, the extrapolated value q* and the estimated relative error of every level
+(fabricfem.scenes.richardson: a pilot's |q_k - q*| / |q*|, a finer level's e_0 2^(-p k); plausible orders
+ORDERS by scene kind). When the sequence is
+not asymptotic only pilots can be chosen, with the conservative estimates of fabricfem.scenes.richardson, and a
+target that no pilot meets is refused.
+
+Model levels ([accuracy] membrane = true, the default): a shell scene whose loads, supports and monitors a
+membrane can carry (no edge moments, no rotation monitors; rotation supports are dropped) is also solved with the
+membrane model at the pilot levels (`<out>/accuracy/membrane<k>/`; a level that does not solve, as a membrane
+without tension does not, ends the membrane's pilots). The membrane's estimated error is its difference to the
+shell's best value: |q_m,k - q*| / |q*| (asymptotic shell), else |q_m,k - q_0| / |q_0| + e_0 (the shell's
+conservative estimate of its finest pilot). So the membrane is chosen for pure tension, where it agrees with
+the shell, and not where bending matters.
+
 Cost: the measured wall times [s] of the pilots; a finer level's predicted wall time is
 wall_0 (dofs_k steps_k / dofs_0 steps_0)^a with a from the two finest pilots, clamped to [1, 2] (work per step
-is linear in the dofs up to the direct solver's fill). The cheapest level whose estimated error is at most the
-target is chosen (levels up to `finer_levels` above the scene's mesh); none: refused (`Plan.require`).
+is linear in the dofs up to the direct solver's fill). The level of least work (dofs x steps) whose estimated
+error is at most the target is chosen (shell levels up to `finer_levels` above the scene's mesh, membrane
+pilots); none: refused (`Plan.require`).
 """
 from __future__ import annotations
 
@@ -22,15 +33,18 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from mpi4py import MPI
+from petsc4py import PETSc
 
 from fabricfem import io
+from fabricfem.dynamics.newmark import DynamicsError
 from fabricfem.scenes.build import critical_time_step_estimate, estimated_dofs, validate
+from fabricfem.scenes.richardson import ORDERS, richardson
 from fabricfem.scenes.run import output_dir, run_scene, scene_name, scene_sha256
 from fabricfem.scenes.schema import Scene, SceneError, accuracy_summary_key, check_target
 from fabricfem.scenes.sections import AccuracySection, DynamicsSection, ModelSection, section
 from fabricfem.scenes.sweep import read_summary
+from fabricfem.solvers.newton import SolverError
 
-P_MIN, P_MAX = 0.5, 6.0          # plausible observed orders of a mesh sequence
 PILOTS = (-2, -1, 0)             # levels solved to estimate the error
 MESH_COUNTS = {"plate": ("nx", "ny"), "tube": ("n_around", "n_along")}
 
@@ -55,11 +69,17 @@ class Level:
         """dofs x time steps (1 step for a static solve)."""
         return float(self.dofs * self.steps)
 
+    @property
+    def model(self) -> str:
+        """naghdi (the shell) or membrane."""
+        return section(ModelSection, self.scene.get("model")).kind
+
 
 @dataclass
 class Plan:
-    """The accuracy plan of a scene: the levels (pilots solved), the observed order p, the extrapolated value,
-    whether the pilots are in the asymptotic range (and why not), and the chosen level (None: target not met)."""
+    """The accuracy plan of a scene: the levels (pilots solved; shell then membrane), the observed order p, the
+    extrapolated value, whether the pilots are in the asymptotic range (and why not), what became of the membrane
+    alternative (`model_note`) and the chosen level (None: target not met)."""
 
     quantity: str
     target: float
@@ -68,14 +88,15 @@ class Plan:
     extrapolated: float | None
     asymptotic: bool
     note: str
+    model_note: str = ""
     chosen: Level | None = None
     header: tuple = field(default=("level", "model", "cells", "dofs", "step_s", "value", "estimated_error",
                                    "wall_s", "solved"))
 
     def rows(self) -> list[list]:
         """One row per level (the columns of `header`)."""
-        return [[lv.k, section(ModelSection, lv.scene.get("model")).kind, _cells(lv.scene), lv.dofs, lv.step,
-                 lv.value, lv.error, lv.cost_s, lv.value is not None] for lv in self.levels]
+        return [[lv.k, lv.model, _cells(lv.scene), lv.dofs, lv.step, lv.value, lv.error, lv.cost_s,
+                 lv.value is not None] for lv in self.levels]
 
     def table(self) -> str:
         """The plan as printed: one line per level, the estimate and the choice."""
@@ -87,10 +108,9 @@ class Plan:
         for lv in self.levels:
             mark = " <- chosen" if lv is self.chosen else ""
             cost = "" if lv.cost_s is None else f"{lv.cost_s:.3g}" + ("" if lv.value is not None else " (pred.)")
-            lines.append(f"  {lv.k:>+5d} {section(ModelSection, lv.scene.get('model')).kind:>8} "
-                         f"{_cells(lv.scene):>9} {lv.dofs:>8d} {_fmt(lv.step, '.4g'):>10} "
+            lines.append(f"  {lv.k:>+5d} {lv.model:>8} {_cells(lv.scene):>9} {lv.dofs:>8d} {_fmt(lv.step, '.4g'):>10} "
                          f"{_fmt(lv.value, '.6g'):>13} {_fmt(lv.error, '.2e'):>10} {cost:>10}{mark}")
-        return "\n".join(lines)
+        return "\n".join(lines + ([f"  {self.model_note}"] if self.model_note else []))
 
     def require(self) -> Level:
         """The chosen level; SceneError with the best estimate when no level meets the target."""
@@ -106,7 +126,7 @@ class Plan:
         """The entries added to the delivered run's summary.json."""
         c = self.chosen
         return {"accuracy_quantity": self.quantity, "accuracy_target": self.target, "accuracy_level": c.k,
-                "accuracy_estimated_error": c.error, "accuracy_order": self.order,
+                "accuracy_model": c.model, "accuracy_estimated_error": c.error, "accuracy_order": self.order,
                 "accuracy_extrapolated": self.extrapolated, "accuracy_asymptotic": self.asymptotic,
                 "accuracy_note": self.note, "accuracy_predicted_wall_s": c.cost_s}
 
@@ -144,10 +164,26 @@ def target_of(scene: Scene, target: float | None = None, quantity: str | None = 
     return quantity, check_target("accuracy.target", target)
 
 
-def level_scene(scene: Scene, k: int, out: Path) -> Level:
-    """Level k of `scene` (module docstring) writing into `out`, validated; SceneError naming the mesh key when
-    a cell count cannot be divided by 2^-k."""
-    data = copy.deepcopy(scene.data)
+def membrane_variant(data: dict) -> tuple[dict | None, str]:
+    """(the scene data with the membrane model, "") or (None, why the scene needs the shell): a membrane carries
+    no edge moments and has no rotations to monitor; rotation supports are dropped (a membrane has none)."""
+    if section(ModelSection, data.get("model")).kind != "naghdi":
+        return None, ""
+    if any(load["type"] == "edge_moment" for load in data.get("load", [])):
+        return None, "membrane: not considered (the edge moments need the shell's rotations)"
+    if any(m.get("field") == "theta" for m in data.get("dynamics", {}).get("monitors", [])):
+        return None, "membrane: not considered (a rotation monitor needs the shell)"
+    data = copy.deepcopy(data)
+    data["model"] = {"kind": "membrane"}
+    for support in data.get("support", []):
+        support.pop("theta", None)
+    return data, ""
+
+
+def level_scene(scene: Scene, k: int, out: Path, data: dict | None = None) -> Level:
+    """Level k of `scene` (or of its variant `data`, e.g. the membrane's; module docstring) writing into `out`,
+    validated; SceneError naming the mesh key when a cell count cannot be divided by 2^-k."""
+    data = copy.deepcopy(scene.data if data is None else data)
     data.pop("accuracy", None)
     mesh = data["mesh"]
     for key in MESH_COUNTS[mesh["type"]]:
@@ -181,33 +217,37 @@ def solve(level: Level, key: str, comm=MPI.COMM_WORLD) -> bool:
     if solved:
         outcome = run_scene(level.scene, comm)
         if outcome.status != "completed":
-            raise SceneError(f"accuracy level {level.k:+d}: the run {outcome.status}")
+            raise SceneError(f"accuracy level {level.k:+d} ({level.model}): the run {outcome.status}")
         summary = comm.bcast(read_summary(folder) if comm.rank == 0 else None, root=0)
     level.value, level.wall_s = float(summary[key]), float(summary["wall_s"])
     level.cost_s = level.wall_s
     return solved
 
 
-def richardson(values: list[float], ratio: float = 2.0) -> tuple[float | None, float | None, str]:
-    """(observed order p, extrapolated value, "" or why the sequence is not asymptotic) of three values on
-    meshes refined by `ratio`, coarse to fine."""
-    d1, d2 = values[1] - values[0], values[2] - values[1]
-    if d2 == 0.0:
-        return None, values[2], "" if d1 == 0.0 else "the finest difference is zero"
-    if d1 * d2 < 0.0:
-        return None, None, "the differences change sign"
-    if abs(d2) >= abs(d1):
-        return None, None, "the differences do not shrink"
-    p = math.log(abs(d1) / abs(d2)) / math.log(ratio)
-    if not P_MIN <= p <= P_MAX:
-        return p, None, f"observed order {p:.2f} outside [{P_MIN:g}, {P_MAX:g}]"
-    return p, values[2] + d2 / (ratio ** p - 1.0), ""
+def _membrane_pilots(scene: Scene, key: str, root: Path, comm, say) -> tuple[list[Level], str]:
+    """The membrane's solved pilot levels and a note (why none or fewer were solved)."""
+    data, note = membrane_variant(scene.data)
+    if data is None or not section(AccuracySection, scene.get("accuracy")).membrane:
+        return [], note
+    solved = []
+    for k in PILOTS:
+        level = level_scene(scene, k, root / f"membrane{k:+d}", data)
+        try:
+            fresh = solve(level, key, comm)
+        except (SolverError, DynamicsError, SceneError, PETSc.Error) as exc:   # a membrane without tension: singular
+            why = f"PETSc error {exc.ierr} in the solve" if isinstance(exc, PETSc.Error) else " ".join(str(exc).split())
+            return solved, f"membrane: level {k:+d} did not solve ({why}); not a candidate from there on"
+        say(f"accuracy: membrane level {k:+d} ({_cells(level.scene)} cells, {level.dofs} dofs) "
+            f"{'solved' if fresh else 'read back'}: {level.value:.6g}")
+        solved.append(level)
+    return solved, ""
 
 
 def plan(scene: Scene, target: float | None = None, quantity: str | None = None, comm=MPI.COMM_WORLD,
          say=None) -> Plan:
-    """Solve the pilots, estimate the error of every level and choose the cheapest one that meets the target
-    (module docstring; `Plan.chosen` is None when no level does, `Plan.require` refuses)."""
+    """Solve the pilots (shell, then the membrane where the scene permits it), estimate the error of every level
+    and choose the one of least work that meets the target (module docstring; `Plan.chosen` is None when no level
+    does, `Plan.require` refuses)."""
     say = say or ((lambda m: print(m, flush=True)) if comm.rank == 0 else (lambda m: None))
     quantity, target = target_of(scene, target, quantity)
     key = accuracy_summary_key(scene.data, quantity)
@@ -220,31 +260,29 @@ def plan(scene: Scene, target: float | None = None, quantity: str | None = None,
         solved = solve(lv, key, comm)
         say(f"accuracy: level {lv.k:+d} ({_cells(lv.scene)} cells, {lv.dofs} dofs) "
             f"{'solved' if solved else 'read back'}: {lv.value:.6g} {clock((i + 1) / len(pilots))}")
-    values = [lv.value for lv in pilots]
-    order, extrapolated, note = richardson(values)
-    asymptotic = not note and extrapolated not in (None, 0.0)
-    if asymptotic:
-        e0 = abs(values[-1] - extrapolated) / abs(extrapolated)
-        for lv in levels:
-            lv.error = abs(lv.value - extrapolated) / abs(extrapolated) if lv.value is not None else \
-                e0 * 2.0 ** (-order * lv.k) if e0 > 0.0 else 0.0
-    else:
-        scale = abs(values[-1]) or 1.0
-        for i, lv in enumerate(pilots):
-            lv.error = (abs(values[-2] - values[-1]) if i == len(pilots) - 1 else
-                        max(abs(v - values[-1]) for v in values[i:])) / scale
+    estimate = richardson([lv.value for lv in pilots], orders=ORDERS[scene.kind])
+    for lv, error in zip(pilots, estimate.errors):
+        lv.error = error
+    for lv in levels[len(PILOTS):]:
+        lv.error = estimate.finer(2.0 ** lv.k)
     a = _cost_exponent(pilots[-2], pilots[-1])
     for lv in levels[len(PILOTS):]:
         lv.cost_s = pilots[-1].wall_s * (lv.work / pilots[-1].work) ** a
-    result = Plan(quantity, target, levels, order, extrapolated, asymptotic, note or "")
-    meeting = [lv for lv in levels if lv.error is not None and lv.error <= target]
+    membrane, model_note = _membrane_pilots(scene, key, root, comm, say)
+    best, best_error = (estimate.extrapolated, 0.0) if estimate.asymptotic else (pilots[-1].value, pilots[-1].error)
+    for lv in membrane:   # model + discretisation error: the difference to the shell's best value
+        lv.error = abs(lv.value - best) / (abs(best) or 1.0) + best_error
+    result = Plan(quantity, target, levels + membrane, estimate.order, estimate.extrapolated, estimate.asymptotic,
+                  estimate.note, model_note)
+    meeting = [lv for lv in result.levels if lv.error is not None and lv.error <= target]
     result.chosen = min(meeting, key=lambda lv: lv.work) if meeting else None
     say(result.table())
     c = result.chosen
     if c is not None:
-        say(f"accuracy: chose level {c.k:+d} ({_cells(c.scene)} cells, {c.dofs} dofs): estimated error "
+        say(f"accuracy: chose level {c.k:+d} {c.model} ({_cells(c.scene)} cells, {c.dofs} dofs): estimated error "
             f"{c.error:.2e} <= {target:.3g}, {'measured' if c.value is not None else 'predicted'} wall "
-            f"{c.cost_s:.3g} s" + ("" if asymptotic else f" (NOT ASYMPTOTIC: {note}; conservative choice)"))
+            f"{c.cost_s:.3g} s" + ("" if estimate.asymptotic else
+                                   f" (NOT ASYMPTOTIC: {estimate.note}; conservative choice)"))
     return result
 
 
@@ -272,6 +310,7 @@ def run_accurate(scene: Scene, target: float | None = None, quantity: str | None
     if comm.rank == 0:
         key = accuracy_summary_key(scene.data, chosen.quantity)
         value = read_summary(out).get(key)
-        print(f"accuracy: {chosen.quantity} = {value} at level {chosen.chosen.k:+d}, estimated relative error "
-              f"{chosen.chosen.error:.2e} (target {chosen.target:.3g}); wrote {out}/accuracy_plan.csv", flush=True)
+        print(f"accuracy: {chosen.quantity} = {value} at level {chosen.chosen.k:+d} ({chosen.chosen.model}), "
+              f"estimated relative error {chosen.chosen.error:.2e} (target {chosen.target:.3g}); "
+              f"wrote {out}/accuracy_plan.csv", flush=True)
     return chosen, outcome

@@ -30,7 +30,7 @@ from fabricfem.dynamics.strain_limit import FastProjection, attach
 from fabricfem.dynamics.ts import GeneralizedAlphaIntegrator
 from fabricfem.scenes import wear
 from fabricfem.scenes.build import build_fabric, build_mesh, sleeve_config
-from fabricfem.scenes.schema import Scene, SceneError, donning_start
+from fabricfem.scenes.schema import ALL_NODES, Scene, SceneError, donning_start
 from fabricfem.scenes.sections import (
     DonningSection,
     DynamicsSection,
@@ -86,6 +86,8 @@ def build_model(scene: Scene, comm=MPI.COMM_WORLD) -> ShellModel:
     for i, support in enumerate(scene.get("support", [])):
         if "point" in support:
             where = _node_locator(model, support["point"], f"support[{i}].point")
+        elif support["edge"] == ALL_NODES:
+            where = lambda x: np.full(x.shape[1], True)   # noqa: E731 (every node)
         elif support["edge"] not in fmesh.tags:
             raise SceneError(f"support[{i}].edge: unknown edge {support['edge']!r}; available: {sorted(fmesh.tags)}")
         else:

@@ -222,6 +222,7 @@ BODY_TYPES = {"default_arm"}
 MOTION_TYPES = {"elbow_flexion"}
 CELLS = ("quadrilateral", "triangle")
 EDGES = {"plate": ("left", "right", "bottom", "top"), "tube": ("end0", "end1")}   # edge tags of the builders
+ALL_NODES = "all"   # a support on every node (e.g. u = ["free", "free", 0]: an in-plane problem)
 MESH_KEYS = {"plate": {"lx", "ly", "nx", "ny"}, "tube": {"length", "radius", "n_around", "n_along"}}
 LOAD_TYPES = {"gravity", "body_force", "edge_traction", "pressure", "edge_moment", "point"}
 
@@ -340,9 +341,9 @@ def validate(data: dict, source: str = "scene") -> Scene:
                     raise SceneError(f"support[{i}].{key}: expected {n} components (numbers or \"free\"), "
                                      f"got {values!r}")
                 _numbers(f"support[{i}].{key}", [0.0 if v == "free" else v for v in values], n)
-        if "edge" in support and support["edge"] not in edges:
+        if "edge" in support and support["edge"] not in (*edges, ALL_NODES):
             raise SceneError(f"support[{i}].edge: a {mesh['type']} has no edge {support['edge']!r}"
-                             f"{_suggest(support['edge'], edges)}; edges: {list(edges)}")
+                             f"{_suggest(support['edge'], (*edges, ALL_NODES))}; edges: {[*edges, ALL_NODES]}")
     if data.get("output", {}).get("probe") is not None:
         _numbers("output.probe", data["output"]["probe"], 3)
     for key in ("E1", "E2", "G12", "nu12", "thickness", "density", "G13"):

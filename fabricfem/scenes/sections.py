@@ -112,7 +112,8 @@ class ModelSection:
 class SupportSection:
     """[[support]]: a held edge or node."""
 
-    edge: str | None = doc("edge tag of the mesh", None)
+    edge: str | None = doc("edge tag of the mesh, or \"all\": every node (e.g. u = [\"free\", \"free\", 0] "
+                           "for an in-plane problem)", None)
     point: list | None = doc("[x, y, z] of a mesh node [m] (instead of edge)", None)
     u: list | None = doc("[ux, uy, uz] [m] or \"free\" per component", None)
     theta: list | None = doc("[theta1, theta2] [rad] or \"free\"", None)
@@ -235,6 +236,9 @@ class AccuracySection:
                                "max_strain_final", None)
     target: float | None = doc("relative error target, in (0, 1) (e.g. 0.02)", None)
     finer_levels: int = doc("levels finer than the scene's mesh that may be chosen (cell counts x 2, x 4, ...)", 2)
+    membrane: bool = doc("a shell scene: also solve the membrane model at the pilot levels and choose it where its "
+                         "difference to the shell's extrapolated value meets the target (not with edge moments or "
+                         "rotation monitors)", True)
 
 
 def section(cls, table: dict | None):
