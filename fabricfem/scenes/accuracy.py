@@ -24,11 +24,11 @@ from pathlib import Path
 from mpi4py import MPI
 
 from fabricfem import io
+from fabricfem.scenes.batch import read_summary
 from fabricfem.scenes.build import critical_time_step_estimate, estimated_dofs, validate
 from fabricfem.scenes.run import output_dir, run_scene, scene_name, scene_sha256
 from fabricfem.scenes.schema import Scene, SceneError, accuracy_summary_key, check_target
 from fabricfem.scenes.sections import AccuracySection, DynamicsSection, ModelSection, section
-from fabricfem.scenes.sweep import read_summary
 
 P_MIN, P_MAX = 0.5, 6.0          # plausible observed orders of a mesh sequence
 PILOTS = (-2, -1, 0)             # levels solved to estimate the error
