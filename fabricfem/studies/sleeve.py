@@ -3,8 +3,9 @@
 Each variant is one flexion (fabricfem.wear.sleeve, explicit dynamics by default) giving a resisting-torque-vs-angle curve;
 each figure gets <out>/<figure>.csv (variant, angle_deg, torque_Nm, ...) and <out>/<figure>.png. Variants
 that stop before the final angle (blow-up or Newton failure, see fabricfem.wear.sleeve) keep their partial curve and the
-reason is written to <out>/failures.csv. Independent variants are shared over the MPI ranks (each rank
-runs its variants on COMM_SELF). `quick` runs mesh I only, to 6 degrees (records at 3 and 6; test suite):
+reason is written to <out>/failures.csv. The distinct variants run as one batch (fabricfem.scenes.batch, the
+machinery of `fabricfem sweep`): groups of `ranks_per_variant` ranks (default 1), longest first (`relative_cost`)
+to the least loaded group; the same command runs under `mpirun -n N`. `quick` runs mesh I only, to 6 degrees (records at 3 and 6; test suite):
 its numbers are a reduced study, not the thesis's. `fine` / `meshes` choose the mesh of the parameter
 figures (default III, as the thesis's "well-refined" sleeve) and of the mesh series (default I-IV); a
 coarser choice is a reduced-resolution study and README.txt says so.
@@ -14,12 +15,9 @@ flexion speed and mass damping times c_k / c_I, c = sqrt(E / rho)), so they cost
 carry fabric I's relative inertia and damping; fabric I of that figure runs with the flag too (factor 1).
 
 Checkpoints: every finished variant is written to <out>/variants/<hash of its configuration>.csv and a
-rerun of the study reads it instead of flexing again (an interrupted or partly rerun study resumes).
-`mesh_frictions` and `only` select the mesh series and figures; the variants are scheduled longest first
-on the least loaded rank (`schedule`).
-
-Progress: rank 0 prints one line when each variant starts and ends, for its own variants and, relayed by
-point-to-point messages polled between its records, for the other ranks' variants.
+rerun of the study reads it instead of flexing again (an interrupted or partly rerun study resumes); the
+figures are written from these files. `mesh_frictions` and `only` select the mesh series and figures.
+Progress: each group's first rank prints one line when each of its variants starts and ends.
 """
 from __future__ import annotations
 
@@ -33,6 +31,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fabricfem.materials import positive_number
+from fabricfem.scenes.batch import Job, run_batch
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.outputs import plot_torque
 from fabricfem.wear.run import build_run, run_sleeve
@@ -99,24 +98,15 @@ def relative_cost(config: SleeveConfig) -> float:
     return (config.tube.n_around * config.tube.n_along) ** 1.5
 
 
-def schedule(configs: list[SleeveConfig], ranks: int) -> list[int]:
-    """Rank of each configuration: longest first, each to the least loaded rank (the same on every rank)."""
-    load = [0.0] * ranks
-    owner = [0] * len(configs)
-    for i in sorted(range(len(configs)), key=lambda k: -relative_cost(configs[k])):
-        r = min(range(ranks), key=lambda k: load[k])
-        owner[i] = r
-        load[r] += relative_cost(configs[i])
-    return owner
-
-
 def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
               comm: MPI.Comm = MPI.COMM_WORLD, fine: str = "III",
               meshes: tuple[str, ...] = ("I", "II", "III", "IV"),
               fabrics: tuple[str, ...] = ("I", "II", "III"), mesh_frictions: tuple[float, ...] = (0.1, 0.5),
-              only: tuple[str, ...] | None = None) -> dict[str, dict[str, SleeveHistory]]:
-    """Run every distinct variant once (longest first, to the least loaded rank: `schedule`), write CSV + PNG
-    per figure."""
+              only: tuple[str, ...] | None = None, ranks_per_variant: int = 1) -> dict[str, dict[str, SleeveHistory]]:
+    """Run every distinct variant once as one batch (fabricfem.scenes.batch.run_batch: groups of
+    `ranks_per_variant` ranks, longest first by `relative_cost` to the least loaded group; a variant saved in
+    <out>/variants is read back, not rerun), then write CSV + PNG per figure from the saved variants. A variant
+    that raises is reported after the others have run and saved (RuntimeError naming it)."""
     out = Path(out)
     figures = variants(quick, fine, meshes, fabrics, mesh_frictions, only)
     unique: list[SleeveConfig] = []
@@ -127,30 +117,22 @@ def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
     say = (lambda m: print(m, flush=True)) if comm.rank == 0 else (lambda m: None)
     say(f"sleeve study{' (quick, reduced)' if quick else ''}: {len(unique)} variants on {comm.size} rank(s)")
     t0 = time.perf_counter()
-    progress = _Progress(comm, t0, len(unique))
-    owner = schedule(unique, comm.size)
-    order = sorted(range(len(unique)), key=lambda k: -relative_cost(unique[k]))
-    mine = {}
-    for i in order:
-        cfg = unique[i]
-        if owner[i] != comm.rank:
-            continue
-        saved = _load_variant(out, cfg)
-        if saved is not None:
-            mine[i] = saved
-            progress.report(f"variant {i + 1}/{len(unique)} read from {_variant_path(out, cfg)} (not rerun)")
-            progress.report(f"variant {i + 1}/{len(unique)} done on rank {comm.rank}: {_describe(cfg)}")
-            continue
-        progress.report(f"variant {i + 1}/{len(unique)} started on rank {comm.rank}: {_describe(cfg)}")
-        h = run_sleeve(cfg, MPI.COMM_SELF, on_step=lambda step: progress.poll(), stop_on_failure=False)
-        _save_variant(out, cfg, h)
-        mine[i] = h
-        progress.report(f"variant {i + 1}/{len(unique)} done on rank {comm.rank}: {_describe(cfg)}: reached "
-                        f"{h.angles[-1]:.1f} deg, torque {h.torques[-1]:.4e} N m, {h.wall:.0f} s"
-                        + (f" STOPPED: {h.failure}" if h.failure else ""))
-    progress.finish(sum(1 for i in range(len(unique)) if owner[i] != 0))
-    gathered = comm.allgather(mine)
-    histories = {k: v for d in gathered for k, v in d.items()}
+
+    def flex(cfg: SleeveConfig, sub: MPI.Comm) -> str:
+        h = run_sleeve(cfg, sub, stop_on_failure=False)
+        if sub.rank == 0:
+            _save_variant(out, cfg, h)
+        return (f"reached {h.angles[-1]:.1f} deg, torque {h.torques[-1]:.4e} N m"
+                + (f" STOPPED: {h.failure}" if h.failure else ""))
+
+    jobs = [Job(f"variant {i + 1}/{len(unique)} ({_describe(cfg)})", relative_cost(cfg),
+                lambda sub, cfg=cfg: flex(cfg, sub), lambda cfg=cfg: _load_variant(out, cfg) is not None)
+            for i, cfg in enumerate(unique)]
+    failed = run_batch(jobs, comm, ranks_per_variant, "sleeve study")
+    if failed:
+        raise RuntimeError(f"sleeve study: {len(failed)} variant(s) failed (the others are saved in {out}/variants; "
+                           f"a rerun resumes): " + "; ".join(f"{name}: {why}" for name, why in failed.items()))
+    histories = {i: _load_variant(out, cfg) for i, cfg in enumerate(unique)}
     results = {name: {label: histories[unique.index(cfg)] for label, cfg in fig.items()}
                for name, fig in figures.items()}
     if comm.rank == 0:
@@ -186,9 +168,6 @@ def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
                if similar else ""))
     say(f"wrote {out}/<figure>.csv and .png for {sorted(results)} ({time.perf_counter() - t0:.0f} s)")
     return results
-
-
-PROGRESS_TAG = 4711
 
 
 def _variant_path(out: Path, cfg: SleeveConfig) -> Path:
@@ -238,42 +217,6 @@ def _describe(cfg: SleeveConfig) -> str:
     return (f"{cfg.tube.n_around}x{cfg.tube.n_along} mu={cfg.contact.friction} R={cfg.tube.radius} t={cfg.material.thickness} E={cfg.material.E:.3g}"
             + (f" (similarity: {cfg.flexion_speed:.4g} deg/s)" if cfg.route.dynamic_similarity and
                cfg.similarity_factor != 1.0 else ""))
-
-
-class _Progress:
-    """Progress lines printed by rank 0 only: its own, and those the other ranks send (non-blocking sends,
-    polled by rank 0 after every record of its own flexions and collected at the end)."""
-
-    def __init__(self, comm: MPI.Comm, t0: float, total: int):
-        self.comm, self.t0, self.total = comm, t0, total
-        self.requests = []
-        self.received = 0
-
-    def _print(self, message: str):
-        print(f"  [{time.perf_counter() - self.t0:6.0f} s] {message}", flush=True)
-
-    def report(self, message: str):
-        if self.comm.rank == 0:
-            self._print(message)
-            self.poll()
-        else:
-            self.requests.append(self.comm.isend(message, dest=0, tag=PROGRESS_TAG))
-
-    def poll(self):
-        if self.comm.rank != 0 or self.comm.size == 1:
-            return
-        while self.comm.iprobe(source=MPI.ANY_SOURCE, tag=PROGRESS_TAG):
-            self._print(self.comm.recv(source=MPI.ANY_SOURCE, tag=PROGRESS_TAG))
-            self.received += 1
-
-    def finish(self, remote_variants: int):
-        """Rank 0: print the remaining messages (two per variant of the other ranks); others: complete sends."""
-        if self.comm.rank == 0:
-            while self.received < 2 * remote_variants:
-                self._print(self.comm.recv(source=MPI.ANY_SOURCE, tag=PROGRESS_TAG))
-                self.received += 1
-        else:
-            MPI.Request.waitall(self.requests)
 
 
 # ------------------------------------------------------------------------------------------------------------
