@@ -7,8 +7,8 @@ fastest). Each is the scene with those keys replaced, validated completely (fabr
 before anything runs: a bad key or value is refused naming the variant and the key. A variant runs into its own
 folder `<out>/<name>/` (name from its key=value pairs) with fabricfem.scenes.run.run_scene as one batch
 (fabricfem.scenes.batch.run_batch: sub-communicators of `ranks_per_variant` ranks, longest first by
-`estimated_cost` to the least loaded group). Resumable: a variant whose folder holds a summary.json with status "completed" and the
-variant's scene hash (run.scene_sha256) is read back, not rerun. Rank 0 writes `<out>/sweep.csv` (the variant's
+`estimated_cost` to the least loaded group). Resumable: a variant whose folder holds a summary.json with status
+"completed" and the variant's scene hash (run.scene_sha256) is read back, not rerun. Rank 0 writes `<out>/sweep.csv` (the variant's
 keys, its status and the scalar entries of its summary.json; numeric lists flattened as `<key>_<i>`) and
 `<out>/sweep.png` (one summary quantity against the first varied key, one curve per combination of the others).
 """
