@@ -31,7 +31,7 @@ from fabricfem.benchmarks.wear_speed import wear_bench
 from fabricfem.demo import rollup_demo
 from fabricfem.dynamics.newmark import DynamicsError
 from fabricfem.scenes.accuracy import parse_target, plan, run_accurate
-from fabricfem.scenes.batch import groups_of
+from fabricfem.scenes.batch import BatchError, groups_of
 from fabricfem.scenes.run import run_scene, scene_name
 from fabricfem.scenes.sweep import parse_vary, run_sweep
 from fabricfem.solvers.newton import SolverError
@@ -161,6 +161,11 @@ def main(argv: list[str] | None = None) -> int:
     logging.disable(logging.NOTSET if args.verbose else logging.INFO)
     try:
         return _command(args)
+    except BatchError as exc:      # a study's variants that failed, named after the others ran (a rerun resumes)
+        if args.debug:
+            raise
+        _print(f"fabricfem {args.command}: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 1
     except USER_ERRORS as exc:
         if args.debug:
             raise

@@ -7,6 +7,7 @@ from pathlib import Path
 import pytest
 from mpi4py import MPI
 
+from fabricfem import cli
 from fabricfem.scenes import batch
 from fabricfem.studies import pants, sleeve
 from fabricfem.studies import unit_cell as unit_cell_study
@@ -61,7 +62,7 @@ def test_killed_sleeve_study_resumes_longest_first(monkeypatch, tmp_path):
     monkeypatch.setattr(sleeve, "run_sleeve", _stub_sleeve(calls, kill={3}))
     options = dict(quick=False, comm=MPI.COMM_SELF, fine="II", meshes=("I", "II", "III"), fabrics=("I",),
                    mesh_frictions=(0.1,), only=("mesh_mu0.1", "friction"))
-    with pytest.raises(RuntimeError, match="1 variant.*failed.*killed"):
+    with pytest.raises(batch.BatchError, match="1 variant.*failed.*killed"):
         sleeve.run_study(tmp_path, **options)
     assert calls == [20, 15, 15, 10]
     assert len(list((tmp_path / "variants").glob("*.csv"))) == 3
@@ -91,7 +92,7 @@ def test_killed_unit_cell_study_resumes(monkeypatch, tmp_path):
     monkeypatch.setattr(unit_cell_study, "run_case", run_case)
     monkeypatch.setattr(unit_cell_study, "render_configuration", lambda *a: "none")
     monkeypatch.setattr(unit_cell_study, "_plot", lambda *a: None)
-    with pytest.raises(RuntimeError, match="1 load case.*failed"):
+    with pytest.raises(batch.BatchError, match="1 variant.*failed"):
         unit_cell_study.run_study(str(tmp_path), quick=True, comm=MPI.COMM_SELF)
     first = calls[:]
     assert first[0] == unit_cell_study.RunKey("ti", "shear") and not first[-1].contact and len(first) == 6
@@ -104,7 +105,7 @@ def test_killed_unit_cell_study_resumes(monkeypatch, tmp_path):
     assert len(calls) == 13
 
 
-def test_killed_pants_study_resumes(monkeypatch, tmp_path):
+def test_killed_pants_study_resumes(monkeypatch, tmp_path, capsys):
     """Three variants with a stub run (a completed summary.json of the variant's scene hash): the coarser mesh
     (h = 10 cm, the cheaper) runs last; a killed variant is reported after the others, the rerun runs only it."""
     calls = []
@@ -122,11 +123,14 @@ def test_killed_pants_study_resumes(monkeypatch, tmp_path):
     monkeypatch.setattr(pants, "write_study", lambda out, curves, quick, crossing: {"curves": curves, "lines": []})
     monkeypatch.setattr(pants, "crossing_window", lambda data: None)
     chosen = {k: pants.VARIANTS[k] for k in ("1mm_mu0.1_h10cm", "1mm_mu0.1", "2mm_mu0.1")}
-    with pytest.raises(RuntimeError, match="1 variant.*failed.*1mm_mu0.1: failed: killed"):
+    with pytest.raises(batch.BatchError, match="1 variant.*failed.*1mm_mu0.1: failed: killed"):
         pants.run_pants_study(tmp_path, comm=MPI.COMM_SELF, variants=chosen)
     assert calls == ["1mm_mu0.1", "2mm_mu0.1", "1mm_mu0.1_h10cm"]
     summary = pants.run_pants_study(tmp_path, comm=MPI.COMM_SELF, variants=chosen)
     assert calls[3:] == ["1mm_mu0.1"]
+    calls.clear()                                        # the command line: exit 1 naming the killed variant
+    assert cli.main(["study", "pants", "--out", str(tmp_path / "cli")]) == 1
+    assert "pants study: 1 variant(s) failed" in capsys.readouterr().err and len(calls) == len(pants.VARIANTS)
     assert list(summary["curves"]) == list(chosen)
     assert json.loads((tmp_path / "1mm_mu0.1" / "summary.json").read_text())["status"] == "completed"
 

@@ -94,6 +94,18 @@ def run_batch(jobs: list[Job], comm: MPI.Comm = MPI.COMM_WORLD, ranks_per_job: i
     return {name: status for part in comm.allgather(failures if leader else {}) for name, status in part.items()}
 
 
+class BatchError(RuntimeError):
+    """Variants of a batch that raised, named after the others have run (`fabricfem` exits 1 with the message)."""
+
+
+def check(failures: dict[str, str], what: str, where: str) -> None:
+    """BatchError naming the failed jobs of `what` (e.g. "sleeve study") unless there are none; `where` says where
+    the finished ones are kept (a rerun resumes)."""
+    if failures:
+        raise BatchError(f"{what}: {len(failures)} variant(s) failed (the finished ones are kept in {where}; a rerun "
+                         f"resumes): " + "; ".join(f"{name}: {why}" for name, why in failures.items()))
+
+
 def read_summary(folder: Path) -> dict:
     """The summary.json of a run's folder ({} when missing or unreadable)."""
     try:

@@ -33,7 +33,7 @@ from fabricfem import io as fio
 from fabricfem.body.blend import BlendedStart
 from fabricfem.scenes import build as scene_build
 from fabricfem.scenes import wear
-from fabricfem.scenes.batch import Job, completed, run_batch
+from fabricfem.scenes.batch import Job, check, completed, run_batch
 from fabricfem.scenes.run import build_wear_run, scene_sha256
 from fabricfem.scenes.schema import Scene
 from fabricfem.wear.outputs import write_sto
@@ -135,7 +135,7 @@ def run_pants_study(out: str | Path = "results/pants_study", quick: bool = False
                     scene: Path = SCENE, ranks_per_variant: int = 1) -> dict:
     """Run the variants (module docstring) as one batch (fabricfem.scenes.batch.run_batch: groups of
     `ranks_per_variant` ranks, longest first by `variant_cost`) and write the study's outputs; returns the summary
-    (rank 0). A variant that raises is reported after the others have run (RuntimeError naming it)."""
+    (rank 0). A variant that raises is reported after the others have run (batch.BatchError naming it)."""
     out = Path(out)
     variants = variants or VARIANTS
     base = tomllib.loads(Path(scene).read_text())
@@ -149,10 +149,7 @@ def run_pants_study(out: str | Path = "results/pants_study", quick: bool = False
     jobs = [Job(label, variant_cost(data), lambda sub, data=data, label=label: _run_variant(data, out / label, sub),
                 lambda data=data, label=label: completed(out / label, scene_sha256(Scene(data, None, "wear"))))
             for label, data in datas.items()]
-    failed = run_batch(jobs, comm, ranks_per_variant, "pants study")
-    if failed:
-        raise RuntimeError(f"pants study: {len(failed)} variant(s) failed (the finished ones are kept; a rerun "
-                           "resumes): " + "; ".join(f"{name}: {why}" for name, why in failed.items()))
+    check(run_batch(jobs, comm, ranks_per_variant, "pants study"), "pants study", str(out))
     if comm.rank != 0:
         return {}
     curves = {label: _read_variant(out / label) for label in labels}

@@ -5,8 +5,8 @@ each figure gets <out>/<figure>.csv (variant, angle_deg, torque_Nm, ...) and <ou
 that stop before the final angle (blow-up or Newton failure, see fabricfem.wear.sleeve) keep their partial curve and the
 reason is written to <out>/failures.csv. The distinct variants run as one batch (fabricfem.scenes.batch, the
 machinery of `fabricfem sweep`): groups of `ranks_per_variant` ranks (default 1), longest first (`relative_cost`)
-to the least loaded group; the same command runs under `mpirun -n N`. `quick` runs mesh I only, to 6 degrees (records at 3 and 6; test suite):
-its numbers are a reduced study, not the thesis's. `fine` / `meshes` choose the mesh of the parameter
+to the least loaded group; the same command runs under `mpirun -n N`. `quick` runs mesh I only, to 6 degrees
+(records at 3 and 6; test suite): its numbers are a reduced study, not the thesis's. `fine` / `meshes` choose the mesh of the parameter
 figures (default III, as the thesis's "well-refined" sleeve) and of the mesh series (default I-IV); a
 coarser choice is a reduced-resolution study and README.txt says so.
 
@@ -31,7 +31,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fabricfem.materials import positive_number
-from fabricfem.scenes.batch import Job, run_batch
+from fabricfem.scenes.batch import Job, check, run_batch
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.outputs import plot_torque
 from fabricfem.wear.run import build_run, run_sleeve
@@ -106,7 +106,7 @@ def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
     """Run every distinct variant once as one batch (fabricfem.scenes.batch.run_batch: groups of
     `ranks_per_variant` ranks, longest first by `relative_cost` to the least loaded group; a variant saved in
     <out>/variants is read back, not rerun), then write CSV + PNG per figure from the saved variants. A variant
-    that raises is reported after the others have run and saved (RuntimeError naming it)."""
+    that raises is reported after the others have run and saved (batch.BatchError naming it)."""
     out = Path(out)
     figures = variants(quick, fine, meshes, fabrics, mesh_frictions, only)
     unique: list[SleeveConfig] = []
@@ -128,10 +128,7 @@ def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
     jobs = [Job(f"variant {i + 1}/{len(unique)} ({_describe(cfg)})", relative_cost(cfg),
                 lambda sub, cfg=cfg: flex(cfg, sub), lambda cfg=cfg: _load_variant(out, cfg) is not None)
             for i, cfg in enumerate(unique)]
-    failed = run_batch(jobs, comm, ranks_per_variant, "sleeve study")
-    if failed:
-        raise RuntimeError(f"sleeve study: {len(failed)} variant(s) failed (the others are saved in {out}/variants; "
-                           f"a rerun resumes): " + "; ".join(f"{name}: {why}" for name, why in failed.items()))
+    check(run_batch(jobs, comm, ranks_per_variant, "sleeve study"), "sleeve study", f"{out}/variants")
     histories = {i: _load_variant(out, cfg) for i, cfg in enumerate(unique)}
     results = {name: {label: histories[unique.index(cfg)] for label, cfg in fig.items()}
                for name, fig in figures.items()}

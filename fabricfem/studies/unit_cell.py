@@ -45,7 +45,7 @@ from mpi4py import MPI
 from fabricfem.materials.yarn import THESIS_ISOTROPIC, THESIS_TRANSVERSELY_ISOTROPIC, YarnMaterial
 from fabricfem.meshes.unit_cell import unit_cell
 from fabricfem.meshes.yarn_geometry import PlainWeave
-from fabricfem.scenes.batch import Job, run_batch
+from fabricfem.scenes.batch import Job, check, run_batch
 from fabricfem.solvers.newton import SolverError
 from fabricfem.weave.unit_cell import ContactUnitCell, contact_table
 
@@ -444,11 +444,7 @@ def run_study(out: str = "results/unit_cell", quick: bool = False, steps: int | 
 
     jobs = [Job(key.label, case_cost(key, n_steps), lambda sub, key=key: solve(key, sub),
                 lambda key=key: saved(key) is not None) for key in keys]
-    failed = run_batch(jobs, comm, ranks_per_variant, "unit-cell study")
-    if failed:
-        raise RuntimeError(f"unit-cell study: {len(failed)} load case(s) failed (the others are saved in "
-                           f"{out}/variants; a rerun resumes): "
-                           + "; ".join(f"{name}: {why}" for name, why in failed.items()))
+    check(run_batch(jobs, comm, ranks_per_variant, "unit-cell study"), "unit-cell study", f"{out}/variants")
     runs = {key: _load_run(out, key, config) or old[key] for key in keys}
     if comm.rank == 0:
         for name, (title, x, ys, fig_keys) in figs.items():
