@@ -119,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     p_study.add_argument("--quick", action="store_true", help="coarse mesh and few angle steps (reduced)")
     p_study.add_argument("--out", default="results/sleeve_study")
     p_study.add_argument("--ranks-per-variant", type=int, default=1,
-                         help="sleeve, unit-cell, pants: MPI ranks of each variant's group (the variants run as a "
+                         help="sleeve, sleeve-fit, unit-cell, pants: MPI ranks of each variant's group (the variants run as a "
                               "batch, as `fabricfem sweep`)")
     p_study.add_argument("--fine", choices=["I", "II", "III", "IV"], default="III",
                          help="sleeve: mesh of the parameter figures (friction, fit, thickness, fabrics)")
@@ -215,7 +215,7 @@ def _command(args) -> int:
     if args.command == "demo":
         rollup_demo(args.out)
         return 0
-    if args.command == "study" and args.name in ("sleeve", "unit-cell", "pants"):
+    if args.command == "study" and args.name in ("sleeve", "unit-cell", "pants", "sleeve-fit"):
         groups_of(MPI.COMM_WORLD, args.ranks_per_variant)     # a bad --ranks-per-variant: a message, not a traceback
     if args.command == "study" and args.name == "pants":
         run_pants_study("results/pants_study" if args.out == "results/sleeve_study" else args.out, args.quick,
@@ -247,7 +247,8 @@ def _command(args) -> int:
         if args.mesh != "II":                # the default mesh's files carry no mesh tag (docs/figures/sleeve)
             prefix += f".mesh{args.mesh}"
         run_fit_study("results/sleeve_fit" if args.out == "results/sleeve_study" else args.out, mesh=args.mesh,
-                      scales=scales, docs=args.docs, long_axis_factors=factors, prefix=prefix, **overrides)
+                      scales=scales, docs=args.docs, long_axis_factors=factors, prefix=prefix,
+                      ranks_per_variant=args.ranks_per_variant, **overrides)
         return 0
     if args.command == "study" and args.name == "sleeve-methods":
         # the three contact methods on the sleeve with gravity (fabricfem.studies.sleeve.run_methods); --mesh defaults to
