@@ -119,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
     p_study.add_argument("--quick", action="store_true", help="coarse mesh and few angle steps (reduced)")
     p_study.add_argument("--out", default="results/sleeve_study")
     p_study.add_argument("--ranks-per-variant", type=int, default=1,
-                         help="sleeve, sleeve-fit, unit-cell, pants: MPI ranks of each variant's group (the variants run as a "
+                         help="sleeve, sleeve-fit, sleeve-methods, unit-cell, pants: MPI ranks of each variant's group (the variants run as a "
                               "batch, as `fabricfem sweep`)")
     p_study.add_argument("--fine", choices=["I", "II", "III", "IV"], default="III",
                          help="sleeve: mesh of the parameter figures (friction, fit, thickness, fabrics)")
@@ -215,7 +215,7 @@ def _command(args) -> int:
     if args.command == "demo":
         rollup_demo(args.out)
         return 0
-    if args.command == "study" and args.name in ("sleeve", "unit-cell", "pants", "sleeve-fit"):
+    if args.command == "study" and args.name in ("sleeve", "unit-cell", "pants", "sleeve-fit", "sleeve-methods"):
         groups_of(MPI.COMM_WORLD, args.ranks_per_variant)     # a bad --ranks-per-variant: a message, not a traceback
     if args.command == "study" and args.name == "pants":
         run_pants_study("results/pants_study" if args.out == "results/sleeve_study" else args.out, args.quick,
@@ -258,7 +258,8 @@ def _command(args) -> int:
         methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
         try:
             run_methods("results/sleeve_methods_gravity.csv" if args.out == "results/sleeve_study" else args.out,
-                        mesh=mesh, methods=methods, al_budget=args.al_budget)
+                        mesh=mesh, methods=methods, al_budget=args.al_budget,
+                        ranks_per_variant=args.ranks_per_variant)
         except ValueError as exc:
             _print(f"fabricfem study sleeve-methods: {exc}", file=sys.stderr)
             return 2

@@ -155,3 +155,28 @@ def test_sleeve_study_on_all_ranks_gives_the_serial_figures(monkeypatch, tmp_pat
             assert (root / "world" / name).read_text() == (root / "self" / name).read_text()
             assert (root / "group" / name).read_text() == (root / "self" / name).read_text()
     comm.barrier()
+
+
+def test_killed_sleeve_methods_resume_implicit_first(monkeypatch, tmp_path):
+    """The three contact methods with a stub run: the implicit route (the longest) first; a killed method is
+    named after the others are saved, the rerun runs only it, and the table keeps the order asked for."""
+    calls = []
+
+    def run_method(method, base, comm, al_budget):
+        calls.append(method)
+        if len(calls) == 2:
+            raise RuntimeError("killed")
+        return {"method": method, "route": sleeve.METHODS[method], "ranks": comm.size, "torque_57_Nm": 0.1,
+                "max_penetration_m": float("nan")}
+
+    monkeypatch.setattr(sleeve, "_run_method", run_method)
+    monkeypatch.setattr(sleeve, "methods_markdown", lambda rows: "")
+    out = tmp_path / "methods.csv"
+    with pytest.raises(batch.BatchError, match="lagrange on mesh I: failed: killed"):
+        sleeve.run_methods(out, mesh="I", comm=MPI.COMM_SELF)
+    assert calls == ["augmented", "lagrange", "penalty"]
+    rows = sleeve.run_methods(out, mesh="I", comm=MPI.COMM_SELF)
+    assert calls[3:] == ["lagrange"] and [r["method"] for r in rows] == ["lagrange", "penalty", "augmented"]
+    assert out.read_text().splitlines()[1].startswith("lagrange,")
+    sleeve.run_methods(out, mesh="I", comm=MPI.COMM_SELF, al_budget=60.0)     # another budget: run again
+    assert calls[4:] == ["augmented", "lagrange", "penalty"]

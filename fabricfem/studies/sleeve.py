@@ -6,9 +6,9 @@ that stop before the final angle (blow-up or Newton failure, see fabricfem.wear.
 reason is written to <out>/failures.csv. The distinct variants run as one batch (fabricfem.scenes.batch, the
 machinery of `fabricfem sweep`): groups of `ranks_per_variant` ranks (default 1), longest first (`relative_cost`)
 to the least loaded group; the same command runs under `mpirun -n N`. `quick` runs mesh I only, to 6 degrees
-(records at 3 and 6; test suite): its numbers are a reduced study, not the thesis's. `fine` / `meshes` choose the mesh of the parameter
-figures (default III, as the thesis's "well-refined" sleeve) and of the mesh series (default I-IV); a
-coarser choice is a reduced-resolution study and README.txt says so.
+(records at 3 and 6; test suite): its numbers are a reduced study, not the thesis's. `fine` / `meshes` choose
+the mesh of the parameter figures (default III, as the thesis's "well-refined" sleeve) and of the mesh series
+(default I-IV); a coarser choice is a reduced-resolution study and README.txt says so.
 
 Fabrics II and III (E = 350 MPa and 7.2 GPa) run with dynamic similarity (`SleeveConfig.dynamic_similarity`:
 flexion speed and mass damping times c_k / c_I, c = sqrt(E / rho)), so they cost the steps of fabric I and
@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import json
 import math
 import time
 from pathlib import Path
@@ -224,6 +225,9 @@ METHODS = {"lagrange": "explicit, forward-increment Lagrange multipliers ([Man20
            "augmented": "implicit backward Euler + Newton, augmented Lagrangian (Uzawa)"}
 METHOD_COLUMNS = ("method", "route", "mesh", "ndofs", "ranks", "gravity", "reached_deg", "torque_57_Nm",
                   "max_penetration_m", "bounce_rms_Nm", "bounce_relative", "work", "wall_s", "cpu_s", "note")
+# relative cost for the batch's schedule: measured walls 666, 728 and >= 1287 s (budget-limited) on mesh III
+# (docs/figures/sleeve/sleeve_methods_gravity.csv)
+METHOD_COST = {"lagrange": 1.0, "penalty": 1.0, "augmented": 2.0}
 # implicit route: 4 backward-Euler steps per degree (dt = 5.6 ms at 45 deg/s), so that the 1-degree moving average of
 # the bounce (`torque_bounce`) spans 4 steps as it spans the explicit steps of a record
 IMPLICIT_STEPS_PER_DEGREE = 4
@@ -291,10 +295,13 @@ def _run_method(method: str, base: SleeveConfig, comm: MPI.Comm, al_budget: floa
 
 def run_methods(out: str | Path = "results/sleeve_methods.csv", mesh: str = "III", friction: float = 0.1,
                 methods: tuple[str, ...] = ("lagrange", "penalty", "augmented"), final_angle: float = 57.0,
-                comm: MPI.Comm = MPI.COMM_WORLD, al_budget: float = 1800.0) -> list[dict]:
+                comm: MPI.Comm = MPI.COMM_WORLD, al_budget: float = 1800.0,
+                ranks_per_variant: int = 1) -> list[dict]:
     """The three contact methods on the sleeve (mesh `mesh`, mu = `friction`, to `final_angle` degrees):
     maximum penetration, torque at the final angle, bounce of the per-step torque (`torque_bounce`), wall time.
-    Methods are shared over the ranks (each runs on COMM_SELF, as the study's variants); all three run with
+    The methods run as one batch (fabricfem.scenes.batch, as the study's variants: groups of `ranks_per_variant`
+    ranks, the implicit route first); each finished row is saved to <out without .csv>/<method>.json and read
+    back by a rerun of the same settings (a killed run resumes). All three run with
     gravity and the settle phase (SleeveConfig defaults). The augmented-Lagrangian row is the implicit route
     (fabricfem.wear.sleeve_implicit: backward Euler with the same lumped mass, mass damping and gravity as the
     explicit rows, IMPLICIT_STEPS_PER_DEGREE steps per degree); it stops where a step fails below the minimum
@@ -309,15 +316,30 @@ def run_methods(out: str | Path = "results/sleeve_methods.csv", mesh: str = "III
         raise ValueError(f"mesh: unknown mesh {mesh!r}, expected one of {sorted(MESHES)}")
     n_around, n_along = MESHES[mesh]
     base = SleeveConfig.of(n_around=n_around, n_along=n_along, friction=friction, final_angle=final_angle)
-    mine = {}
-    for i, method in enumerate(methods):
-        if i % comm.size == comm.rank:
-            print(f"  [rank {comm.rank}] sleeve methods: {method} on mesh {mesh} ...", flush=True)
-            mine[i] = _run_method(method, base, MPI.COMM_SELF, al_budget)
-            print(f"  [rank {comm.rank}] {method}: {mine[i]}", flush=True)
-    rows = [r for _, r in sorted((k, v) for d in comm.allgather(mine) for k, v in d.items())]
+    out = Path(out)
+    folder = out.with_suffix("")                     # <out without .csv>/<method>.json: the finished methods
+    key = lambda method: repr((method, al_budget, sorted(base.key_items().items())))  # noqa: E731
+
+    def saved(method: str) -> dict | None:
+        try:
+            data = json.loads((folder / f"{method}.json").read_text())
+        except (OSError, ValueError):
+            return None
+        return data["row"] if data.get("config") == key(method) else None
+
+    def run(method: str, sub: MPI.Comm) -> str:
+        row = _run_method(method, base, sub, al_budget)
+        if sub.rank == 0:
+            folder.mkdir(parents=True, exist_ok=True)
+            row = {k: v.item() if isinstance(v, np.generic) else v for k, v in row.items()}
+            (folder / f"{method}.json").write_text(json.dumps({"config": key(method), "row": row}))
+        return f"{row}"
+
+    jobs = [Job(f"{method} on mesh {mesh}", METHOD_COST[method], lambda sub, m=method: run(m, sub),
+                lambda m=method: saved(m) is not None) for method in methods]
+    check(run_batch(jobs, comm, ranks_per_variant, "sleeve methods"), "sleeve methods", str(folder))
+    rows = [saved(method) for method in methods]
     if comm.rank == 0:
-        out = Path(out)
         out.parent.mkdir(parents=True, exist_ok=True)
         with open(out, "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=METHOD_COLUMNS)
