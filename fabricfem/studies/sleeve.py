@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import io
 import json
 import math
 import time
@@ -31,6 +32,7 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from fabricfem import io as fio
 from fabricfem.materials import positive_number
 from fabricfem.scenes.batch import Job, check, run_batch
 from fabricfem.wear.config import SleeveConfig
@@ -177,13 +179,12 @@ def _variant_path(out: Path, cfg: SleeveConfig) -> Path:
 def _save_variant(out: Path, cfg: SleeveConfig, h: SleeveHistory):
     """Write a finished variant (its configuration on the first line, then the history rows) so that an
     interrupted study resumes without rerunning it (`_load_variant`)."""
-    path = _variant_path(out, cfg)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as f:
-        f.write(f"# {repr(sorted(cfg.flat().items()))} | wall {h.wall:.1f} | failure {h.failure}\n")
-        w = csv.writer(f)
-        w.writerow(SleeveHistory.HEADER)
-        w.writerows(h.rows())
+    text = io.StringIO()
+    text.write(f"# {repr(sorted(cfg.flat().items()))} | wall {h.wall:.1f} | failure {h.failure}\n")
+    w = csv.writer(text)
+    w.writerow(SleeveHistory.HEADER)
+    w.writerows(h.rows())
+    fio.write_text_whole(_variant_path(out, cfg), text.getvalue())
 
 
 def _load_variant(out: Path, cfg: SleeveConfig) -> SleeveHistory | None:
@@ -330,9 +331,8 @@ def run_methods(out: str | Path = "results/sleeve_methods.csv", mesh: str = "III
     def run(method: str, sub: MPI.Comm) -> str:
         row = _run_method(method, base, sub, al_budget)
         if sub.rank == 0:
-            folder.mkdir(parents=True, exist_ok=True)
             row = {k: v.item() if isinstance(v, np.generic) else v for k, v in row.items()}
-            (folder / f"{method}.json").write_text(json.dumps({"config": key(method), "row": row}))
+            fio.write_text_whole(folder / f"{method}.json", json.dumps({"config": key(method), "row": row}))
         return f"{row}"
 
     jobs = [Job(f"{method} on mesh {mesh}", METHOD_COST[method], lambda sub, m=method: run(m, sub),

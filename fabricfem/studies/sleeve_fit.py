@@ -51,6 +51,7 @@ import ufl
 from dolfinx import fem
 from mpi4py import MPI
 
+from fabricfem import io as fio
 from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
 from fabricfem.forms import shell as sf
 from fabricfem.materials import positive_number
@@ -219,12 +220,10 @@ def _checkpoint(out: Path, config: SleeveConfig) -> Path:
 
 
 def _save(out: Path, config: SleeveConfig, history: SleeveHistory, splits: dict) -> None:
-    path = _checkpoint(out, config)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps({"config": _key(config), "rows": history.rows(), "splits": {str(a): s for a, s in
-                                                                                         splits.items()},
-                                "wall_s": history.wall, "cpu_s": history.timings.get("run_cpu_s", math.nan),
-                                "failure": history.failure, "ndofs": history.ndofs}))
+    fio.write_text_whole(_checkpoint(out, config), json.dumps({
+        "config": _key(config), "rows": history.rows(), "splits": {str(a): s for a, s in splits.items()},
+        "wall_s": history.wall, "cpu_s": history.timings.get("run_cpu_s", math.nan), "failure": history.failure,
+        "ndofs": history.ndofs}))
 
 
 def _load(out: Path, config: SleeveConfig) -> tuple[SleeveHistory, dict, float] | None:

@@ -42,6 +42,7 @@ import numpy as np
 from dolfinx import fem, io, plot
 from mpi4py import MPI
 
+from fabricfem import io as fio
 from fabricfem.materials.yarn import THESIS_ISOTROPIC, THESIS_TRANSVERSELY_ISOTROPIC, YarnMaterial
 from fabricfem.meshes.unit_cell import unit_cell
 from fabricfem.meshes.yarn_geometry import PlainWeave
@@ -370,14 +371,10 @@ def _variant_path(out: str, key: RunKey) -> str:
 def _save_run(out: str, run: Run, config: dict) -> None:
     """Write a finished load case (its key, the path settings `config`, rows, stop reason, wall time, dofs and
     contact table; floats round trip) so that an interrupted study resumes without solving it again."""
-    path = _variant_path(out, run.key)
-    os.makedirs(os.path.dirname(path), exist_ok=True)
     rows = [{q: int(v) if isinstance(v, (int, np.integer)) else float(v) for q, v in row.items()} for row in run.rows]
     data = dict(key=dataclasses.asdict(run.key), config=config, rows=rows, stopped=run.stopped, wall_s=run.wall_s,
                 ndofs=int(run.ndofs), table=run.table)
-    with open(path + ".part", "w") as f:
-        json.dump(data, f)
-    os.replace(path + ".part", path)      # a kill leaves no half-written checkpoint
+    fio.write_text_whole(_variant_path(out, run.key), json.dumps(data))
 
 
 def _load_run(out: str, key: RunKey, config: dict) -> Run | None:
