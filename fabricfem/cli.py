@@ -31,6 +31,7 @@ from fabricfem.benchmarks.wear_speed import wear_bench
 from fabricfem.demo import rollup_demo
 from fabricfem.dynamics.newmark import DynamicsError
 from fabricfem.scenes.accuracy import parse_target, plan, run_accurate
+from fabricfem.scenes.batch import BatchError, groups_of
 from fabricfem.scenes.run import run_scene, scene_name
 from fabricfem.scenes.sweep import parse_vary, run_sweep
 from fabricfem.solvers.newton import SolverError
@@ -120,6 +121,9 @@ def main(argv: list[str] | None = None) -> int:
                          help="study to run (sleeve: [Man2006, sec. 5.3]; unit-cell: [Man2006, sec. 4.3.5], Figs. 21-28, 32-33)")
     p_study.add_argument("--quick", action="store_true", help="coarse mesh and few angle steps (reduced)")
     p_study.add_argument("--out", default="results/sleeve_study")
+    p_study.add_argument("--ranks-per-variant", type=int, default=1,
+                         help="sleeve, sleeve-fit, sleeve-methods, unit-cell, pants: MPI ranks of each variant's group (the variants run as a "
+                              "batch, as `fabricfem sweep`)")
     p_study.add_argument("--fine", choices=["I", "II", "III", "IV"], default="III",
                          help="sleeve: mesh of the parameter figures (friction, fit, thickness, fabrics)")
     p_study.add_argument("--meshes", default="I,II,III,IV", help="sleeve: meshes of the mesh series, e.g. I,II")
@@ -160,6 +164,11 @@ def main(argv: list[str] | None = None) -> int:
     logging.disable(logging.NOTSET if args.verbose else logging.INFO)
     try:
         return _command(args)
+    except BatchError as exc:      # a study's variants that failed, named after the others ran (a rerun resumes)
+        if args.debug:
+            raise
+        _print(f"fabricfem {args.command}: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 1
     except USER_ERRORS as exc:
         if args.debug:
             raise
@@ -209,8 +218,11 @@ def _command(args) -> int:
     if args.command == "demo":
         rollup_demo(args.out)
         return 0
+    if args.command == "study" and args.name in ("sleeve", "unit-cell", "pants", "sleeve-fit", "sleeve-methods"):
+        groups_of(MPI.COMM_WORLD, args.ranks_per_variant)     # a bad --ranks-per-variant: a message, not a traceback
     if args.command == "study" and args.name == "pants":
-        run_pants_study("results/pants_study" if args.out == "results/sleeve_study" else args.out, args.quick)
+        run_pants_study("results/pants_study" if args.out == "results/sleeve_study" else args.out, args.quick,
+                        ranks_per_variant=args.ranks_per_variant)
         return 0
     if args.command == "study" and args.name == "fabric-link":
         meshes = ((10, 13),) if args.quick else ((10, 13), (20, 26))
@@ -238,7 +250,8 @@ def _command(args) -> int:
         if args.mesh != "II":                # the default mesh's files carry no mesh tag (docs/figures/sleeve)
             prefix += f".mesh{args.mesh}"
         run_fit_study("results/sleeve_fit" if args.out == "results/sleeve_study" else args.out, mesh=args.mesh,
-                      scales=scales, docs=args.docs, long_axis_factors=factors, prefix=prefix, **overrides)
+                      scales=scales, docs=args.docs, long_axis_factors=factors, prefix=prefix,
+                      ranks_per_variant=args.ranks_per_variant, **overrides)
         return 0
     if args.command == "study" and args.name == "sleeve-methods":
         # the three contact methods on the sleeve with gravity (fabricfem.studies.sleeve.run_methods); --mesh defaults to
@@ -248,7 +261,8 @@ def _command(args) -> int:
         methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
         try:
             run_methods("results/sleeve_methods_gravity.csv" if args.out == "results/sleeve_study" else args.out,
-                        mesh=mesh, methods=methods, al_budget=args.al_budget)
+                        mesh=mesh, methods=methods, al_budget=args.al_budget,
+                        ranks_per_variant=args.ranks_per_variant)
         except ValueError as exc:
             _print(f"fabricfem study sleeve-methods: {exc}", file=sys.stderr)
             return 2
@@ -264,7 +278,8 @@ def _command(args) -> int:
         skip = "fine" if args.coarse_only else "coarse" if args.fine_only else None
         stopped = ({key for key, run in unit_cell_study.previous_runs(out).items() if run.stopped and key.refinement != skip}
                    if args.recompute_stopped and os.path.isdir(out) else set())
-        unit_cell_study.run_study(out, quick=args.quick, recompute=stopped, time_budget=args.budget)
+        unit_cell_study.run_study(out, quick=args.quick, recompute=stopped, time_budget=args.budget,
+                                  ranks_per_variant=args.ranks_per_variant)
         return 0
     if args.command == "study":
         options = dict(quick=args.quick, fine=args.fine,
@@ -283,7 +298,7 @@ def _command(args) -> int:
         except ValueError as exc:
             _print(f"fabricfem study sleeve: {exc}", file=sys.stderr)
             return 2
-        run_study(args.out, **options)
+        run_study(args.out, ranks_per_variant=args.ranks_per_variant, **options)
         return 0
     if args.command == "bench":
         if args.name == "unit-cell":

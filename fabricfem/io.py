@@ -308,6 +308,16 @@ def write_json(path: str | Path, data: dict, comm=MPI.COMM_WORLD):
         json.dump(data, f, indent=1, default=str)
 
 
+def write_text_whole(path: str | Path, text: str) -> None:
+    """Write `text` to `path` (its folder created) through a temporary name and a rename, so that a process killed
+    meanwhile leaves either the previous file or the whole new one (a study's checkpoint of a finished variant)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
 def update_json(path: str | Path, data: dict, comm=MPI.COMM_WORLD):
     """Merge `data` into the JSON object in `path` (created if missing or unreadable; its entries are kept
     unless `data` replaces them), written by rank 0: how a runner adds its results to a run's summary.json

@@ -212,7 +212,7 @@ def test_recompute_stopped_selects_the_stopped_curves(tmp_path, monkeypatch, cap
         for r in rows:
             w.writerow(list(r) + [0.01, 1e6, 1.0])
     seen = []
-    monkeypatch.setattr(study, "run_study", lambda out, quick=False, recompute=None, time_budget=None:
+    monkeypatch.setattr(study, "run_study", lambda out, quick=False, recompute=None, time_budget=None, ranks_per_variant=1:
                         seen.append((set(recompute), time_budget)))
     assert main(["study", "unit-cell", "--out", str(tmp_path), "--recompute-stopped"]) == 0
     assert main(["study", "unit-cell", "--out", str(tmp_path), "--recompute-stopped", "--coarse-only"]) == 0

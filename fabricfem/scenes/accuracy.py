@@ -37,12 +37,12 @@ from petsc4py import PETSc
 
 from fabricfem import io
 from fabricfem.dynamics.newmark import DynamicsError
+from fabricfem.scenes.batch import read_summary
 from fabricfem.scenes.build import critical_time_step_estimate, estimated_dofs, validate
 from fabricfem.scenes.richardson import ORDERS, richardson
 from fabricfem.scenes.run import output_dir, run_scene, scene_name, scene_sha256
 from fabricfem.scenes.schema import Scene, SceneError, accuracy_summary_key, check_target
 from fabricfem.scenes.sections import AccuracySection, DynamicsSection, ModelSection, section
-from fabricfem.scenes.sweep import read_summary
 from fabricfem.solvers.newton import SolverError
 
 PILOTS = (-2, -1, 0)             # levels solved to estimate the error

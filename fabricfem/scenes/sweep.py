@@ -5,10 +5,10 @@ array of tables) and its values, parsed as TOML values (`1e6`, `true`, `"triangl
 is a string). The variants are the cartesian product of the lists, in the order given (the last key varies
 fastest). Each is the scene with those keys replaced, validated completely (fabricfem.scenes.build.validate)
 before anything runs: a bad key or value is refused naming the variant and the key. A variant runs into its own
-folder `<out>/<name>/` (name from its key=value pairs) with fabricfem.scenes.run.run_scene on a sub-communicator
-(MPI.COMM_WORLD.Split: `ranks_per_variant` ranks per group), longest first (`estimated_cost`) to the least loaded
-group (`schedule`). Resumable: a variant whose folder holds a summary.json with status "completed" and the
-variant's scene hash (run.scene_sha256) is read back, not rerun. Rank 0 writes `<out>/sweep.csv` (the variant's
+folder `<out>/<name>/` (name from its key=value pairs) with fabricfem.scenes.run.run_scene as one batch
+(fabricfem.scenes.batch.run_batch: sub-communicators of `ranks_per_variant` ranks, longest first by
+`estimated_cost` to the least loaded group). Resumable: a variant whose folder holds a summary.json with status
+"completed" and the variant's scene hash (run.scene_sha256) is read back, not rerun. Rank 0 writes `<out>/sweep.csv` (the variant's
 keys, its status and the scalar entries of its summary.json; numeric lists flattened as `<key>_<i>`) and
 `<out>/sweep.png` (one summary quantity against the first varied key, one curve per combination of the others).
 """
@@ -16,17 +16,15 @@ from __future__ import annotations
 
 import copy
 import itertools
-import json
 import math
 import re
-import time
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
 from mpi4py import MPI
 
-from fabricfem import io
+from fabricfem.scenes.batch import Job, completed, groups_of, read_summary, run_batch, write_table
 from fabricfem.scenes.build import estimated_cost, validate
 from fabricfem.scenes.run import run_scene, scene_sha256
 from fabricfem.scenes.schema import Scene, SceneError
@@ -136,36 +134,9 @@ def variants(base: Scene, varies: list[tuple[str, list]], out: str | Path) -> li
     return result
 
 
-def longest_first(costs: list[float | None]) -> list[int]:
-    """Indices by decreasing cost; unknown costs (None) after the known ones, in the order given."""
-    return sorted(range(len(costs)), key=lambda i: (costs[i] is None, -(costs[i] or 0.0), i))
-
-
-def schedule(costs: list[float | None], groups: int) -> list[int]:
-    """Group of each variant: longest first (unknown costs: the order given, after the known ones), each to the
-    least loaded group; the same on every rank."""
-    load = [0.0] * groups
-    owner = [0] * len(costs)
-    for i in longest_first(costs):
-        g = min(range(groups), key=lambda k: (load[k], k))
-        owner[i] = g
-        load[g] += costs[i] if costs[i] is not None else 1.0
-    return owner
-
-
-def read_summary(folder: Path) -> dict:
-    """The summary.json of a variant's folder ({} when missing or unreadable)."""
-    try:
-        data = json.loads((Path(folder) / "summary.json").read_text())
-    except (OSError, ValueError):
-        return {}
-    return data if isinstance(data, dict) else {}
-
-
 def finished(variant: Variant) -> bool:
     """True when the variant's folder holds a completed run of exactly this scene (status and scene hash)."""
-    summary = read_summary(Path(variant.scene["output"]["dir"]))
-    return summary.get("status") == "completed" and summary.get("scene_sha256") == scene_sha256(variant.scene)
+    return completed(Path(variant.scene["output"]["dir"]), scene_sha256(variant.scene))
 
 
 def scalar_entries(summary: dict) -> dict:
@@ -186,39 +157,14 @@ def run_sweep(base: Scene, varies: list[tuple[str, list]], out: str | Path, rank
     fails is recorded with its status ("failed: ...") and the others go on; ValueError naming
     --ranks-per-variant when it does not divide the number of ranks."""
     out = Path(out)
-    if ranks_per_variant < 1 or comm.size % ranks_per_variant:
-        raise ValueError(f"--ranks-per-variant: {ranks_per_variant} must be a positive divisor of the "
-                         f"{comm.size} rank(s)")
+    groups = groups_of(comm, ranks_per_variant)
     todo = variants(base, varies, out)
-    groups = comm.size // ranks_per_variant
-    group = comm.rank // ranks_per_variant
-    costs = [estimated_cost(v.scene) for v in todo]
-    owner = schedule(costs, groups)
-    sub = comm.Split(color=group, key=comm.rank)
-    leader = sub.rank == 0
-    say = (lambda m: print(m, flush=True)) if leader else (lambda m: None)
     if comm.rank == 0:
         print(f"sweep: {len(todo)} variants of {base.path or 'the scene'} on {groups} group(s) of "
               f"{ranks_per_variant} rank(s) into {out}", flush=True)
-    clock = io.Progress()
-    mine = [i for i in longest_first(costs) if owner[i] == group]
-    statuses = {}                       # this group's failures that left no summary.json (raised before the run)
-    for n, i in enumerate(mine):
-        v = todo[i]
-        if finished(v):
-            say(f"[group {group}] {v.name}: completed before, read back (not rerun)")
-            continue
-        say(f"[group {group}] {v.name}: started {clock(n / len(mine))}")
-        t0 = time.perf_counter()
-        try:
-            outcome = run_scene(v.scene, sub)
-            status = outcome.status
-        except Exception as exc:  # noqa: BLE001 (any failure of one variant: recorded, the others go on)
-            status = statuses[v.name] = f"failed: {' '.join(str(exc).split())}"
-        say(f"[group {group}] {v.name}: {status} in {time.perf_counter() - t0:.1f} s {clock((n + 1) / len(mine))}")
-    sub.Free()
-    statuses = {name: status for part in comm.allgather(statuses if leader else {})
-                for name, status in part.items()}
+    jobs = [Job(v.name, estimated_cost(v.scene), lambda sub, v=v: run_scene(v.scene, sub).status,
+                lambda v=v: finished(v)) for v in todo]
+    statuses = run_batch(jobs, comm, ranks_per_variant, "sweep")   # failures that left no summary.json
     rows = []
     for v in todo:
         summary = read_summary(Path(v.scene["output"]["dir"]))
@@ -226,8 +172,7 @@ def run_sweep(base: Scene, varies: list[tuple[str, list]], out: str | Path, rank
         rows.append({"variant": v.name, **v.values, "status": status,
                      **{k: val for k, val in scalar_entries(summary).items() if k not in v.values and k != "status"}})
     if comm.rank == 0:
-        header = list(dict.fromkeys(k for row in rows for k in row))
-        io.write_csv(out / "sweep.csv", header, [[_cell(row.get(k)) for k in header] for row in rows], MPI.COMM_SELF)
+        write_table(out / "sweep.csv", rows)
         quantity = plot or default_quantity(rows, {"variant", *todo[0].values})
         numeric = sorted({k for row in rows for k, v in row.items() if isinstance(v, (int, float))})
         if quantity is not None and quantity not in numeric:
@@ -238,13 +183,6 @@ def run_sweep(base: Scene, varies: list[tuple[str, list]], out: str | Path, rank
             plot_sweep(out / "sweep.png", rows, [k for k, _ in varies], quantity)
         print(f"sweep: wrote {out}/sweep.csv" + (f", sweep.png ({quantity})" if quantity else ""), flush=True)
     return rows
-
-
-def _cell(value) -> str:
-    """CSV text of a table cell: repr of floats (round trip), '' for missing."""
-    if value is None:
-        return ""
-    return repr(value) if isinstance(value, float) else str(value)
 
 
 def default_quantity(rows: list[dict], exclude: set[str]) -> str | None:

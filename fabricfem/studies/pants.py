@@ -1,10 +1,11 @@
 """The pants study [Man2006, sec. 5.4, Figs. 47-49]: the resisting torque of pants about the right knee while the
 wearer walks (and steps over an obstacle), for crimped cotton pants 1 mm and 2 mm thick (and mu = 0.5; and 1 mm on a coarser mesh, h = 10 cm instead of 7 cm).
 
-`fabricfem study pants [--quick] [--out DIR]` runs the variants of scenes/pants_walk.toml on the ranks of
-COMM_WORLD (one variant per rank, longest first to the least loaded rank; each variant on COMM_SELF writes its own
-folder: the garment and body over time, renders of the pressure on the skin at the donning and walking frames,
-torque.csv/.sto, summary.json), then writes on rank 0:
+`fabricfem study pants [--quick] [--out DIR]` runs the variants of scenes/pants_walk.toml as one batch on the
+ranks of COMM_WORLD (fabricfem.scenes.batch, the machinery of `fabricfem sweep`: groups of `ranks_per_variant`
+ranks, longest first to the least loaded group; each variant writes its own folder: the garment and body over
+time, renders of the pressure on the skin at the donning and walking frames, torque.csv/.sto, summary.json), then
+writes on rank 0:
 
     knee_torque.csv   time [s], right-knee flexion [deg], the resisting knee torque of every variant [N m]
     knee_torque.sto   OpenSim storage of the same torques (columns knee_r_moment_<variant>)
@@ -32,6 +33,7 @@ from fabricfem import io as fio
 from fabricfem.body.blend import BlendedStart
 from fabricfem.scenes import build as scene_build
 from fabricfem.scenes import wear
+from fabricfem.scenes.batch import Job, check, completed, run_batch
 from fabricfem.scenes.run import build_wear_run, scene_sha256
 from fabricfem.scenes.schema import Scene
 from fabricfem.wear.outputs import write_sto
@@ -58,6 +60,8 @@ def variant_data(base: dict, thickness: float, friction: float, out: Path, quick
     if quick:
         data["garment"]["h"] = 0.1
         data["motion"]["strides"] = 1
+        if "crossing_stride" in data["motion"]:       # an obstacle walk: the one stride crosses
+            data["motion"]["crossing_stride"] = 1
         data["motion"]["duration"] = 0.2
     return data
 
@@ -88,18 +92,14 @@ def crossing_window(data: dict) -> tuple[float, float] | None:
     return (start + walk.crossing_window[0], start + walk.crossing_window[1])
 
 
-def _finished(out: Path, sha: str) -> bool:
-    try:
-        summary = json.loads((out / "summary.json").read_text())
-    except (OSError, ValueError):
-        return False
-    return summary.get("status") == "completed" and summary.get("scene_sha256") == sha
+def variant_cost(data: dict) -> float:
+    """Estimated relative cost of a variant for the batch's schedule: nodes x explicit steps ~ h^-2 x h^-1."""
+    return float(data["garment"]["h"]) ** -3
 
 
-def _run_variant(data: dict, out: Path) -> None:
-    """Run one variant on COMM_SELF into `out` (io.OutputFolder: status and hash in summary.json), with the knee
-    flexion of its records in knee.csv."""
-    comm = MPI.COMM_SELF
+def _run_variant(data: dict, out: Path, comm: MPI.Comm) -> str:
+    """Run one variant on `comm` into `out` (io.OutputFolder: status and hash in summary.json), with the knee
+    flexion of its records in knee.csv; returns its status."""
     scene = Scene(data, None, "wear")
     folder = fio.OutputFolder(out, scene_sha256(scene), comm)
     run, headline, render_at, output = build_wear_run(scene, comm)
@@ -115,6 +115,7 @@ def _run_variant(data: dict, out: Path) -> None:
                   comm)
     status = f"stopped early: {history.failure}" if history.failure else "completed"
     folder.finish(status, history.summary())
+    return status
 
 
 def _read_variant(out: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
@@ -131,8 +132,10 @@ def _read_variant(out: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[s
 
 def run_pants_study(out: str | Path = "results/pants_study", quick: bool = False, comm: MPI.Comm = MPI.COMM_WORLD,
                     variants: dict[str, tuple[float, float, float | None]] | None = None,
-                    scene: Path = SCENE) -> dict:
-    """Run the variants (module docstring) and write the study's outputs; returns the summary (rank 0)."""
+                    scene: Path = SCENE, ranks_per_variant: int = 1) -> dict:
+    """Run the variants (module docstring) as one batch (fabricfem.scenes.batch.run_batch: groups of
+    `ranks_per_variant` ranks, longest first by `variant_cost`) and write the study's outputs; returns the summary
+    (rank 0). A variant that raises is reported after the others have run (batch.BatchError naming it)."""
     out = Path(out)
     variants = variants or VARIANTS
     base = tomllib.loads(Path(scene).read_text())
@@ -143,17 +146,10 @@ def run_pants_study(out: str | Path = "results/pants_study", quick: bool = False
         scene_build.validate(copy.deepcopy(data), f"variant {label}")
     labels = list(datas)
     say(f"pants study{' (quick)' if quick else ''}: {len(labels)} variants on {comm.size} rank(s): {labels}")
-    for k, label in enumerate(labels):
-        if k % comm.size != comm.rank:
-            continue
-        target = out / label
-        if _finished(target, scene_sha256(Scene(datas[label], None, "wear"))):
-            print(f"[rank {comm.rank}] {label}: finished before, read back", flush=True)
-            continue
-        print(f"[rank {comm.rank}] {label}: started", flush=True)
-        _run_variant(datas[label], target)
-        print(f"[rank {comm.rank}] {label}: done ({time.perf_counter() - t0:.0f} s)", flush=True)
-    comm.barrier()
+    jobs = [Job(label, variant_cost(data), lambda sub, data=data, label=label: _run_variant(data, out / label, sub),
+                lambda data=data, label=label: completed(out / label, scene_sha256(Scene(data, None, "wear"))))
+            for label, data in datas.items()]
+    check(run_batch(jobs, comm, ranks_per_variant, "pants study"), "pants study", str(out))
     if comm.rank != 0:
         return {}
     curves = {label: _read_variant(out / label) for label in labels}

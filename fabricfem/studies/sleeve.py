@@ -3,28 +3,28 @@
 Each variant is one flexion (fabricfem.wear.sleeve, explicit dynamics by default) giving a resisting-torque-vs-angle curve;
 each figure gets <out>/<figure>.csv (variant, angle_deg, torque_Nm, ...) and <out>/<figure>.png. Variants
 that stop before the final angle (blow-up or Newton failure, see fabricfem.wear.sleeve) keep their partial curve and the
-reason is written to <out>/failures.csv. Independent variants are shared over the MPI ranks (each rank
-runs its variants on COMM_SELF). `quick` runs mesh I only, to 6 degrees (records at 3 and 6; test suite):
-its numbers are a reduced study, not the thesis's. `fine` / `meshes` choose the mesh of the parameter
-figures (default III, as the thesis's "well-refined" sleeve) and of the mesh series (default I-IV); a
-coarser choice is a reduced-resolution study and README.txt says so.
+reason is written to <out>/failures.csv. The distinct variants run as one batch (fabricfem.scenes.batch, the
+machinery of `fabricfem sweep`): groups of `ranks_per_variant` ranks (default 1), longest first (`relative_cost`)
+to the least loaded group; the same command runs under `mpirun -n N`. `quick` runs mesh I only, to 6 degrees
+(records at 3 and 6; test suite): its numbers are a reduced study, not the thesis's. `fine` / `meshes` choose
+the mesh of the parameter figures (default III, as the thesis's "well-refined" sleeve) and of the mesh series
+(default I-IV); a coarser choice is a reduced-resolution study and README.txt says so.
 
 Fabrics II and III (E = 350 MPa and 7.2 GPa) run with dynamic similarity (`SleeveConfig.dynamic_similarity`:
 flexion speed and mass damping times c_k / c_I, c = sqrt(E / rho)), so they cost the steps of fabric I and
 carry fabric I's relative inertia and damping; fabric I of that figure runs with the flag too (factor 1).
 
 Checkpoints: every finished variant is written to <out>/variants/<hash of its configuration>.csv and a
-rerun of the study reads it instead of flexing again (an interrupted or partly rerun study resumes).
-`mesh_frictions` and `only` select the mesh series and figures; the variants are scheduled longest first
-on the least loaded rank (`schedule`).
-
-Progress: rank 0 prints one line when each variant starts and ends, for its own variants and, relayed by
-point-to-point messages polled between its records, for the other ranks' variants.
+rerun of the study reads it instead of flexing again (an interrupted or partly rerun study resumes); the
+figures are written from these files. `mesh_frictions` and `only` select the mesh series and figures.
+Progress: each group's first rank prints one line when each of its variants starts and ends.
 """
 from __future__ import annotations
 
 import csv
 import hashlib
+import io
+import json
 import math
 import time
 from pathlib import Path
@@ -32,7 +32,9 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from fabricfem import io as fio
 from fabricfem.materials import positive_number
+from fabricfem.scenes.batch import Job, check, run_batch
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.outputs import plot_torque
 from fabricfem.wear.run import build_run, run_sleeve
@@ -99,24 +101,15 @@ def relative_cost(config: SleeveConfig) -> float:
     return (config.tube.n_around * config.tube.n_along) ** 1.5
 
 
-def schedule(configs: list[SleeveConfig], ranks: int) -> list[int]:
-    """Rank of each configuration: longest first, each to the least loaded rank (the same on every rank)."""
-    load = [0.0] * ranks
-    owner = [0] * len(configs)
-    for i in sorted(range(len(configs)), key=lambda k: -relative_cost(configs[k])):
-        r = min(range(ranks), key=lambda k: load[k])
-        owner[i] = r
-        load[r] += relative_cost(configs[i])
-    return owner
-
-
 def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
               comm: MPI.Comm = MPI.COMM_WORLD, fine: str = "III",
               meshes: tuple[str, ...] = ("I", "II", "III", "IV"),
               fabrics: tuple[str, ...] = ("I", "II", "III"), mesh_frictions: tuple[float, ...] = (0.1, 0.5),
-              only: tuple[str, ...] | None = None) -> dict[str, dict[str, SleeveHistory]]:
-    """Run every distinct variant once (longest first, to the least loaded rank: `schedule`), write CSV + PNG
-    per figure."""
+              only: tuple[str, ...] | None = None, ranks_per_variant: int = 1) -> dict[str, dict[str, SleeveHistory]]:
+    """Run every distinct variant once as one batch (fabricfem.scenes.batch.run_batch: groups of
+    `ranks_per_variant` ranks, longest first by `relative_cost` to the least loaded group; a variant saved in
+    <out>/variants is read back, not rerun), then write CSV + PNG per figure from the saved variants. A variant
+    that raises is reported after the others have run and saved (batch.BatchError naming it)."""
     out = Path(out)
     figures = variants(quick, fine, meshes, fabrics, mesh_frictions, only)
     unique: list[SleeveConfig] = []
@@ -127,30 +120,19 @@ def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
     say = (lambda m: print(m, flush=True)) if comm.rank == 0 else (lambda m: None)
     say(f"sleeve study{' (quick, reduced)' if quick else ''}: {len(unique)} variants on {comm.size} rank(s)")
     t0 = time.perf_counter()
-    progress = _Progress(comm, t0, len(unique))
-    owner = schedule(unique, comm.size)
-    order = sorted(range(len(unique)), key=lambda k: -relative_cost(unique[k]))
-    mine = {}
-    for i in order:
-        cfg = unique[i]
-        if owner[i] != comm.rank:
-            continue
-        saved = _load_variant(out, cfg)
-        if saved is not None:
-            mine[i] = saved
-            progress.report(f"variant {i + 1}/{len(unique)} read from {_variant_path(out, cfg)} (not rerun)")
-            progress.report(f"variant {i + 1}/{len(unique)} done on rank {comm.rank}: {_describe(cfg)}")
-            continue
-        progress.report(f"variant {i + 1}/{len(unique)} started on rank {comm.rank}: {_describe(cfg)}")
-        h = run_sleeve(cfg, MPI.COMM_SELF, on_step=lambda step: progress.poll(), stop_on_failure=False)
-        _save_variant(out, cfg, h)
-        mine[i] = h
-        progress.report(f"variant {i + 1}/{len(unique)} done on rank {comm.rank}: {_describe(cfg)}: reached "
-                        f"{h.angles[-1]:.1f} deg, torque {h.torques[-1]:.4e} N m, {h.wall:.0f} s"
-                        + (f" STOPPED: {h.failure}" if h.failure else ""))
-    progress.finish(sum(1 for i in range(len(unique)) if owner[i] != 0))
-    gathered = comm.allgather(mine)
-    histories = {k: v for d in gathered for k, v in d.items()}
+
+    def flex(cfg: SleeveConfig, sub: MPI.Comm) -> str:
+        h = run_sleeve(cfg, sub, stop_on_failure=False)
+        if sub.rank == 0:
+            _save_variant(out, cfg, h)
+        return (f"reached {h.angles[-1]:.1f} deg, torque {h.torques[-1]:.4e} N m"
+                + (f" STOPPED: {h.failure}" if h.failure else ""))
+
+    jobs = [Job(f"variant {i + 1}/{len(unique)} ({_describe(cfg)})", relative_cost(cfg),
+                lambda sub, cfg=cfg: flex(cfg, sub), lambda cfg=cfg: _load_variant(out, cfg) is not None)
+            for i, cfg in enumerate(unique)]
+    check(run_batch(jobs, comm, ranks_per_variant, "sleeve study"), "sleeve study", f"{out}/variants")
+    histories = {i: _load_variant(out, cfg) for i, cfg in enumerate(unique)}
     results = {name: {label: histories[unique.index(cfg)] for label, cfg in fig.items()}
                for name, fig in figures.items()}
     if comm.rank == 0:
@@ -188,9 +170,6 @@ def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
     return results
 
 
-PROGRESS_TAG = 4711
-
-
 def _variant_path(out: Path, cfg: SleeveConfig) -> Path:
     """Checkpoint of one finished variant: <out>/variants/<sha1 of the configuration>.csv."""
     key = hashlib.sha1(repr(sorted(cfg.key_items().items())).encode()).hexdigest()[:16]
@@ -200,13 +179,12 @@ def _variant_path(out: Path, cfg: SleeveConfig) -> Path:
 def _save_variant(out: Path, cfg: SleeveConfig, h: SleeveHistory):
     """Write a finished variant (its configuration on the first line, then the history rows) so that an
     interrupted study resumes without rerunning it (`_load_variant`)."""
-    path = _variant_path(out, cfg)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as f:
-        f.write(f"# {repr(sorted(cfg.flat().items()))} | wall {h.wall:.1f} | failure {h.failure}\n")
-        w = csv.writer(f)
-        w.writerow(SleeveHistory.HEADER)
-        w.writerows(h.rows())
+    text = io.StringIO()
+    text.write(f"# {repr(sorted(cfg.flat().items()))} | wall {h.wall:.1f} | failure {h.failure}\n")
+    w = csv.writer(text)
+    w.writerow(SleeveHistory.HEADER)
+    w.writerows(h.rows())
+    fio.write_text_whole(_variant_path(out, cfg), text.getvalue())
 
 
 def _load_variant(out: Path, cfg: SleeveConfig) -> SleeveHistory | None:
@@ -240,42 +218,6 @@ def _describe(cfg: SleeveConfig) -> str:
                cfg.similarity_factor != 1.0 else ""))
 
 
-class _Progress:
-    """Progress lines printed by rank 0 only: its own, and those the other ranks send (non-blocking sends,
-    polled by rank 0 after every record of its own flexions and collected at the end)."""
-
-    def __init__(self, comm: MPI.Comm, t0: float, total: int):
-        self.comm, self.t0, self.total = comm, t0, total
-        self.requests = []
-        self.received = 0
-
-    def _print(self, message: str):
-        print(f"  [{time.perf_counter() - self.t0:6.0f} s] {message}", flush=True)
-
-    def report(self, message: str):
-        if self.comm.rank == 0:
-            self._print(message)
-            self.poll()
-        else:
-            self.requests.append(self.comm.isend(message, dest=0, tag=PROGRESS_TAG))
-
-    def poll(self):
-        if self.comm.rank != 0 or self.comm.size == 1:
-            return
-        while self.comm.iprobe(source=MPI.ANY_SOURCE, tag=PROGRESS_TAG):
-            self._print(self.comm.recv(source=MPI.ANY_SOURCE, tag=PROGRESS_TAG))
-            self.received += 1
-
-    def finish(self, remote_variants: int):
-        """Rank 0: print the remaining messages (two per variant of the other ranks); others: complete sends."""
-        if self.comm.rank == 0:
-            while self.received < 2 * remote_variants:
-                self._print(self.comm.recv(source=MPI.ANY_SOURCE, tag=PROGRESS_TAG))
-                self.received += 1
-        else:
-            MPI.Request.waitall(self.requests)
-
-
 # ------------------------------------------------------------------------------------------------------------
 # The three contact methods on the sleeve (acceptance table)
 # ------------------------------------------------------------------------------------------------------------
@@ -284,6 +226,9 @@ METHODS = {"lagrange": "explicit, forward-increment Lagrange multipliers ([Man20
            "augmented": "implicit backward Euler + Newton, augmented Lagrangian (Uzawa)"}
 METHOD_COLUMNS = ("method", "route", "mesh", "ndofs", "ranks", "gravity", "reached_deg", "torque_57_Nm",
                   "max_penetration_m", "bounce_rms_Nm", "bounce_relative", "work", "wall_s", "cpu_s", "note")
+# relative cost for the batch's schedule: measured walls 666, 728 and >= 1287 s (budget-limited) on mesh III
+# (docs/figures/sleeve/sleeve_methods_gravity.csv)
+METHOD_COST = {"lagrange": 1.0, "penalty": 1.0, "augmented": 2.0}
 # implicit route: 4 backward-Euler steps per degree (dt = 5.6 ms at 45 deg/s), so that the 1-degree moving average of
 # the bounce (`torque_bounce`) spans 4 steps as it spans the explicit steps of a record
 IMPLICIT_STEPS_PER_DEGREE = 4
@@ -351,10 +296,13 @@ def _run_method(method: str, base: SleeveConfig, comm: MPI.Comm, al_budget: floa
 
 def run_methods(out: str | Path = "results/sleeve_methods.csv", mesh: str = "III", friction: float = 0.1,
                 methods: tuple[str, ...] = ("lagrange", "penalty", "augmented"), final_angle: float = 57.0,
-                comm: MPI.Comm = MPI.COMM_WORLD, al_budget: float = 1800.0) -> list[dict]:
+                comm: MPI.Comm = MPI.COMM_WORLD, al_budget: float = 1800.0,
+                ranks_per_variant: int = 1) -> list[dict]:
     """The three contact methods on the sleeve (mesh `mesh`, mu = `friction`, to `final_angle` degrees):
     maximum penetration, torque at the final angle, bounce of the per-step torque (`torque_bounce`), wall time.
-    Methods are shared over the ranks (each runs on COMM_SELF, as the study's variants); all three run with
+    The methods run as one batch (fabricfem.scenes.batch, as the study's variants: groups of `ranks_per_variant`
+    ranks, the implicit route first); each finished row is saved to <out without .csv>/<method>.json and read
+    back by a rerun of the same settings (a killed run resumes). All three run with
     gravity and the settle phase (SleeveConfig defaults). The augmented-Lagrangian row is the implicit route
     (fabricfem.wear.sleeve_implicit: backward Euler with the same lumped mass, mass damping and gravity as the
     explicit rows, IMPLICIT_STEPS_PER_DEGREE steps per degree); it stops where a step fails below the minimum
@@ -369,15 +317,29 @@ def run_methods(out: str | Path = "results/sleeve_methods.csv", mesh: str = "III
         raise ValueError(f"mesh: unknown mesh {mesh!r}, expected one of {sorted(MESHES)}")
     n_around, n_along = MESHES[mesh]
     base = SleeveConfig.of(n_around=n_around, n_along=n_along, friction=friction, final_angle=final_angle)
-    mine = {}
-    for i, method in enumerate(methods):
-        if i % comm.size == comm.rank:
-            print(f"  [rank {comm.rank}] sleeve methods: {method} on mesh {mesh} ...", flush=True)
-            mine[i] = _run_method(method, base, MPI.COMM_SELF, al_budget)
-            print(f"  [rank {comm.rank}] {method}: {mine[i]}", flush=True)
-    rows = [r for _, r in sorted((k, v) for d in comm.allgather(mine) for k, v in d.items())]
+    out = Path(out)
+    folder = out.with_suffix("")                     # <out without .csv>/<method>.json: the finished methods
+    key = lambda method: repr((method, al_budget, sorted(base.key_items().items())))  # noqa: E731
+
+    def saved(method: str) -> dict | None:
+        try:
+            data = json.loads((folder / f"{method}.json").read_text())
+        except (OSError, ValueError):
+            return None
+        return data["row"] if data.get("config") == key(method) else None
+
+    def run(method: str, sub: MPI.Comm) -> str:
+        row = _run_method(method, base, sub, al_budget)
+        if sub.rank == 0:
+            row = {k: v.item() if isinstance(v, np.generic) else v for k, v in row.items()}
+            fio.write_text_whole(folder / f"{method}.json", json.dumps({"config": key(method), "row": row}))
+        return f"{row}"
+
+    jobs = [Job(f"{method} on mesh {mesh}", METHOD_COST[method], lambda sub, m=method: run(m, sub),
+                lambda m=method: saved(m) is not None) for method in methods]
+    check(run_batch(jobs, comm, ranks_per_variant, "sleeve methods"), "sleeve methods", str(folder))
+    rows = [saved(method) for method in methods]
     if comm.rank == 0:
-        out = Path(out)
         out.parent.mkdir(parents=True, exist_ok=True)
         with open(out, "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=METHOD_COLUMNS)

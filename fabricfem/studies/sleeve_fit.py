@@ -33,7 +33,8 @@ factor existed (`_key` leaves the default factor out), so those runs are read ba
 Outputs under `out` (rank 0): curves.csv (torque vs angle per arm and case), runs.csv (per run: torque
 at rest and at 57 deg, strain-energy parts at rest and 57 deg, bending share, cost), summary.csv (per arm:
 clearance, max tau(R=0.07)/tau(R=0.06) over 20-57 deg, tau(t=2)/tau(t=1) at 57 deg, torques at rest),
-fit_sensitivity.png; runs/<hash>.json checkpoints (a rerun resumes). Runs are serial (one at a time).
+fit_sensitivity.png; runs/<hash>.json checkpoints (a rerun resumes). The flexions run as the sweep's batch
+(fabricfem.scenes.batch: under `mpirun -n N`, N at a time).
 """
 from __future__ import annotations
 
@@ -50,9 +51,12 @@ import ufl
 from dolfinx import fem
 from mpi4py import MPI
 
+from fabricfem import io as fio
 from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
 from fabricfem.forms import shell as sf
 from fabricfem.materials import positive_number
+from fabricfem.scenes.batch import Job, check, run_batch
+from fabricfem.studies.sleeve import relative_cost
 from fabricfem.wear.config import SleeveConfig, check_fit
 from fabricfem.wear.run import build_run
 from fabricfem.wear.sleeve import SleeveHistory, SleeveStep
@@ -216,12 +220,10 @@ def _checkpoint(out: Path, config: SleeveConfig) -> Path:
 
 
 def _save(out: Path, config: SleeveConfig, history: SleeveHistory, splits: dict) -> None:
-    path = _checkpoint(out, config)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps({"config": _key(config), "rows": history.rows(), "splits": {str(a): s for a, s in
-                                                                                         splits.items()},
-                                "wall_s": history.wall, "cpu_s": history.timings.get("run_cpu_s", math.nan),
-                                "failure": history.failure, "ndofs": history.ndofs}))
+    fio.write_text_whole(_checkpoint(out, config), json.dumps({
+        "config": _key(config), "rows": history.rows(), "splits": {str(a): s for a, s in splits.items()},
+        "wall_s": history.wall, "cpu_s": history.timings.get("run_cpu_s", math.nan), "failure": history.failure,
+        "ndofs": history.ndofs}))
 
 
 def _load(out: Path, config: SleeveConfig) -> tuple[SleeveHistory, dict, float] | None:
@@ -245,36 +247,35 @@ RUN_COLUMNS = ("scale", "long_axis_factor", "case", "radius_m", "thickness_m", "
 def run_fit_study(out: str | Path = "results/sleeve_fit", mesh: str = "II", scales=FIT_SCALES,
                   final_angle: float = 57.0, docs: str | Path | None = None, comm: MPI.Comm = MPI.COMM_WORLD,
                   long_axis_factors=(DEFAULT_LONG_AXIS_FACTOR,), prefix: str = "fit_sensitivity",
-                  **overrides) -> list[dict]:
-    """Run the 3 x len(scales) x len(long_axis_factors) flexions one at a time on rank 0 (COMM_SELF;
-    checkpointed), write curves.csv, runs.csv, summary.csv, fit_sensitivity.png under `out` (and, if `docs` is
+                  ranks_per_variant: int = 1, **overrides) -> list[dict]:
+    """Run the 3 x len(scales) x len(long_axis_factors) flexions as one batch (fabricfem.scenes.batch.run_batch:
+    groups of `ranks_per_variant` ranks, each flexion checkpointed to runs/<hash>.json and read back by a rerun),
+    write curves.csv, runs.csv, summary.csv, fit_sensitivity.png under `out` (and, if `docs` is
     given, docs/<prefix>.csv = summary, .runs.csv, .curves.csv, .png); returns the summary rows (one per arm:
     factor-major, then scale)."""
     out = Path(out)
     arms = [(f, configs) for f in long_axis_factors
             for configs in [fit_configs(scales, mesh, final_angle, long_axis_factor=f, **overrides)]]
+    runs = [(f, s, label, cfg) for f, configs in arms for s, cases in configs.items() for label, cfg in cases.items()]
+
+    def flex(cfg: SleeveConfig, sub: MPI.Comm) -> str:
+        history, splits = run_case(cfg, sub)
+        if sub.rank == 0:
+            _save(out, cfg, history, splits)
+        return f"torque at rest {float(history.torques[0]):.4e} N m" + (
+            f"; STOPPED: {history.failure}" if history.failure else "")
+
+    jobs = [Job(f"run {k + 1}/{len(runs)}: arm scale {scale:g}, r1 = {factor:g} L (clearance "
+                f"{check_fit(cfg.tube.radius, cfg.arm) * 1e3:.3f} mm, elbow radius "
+                f"{cfg.arm.elbow_radius * 1e3:.1f} mm), {label}", relative_cost(cfg), lambda sub, cfg=cfg: flex(cfg, sub),
+                lambda cfg=cfg: _load(out, cfg) is not None) for k, (factor, scale, label, cfg) in enumerate(runs)]
+    check(run_batch(jobs, comm, ranks_per_variant, "sleeve-fit study"), "sleeve-fit study", f"{out}/runs")
     rows, run_rows, curve_rows = [], [], []
     if comm.rank == 0:
-        total = sum(len(c) for _, configs in arms for c in configs.values())
-        k = 0
-        t0 = time.perf_counter()
         for factor, scale, cases in ((f, s, c) for f, configs in arms for s, c in configs.items()):
             curves = {}
             for label, cfg in cases.items():
-                k += 1
-                saved = _load(out, cfg)
-                if saved is None:
-                    print(f"  [{time.perf_counter() - t0:6.0f} s] run {k}/{total}: arm scale {scale:g}, r1 = "
-                          f"{factor:g} L (clearance {check_fit(cfg.tube.radius, cfg.arm) * 1e3:.3f} mm, elbow radius "
-                          f"{cfg.arm.elbow_radius * 1e3:.1f} mm), {label} ...", flush=True)
-                    history, splits = run_case(cfg)
-                    cpu = history.timings["run_cpu_s"]
-                    _save(out, cfg, history, splits)
-                else:
-                    history, splits, cpu = saved
-                    print(f"  run {k}/{total}: arm scale {scale:g}, r1 = {factor:g} L, {label}: read from "
-                          f"{_checkpoint(out, cfg)}",
-                          flush=True)
+                history, splits, cpu = _load(out, cfg)
                 curves[label] = (history.angles, history.torques)
                 rest, end = splits.get(0.0, {}), splits.get(float(final_angle), {})
                 run_rows.append({"scale": scale, "long_axis_factor": factor, "case": label, "radius_m": cfg.tube.radius, "thickness_m": cfg.material.thickness,
@@ -286,7 +287,8 @@ def run_fit_study(out: str | Path = "results/sleeve_fit", mesh: str = "II", scal
                                  **{f"{p}_J_rest": rest.get(p, math.nan) for p in ENERGY_PARTS},
                                  **{f"{p}_J_57": end.get(p, math.nan) for p in ENERGY_PARTS},
                                  "wall_s": history.wall, "cpu_s": cpu, "failure": history.failure})
-                print(f"    torque at rest {run_rows[-1]['torque_rest_Nm']:.4e} N m, at {final_angle:g} deg "
+                print(f"  arm scale {scale:g}, r1 = {factor:g} L, {label}: torque at rest "
+                      f"{run_rows[-1]['torque_rest_Nm']:.4e} N m, at {final_angle:g} deg "
                       f"{run_rows[-1]['torque_57_Nm']:.4e} N m; bending share {run_rows[-1]['bending_share_rest']:.3f} "
                       f"(rest), {run_rows[-1]['bending_share_57']:.3f} ({final_angle:g} deg); cpu {cpu:.0f} s"
                       + (f"; STOPPED: {history.failure}" if history.failure else ""), flush=True)

@@ -30,20 +30,23 @@ Units: S in Pa, E dimensionless, forces in N, lengths in m, times in s.
 from __future__ import annotations
 
 import csv
+import dataclasses
 import glob
+import json
 import math
 import os
 import re
 import time
-from dataclasses import dataclass
 
 import numpy as np
 from dolfinx import fem, io, plot
 from mpi4py import MPI
 
+from fabricfem import io as fio
 from fabricfem.materials.yarn import THESIS_ISOTROPIC, THESIS_TRANSVERSELY_ISOTROPIC, YarnMaterial
 from fabricfem.meshes.unit_cell import unit_cell
 from fabricfem.meshes.yarn_geometry import PlainWeave
+from fabricfem.scenes.batch import Job, check, run_batch
 from fabricfem.solvers.newton import SolverError
 from fabricfem.weave.unit_cell import ContactUnitCell, contact_table
 
@@ -86,7 +89,7 @@ def load_targets(load: str, scale: float = 1.0) -> list[tuple[np.ndarray, int]]:
     raise ValueError(f"load must be biaxial, uniaxial, shear or compression, got {load!r}")
 
 
-@dataclass(frozen=True)
+@dataclasses.dataclass(frozen=True)
 class RunKey:
     material: str  # "iso" | "ti"
     load: str
@@ -108,7 +111,7 @@ class RunKey:
                          self.refinement, self.end_faces))
 
 
-@dataclass
+@dataclasses.dataclass
 class Run:
     key: RunKey
     rows: list[dict]
@@ -349,67 +352,111 @@ def previous_runs(folder: str) -> dict[RunKey, Run]:
     return {run.key: run for run in by_label.values()}
 
 
+# relative size of a cell (the full cell is four quarters; the fine mesh halves the element size in 3-D)
+CELL_SIZE = {"quarter": 1.0, "full": 4.0, "coarse": 1.0, "fine": 8.0}
+
+
+def case_cost(key: RunKey, steps: int) -> float:
+    """Estimated relative cost of a load case for the batch's schedule: (cell size)^1.5 (direct solver) x steps,
+    twice that with yarn contact (augmentations) and with the shear's pre-stretch step."""
+    return ((CELL_SIZE[key.option] * CELL_SIZE[key.refinement]) ** 1.5 * (steps + (key.load == "shear"))
+            * (2.0 if key.contact else 1.0))
+
+
+def _variant_path(out: str, key: RunKey) -> str:
+    """Checkpoint of one finished load case: <out>/variants/<slug>.json."""
+    return os.path.join(out, "variants", key.slug + ".json")
+
+
+def _save_run(out: str, run: Run, config: dict) -> None:
+    """Write a finished load case (its key, the path settings `config`, rows, stop reason, wall time, dofs and
+    contact table; floats round trip) so that an interrupted study resumes without solving it again."""
+    rows = [{q: int(v) if isinstance(v, (int, np.integer)) else float(v) for q, v in row.items()} for row in run.rows]
+    data = dict(key=dataclasses.asdict(run.key), config=config, rows=rows, stopped=run.stopped, wall_s=run.wall_s,
+                ndofs=int(run.ndofs), table=run.table)
+    fio.write_text_whole(_variant_path(out, run.key), json.dumps(data))
+
+
+def _load_run(out: str, key: RunKey, config: dict) -> Run | None:
+    """The load case saved by `_save_run` for exactly this key and `config`, or None."""
+    try:
+        with open(_variant_path(out, key)) as f:
+            data = json.load(f)
+    except (OSError, ValueError):
+        return None
+    if data.get("key") != dataclasses.asdict(key) or data.get("config") != config:
+        return None
+    return Run(key, data["rows"], data["stopped"], data["wall_s"], data["ndofs"], data["table"])
+
+
 def run_study(out: str = "results/unit_cell", quick: bool = False, steps: int | None = None,
               comm: MPI.Comm = MPI.COMM_WORLD, time_budget: float | None = None,
               recompute: set[RunKey] | None = None, previous: str | None = None,
-              reuse: bool | None = None) -> dict[RunKey, Run]:
+              reuse: bool | None = None, ranks_per_variant: int = 1) -> dict[RunKey, Run]:
     """Run the figures' load cases (each once, shared between figures), write fig*.csv / fig*.png,
     the renders fig20.png / fig23.png (+ snapshots/*.xdmf) and contact_reports.txt under `out`.
     quick: only Figs. 21, 24, 25, 26 (+ 20, 23) on the coarse quarter cell, 3 steps to 1/4 of the
     thesis strains (a smoke test of the whole chain). time_budget [s] per load case (default: none for
     quick, else TIME_BUDGET by cell).
-    reuse (default: not quick): a load case whose curve is in the CSVs of the earlier output folder
-    `previous` (default `out`) is read back (previous_runs, matched by RunKey, so a changed key
-    reruns) instead of solved, unless it is in `recompute`; a render whose snapshot is missing reruns
-    its load case. Delete the folder (or pass the keys in `recompute`) to recompute after a solver
-    change."""
-    reuse = (not quick) if reuse is None else bool(reuse)
+    The load cases run as one batch (fabricfem.scenes.batch.run_batch, the machinery of `fabricfem sweep`):
+    groups of `ranks_per_variant` ranks, longest first (`case_cost`) to the least loaded group. Each finished
+    case is saved to <out>/variants/<slug>.json and a rerun reads it back instead of solving it (an interrupted
+    study resumes), unless reuse is False or the key is in `recompute`; a case saved with other steps or
+    scale is solved again.
+    reuse (default: not quick) also reads back a load case whose curve is in the CSVs of the earlier output
+    folder `previous` (default `out`; previous_runs, matched by RunKey, so a changed key reruns). A render whose
+    snapshot is missing reruns its load case. Delete the folder (or pass the keys in `recompute`) to recompute
+    after a solver change."""
+    legacy = (not quick) if reuse is None else bool(reuse)
     folder = out if previous is None else previous
-    old = previous_runs(folder) if (reuse and os.path.isdir(folder)) else {}
+    old = previous_runs(folder) if (legacy and os.path.isdir(folder)) else {}
     recompute = set() if recompute is None else set(recompute)
     n_steps = (3 if quick else 10) if steps is None else int(steps)
     scale = 0.25 if quick else 1.0
+    config = {"steps": n_steps, "scale": scale}
     figs = figures(quick)
     snap_dir = os.path.join(out, "snapshots")
     snapshots = {key: os.path.join(snap_dir, key.slug) for _, key in RENDERS.values()}
-    runs: dict[RunKey, Run] = {}
     if comm.rank == 0:
         os.makedirs(snap_dir, exist_ok=True)
     comm.barrier()
+    keys = list(dict.fromkeys([k for _, _, _, ks in figs.values() for k in ks] + [k for _, k in RENDERS.values()]))
 
-    def solve(name: str, key: RunKey) -> None:
-        if key in runs:
-            return
+    def saved(key: RunKey) -> Run | None:
+        """The finished case to read back (checkpoint first, then an earlier folder's CSVs), or None."""
         snap = snapshots.get(key)
-        have_snap = snap is not None and os.path.exists(snap + ".xdmf") and (
-            comm.size > 1 or os.path.exists(snap + ".npz"))
-        if key in old and key not in recompute and (snap is None or have_snap):
-            runs[key] = old[key]
-            return
+        have_snap = snap is None or (os.path.exists(snap + ".xdmf") and (  # no .npz from a case solved on > 1 rank
+            ranks_per_variant > 1 or os.path.exists(snap + ".npz")))
+        if key in recompute or not have_snap or reuse is False:
+            return None
+        return _load_run(out, key, config) or old.get(key)
+
+    def solve(key: RunKey, sub: MPI.Comm) -> str:
         budget = time_budget if time_budget is not None else (
             math.inf if quick else TIME_BUDGET[(key.option, key.refinement)])
-        runs[key] = r = run_case(key, n_steps, scale, comm=comm, time_budget=budget, snapshot=snap)
-        if comm.rank == 0:
-            print(f"[{name}] {key.label}: {len(r.rows)} steps, {r.wall_s:.1f} s"
-                  + (f", STOPPED: {r.stopped[:160]}" if r.stopped else ""), flush=True)
+        run = run_case(key, n_steps, scale, comm=sub, time_budget=budget, snapshot=snapshots.get(key))
+        if sub.rank == 0:
+            _save_run(out, run, config)
+        return f"{len(run.rows)} steps" + (f", STOPPED: {run.stopped[:160]}" if run.stopped else "")
 
-    for name, (title, x, ys, keys) in figs.items():
-        for key in keys:
-            solve(name, key)
-        if comm.rank == 0:
-            _write_csv(os.path.join(out, f"{name}.csv"), [runs[k] for k in keys])
-            _plot(os.path.join(out, f"{name}.png"), f"thesis {name}: {title}", x, ys, [runs[k] for k in keys])
-    for name, (caption, key) in RENDERS.items():
-        solve(name, key)
-        run = runs[key]
-        if comm.rank == 0 and comm.size == 1 and run.rows:
-            render_configuration(snapshots[key] + ".npz", os.path.join(out, f"{name}.png"),
-                                 f"thesis {name}: {caption}" + (" (stopped early)" if run.stopped else ""))
+    jobs = [Job(key.label, case_cost(key, n_steps), lambda sub, key=key: solve(key, sub),
+                lambda key=key: saved(key) is not None) for key in keys]
+    check(run_batch(jobs, comm, ranks_per_variant, "unit-cell study"), "unit-cell study", f"{out}/variants")
+    runs = {key: _load_run(out, key, config) or old[key] for key in keys}
     if comm.rank == 0:
+        for name, (title, x, ys, fig_keys) in figs.items():
+            _write_csv(os.path.join(out, f"{name}.csv"), [runs[k] for k in fig_keys])
+            _plot(os.path.join(out, f"{name}.png"), f"thesis {name}: {title}", x, ys, [runs[k] for k in fig_keys])
+        for name, (caption, key) in RENDERS.items():
+            run = runs[key]
+            if run.rows and os.path.exists(snapshots[key] + ".npz"):   # the surface of a serial solve
+                render_configuration(snapshots[key] + ".npz", os.path.join(out, f"{name}.png"),
+                                     f"thesis {name}: {caption}" + (" (stopped early)" if run.stopped else ""))
         with open(os.path.join(out, "contact_reports.txt"), "w") as f:
             for key, run in runs.items():
                 f.write(f"## {key.label} ({run.ndofs} dofs, {run.wall_s:.1f} s){' STOPPED: ' + run.stopped if run.stopped else ''}\n")
                 f.write(run.table + "\n\n")
+    comm.barrier()
     return runs
 
 
