@@ -89,6 +89,8 @@ def test_compression_mean_pressure_meets_the_target_against_laplace(tmp_path, ca
     assert summary["accuracy_quantity"] == "mean_pressure_Pa" and summary["accuracy_window_s"] is None
     assert true <= summary["accuracy_target"] == 0.001 and summary["accuracy_estimated_error"] <= 0.001
     assert "<- chosen" in capsys.readouterr().out
+    tight = plan(load_scene(path), 1e-4)          # the pilots read back: a finer pilot is chosen, and it meets it
+    assert tight.asymptotic and tight.chosen.k > -2 and abs(tight.chosen.value - exact) / exact <= 1e-4
 
 
 def _refused(path: Path, capsys, *args) -> str:
