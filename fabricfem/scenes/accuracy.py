@@ -23,7 +23,8 @@ Wear scenes ([scene] kind = "wear"; `WearLevels`): the levels are the garment's 
 (n_around, n_along) x ratio^k rounded (the compression route: n_around a multiple of 4) or a pattern's element size
 h / ratio^k, with the ratio of [accuracy] ratio (default 2, or less so that the coarsest pilot keeps 6 cells
 around a tube, 8 on the compression route); Richardson uses the levels' cell sizes (a tube's 1 / sqrt(n_around
-n_along), a pattern's h), so rounded counts give non-uniform ratios. The explicit step follows each mesh by itself
+n_along), a pattern's 1 / sqrt(dofs) as meshed: every edge has at least two segments, so a coarse h meshes finer
+than h), so rounded counts give non-uniform ratios. The explicit step follows each mesh by itself
 (its critical step), so the levels are mesh levels only, and an observed order above 2 is not asymptotic (the
 dynamic range); the compression route is quasi-static (the static range). [accuracy] window [s]: the pilots run
 only the first `window` seconds of body time (route.end_time; donning, settling and motion as scheduled, cut
@@ -171,6 +172,12 @@ def _cells(scene: Scene) -> str:
                 else f"h={g.get('h', wear.GarmentSection.h):.3g}")
     mesh = scene["mesh"]
     return "x".join(str(mesh[key]) for key in MESH_COUNTS[mesh["type"]])
+
+
+def _mesh_label(scene: Scene) -> str:
+    """"6x8 cells" or, for a pattern garment, "h = 0.05 m"."""
+    cells = _cells(scene)
+    return f"h = {cells[2:]} m" if cells.startswith("h=") else f"{cells} cells"
 
 
 def summary_value(summary: dict, key: str):
@@ -339,7 +346,7 @@ def _membrane_pilots(scene: Scene, key: str, root: Path, comm, say) -> tuple[lis
         except (SolverError, DynamicsError, SceneError, PETSc.Error) as exc:   # a membrane without tension: singular
             why = f"PETSc error {exc.ierr} in the solve" if isinstance(exc, PETSc.Error) else " ".join(str(exc).split())
             return solved, f"membrane: level {k:+d} did not solve ({why}); not a candidate from there on"
-        say(f"accuracy: membrane level {k:+d} ({_cells(level.scene)} cells, {level.dofs} dofs) "
+        say(f"accuracy: membrane level {k:+d} ({_mesh_label(level.scene)}, {level.dofs} dofs) "
             f"{'solved' if fresh else 'read back'}: {level.value:.6g}")
         solved.append(level)
     return solved, ""
@@ -364,8 +371,10 @@ def plan(scene: Scene, target: float | None = None, quantity: str | None = None,
                          f"rounding; give a larger ratio or a finer scene mesh")
     for i, lv in enumerate(pilots):
         solved = solve(lv, key, comm)
-        say(f"accuracy: level {lv.k:+d} ({_cells(lv.scene)} cells, {lv.dofs} dofs) "
+        say(f"accuracy: level {lv.k:+d} ({_mesh_label(lv.scene)}, {lv.dofs} dofs) "
             f"{'solved' if solved else 'read back'}: {lv.value:.6g} {clock((i + 1) / len(pilots))}")
+    if scene.kind == "wear" and scene["garment"].get("builder", "pattern") != "tube":
+        _meshed_sizes(scene, levels)
     estimate = richardson([lv.value for lv in pilots], [lv.size for lv in pilots], orders=_orders(scene))
     for lv, error in zip(pilots, estimate.errors):
         lv.error = error
@@ -390,13 +399,27 @@ def plan(scene: Scene, target: float | None = None, quantity: str | None = None,
     say(result.table())
     c = result.chosen
     if c is not None:
-        say(f"accuracy: chose level {c.k:+d} {c.model} ({_cells(c.scene)} cells, {c.dofs} dofs): estimated error "
+        say(f"accuracy: chose level {c.k:+d} {c.model} ({_mesh_label(c.scene)}, {c.dofs} dofs): estimated error "
             f"{c.error:.2e} <= {target:.3g}, {'measured' if c.value is not None else 'predicted'} wall "
             f"{c.cost_s:.3g} s" + ("" if window is None else
                                    f" on the window, about {c.cost_s * result.full_factor:.3g} s for the whole scene")
             + ("" if estimate.asymptotic else
                                    f" (NOT ASYMPTOTIC: {estimate.note}; conservative choice)"))
     return result
+
+
+def _meshed_sizes(scene: Scene, levels: list[Level]) -> None:
+    """A pattern garment's cell sizes from its meshed dofs (1 / sqrt(dofs), relative): every edge gets at least
+    two segments, so a coarse level's cells are smaller than its h; the finer levels h / ratio^k of the finest
+    pilot's. SceneError naming accuracy.ratio when two pilots meshed alike."""
+    pilots, ratio = levels[:len(PILOTS)], wear_ratio(scene.data)
+    if len({lv.dofs for lv in pilots}) < len(pilots):
+        raise SceneError(f"accuracy.ratio: the pilots h = {[lv.scene['garment']['h'] for lv in pilots]} m meshed with "
+                         f"equal dofs {[lv.dofs for lv in pilots]}; give a larger ratio or a smaller garment.h")
+    for lv in pilots:
+        lv.size = lv.dofs ** -0.5
+    for lv in levels[len(PILOTS):]:
+        lv.size = pilots[-1].size / ratio ** lv.k
 
 
 def _orders(scene: Scene) -> tuple[float, float]:
