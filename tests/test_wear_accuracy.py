@@ -12,7 +12,6 @@ from toml_text import dumps
 
 from fabricfem import cli
 from fabricfem.materials import Fabric
-from fabricfem.scenes import run as scene_run
 from fabricfem.scenes.accuracy import plan
 from fabricfem.scenes.build import load as load_scene
 from fabricfem.scenes.errors import SceneError
@@ -107,20 +106,18 @@ def _refused(path: Path, capsys, *args) -> str:
     ({"window": 5.0}, "accuracy.window: 5 s is longer than the scene (1.66"),
     ({"ratio": 1.0}, "accuracy.ratio: a refinement ratio in (1, 4]"),
     ({"target": 1.5}, "accuracy.target")])
-def test_bad_wear_accuracy_refused_before_meshing(change, text, tmp_path, capsys, monkeypatch):
+def test_bad_wear_accuracy_refused_before_meshing(change, text, tmp_path, capsys, no_meshing):
     """Each bad [accuracy] key is refused in one line naming it, before anything is meshed or run; an unknown
     quantity lists the valid ones."""
-    monkeypatch.setattr(scene_run, "run_scene", lambda *a, **k: pytest.fail("a pilot ran"))
     message = _refused(_sleeve(tmp_path, **change), capsys, "--accuracy", "10%")
     assert text in message
     if "quantity" in change:
         assert "torque_elbow_final_Nm" in message and "pressure_peak_Pa" in message and "max_strain" in message
 
 
-def test_bad_wear_accuracy_requests(tmp_path, capsys, monkeypatch):
+def test_bad_wear_accuracy_requests(tmp_path, capsys, no_meshing):
     """--quantity unknown on the command line, a window on the quasi-static compression route, and a sleeve on a
     tube too coarse for two coarser pilots: refused naming the key, nothing run."""
-    monkeypatch.setattr(scene_run, "run_scene", lambda *a, **k: pytest.fail("a pilot ran"))
     message = _refused(_compression(tmp_path), capsys, "--accuracy", "1%", "--quantity", "peak_torque")
     assert "accuracy.quantity" in message and "hoop_tension_N_per_m" in message
     data = tomllib.loads(_compression(tmp_path).read_text())
