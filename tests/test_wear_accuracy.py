@@ -116,8 +116,8 @@ def test_bad_wear_accuracy_refused_before_meshing(change, text, tmp_path, capsys
 
 
 def test_bad_wear_accuracy_requests(tmp_path, capsys, no_meshing):
-    """--quantity unknown on the command line, a window on the quasi-static compression route, and a sleeve on a
-    tube too coarse for two coarser pilots: refused naming the key, nothing run."""
+    """--quantity unknown on the command line, a window on the quasi-static compression route, --window too long or
+    negative, and a sleeve on a tube too coarse for two coarser pilots: refused naming the key, nothing meshed."""
     message = _refused(_compression(tmp_path), capsys, "--accuracy", "1%", "--quantity", "peak_torque")
     assert "accuracy.quantity" in message and "hoop_tension_N_per_m" in message
     data = tomllib.loads(_compression(tmp_path).read_text())
@@ -125,6 +125,9 @@ def test_bad_wear_accuracy_requests(tmp_path, capsys, no_meshing):
     (tmp_path / "window.toml").write_text(dumps(data))
     assert "accuracy.window: the compression route is quasi-static" in _refused(tmp_path / "window.toml", capsys,
                                                                                  "--accuracy", "1%")
+    assert "accuracy.window: 9 s is longer" in _refused(_sleeve(tmp_path), capsys, "--accuracy", "1%", "--window", "9")
+    assert "accuracy.window: must be a positive body time" in _refused(_sleeve(tmp_path), capsys, "--accuracy", "1%",
+                                                               "--window", "-0.1")
     coarse = tomllib.loads(_sleeve(tmp_path).read_text())
     coarse["garment"].update(n_around=6, n_along=8)
     del coarse["accuracy"]["ratio"]

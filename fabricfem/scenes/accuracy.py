@@ -200,6 +200,18 @@ def parse_target(text: str) -> float:
     return check_target("--accuracy", value)
 
 
+def with_window(scene: Scene, window: float | None) -> Scene:
+    """The scene with [accuracy] window = `window` [s] (None: unchanged), validated again (SceneError naming
+    accuracy.window: not positive, longer than the scene, or not a scene on the explicit engine)."""
+    if window is None:
+        return scene
+    data = copy.deepcopy(scene.data)
+    data.setdefault("accuracy", {})["window"] = float(window)
+    out = validate(data, source="--window", path=scene.path)
+    out.path = scene.path
+    return out
+
+
 def target_of(scene: Scene, target: float | None = None, quantity: str | None = None) -> tuple[str, float]:
     """(quantity, target) from the arguments, else the scene's [accuracy]; SceneError naming what is missing."""
     spec = section(AccuracySection, scene.get("accuracy"))
