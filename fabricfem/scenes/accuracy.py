@@ -115,7 +115,7 @@ class Plan:
 
     def rows(self) -> list[list]:
         """One row per level (the columns of `header`)."""
-        return [[lv.k, lv.model, _cells(lv.scene), lv.dofs, lv.step, lv.value, lv.error, lv.cost_s,
+        return [[lv.k, lv.model, cells_of(lv.scene), lv.dofs, lv.step, lv.value, lv.error, lv.cost_s,
                  lv.value is not None] for lv in self.levels]
 
     def table(self) -> str:
@@ -128,7 +128,7 @@ class Plan:
         for lv in self.levels:
             mark = " <- chosen" if lv is self.chosen else ""
             cost = "" if lv.cost_s is None else f"{lv.cost_s:.3g}" + ("" if lv.value is not None else " (pred.)")
-            lines.append(f"  {lv.k:>+5d} {lv.model:>8} {_cells(lv.scene):>9} {lv.dofs:>8d} {_fmt(lv.step, '.4g'):>10} "
+            lines.append(f"  {lv.k:>+5d} {lv.model:>8} {cells_of(lv.scene):>9} {lv.dofs:>8d} {_fmt(lv.step, '.4g'):>10} "
                          f"{_fmt(lv.value, '.6g'):>13} {_fmt(lv.error, '.2e'):>10} {cost:>10}{mark}")
         if self.window is not None:
             lines.append(f"  window: the pilots ran the first {self.window:g} s of {self.full_time:.4g} s of body time; "
@@ -165,7 +165,8 @@ def _fmt(value, spec: str) -> str:
     return "-" if value is None else format(value, spec)
 
 
-def _cells(scene: Scene) -> str:
+def cells_of(scene: Scene) -> str:
+    """The level's mesh: "nx x ny" cells (plate), "n_around x n_along" (tube, wear tube) or "h=..." (pattern)."""
     if scene.kind == "wear":
         g = scene["garment"]
         return (f"{g['n_around']}x{g['n_along']}" if g.get("builder", "pattern") == "tube"
@@ -176,7 +177,7 @@ def _cells(scene: Scene) -> str:
 
 def _mesh_label(scene: Scene) -> str:
     """"6x8 cells" or, for a pattern garment, "h = 0.05 m"."""
-    cells = _cells(scene)
+    cells = cells_of(scene)
     return f"h = {cells[2:]} m" if cells.startswith("h=") else f"{cells} cells"
 
 
@@ -379,7 +380,7 @@ def plan(scene: Scene, target: float | None = None, quantity: str | None = None,
     clock = io.Progress("accuracy pilots")
     pilots = levels[:len(PILOTS)]
     if len({lv.size for lv in pilots}) < len(pilots):
-        raise SceneError(f"accuracy.ratio: the pilot levels {[_cells(lv.scene) for lv in pilots]} coincide after "
+        raise SceneError(f"accuracy.ratio: the pilot levels {[cells_of(lv.scene) for lv in pilots]} coincide after "
                          f"rounding; give a larger ratio or a finer scene mesh")
     for i, lv in enumerate(pilots):
         solved = solve(lv, key, comm)
