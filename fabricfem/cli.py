@@ -1,4 +1,4 @@
-"""Command line: `fabricfem run SCENE [--accuracy 2%] [--quantity NAME]`, `fabricfem plan SCENE --accuracy 2%`,
+"""Command line: `fabricfem run SCENE [--accuracy 2%] [--quantity NAME] [--window S]`, `fabricfem plan SCENE --accuracy 2%`,
 `fabricfem sweep SCENE --vary key=v1,v2 [--vary ...] [--out DIR] [--ranks-per-variant K] [--plot QUANTITY]`, `fabricfem verify [CASE ...] [--json]`, `fabricfem demo`,
 `fabricfem bench ...`,
 `fabricfem study sleeve [--quick] [--out DIR] [--fine III] [--meshes I,II,III,IV] [--fabrics I,II,III]
@@ -30,7 +30,7 @@ from fabricfem.benchmarks.unit_cell_perf import unit_cell_perf
 from fabricfem.benchmarks.wear_speed import wear_bench
 from fabricfem.demo import rollup_demo
 from fabricfem.dynamics.newmark import DynamicsError
-from fabricfem.scenes.accuracy import parse_target, plan, run_accurate
+from fabricfem.scenes.accuracy import parse_target, plan, run_accurate, with_window
 from fabricfem.scenes.batch import BatchError, groups_of
 from fabricfem.scenes.run import run_scene, scene_name
 from fabricfem.scenes.sweep import parse_vary, run_sweep
@@ -74,6 +74,8 @@ def main(argv: list[str] | None = None) -> int:
     p_run.add_argument("--accuracy", default=None, metavar="TARGET",
                        help="relative error target (2%% or 0.02): run the cheapest mesh level that meets it")
     p_run.add_argument("--quantity", default=None, help="the monitored quantity of the target (default [accuracy])")
+    p_run.add_argument("--window", type=float, default=None, metavar="SECONDS",
+                       help="wear scenes: the pilots run the first SECONDS of body time (default [accuracy] window)")
     p_run.add_argument("--out", default=None, help="output folder (default: the scene's [output] dir)")
     p_run.add_argument("--resume", action="store_true",
                        help="wear and dynamic scenes: continue from the output folder's checkpoint after a kill "
@@ -83,6 +85,8 @@ def main(argv: list[str] | None = None) -> int:
     p_plan.add_argument("scene", help="path of the scene file")
     p_plan.add_argument("--accuracy", default=None, metavar="TARGET", help="relative error target (2%% or 0.02)")
     p_plan.add_argument("--quantity", default=None, help="the monitored quantity (default [accuracy] quantity)")
+    p_plan.add_argument("--window", type=float, default=None, metavar="SECONDS",
+                        help="wear scenes: the pilots run the first SECONDS of body time (default [accuracy] window)")
     p_sweep = sub.add_parser("sweep", help="run the variants of a scene as one MPI batch (fabricfem.scenes.sweep)")
     p_sweep.add_argument("scene", help="path of the scene file")
     p_sweep.add_argument("--vary", action="append", required=True, metavar="KEY=V1,V2,...",
@@ -185,14 +189,15 @@ def _command(args) -> int:
             return 0
         return report(registry, args.cases, args.command, args.json, args.markdown)
     if args.command == "plan":
-        scene = scene_module.load(args.scene)
+        scene = with_window(scene_module.load(args.scene), args.window)
         plan(scene, None if args.accuracy is None else parse_target(args.accuracy), args.quantity).require()
         return 0
     if args.command == "run":
-        scene = scene_module.load(args.scene)
+        scene = with_window(scene_module.load(args.scene), args.window)
         target = None if args.accuracy is None else parse_target(args.accuracy)
         try:
-            if target is not None or args.quantity is not None or scene.get("accuracy", {}).get("target"):
+            if (target is not None or args.quantity is not None or args.window is not None
+                    or scene.get("accuracy", {}).get("target")):
                 _, outcome = run_accurate(scene, target, args.quantity)
             else:
                 outcome = run_scene(scene, out=None if args.out is None else Path(args.out), resume=args.resume)

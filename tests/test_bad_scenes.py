@@ -7,8 +7,6 @@ import pytest
 from toml_text import dumps
 
 from fabricfem import cli
-from fabricfem.scenes import build as scene_build
-from fabricfem.scenes import run as scene_run
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENES = {"static": "scenes/rollup.toml", "dynamic": "scenes/cantilever_vibration.toml",
@@ -91,18 +89,6 @@ BAD = [  # (scene kind, mutation, text the one-line error must contain)
     ("static", _set("accuracy", quantity="probe_ux_m", membrane="yes"), "accuracy.membrane"),
     ("static", _first("support", edge="al"), "did you mean 'all'"),
 ]
-
-
-@pytest.fixture
-def no_meshing(monkeypatch):
-    """Any attempt to mesh fails the test (the refusal must come before meshing)."""
-    def trap(*args, **kwargs):
-        raise AssertionError("meshed before refusing the scene")
-    for module in (scene_build, scene_run):
-        monkeypatch.setattr(module, "build_mesh", trap)
-    monkeypatch.setattr("fabricfem.wear.sleeve.tube", trap)
-    monkeypatch.setattr("fabricfem.scenes.wear.tube", trap)
-    monkeypatch.setattr("fabricfem.scenes.wear.mesh_pattern", trap)
 
 
 def _run_cli(path: Path, capsys) -> tuple[int, list[str]]:

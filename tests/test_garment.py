@@ -97,14 +97,6 @@ def test_sleeve_wear_scene_gives_the_stored_history_over_the_first_ten_degrees(t
 
 
 # ------------------------------------------------------------------------------ refusals before meshing
-@pytest.fixture
-def no_meshing(monkeypatch):
-    def trap(*args, **kwargs):
-        raise AssertionError("meshed before refusing the scene")
-    monkeypatch.setattr("fabricfem.scenes.wear.tube", trap)
-    monkeypatch.setattr("fabricfem.scenes.wear.mesh_pattern", trap)
-
-
 def _trousers() -> dict:
     return tomllib.loads((ROOT / "scenes" / "trousers_standing.toml").read_text())
 

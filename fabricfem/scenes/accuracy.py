@@ -19,6 +19,20 @@ shell's best value: |q_m,k - q*| / |q*| (asymptotic shell), else |q_m,k - q_0| /
 conservative estimate of its finest pilot). So the membrane is chosen for pure tension, where it agrees with
 the shell, and not where bending matters.
 
+Wear scenes ([scene] kind = "wear"; `WearLevels`): the levels are the garment's mesh, a tube's cell counts
+(n_around, n_along) x ratio^k rounded (the compression route: n_around a multiple of 4) or a pattern's element size
+h / ratio^k, with the ratio of [accuracy] ratio (default 2, or less so that the coarsest pilot keeps 6 cells
+around a tube, 8 on the compression route); Richardson uses the levels' cell sizes (a tube's 1 / sqrt(n_around
+n_along), a pattern's 1 / sqrt(dofs) as meshed: every edge has at least two segments, so a coarse h meshes finer
+than h), so rounded counts give non-uniform ratios. The explicit step follows each mesh by itself
+(its critical step), so the levels are mesh levels only, and an observed order above 2 is not asymptotic (the
+dynamic range); the compression route is quasi-static (the static range). [accuracy] window [s]: the pilots run
+only the first `window` seconds of body time (route.end_time; donning, settling and motion as scheduled, cut
+there), so their quantity, and with it the estimate, is the window's (e.g. the peak torque over the first 0.3 s,
+not over the whole flexion); the chosen level then runs the whole scene, and its quantity's error is estimated
+by the window's (this holds where the error is set by the mesh, not by what happens after the window). The
+membrane is not a model level of a wear scene (the engine runs the shell).
+
 Cost: the measured wall times [s] of the pilots; a finer level's predicted wall time is
 wall_0 (dofs_k steps_k / dofs_0 steps_0)^a with a from the two finest pilots, clamped to [1, 2] (work per step
 is linear in the dofs up to the direct solver's fill). The level of least work (dofs x steps) whose estimated
@@ -37,28 +51,32 @@ from petsc4py import PETSc
 
 from fabricfem import io
 from fabricfem.dynamics.newmark import DynamicsError
+from fabricfem.scenes import wear
 from fabricfem.scenes.batch import read_summary
-from fabricfem.scenes.build import critical_time_step_estimate, estimated_dofs, validate
+from fabricfem.scenes.build import build_fabric, critical_time_step_estimate, estimated_dofs, validate
 from fabricfem.scenes.richardson import ORDERS, richardson
 from fabricfem.scenes.run import output_dir, run_scene, scene_name, scene_sha256
-from fabricfem.scenes.schema import Scene, SceneError, accuracy_summary_key, check_target
+from fabricfem.scenes.schema import ACCURACY_KINDS, Scene, SceneError, accuracy_summary_key, check_target
 from fabricfem.scenes.sections import AccuracySection, DynamicsSection, ModelSection, section
 from fabricfem.solvers.newton import SolverError
 
 PILOTS = (-2, -1, 0)             # levels solved to estimate the error
 MESH_COUNTS = {"plate": ("nx", "ny"), "tube": ("n_around", "n_along")}
+LEAST_AROUND = {"engine": 6, "compression": 8}   # cells around a tube at the coarsest wear pilot (default ratio)
 
 
 @dataclass
 class Level:
-    """One level of a scene: k (cell counts x 2^k), its scene, dofs, time step [s] (dynamic), the quantity and
-    wall time [s] when solved, the estimated relative error and the measured or predicted wall time [s]."""
+    """One level of a scene: k (cell counts x 2^k; wear: x ratio^k), its scene, dofs, time step [s] (dynamic,
+    wear), the number of steps, its cell size (relative: 2^-k; wear: module docstring), the quantity and wall time
+    [s] when solved, the estimated relative error and the measured or predicted wall time [s]."""
 
     k: int
     scene: Scene
     dofs: int
     step: float | None
     steps: int
+    size: float = 1.0
     value: float | None = None
     wall_s: float | None = None
     error: float | None = None
@@ -90,12 +108,14 @@ class Plan:
     note: str
     model_note: str = ""
     chosen: Level | None = None
+    window: float | None = None       # s of body time the pilots ran (wear), None: the whole scene
+    full_time: float | None = None    # s of body time of the whole scene (wear)
     header: tuple = field(default=("level", "model", "cells", "dofs", "step_s", "value", "estimated_error",
                                    "wall_s", "solved"))
 
     def rows(self) -> list[list]:
         """One row per level (the columns of `header`)."""
-        return [[lv.k, lv.model, _cells(lv.scene), lv.dofs, lv.step, lv.value, lv.error, lv.cost_s,
+        return [[lv.k, lv.model, cells_of(lv.scene), lv.dofs, lv.step, lv.value, lv.error, lv.cost_s,
                  lv.value is not None] for lv in self.levels]
 
     def table(self) -> str:
@@ -108,8 +128,12 @@ class Plan:
         for lv in self.levels:
             mark = " <- chosen" if lv is self.chosen else ""
             cost = "" if lv.cost_s is None else f"{lv.cost_s:.3g}" + ("" if lv.value is not None else " (pred.)")
-            lines.append(f"  {lv.k:>+5d} {lv.model:>8} {_cells(lv.scene):>9} {lv.dofs:>8d} {_fmt(lv.step, '.4g'):>10} "
+            lines.append(f"  {lv.k:>+5d} {lv.model:>8} {cells_of(lv.scene):>9} {lv.dofs:>8d} {_fmt(lv.step, '.4g'):>10} "
                          f"{_fmt(lv.value, '.6g'):>13} {_fmt(lv.error, '.2e'):>10} {cost:>10}{mark}")
+        if self.window is not None:
+            lines.append(f"  window: the pilots ran the first {self.window:g} s of {self.full_time:.4g} s of body time; "
+                         f"the estimate is of the window's {self.quantity}; the whole scene costs about "
+                         f"{self.full_time / self.window:.3g} x the wall times above")
         return "\n".join(lines + ([f"  {self.model_note}"] if self.model_note else []))
 
     def require(self) -> Level:
@@ -128,16 +152,44 @@ class Plan:
         return {"accuracy_quantity": self.quantity, "accuracy_target": self.target, "accuracy_level": c.k,
                 "accuracy_model": c.model, "accuracy_estimated_error": c.error, "accuracy_order": self.order,
                 "accuracy_extrapolated": self.extrapolated, "accuracy_asymptotic": self.asymptotic,
-                "accuracy_note": self.note, "accuracy_predicted_wall_s": c.cost_s}
+                "accuracy_note": self.note, "accuracy_predicted_wall_s": c.cost_s * self.full_factor,
+                "accuracy_window_s": self.window}
+
+    @property
+    def full_factor(self) -> float:
+        """Body time of the whole scene over the pilots' window (1 without a window)."""
+        return 1.0 if self.window is None else self.full_time / self.window
 
 
 def _fmt(value, spec: str) -> str:
     return "-" if value is None else format(value, spec)
 
 
-def _cells(scene: Scene) -> str:
+def cells_of(scene: Scene) -> str:
+    """The level's mesh: "nx x ny" cells (plate), "n_around x n_along" (tube, wear tube) or "h=..." (pattern)."""
+    if scene.kind == "wear":
+        g = scene["garment"]
+        return (f"{g['n_around']}x{g['n_along']}" if g.get("builder", "pattern") == "tube"
+                else f"h={g.get('h', wear.GarmentSection.h):.3g}")
     mesh = scene["mesh"]
     return "x".join(str(mesh[key]) for key in MESH_COUNTS[mesh["type"]])
+
+
+def _mesh_label(scene: Scene) -> str:
+    """"6x8 cells" or, for a pattern garment, "h = 0.05 m"."""
+    cells = cells_of(scene)
+    return f"h = {cells[2:]} m" if cells.startswith("h=") else f"{cells} cells"
+
+
+def summary_value(summary: dict, key: str):
+    """The entry `key` of a run's summary.json (a dotted key names a nested entry, e.g. "torque_elbow.peak_Nm");
+    None when absent."""
+    value = summary
+    for part in key.split("."):
+        if not isinstance(value, dict) or part not in value:
+            return None
+        value = value[part]
+    return value
 
 
 def parse_target(text: str) -> float:
@@ -149,13 +201,29 @@ def parse_target(text: str) -> float:
     return check_target("--accuracy", value)
 
 
+def with_window(scene: Scene, window: float | None) -> Scene:
+    """The scene with [accuracy] window = `window` [s] (None: unchanged), validated again (SceneError naming
+    accuracy.window: not positive, longer than the scene, or not a scene on the explicit engine)."""
+    if window is None:
+        return scene
+    data = copy.deepcopy(scene.data)
+    data.setdefault("accuracy", {})["window"] = float(window)
+    out = validate(data, source="--window", path=scene.path)
+    out.path = scene.path
+    return out
+
+
 def target_of(scene: Scene, target: float | None = None, quantity: str | None = None) -> tuple[str, float]:
     """(quantity, target) from the arguments, else the scene's [accuracy]; SceneError naming what is missing."""
     spec = section(AccuracySection, scene.get("accuracy"))
     quantity = quantity if quantity is not None else spec.quantity
     target = target if target is not None else spec.target
-    if scene.kind not in ("static", "dynamic"):
-        raise SceneError(f"--accuracy: an accuracy target is for static and dynamic scenes, not {scene.kind!r} ones")
+    if scene.kind not in ACCURACY_KINDS:
+        raise SceneError(f"--accuracy: an accuracy target is for {', '.join(ACCURACY_KINDS)} scenes, not "
+                         f"{scene.kind!r} ones")
+    if scene.kind == "wear" and wear.route_of(scene.data) == "sleeve":
+        raise SceneError("route.solver: an accuracy target runs a wear scene on the explicit engine (route.solver = "
+                         "\"explicit\") or the compression route, not the sleeve's quasistatic or implicit route")
     if target is None:
         raise SceneError("accuracy.target: give a relative error target (--accuracy 2% or [accuracy] target)")
     if quantity is None:
@@ -167,6 +235,8 @@ def target_of(scene: Scene, target: float | None = None, quantity: str | None = 
 def membrane_variant(data: dict) -> tuple[dict | None, str]:
     """(the scene data with the membrane model, "") or (None, why the scene needs the shell): a membrane carries
     no edge moments and has no rotations to monitor; rotation supports are dropped (a membrane has none)."""
+    if "garment" in data:
+        return None, "membrane: not considered (the wear engine runs the shell)"
     if section(ModelSection, data.get("model")).kind != "naghdi":
         return None, ""
     if any(load["type"] == "edge_moment" for load in data.get("load", [])):
@@ -180,9 +250,54 @@ def membrane_variant(data: dict) -> tuple[dict | None, str]:
     return data, ""
 
 
-def level_scene(scene: Scene, k: int, out: Path, data: dict | None = None) -> Level:
+def wear_ratio(data: dict) -> float:
+    """The refinement ratio of a wear scene's levels: [accuracy] ratio, else 2 for a pattern, else the largest
+    ratio <= 2 that keeps LEAST_AROUND cells around the tube at the coarsest pilot; SceneError naming
+    garment.n_around when the tube is too coarse for coarser pilots."""
+    ratio = section(AccuracySection, data.get("accuracy")).ratio
+    g = data["garment"]
+    if ratio is not None or g.get("builder", "pattern") != "tube":
+        return float(ratio or 2.0)
+    least = LEAST_AROUND[wear.route_of(data)]
+    ratio = min(2.0, (g["n_around"] / least) ** (1.0 / -min(PILOTS)))
+    if ratio < 1.1:
+        raise SceneError(f"garment.n_around: {g['n_around']} cells around leave no room for two coarser pilot "
+                         f"levels (at least {least} around at the coarsest, ratio >= 1.1); refine the scene's "
+                         f"tube or give accuracy.ratio")
+    return ratio
+
+
+def wear_level(scene: Scene, k: int, out: Path, window: bool) -> Level:
+    """Level k of a wear scene (module docstring), its pilots cut at [accuracy] window when `window`; validated
+    (the pattern and motion files found beside the scene file)."""
+    data = copy.deepcopy(scene.data)
+    spec = section(AccuracySection, data.pop("accuracy", None))
+    ratio, g = wear_ratio(scene.data), data["garment"]
+    scale = ratio ** k
+    if g.get("builder", "pattern") == "tube":
+        quarter = wear.route_of(data) == "compression"   # symmetry planes y = 0, z = 0: a multiple of 4 around
+        around = 4 * max(1, round(g["n_around"] * scale / 4)) if quarter else max(3, round(g["n_around"] * scale))
+        g.update(n_around=around, n_along=max(1, round(g["n_along"] * scale)))
+        size = 1.0 / math.sqrt(g["n_around"] * g["n_along"])
+        dofs = estimated_dofs({"type": "tube", "n_around": g["n_around"], "n_along": g["n_along"]})
+    else:
+        g["h"] = size = section(wear.GarmentSection, scene["garment"]).h / scale
+        dofs = 0                                          # known once meshed (the pilots' summaries)
+    if window and spec.window is not None:
+        data.setdefault("route", {})["end_time"] = spec.window
+    data.setdefault("output", {}).update(dir=str(out), render=False)
+    level = validate(data, source=f"accuracy level {k:+d}", path=scene.path)
+    level.path = scene.path
+    steps = data.get("donning", {}).get("steps", 10) if wear.route_of(data) == "compression" else 1
+    return Level(k, level, dofs, None, steps, size)
+
+
+def level_scene(scene: Scene, k: int, out: Path, data: dict | None = None, window: bool = True) -> Level:
     """Level k of `scene` (or of its variant `data`, e.g. the membrane's; module docstring) writing into `out`,
-    validated; SceneError naming the mesh key when a cell count cannot be divided by 2^-k."""
+    validated; SceneError naming the mesh key when a cell count cannot be divided by 2^-k. A wear scene's level
+    (`wear_level`) runs the pilots' window when `window`, the whole scene otherwise."""
+    if scene.kind == "wear":
+        return wear_level(scene, k, out, window)
     data = copy.deepcopy(scene.data if data is None else data)
     data.pop("accuracy", None)
     mesh = data["mesh"]
@@ -205,7 +320,8 @@ def level_scene(scene: Scene, k: int, out: Path, data: dict | None = None) -> Le
     data.setdefault("output", {}).update(dir=str(out), render=False)
     level = validate(data, source=f"accuracy level {k:+d}")
     level.path = scene.path
-    return Level(k, level, estimated_dofs(data["mesh"], section(ModelSection, data.get("model")).kind), step, steps)
+    return Level(k, level, estimated_dofs(data["mesh"], section(ModelSection, data.get("model")).kind), step, steps,
+                 2.0 ** -k)
 
 
 def solve(level: Level, key: str, comm=MPI.COMM_WORLD) -> bool:
@@ -219,8 +335,14 @@ def solve(level: Level, key: str, comm=MPI.COMM_WORLD) -> bool:
         if outcome.status != "completed":
             raise SceneError(f"accuracy level {level.k:+d} ({level.model}): the run {outcome.status}")
         summary = comm.bcast(read_summary(folder) if comm.rank == 0 else None, root=0)
-    level.value, level.wall_s = float(summary[key]), float(summary["wall_s"])
+    value = summary_value(summary, key)
+    if value is None:
+        raise SceneError(f"accuracy level {level.k:+d}: the run's summary.json has no {key!r} (the window ends "
+                         f"before anything of it was recorded?)")
+    level.value, level.wall_s = float(value), float(summary["wall_s"])
     level.cost_s = level.wall_s
+    if level.scene.kind == "wear" and summary.get("ndofs"):   # the engine's own count, step and steps
+        level.dofs, level.step, level.steps = int(summary["ndofs"]), summary["dt_s"], int(summary["time_steps"])
     return solved
 
 
@@ -237,7 +359,7 @@ def _membrane_pilots(scene: Scene, key: str, root: Path, comm, say) -> tuple[lis
         except (SolverError, DynamicsError, SceneError, PETSc.Error) as exc:   # a membrane without tension: singular
             why = f"PETSc error {exc.ierr} in the solve" if isinstance(exc, PETSc.Error) else " ".join(str(exc).split())
             return solved, f"membrane: level {k:+d} did not solve ({why}); not a candidate from there on"
-        say(f"accuracy: membrane level {k:+d} ({_cells(level.scene)} cells, {level.dofs} dofs) "
+        say(f"accuracy: membrane level {k:+d} ({_mesh_label(level.scene)}, {level.dofs} dofs) "
             f"{'solved' if fresh else 'read back'}: {level.value:.6g}")
         solved.append(level)
     return solved, ""
@@ -254,17 +376,28 @@ def plan(scene: Scene, target: float | None = None, quantity: str | None = None,
     finer = section(AccuracySection, scene.get("accuracy")).finer_levels
     root = output_dir(scene) / "accuracy"
     levels = [level_scene(scene, k, root / f"level{k:+d}") for k in (*PILOTS, *range(1, finer + 1))]
+    window, full_time = _window(scene)
     clock = io.Progress("accuracy pilots")
     pilots = levels[:len(PILOTS)]
+    if len({lv.size for lv in pilots}) < len(pilots):
+        raise SceneError(f"accuracy.ratio: the pilot levels {[cells_of(lv.scene) for lv in pilots]} coincide after "
+                         f"rounding; give a larger ratio or a finer scene mesh")
     for i, lv in enumerate(pilots):
         solved = solve(lv, key, comm)
-        say(f"accuracy: level {lv.k:+d} ({_cells(lv.scene)} cells, {lv.dofs} dofs) "
+        say(f"accuracy: level {lv.k:+d} ({_mesh_label(lv.scene)}, {lv.dofs} dofs) "
             f"{'solved' if solved else 'read back'}: {lv.value:.6g} {clock((i + 1) / len(pilots))}")
-    estimate = richardson([lv.value for lv in pilots], orders=ORDERS[scene.kind])
+    if scene.kind == "wear" and scene["garment"].get("builder", "pattern") != "tube":
+        _meshed_sizes(scene, levels)
+    estimate = richardson([lv.value for lv in pilots], [lv.size for lv in pilots], orders=_orders(scene))
     for lv, error in zip(pilots, estimate.errors):
         lv.error = error
+    finest = pilots[-1]
     for lv in levels[len(PILOTS):]:
-        lv.error = estimate.finer(2.0 ** lv.k)
+        lv.error = estimate.finer(finest.size / lv.size)
+        if scene.kind == "wear":   # the dofs go with the cells, the explicit step with the cell size
+            lv.dofs = round(finest.dofs * (finest.size / lv.size) ** 2)
+            lv.step = None if finest.step is None else finest.step * lv.size / finest.size
+            lv.steps = finest.steps if finest.step is None else math.ceil(finest.steps * finest.size / lv.size)
     a = _cost_exponent(pilots[-2], pilots[-1])
     for lv in levels[len(PILOTS):]:
         lv.cost_s = pilots[-1].wall_s * (lv.work / pilots[-1].work) ** a
@@ -273,17 +406,51 @@ def plan(scene: Scene, target: float | None = None, quantity: str | None = None,
     for lv in membrane:   # model + discretisation error: the difference to the shell's best value
         lv.error = abs(lv.value - best) / (abs(best) or 1.0) + best_error
     result = Plan(quantity, target, levels + membrane, estimate.order, estimate.extrapolated, estimate.asymptotic,
-                  estimate.note, model_note)
+                  estimate.note, model_note, window=window, full_time=full_time)
     meeting = [lv for lv in result.levels if lv.error is not None and lv.error <= target]
     result.chosen = min(meeting, key=lambda lv: lv.work) if meeting else None
     say(result.table())
     c = result.chosen
     if c is not None:
-        say(f"accuracy: chose level {c.k:+d} {c.model} ({_cells(c.scene)} cells, {c.dofs} dofs): estimated error "
+        say(f"accuracy: chose level {c.k:+d} {c.model} ({_mesh_label(c.scene)}, {c.dofs} dofs): estimated error "
             f"{c.error:.2e} <= {target:.3g}, {'measured' if c.value is not None else 'predicted'} wall "
-            f"{c.cost_s:.3g} s" + ("" if estimate.asymptotic else
+            f"{c.cost_s:.3g} s" + ("" if window is None else
+                                   f" on the window, about {c.cost_s * result.full_factor:.3g} s for the whole scene")
+            + ("" if estimate.asymptotic else
                                    f" (NOT ASYMPTOTIC: {estimate.note}; conservative choice)"))
     return result
+
+
+def _meshed_sizes(scene: Scene, levels: list[Level]) -> None:
+    """A pattern garment's cell sizes from its meshed dofs (1 / sqrt(dofs), relative): every edge gets at least
+    two segments, so a coarse level's cells are smaller than its h; the finer levels h / ratio^k of the finest
+    pilot's. SceneError naming accuracy.ratio when two pilots meshed alike."""
+    pilots, ratio = levels[:len(PILOTS)], wear_ratio(scene.data)
+    if len({lv.dofs for lv in pilots}) < len(pilots):
+        raise SceneError(f"accuracy.ratio: the pilots h = {[lv.scene['garment']['h'] for lv in pilots]} m meshed with "
+                         f"equal dofs {[lv.dofs for lv in pilots]}; give a larger ratio or a smaller garment.h")
+    for lv in pilots:
+        lv.size = lv.dofs ** -0.5
+    for lv in levels[len(PILOTS):]:
+        lv.size = pilots[-1].size / ratio ** lv.k
+
+
+def _orders(scene: Scene) -> tuple[float, float]:
+    """Plausible observed orders (fabricfem.scenes.richardson.ORDERS): a wear scene on the explicit engine as a
+    dynamic one (its step follows the mesh), the compression route as a static one."""
+    if scene.kind != "wear":
+        return ORDERS[scene.kind]
+    return ORDERS["static" if wear.route_of(scene.data) == "compression" else "dynamic"]
+
+
+def _window(scene: Scene) -> tuple[float | None, float | None]:
+    """(the pilots' window [s], the whole scene's body time [s]) of a wear scene with [accuracy] window, else
+    (None, None)."""
+    window = section(AccuracySection, scene.get("accuracy")).window
+    if scene.kind != "wear" or window is None:
+        return None, None
+    data = scene.data
+    return window, wear.scene_body_time(wear.plan(data, wear.wear_fabric(data, build_fabric), scene.path))
 
 
 def _cost_exponent(coarse: Level, fine: Level) -> float:
@@ -298,10 +465,13 @@ def run_accurate(scene: Scene, target: float | None = None, quantity: str | None
     its renders) and add the plan's estimate to its summary.json; writes accuracy_plan.csv beside it. Returns
     (plan, SceneOutcome)."""
     chosen = plan(scene, target, quantity, comm)
-    data = copy.deepcopy(chosen.require().scene.data)
+    level = chosen.require()
+    if scene.kind == "wear":   # the whole scene, not the pilots' window
+        level = level_scene(scene, level.k, output_dir(scene), window=False)
+    data = copy.deepcopy(level.scene.data)
     data["output"] = {**scene.get("output", {}), "dir": str(output_dir(scene))}
     data.setdefault("scene", {})["name"] = scene_name(scene)
-    delivered = validate(data, source=f"accuracy level {chosen.chosen.k:+d}")
+    delivered = validate(data, source=f"accuracy level {chosen.chosen.k:+d}", path=scene.path)
     delivered.path = scene.path
     outcome = run_scene(delivered, comm)
     out = output_dir(scene)
@@ -309,7 +479,7 @@ def run_accurate(scene: Scene, target: float | None = None, quantity: str | None
     io.write_csv(out / "accuracy_plan.csv", list(chosen.header), chosen.rows(), comm)
     if comm.rank == 0:
         key = accuracy_summary_key(scene.data, chosen.quantity)
-        value = read_summary(out).get(key)
+        value = summary_value(read_summary(out), key)
         print(f"accuracy: {chosen.quantity} = {value} at level {chosen.chosen.k:+d} ({chosen.chosen.model}), "
               f"estimated relative error {chosen.chosen.error:.2e} (target {chosen.target:.3g}); "
               f"wrote {out}/accuracy_plan.csv", flush=True)

@@ -181,10 +181,11 @@ def check_objects(data: dict, path: Path | None = None) -> None:
                          f"dt = \"auto\", or force = true")
 
 
-def validate(data: dict, source: str = "scene") -> Scene:
-    """schema.validate, then the object checks; SceneError names the key."""
+def validate(data: dict, source: str = "scene", path: Path | None = None) -> Scene:
+    """schema.validate, then the object checks (`path`: the scene file, for relative file names); SceneError
+    names the key."""
     scene = schema.validate(data, source)
-    check_objects(data)
+    check_objects(data, path)
     return scene
 
 
@@ -207,5 +208,5 @@ def check_wear_objects(data: dict, path: Path | None) -> None:
     fabric = wear.wear_fabric(data, build_fabric)
     if not fabric.density > 0.0:
         raise SceneError(f"fabric.density: the explicit engine needs a positive density [kg/m^3], got {fabric.density}")
-    wear.plan(data, fabric, path)
+    wear.check_window(data, wear.plan(data, fabric, path))
     wear.check_garment(data, path)

@@ -265,6 +265,7 @@ def validate(data: dict, source: str = "scene") -> Scene:
     """Check sections, keys, types and cross-references; raise SceneError naming the problem."""
     if "garment" in data or data.get("scene", {}).get("kind") == "wear":
         check_wear(data, source)
+        check_accuracy(data, "wear")
         return Scene(data, kind="wear")
     for section in data:
         if section not in SCHEMA:
@@ -359,17 +360,30 @@ def validate(data: dict, source: str = "scene") -> Scene:
         _check_compression(data)
     if dynamic:
         _check_dynamics(data)
-    if "accuracy" in data:
-        if kind not in ("static", "dynamic"):
-            raise SceneError(f"accuracy: an accuracy target is for static and dynamic scenes, not {kind!r} ones")
-        accuracy = data["accuracy"]
-        if "target" in accuracy:
-            check_target("accuracy.target", accuracy["target"])
-        if "quantity" in accuracy:
-            accuracy_summary_key(data, accuracy["quantity"])
-        if accuracy.get("finer_levels", 0) < 0:
-            raise SceneError(f"accuracy.finer_levels: must be >= 0, got {accuracy['finer_levels']!r}")
+    check_accuracy(data, kind)
     return Scene(data, kind=kind)
+
+
+ACCURACY_KINDS = ("static", "dynamic", "wear")
+WEAR_ONLY_ACCURACY_KEYS = ("window", "ratio")
+
+
+def check_accuracy(data: dict, kind: str) -> None:
+    """The [accuracy] section of a scene of `kind` (target, quantity, finer_levels; a wear scene's window and
+    ratio are checked by fabricfem.scenes.wear.check_wear); SceneError naming the key."""
+    if "accuracy" not in data:
+        return
+    if kind not in ACCURACY_KINDS:
+        raise SceneError(f"accuracy: an accuracy target is for {', '.join(ACCURACY_KINDS)} scenes, not {kind!r} ones")
+    accuracy = data["accuracy"]
+    if kind != "wear" and (keys := [k for k in WEAR_ONLY_ACCURACY_KEYS if k in accuracy]):
+        raise SceneError(f"accuracy.{keys[0]}: a key of wear scenes' accuracy levels, not of {kind} scenes")
+    if "target" in accuracy:
+        check_target("accuracy.target", accuracy["target"])
+    if "quantity" in accuracy:
+        accuracy_summary_key(data, accuracy["quantity"])
+    if accuracy.get("finer_levels", 0) < 0:
+        raise SceneError(f"accuracy.finer_levels: must be >= 0, got {accuracy['finer_levels']!r}")
 
 
 def check_target(where: str, target) -> float:
@@ -380,7 +394,10 @@ def check_target(where: str, target) -> float:
 
 
 def accuracy_quantities(data: dict) -> dict[str, str]:
-    """{quantity name: its summary.json key} that an accuracy target may name (AccuracySection.quantity)."""
+    """{quantity name: its summary.json key} that an accuracy target may name (AccuracySection.quantity; a dotted
+    key names a nested entry of a wear run's summary, fabricfem.scenes.wear.wear_quantities)."""
+    if "garment" in data or data.get("scene", {}).get("kind") == "wear":
+        return wear_module.wear_quantities(data)
     if "dynamics" in data:
         names = {m["name"]: f"final_{m['name']}" for m in data["dynamics"].get("monitors", [])}
         return {**names, **{k: k for k in ("kinetic_J", "strain_J", "max_strain_final")}}
@@ -393,7 +410,8 @@ def accuracy_summary_key(data: dict, quantity: str) -> str:
     """The summary.json key of an accuracy quantity; SceneError naming it when the scene does not monitor it."""
     allowed = accuracy_quantities(data)
     if quantity not in allowed:
-        hint = "" if allowed else " (a static scene needs output.probe)"
+        hint = "" if allowed else (" (a wear scene: the explicit engine or the compression route)"
+                                   if "garment" in data else " (a static scene needs output.probe)")
         raise SceneError(f"accuracy.quantity: {quantity!r} is not a monitored output of this scene"
                          f"{_suggest(str(quantity), allowed)}; allowed: {sorted(allowed)}{hint}")
     return allowed[quantity]

@@ -229,16 +229,27 @@ class MonitorSection:
 @dataclasses.dataclass(frozen=True)
 class AccuracySection:
     """[accuracy]: run the cheapest mesh level whose estimated error of a monitored quantity is below a target
-    (fabricfem.scenes.accuracy; static and dynamic scenes)."""
+    (fabricfem.scenes.accuracy; static, dynamic and wear scenes)."""
 
     quantity: str | None = doc("static: probe_ux_m | probe_uy_m | probe_uz_m (needs output.probe); dynamic: a "
                                "[[dynamics.monitors]] name (its value at end_time) or kinetic_J | strain_J | "
-                               "max_strain_final", None)
+                               "max_strain_final; wear: torque_<monitor>_peak_Nm | torque_<monitor>_final_Nm | "
+                               "pressure_peak_Pa | pressure_mean_Pa | max_strain (explicit engine), peak_pressure_Pa "
+                               "| mean_pressure_Pa | hoop_tension_N_per_m (compression route)", None)
     target: float | None = doc("relative error target, in (0, 1) (e.g. 0.02)", None)
-    finer_levels: int = doc("levels finer than the scene's mesh that may be chosen (cell counts x 2, x 4, ...)", 2)
+    finer_levels: int = doc("levels finer than the scene's mesh that may be chosen (cell counts x 2, x 4, ...; "
+                            "wear: x ratio, x ratio^2, ...)", 2)
     membrane: bool = doc("a shell scene: also solve the membrane model at the pilot levels and choose it where its "
                          "difference to the shell's extrapolated value meets the target (not with edge moments or "
                          "rotation monitors)", True)
+    window: float | None = doc("wear, explicit engine: the pilots run only the first `window` seconds of body time "
+                               "(donning, settling and motion phases as scheduled, cut there) [s]; the estimate is "
+                               "that of the window's quantity; the chosen level then runs the whole scene "
+                               "(default: the whole scene)", None)
+    ratio: float | None = doc("wear: refinement ratio between levels, in (1, 4]: tube cell counts x ratio^k "
+                              "(rounded), pattern element size h / ratio^k (default: 2 where the coarsest pilot "
+                              "keeps 6 cells around a tube (compression route: 8, multiples of 4), else the largest "
+                              "ratio that does; 2 for a pattern)", None)
 
 
 def section(cls, table: dict | None):

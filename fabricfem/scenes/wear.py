@@ -38,7 +38,14 @@ from fabricfem.parameters import param as doc
 from fabricfem.patterns import pattern_path
 from fabricfem.scenes.errors import SceneError
 from fabricfem.scenes.errors import suggest as _suggest
-from fabricfem.scenes.sections import FabricSection, OutputSection, SceneSection, from_table, schema_of
+from fabricfem.scenes.sections import (
+    AccuracySection,
+    FabricSection,
+    OutputSection,
+    SceneSection,
+    from_table,
+    schema_of,
+)
 from fabricfem.wear.config import ContactSpec, FlexionSpec, RouteSpec, TubeSpec
 from fabricfem.wear.garment import ExplicitSettings, Timeline, TorqueSpec
 
@@ -154,13 +161,21 @@ class TorqueSection:
     segments: list = doc("segment names whose contact forces count")
 
 
+@dataclasses.dataclass(frozen=True)
+class WearRouteSection:
+    """[route] keys of the explicit engine besides RouteSpec's."""
+
+    end_time: float | None = doc("explicit engine: stop the run at this body time [s] (the phases as scheduled, cut "
+                                 "there; the accuracy pilots' window); default: the whole scene", None)
+
+
 # section -> the dataclasses that declare its keys (the wear kind's own table; fabricfem.scenes.schema has the
 # other kinds')
 WEAR_SECTION_CLASSES: dict[str, tuple] = {
     "scene": (SceneSection,), "garment": (GarmentSection,), "fabric": (FabricSection, WearFabricSection),
     "body": (WearBodySection, ArmDimensions, LowerBodyDimensions), "motion": (WearMotionSection, FlexionSpec),
-    "donning": (WearDonningSection,), "contact": (ContactSpec,), "route": (RouteSpec,), "torque": (TorqueSection,),
-    "output": (OutputSection,)}
+    "donning": (WearDonningSection,), "contact": (ContactSpec,), "route": (RouteSpec, WearRouteSection),
+    "torque": (TorqueSection,), "output": (OutputSection,), "accuracy": (AccuracySection,)}
 WEAR_LIST_SECTIONS = {"torque"}
 
 
@@ -261,7 +276,62 @@ def check_wear(data: dict, source: str = "scene") -> None:
         _vector(f"torque[{i}].axis", spec["axis"])
         if not spec["segments"] or not all(isinstance(s, str) for s in spec["segments"]):
             raise SceneError(f"torque[{i}].segments: a list of segment names, got {spec['segments']!r}")
-    route_of(data)
+    route = route_of(data)
+    end = data.get("route", {}).get("end_time")
+    if end is not None and not (math.isfinite(end) and end > 0):
+        raise SceneError(f"route.end_time: must be a positive body time [s], got {end!r}")
+    if end is not None and route != "engine":
+        raise SceneError("route.end_time: stops a run of the explicit engine (route.solver = \"explicit\"), not of "
+                         f"the {route} route")
+    accuracy = data.get("accuracy", {})
+    if accuracy and route == "sleeve":
+        raise SceneError("accuracy: an accuracy target runs a wear scene on the explicit engine (route.solver = "
+                         "\"explicit\") or the compression route, not the sleeve's quasistatic or implicit route")
+    window, ratio = accuracy.get("window"), accuracy.get("ratio")
+    if window is not None and route != "engine":
+        raise SceneError(f"accuracy.window: the {route} route is quasi-static (no body time to cut); leave it out")
+    if window is not None and not (math.isfinite(window) and window > 0):
+        raise SceneError(f"accuracy.window: must be a positive body time [s], got {window!r}")
+    if ratio is not None and not (math.isfinite(ratio) and 1.0 < ratio <= 4.0):
+        raise SceneError(f"accuracy.ratio: a refinement ratio in (1, 4], got {ratio!r}")
+
+
+ARM_MONITORS = (TorqueSpec("elbow", "elbow", (0.0, 0.0, 1.0), ("forearm",)),
+                TorqueSpec("elbow_both_segments", "elbow", (0.0, 0.0, 1.0), ("upper_arm", "forearm")))
+COMPRESSION_QUANTITIES = ("peak_pressure_Pa", "mean_pressure_Pa", "hoop_tension_N_per_m")
+
+
+def wear_quantities(data: dict) -> dict[str, str]:
+    """{accuracy quantity: its summary.json key} of a wear scene (a dotted key names a nested entry): on the
+    explicit engine the peak and final torque [N m] of each monitor over the motion (the arm's presets and the
+    [[torque]] monitors), the peak and mean contact pressure [Pa] over the motion and the largest fabric strain
+    [-]; on the compression route the peak and mean pressure on the skin [Pa] and the hoop tension [N/m]."""
+    route = route_of(data)
+    if route == "compression":
+        return {name: name for name in COMPRESSION_QUANTITIES}
+    if route != "engine":
+        return {}
+    monitors = [m.name for m in ARM_MONITORS] if data["body"]["type"] in ("arm", "default_arm") else []
+    out = {}
+    for name in monitors + [spec["name"] for spec in data.get("torque", [])]:
+        out.update({f"torque_{name}_{which}_Nm": f"torque_{name}.{which}_Nm" for which in ("peak", "final")})
+    return {**out, "pressure_peak_Pa": "pressure.peak_Pa", "pressure_mean_Pa": "pressure.mean_Pa",
+            "max_strain": "max_strain"}
+
+
+def scene_body_time(plan: WearPlan) -> float:
+    """Body time [s] of the whole run of a wear scene on the engine (every phase; route.end_time ignored)."""
+    timeline = dataclasses.replace(plan.timeline, end_time=None)
+    records = timeline.phase_records(timeline.motion_length(plan.body.kinematics))
+    return sum(records.values()) * timeline.record_time
+
+
+def check_window(data: dict, plan: WearPlan) -> None:
+    """accuracy.window must not exceed the scene's body time (SceneError naming it, before meshing)."""
+    window = data.get("accuracy", {}).get("window")
+    if window is not None and window > (total := scene_body_time(plan)) + 1e-12:
+        raise SceneError(f"accuracy.window: {window:g} s is longer than the scene ({total:.6g} s of body time: "
+                         f"donning, settling and motion); give a shorter window or leave it out")
 
 
 # ------------------------------------------------------------------------------------------ objects
@@ -353,7 +423,7 @@ def plan(data: dict, fabric, scene_path: Path | None = None) -> WearPlan:
     body_spec, motion_spec = data["body"], data["motion"]
     kind, motion = body_spec["type"], motion_spec["type"]
     donning = from_table(WearDonningSection, data.get("donning", {}))
-    route = from_table(RouteSpec, data.get("route", {}))
+    route = _fields(RouteSpec, data.get("route", {}))
     contact = from_table(ContactSpec, data.get("contact", {}))
     garment = from_table(GarmentSection, data["garment"])
     axis, torques, damping, similarity = None, [], route.mass_damping, 1.0
@@ -364,8 +434,7 @@ def plan(data: dict, fabric, scene_path: Path | None = None) -> WearPlan:
     if kind in ("arm", "default_arm"):
         dims = _fields(ArmDimensions, body_spec)
         gravity = (0.0, -GRAVITY, 0.0)       # the sleeve's convention: the forearm rotates up, towards +y
-        torques = [TorqueSpec("elbow", "elbow", (0.0, 0.0, 1.0), ("forearm",)),
-                   TorqueSpec("elbow_both_segments", "elbow", (0.0, 0.0, 1.0), ("upper_arm", "forearm"))]
+        torques = list(ARM_MONITORS)
         if motion == "elbow_flexion":
             flex = _fields(FlexionSpec, motion_spec)
             if route.dynamic_similarity:
@@ -424,7 +493,8 @@ def plan(data: dict, fabric, scene_path: Path | None = None) -> WearPlan:
         timeline = Timeline(record_time=record_time, sewing_time=garment.sewing_time,
                             donning_time=donning.time if donning.method == "grow" else 0.0, grow_from=grow_from,
                             settle_time=settle, motion_time=duration, pull_time=donning.pull_time,
-                            belt_time=donning.belt_time if donning.belt_edges else 0.0)
+                            belt_time=donning.belt_time if donning.belt_edges else 0.0,
+                            end_time=data.get("route", {}).get("end_time"))
     except ValueError as exc:
         raise SceneError(f"donning: {exc}") from None
     if donning.pull_edges and not (donning.pull_path and donning.pull_time > 0):

@@ -24,6 +24,13 @@ Two cheap scenes with a converged reference:
   level is checked against it (within 1e-3). The membrane alternative is tried and does not solve (no bending
   stiffness: a flat membrane under a transverse load is singular), so the shell is chosen.
 
+* "compression-cylinder" (a wear scene on the compression route): the compression sleeve of
+  scenes/compression_sleeve.toml (relaxed radius 34 mm, orthotropic knit, 16 x 8 Q2 cells) grown onto a limb that
+  is a cylinder of radius 40 mm over the tube (an ellipsoid 20 m long); quantity: the mean pressure on the skin,
+  reference Laplace's law p = T / r with the St. Venant-Kirchhoff hoop tension and the axial force free
+  (fabricfem.wear.compression.laplace_pressure, 2052.17 Pa); levels -2 ... 0 (8 x 4, 12 x 6, 16 x 8, ratio
+  sqrt 2). An easy case: every pilot meets 1% (true errors 2.4e-4 ... 2e-6), so the coarsest is chosen.
+
 For each target (10%, 3%, 1%) the plan (pilots -2, -1, 0) chooses a level; every level is then solved (brute
 force) and compared with the reference. Checks: the true relative error of the chosen level's quantity is at
 most the target, and its work (dofs x steps) is at most twice that of the cheapest level whose true error meets
@@ -38,11 +45,13 @@ from pathlib import Path
 
 from mpi4py import MPI
 
-from fabricfem.scenes.accuracy import level_scene, plan, solve
+from fabricfem.materials import Fabric
+from fabricfem.scenes.accuracy import cells_of, level_scene, plan, solve
 from fabricfem.scenes.build import validate
 from fabricfem.scenes.schema import Scene, accuracy_summary_key
 from fabricfem.scenes.sections import ModelSection, section
 from fabricfem.verify import Timer, case, result
+from fabricfem.wear.compression import laplace_pressure
 
 NAME = "accuracy-choice"
 TARGETS = (0.10, 0.03, 0.01)
@@ -90,6 +99,24 @@ def rollup_tip_ux() -> float:
     """Closed form of the rolled strip's tip x displacement [m]: sin(kappa L) / kappa - L, kappa = 12 M / (E1 t^3)."""
     kappa = 12.0 * M / (E1 * T ** 3)
     return math.sin(kappa * L) / kappa - L
+COMPRESSION_FABRIC = {"E1": 0.8e6, "E2": 0.5e6, "G12": 0.1e6, "nu12": 0.3, "thickness": 7e-4, "density": 400.0}
+COMPRESSION = {
+    "scene": {"name": "compression-cylinder-accuracy", "kind": "wear"},
+    "garment": {"builder": "tube", "length": 0.24, "radius": 0.034, "n_around": 16, "n_along": 8, "order": 2},
+    "fabric": COMPRESSION_FABRIC,
+    "body": {"type": "limb", "center": [0.12, 0.0, 0.0], "radii": [20.0, 0.04, 0.04]},
+    "motion": {"type": "still"},
+    "donning": {"method": "grow", "start": 0.7, "steps": 12, "tolerance": 1e-7},
+    "route": {"solver": "quasistatic"},
+    "output": {"render": False},
+    "accuracy": {"quantity": "mean_pressure_Pa", "finer_levels": 0},
+}
+
+
+def compression_laplace() -> float:
+    """Laplace's law for COMPRESSION: the mean pressure [Pa] of the tube on the 40 mm cylinder."""
+    return laplace_pressure(Fabric(**COMPRESSION_FABRIC), COMPRESSION["garment"]["radius"],
+                            COMPRESSION["body"]["radii"][1], axial="free").pressure
 
 
 def _scene(data: dict, out: Path) -> Scene:
@@ -103,7 +130,8 @@ def choices(root: Path, comm=MPI.COMM_SELF) -> list[dict]:
     the cheapest level meeting the target by brute force (None: no level does)."""
     quiet = lambda message: None   # the plan's table is in the rows
     rows = []
-    for data, reference in ((ROLLUP, rollup_tip_ux), (CORNER, None), (DRAPE, lambda: DRAPE_UX_REFERENCE)):
+    for data, reference in ((ROLLUP, rollup_tip_ux), (CORNER, None), (DRAPE, lambda: DRAPE_UX_REFERENCE),
+                            (COMPRESSION, compression_laplace)):
         scene = _scene(data, root / data["scene"]["name"])
         key = accuracy_summary_key(scene.data, data["accuracy"]["quantity"])
         base = plan(scene, TARGETS[0], comm=comm, say=quiet)     # the pilots (read back by the plans below)
@@ -147,16 +175,14 @@ def scene_model(scene) -> str:
 
 
 def _cells(level) -> str:
-    if level is None:
-        return "refused"
-    mesh = level.scene["mesh"]
-    return f"{mesh['nx']}x{mesh['ny']}"
+    return "refused" if level is None else cells_of(level.scene)
 
 
 @case(NAME, in_tests=False)   # 45 s; tests/test_accuracy.py covers its parts
 def accuracy_choice() -> list:
     """Accuracy target: the chosen level's true error is below 10%, 3%, 1% and its work within 2x of the cheapest
-    level that meets the target (rolled strip vs closed form, corner-pinned cloth and drape vs fine meshes)."""
+    level that meets the target (rolled strip vs closed form, corner-pinned cloth and drape vs fine meshes, the
+    compression sleeve, a wear scene, vs Laplace's law)."""
     out = []
     with Timer() as timer, tempfile.TemporaryDirectory(prefix="accuracy_choice_") as tmp:
         rows = choices(Path(tmp))

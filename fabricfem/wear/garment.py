@@ -71,6 +71,7 @@ class Timeline:
     motion_time: float | None = None
     pull_time: float = 0.0
     belt_time: float = 0.0
+    end_time: float | None = None        # body time [s] at which the run stops (None: after the motion)
 
     PHASES = ("sew", "pull", "don", "belt", "settle", "motion")
 
@@ -87,6 +88,8 @@ class Timeline:
             raise ValueError("donning_time: growing the body (grow_from < 1) needs a donning time > 0 [s]")
         if self.motion_time is not None and not (math.isfinite(self.motion_time) and self.motion_time >= 0.0):
             raise ValueError(f"motion_time must be a time >= 0 [s], got {self.motion_time!r}")
+        if self.end_time is not None and not (math.isfinite(self.end_time) and self.end_time > 0.0):
+            raise ValueError(f"end_time must be a positive time [s], got {self.end_time!r}")
 
     def records(self, duration: float) -> int:
         """Whole record intervals covering `duration` [s]."""
@@ -96,6 +99,21 @@ class Timeline:
         """Duration [s] of each phase in order (PHASES), the motion's given."""
         return {"sew": self.sewing_time, "pull": self.pull_time, "don": self.donning_time, "belt": self.belt_time,
                 "settle": self.settle_time, "motion": motion_time}
+
+    def motion_length(self, kinematics) -> float:
+        """Length [s] of the motion phase: `motion_time`, else the kinematics source's time range."""
+        if self.motion_time is not None:
+            return self.motion_time
+        return kinematics.time_range[1] - kinematics.time_range[0]
+
+    def phase_records(self, motion_time: float) -> dict[str, int]:
+        """Record intervals of each phase in order (PHASES), the motion's length [s] given; the phases are cut at
+        `end_time` (a run that stops early: the accuracy pilots' window)."""
+        out, left = {}, (math.inf if self.end_time is None else self.records(self.end_time))
+        for name, duration in self.durations(motion_time).items():
+            out[name] = min(self.records(duration), left)
+            left -= out[name]
+        return out
 
     def start_of(self, phase: str) -> float:
         """Body time [s] at which `phase` starts (whole record intervals of the phases before it)."""
@@ -225,8 +243,11 @@ class WearHistory(RunHistory):
     def summary(self) -> dict:
         """Over the motion phase: peak and final per torque monitor (with their time and axis value), pressure
         peak and mean (Pa, kPa, mmHg) with the segment and position of the peak; after the sewing: the largest
-        strain, penetration and seam gap."""
-        out: dict = {"records": len(self.steps), "completed": self.completed}
+        strain, penetration and seam gap; the dofs, wall time [s], explicit step dt_s [s] and the number of
+        steps (fabricfem.scenes.accuracy reads them)."""
+        out: dict = {"records": len(self.steps), "completed": self.completed, "ndofs": self.ndofs,
+                     "wall_s": self.wall, "dt_s": self.timings.get("dt"),
+                     "time_steps": int(sum(s.time_steps for s in self.steps))}
         if not self.steps:
             return out
         # torque peaks over the motion (the settling and donning records carry the garment's landing)
@@ -289,7 +310,7 @@ class GarmentRun:
     @property
     def motion_start(self) -> float:
         """Body time [s] at which the motion phase starts."""
-        return sum(p.records for p in self.phases[:-1]) * self.timeline.record_time
+        return self.timeline.start_of("motion")
 
     @property
     def comm(self) -> MPI.Comm:
@@ -479,7 +500,7 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
         model.add_gravity(tuple(settings.gravity))
     model.compile()
     kin = body.kinematics
-    motion_time = (kin.time_range[1] - kin.time_range[0]) if timeline.motion_time is None else timeline.motion_time
+    motion_time = timeline.motion_length(kin)
     posed = Body(list(body.segments.values()), DelayedKinematics(kin, timeline.start_of("motion")), body.schedule)
     contact = ExplicitBodyContact(model, posed, friction=friction, method=contact_method, penalty=penalty)
     # a body overlaps at its joints (hips, knees, elbow): a node trapped in such a lens keeps a small, reported
@@ -512,7 +533,7 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
                                    energy_bound=None, rotary_inertia_scale=settings.rotary_inertia_scale,
                                    mass_scale=settings.mass_scale,
                                    contact=hooks)
-    phases = [Phase(n, timeline.records(d)) for n, d in timeline.durations(motion_time).items()]
+    phases = [Phase(n, records) for n, records in timeline.phase_records(motion_time).items()]
     strain = FastProjection(model, 1.0) if measure_strain else None
     return GarmentRun(name, model, posed, contact, ties, integrator, timeline, phases, dt, dt_estimate,
                       steps_per_record, tuple(torques), config, strain, axis, tuple(handles),
