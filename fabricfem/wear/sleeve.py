@@ -631,7 +631,7 @@ class ExplicitSleeve(ArmOutputs):
     integrator: CentralDifference
     dt: float                  # s, the time step used
     dt_estimate: float         # s, estimated critical step with the rotary scaling (and penalty, if any)
-    dt_estimate_unscaled: float  # s, the same without rotary scaling (s = 1)
+    dt_estimate_unscaled: float  # s, the element formula's critical step without rotary scaling (s = 1)
     steps_per_record: int
     settle_records: int = 0    # record intervals of rest before the flexion starts (t_start = this x record time)
 
@@ -646,8 +646,8 @@ class ExplicitSleeve(ArmOutputs):
                 f"{config.route.critical_step} "
                 f"with rotary-inertia scale {config.route.rotary_inertia_scale:g}"
                 + (f" and mass scale {config.route.mass_scale:g}" if config.route.mass_scale != 1.0 else "")
-                + f", {self.dt_estimate_unscaled:.3g} s "
-                f"without), mass damping {config.damping:g} 1/s, records every {config.motion.output_angle_step:g} deg"
+                + f"; the element formula gives {self.dt_estimate_unscaled:.3g} s "
+                f"without it), mass damping {config.damping:g} 1/s, records every {config.motion.output_angle_step:g} deg"
                 + (f", dynamic similarity: flexion at {config.flexion_speed:.4g} deg/s (c / c_ref = "
                    f"{config.similarity_factor:.4g})" if config.route.dynamic_similarity else ""))
 
@@ -689,7 +689,7 @@ def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> Exp
     omega_p = contact.penalty_frequency()
     method = config.route.critical_step
     omega = math.hypot(stability.max_frequency(model, config.route.rotary_inertia_scale, method), omega_p)
-    omega_1 = math.hypot(stability.max_frequency(model, 1.0, method), omega_p)
+    omega_1 = math.hypot(stability.max_frequency_estimate(model, 1.0), omega_p)   # for the description only
     mass_scale = config.route.mass_scale
     dt_estimate = stability.critical_time_step(model, rayleigh, omega_max=omega, mass_scale=mass_scale)
     dt_unscaled = stability.critical_time_step(model, rayleigh, omega_max=omega_1)
