@@ -510,7 +510,7 @@ def plan(data: dict, fabric, scene_path: Path | None = None) -> WearPlan:
     handles = handle_specs(donning, timeline)
     settings = ExplicitSettings(mass_damping=damping, rotary_inertia_scale=route.rotary_inertia_scale,
                                 time_step_safety=route.time_step_safety, mass_scale=route.mass_scale,
-                                critical_step=route.critical_step, gravity=gravity if route.gravity else None)
+                                critical_step=route.critical_step or ExplicitSettings.critical_step, gravity=gravity if route.gravity else None)
     return WearPlan(body, torques, timeline, settings, contact, axis, handles)
 
 
