@@ -177,16 +177,17 @@ def plot(path: Path, rows: list[list]):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
-    markers = dict(zip(VARIANTS, "osv^"))
+    markers = dict(zip(VARIANTS, "osvD^"))
     for mesh in dict.fromkeys(r[0] for r in rows):
         for r in (r for r in rows if r[0] == mesh):
             ax.scatter(max(100.0 * r[-2], 1e-3), r[7], marker=markers.get(r[1], "x"),
                        label=f"mesh {mesh}, {r[1]}")
     ax.axvline(3.0, color="k", ls=":", lw=0.8, label="3 % bound")
     ax.set_xscale("log")
-    ax.set_xlabel("torque error against the reference [%] (sleeve: RMS over 10-57 deg; pants: mean knee moment)")
+    ax.set_xlabel("torque error against the reference [%]")
     ax.set_ylabel("speed-up against the reference (wall, same run)")
-    ax.set_title("explicit sleeve: speed against accuracy")
+    ax.set_title("explicit wear runs: speed against accuracy\n(sleeve: RMS over 10-57 deg; pants: mean knee moment)",
+                 fontsize=10)
     ax.legend(fontsize=6, ncol=2)
     fig.tight_layout()
     fig.savefig(path, dpi=120)
