@@ -440,7 +440,9 @@ def plan(scene: Scene, target: float | None = None, quantity: str | None = None,
     for lv in membrane + particles:   # model + discretisation error: the difference to the shell's best value
         lv.error = abs(lv.value - best) / (abs(best) or 1.0) + best_error
     offered = particles
-    if particles and particles[-1].error > target:   # the particle model's error floor: its finest pilot's
+    if particles and len(particles) < len(PILOTS):   # the finest pilot did not solve: no floor, not offered
+        offered = []
+    elif particles and particles[-1].error > target:   # the particle model's error floor: its finest pilot's
         offered = []
         particle_note = (f"particles: error floor {particles[-1].error:.2e} (finest pilot "
                          f"{_mesh_label(particles[-1].scene)}) above the target {target:.3g}; not offered")
@@ -451,7 +453,7 @@ def plan(scene: Scene, target: float | None = None, quantity: str | None = None,
     result = Plan(quantity, target, levels + membrane + particles, estimate.order, estimate.extrapolated,
                   estimate.asymptotic, estimate.note, model_note, window=window, full_time=full_time)
     meeting = [lv for lv in result.levels if lv.error is not None and lv.error <= target
-               and (lv.model != "particles" or lv in offered)]
+               and (lv.model != "particles" or any(lv is o for o in offered))]
     result.chosen = min(meeting, key=lambda lv: lv.work) if meeting else None
     say(result.table())
     c = result.chosen

@@ -47,7 +47,7 @@ def _not_representable(data: dict) -> str:
     if "garment" in data:
         return "a wear scene: the wear engine runs the shell"
     if "dynamics" in data or "solver" not in data:
-        return "not a static scene: the particle level is for static plates (dynamics not yet)"
+        return "not a static scene: the particle level is for static plates; dynamics not yet"
     if data.get("model", {}).get("kind", "naghdi") != "naghdi":
         return "the scene's model is not the shell"
     mesh = section(MeshSection, data["mesh"])
