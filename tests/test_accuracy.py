@@ -15,7 +15,9 @@ from fabricfem.benchmarks.sleeve_accuracy import SLEEVE_FIGURES, sleeve_choices,
 from fabricfem.scenes.build import load as load_scene
 from fabricfem.scenes.accuracy import parse_target, plan
 from fabricfem.scenes.richardson import richardson
-from fabricfem.verify.accuracy import DRAPE
+from fabricfem.scenes.particle_level import particle_variant, solve_particles
+from fabricfem.scenes.schema import SceneError
+from fabricfem.verify.accuracy import CORNER, DRAPE, ROLLUP
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -165,3 +167,75 @@ def test_sleeve_series_bad_files(tmp_path):
     (tmp_path / "mesh_mu0.1.csv").write_text("\n".join(line for line in text if "mesh IV" not in line))
     with pytest.raises(ValueError, match="no row of mesh IV at 57 degrees"):
         sleeve_choices((0.1,), tmp_path)
+
+
+HAMMOCK = {   # a plate hung between its left and right edges (pinned: no rotation supports), sagging under gravity
+    "scene": {"name": "hammock", "kind": "static"},
+    "mesh": {"type": "plate", "lx": 0.2, "ly": 0.1, "nx": 8, "ny": 4},
+    "fabric": {"E1": 5e6, "E2": 3e6, "G12": 2e5, "nu12": 0.3, "thickness": 5e-4, "density": 600.0},
+    "support": [{"edge": "left", "u": [0, 0, 0]}, {"edge": "right", "u": [0, 0, 0]}],
+    "load": [{"type": "gravity", "value": [0.0, 0.0, -9.81]}],
+    "solver": {"targets": [1.0], "initial_step": 0.1},
+    "output": {"probe": [0.1, 0.0, 0.0]},
+    "accuracy": {"quantity": "probe_uz_m", "finer_levels": 1, "membrane": False},
+}
+
+
+def test_particles_offered_only_below_their_error_floor(tmp_path, capsys):
+    """The hammock's sag at mid-span of a free edge: the shell pilots 2x1, 4x2, 8x4 give order 3.06 and
+    -4.4912 mm extrapolated; the particle pilots -4.836, -4.493, -4.423 mm, whose finest is 1.5% from it (the
+    particle model's error floor). At 10% the cheapest particle grid (2x1, 7.7%) is chosen and run --accuracy
+    delivers it; at 1% the particles are not offered (the 4x2 pilot's 0.05% is a crossing, not convergence) and
+    the shell's 8x4 is chosen; particles = false leaves them out."""
+    path = _write(tmp_path, HAMMOCK, "hammock")
+    loose = plan(load_scene(path), 0.10)
+    assert loose.require().model == "particles" and loose.require().k == -2
+    particles = [lv for lv in loose.levels if lv.model == "particles"]
+    assert [lv.k for lv in particles] == [-2, -1, 0] and particles[-1].error == pytest.approx(0.0152, abs=1e-3)
+    assert "error floor" in loose.model_note and "offered" in loose.model_note
+    tight = plan(load_scene(path), 0.01)
+    assert tight.require().model == "naghdi" and "above the target 0.01; not offered" in tight.model_note
+    assert min(lv.error for lv in tight.levels if lv.model == "particles") < 0.01   # a coarser pilot by chance
+    assert "particles" in capsys.readouterr().out
+    assert cli.main(["run", str(path), "--accuracy", "10%"]) == 0
+    summary = json.loads((tmp_path / "hammock" / "summary.json").read_text())
+    assert summary["accuracy_model"] == "particles" and summary["status"] == "completed"
+    assert summary["probe_uz_m"] == pytest.approx(particles[0].value, rel=1e-12)
+    assert "particles" in (tmp_path / "hammock" / "accuracy_plan.csv").read_text()
+    off = {**HAMMOCK, "accuracy": {**HAMMOCK["accuracy"], "particles": False}}
+    assert all(lv.model == "naghdi" for lv in plan(load_scene(_write(tmp_path, off, "no_particles")), 0.1).levels)
+
+
+def test_particles_not_considered_where_they_cannot_represent_the_scene():
+    """Edge moments, a clamp (fixed rotations), dynamics, a tube, pressure: the reason is the plan's note."""
+    cases = [(ROLLUP, "edge moment"), (DRAPE, "fixes rotations"), (CORNER, "not a static scene"),
+             ({**HAMMOCK, "load": [{"type": "pressure", "value": 1.0}]}, "'pressure'"),
+             ({**HAMMOCK, "mesh": {"type": "tube", "length": 0.2, "radius": 0.05, "n_around": 8, "n_along": 4}},
+              "a tube")]
+    for data, why in cases:
+        variant, note = particle_variant(data)
+        assert variant is None and note.startswith("particles: not considered") and why in note, note
+    assert particle_variant(HAMMOCK) == (HAMMOCK, "")
+
+
+def test_bad_particles_key_refused(tmp_path):
+    bad = {**HAMMOCK, "accuracy": {**HAMMOCK["accuracy"], "particles": "yes"}}
+    with pytest.raises(SceneError, match="accuracy.particles"):
+        load_scene(_write(tmp_path, bad, "bad"))
+
+
+def test_particle_grid_bends_with_the_shell_rigidity(tmp_path):
+    """The particle level's flexion springs carry D11 = E1 t^3 / (12 (1 - nu12 nu21)) per unit width: a strip
+    simply supported at x = 0 and 0.2 m under a small weight sags at mid-span as the beam 5 q L^4 / (384 D11)
+    (1.1136e-4 m); the 16x8 grid is within 0.5%. A probe off the grid is refused naming output.probe."""
+    data = {"mesh": {"type": "plate", "lx": 0.2, "ly": 0.1, "nx": 16, "ny": 8},
+            "fabric": {"E1": 5e8, "E2": 3e8, "G12": 2e7, "nu12": 0.3, "thickness": 5e-4, "density": 600.0},
+            "support": [{"edge": "left", "u": [0, 0, 0]}, {"edge": "right", "u": ["free", 0, 0]}],
+            "load": [{"type": "gravity", "value": [0.0, 0.0, -9.81]}],
+            "solver": {"targets": [0.01]}, "output": {"probe": [0.1, 0.05, 0.0]}}
+    q, D = 600 * 5e-4 * 9.81 * 0.01, 5e8 * 5e-4 ** 3 / (12 * (1 - 0.3 * 0.3 * 3e8 / 5e8))
+    uz = solve_particles(data, tmp_path / "strip")["probe_uz_m"]
+    assert uz == pytest.approx(-5 * q * 0.2 ** 4 / (384 * D), rel=5e-3)
+    data["output"]["probe"] = [0.11, 0.05, 0.0]
+    with pytest.raises(SceneError, match="output.probe"):
+        solve_particles(data, tmp_path / "off")

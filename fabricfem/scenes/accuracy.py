@@ -19,6 +19,14 @@ shell's best value: |q_m,k - q*| / |q*| (asymptotic shell), else |q_m,k - q_0| /
 conservative estimate of its finest pilot). So the membrane is chosen for pure tension, where it agrees with
 the shell, and not where bending matters.
 
+Particles ([accuracy] particles = true, the default: a particle pilot costs 0.1-1 s): a static plate scene that
+the particle model can represent (fabricfem.scenes.particle_level: gravity, body forces, edge tractions, point loads,
+displacement supports; no edge moments, pressure, fixed rotations, tubes or dynamics) is also solved as a particle
+grid on the mesh nodes of each pilot (`<out>/accuracy/particles<k>/`). Its estimated error is measured like the
+membrane's; the particle model's error floor is that of its finest pilot, and the particle levels are offered only
+when the floor is at most the target (then the cheapest particle pilot meeting the target). The model's reason
+for not being considered, or its floor above the target, is in the plan's notes.
+
 Wear scenes ([scene] kind = "wear"; `WearLevels`): the levels are the garment's mesh, a tube's cell counts
 (n_around, n_along) x ratio^k rounded (the compression route: n_around a multiple of 4) or a pattern's element size
 h / ratio^k, with the ratio of [accuracy] ratio (default 2, or less so that the coarsest pilot keeps 6 cells
@@ -53,9 +61,10 @@ from fabricfem import io
 from fabricfem.dynamics.newmark import DynamicsError
 from fabricfem.scenes import wear
 from fabricfem.scenes.batch import read_summary
+from fabricfem.scenes import particle_level
 from fabricfem.scenes.build import build_fabric, critical_time_step_estimate, estimated_dofs, validate
 from fabricfem.scenes.richardson import ORDERS, richardson
-from fabricfem.scenes.run import output_dir, run_scene, scene_name, scene_sha256
+from fabricfem.scenes.run import SceneOutcome, output_dir, run_scene, scene_name, scene_sha256
 from fabricfem.scenes.schema import ACCURACY_KINDS, Scene, SceneError, accuracy_summary_key, check_target
 from fabricfem.scenes.sections import AccuracySection, DynamicsSection, ModelSection, section
 from fabricfem.solvers.newton import SolverError
@@ -81,6 +90,7 @@ class Level:
     wall_s: float | None = None
     error: float | None = None
     cost_s: float | None = None
+    kind: str | None = None           # "particles": a particle level (the scene's data, solved by particle_level)
 
     @property
     def work(self) -> float:
@@ -89,15 +99,15 @@ class Level:
 
     @property
     def model(self) -> str:
-        """naghdi (the shell) or membrane."""
-        return section(ModelSection, self.scene.get("model")).kind
+        """naghdi (the shell), membrane or particles."""
+        return self.kind or section(ModelSection, self.scene.get("model")).kind
 
 
 @dataclass
 class Plan:
-    """The accuracy plan of a scene: the levels (pilots solved; shell then membrane), the observed order p, the
-    extrapolated value, whether the pilots are in the asymptotic range (and why not), what became of the membrane
-    alternative (`model_note`) and the chosen level (None: target not met)."""
+    """The accuracy plan of a scene: the levels (pilots solved; shell, membrane, particles), the observed order p,
+    the extrapolated value, whether the pilots are in the asymptotic range (and why not), what became of the
+    membrane and particle alternatives (`model_note`) and the chosen level (None: target not met)."""
 
     quantity: str
     target: float
@@ -123,12 +133,12 @@ class Plan:
         estimate = (f"observed order p = {self.order:.2f}, extrapolated {self.extrapolated:.6g}" if self.asymptotic
                     else f"NOT ASYMPTOTIC ({self.note}): only the solved levels, conservative estimates")
         lines = [f"accuracy plan: {self.quantity} to {self.target:.3g} relative; {estimate}",
-                 (f"  {'level':>5} {'model':>8} {'cells':>9} {'dofs':>8} {'step [s]':>10} {'value':>13} "
+                 (f"  {'level':>5} {'model':>9} {'cells':>9} {'dofs':>8} {'step [s]':>10} {'value':>13} "
                   f"{'est. error':>10} {'wall [s]':>10}")]
         for lv in self.levels:
             mark = " <- chosen" if lv is self.chosen else ""
             cost = "" if lv.cost_s is None else f"{lv.cost_s:.3g}" + ("" if lv.value is not None else " (pred.)")
-            lines.append(f"  {lv.k:>+5d} {lv.model:>8} {cells_of(lv.scene):>9} {lv.dofs:>8d} {_fmt(lv.step, '.4g'):>10} "
+            lines.append(f"  {lv.k:>+5d} {lv.model:>9} {cells_of(lv.scene):>9} {lv.dofs:>8d} {_fmt(lv.step, '.4g'):>10} "
                          f"{_fmt(lv.value, '.6g'):>13} {_fmt(lv.error, '.2e'):>10} {cost:>10}{mark}")
         if self.window is not None:
             lines.append(f"  window: the pilots ran the first {self.window:g} s of {self.full_time:.4g} s of body time; "
@@ -365,9 +375,32 @@ def _membrane_pilots(scene: Scene, key: str, root: Path, comm, say) -> tuple[lis
     return solved, ""
 
 
+def _particle_pilots(scene: Scene, key: str, root: Path, comm, say) -> tuple[list[Level], str]:
+    """The particle model's solved pilot levels and a note (why none or fewer were solved)."""
+    data, note = particle_level.particle_variant(scene.data)
+    if not section(AccuracySection, scene.get("accuracy")).particles:
+        return [], ""
+    if data is None:
+        return [], note
+    solved = []
+    for k in PILOTS:
+        level = level_scene(scene, k, root / f"particles{k:+d}", data)
+        level.kind, level.dofs = "particles", particle_level.particle_dofs(level.scene.data)
+        try:
+            summary = particle_level.solve_particles(level.scene.data, level.scene["output"]["dir"], comm)
+        except SceneError as exc:
+            return solved, f"particles: level {k:+d} did not solve ({' '.join(str(exc).split())}); not a candidate"
+        level.value, level.wall_s = float(summary_value(summary, key)), float(summary["wall_s"])
+        level.cost_s = level.wall_s
+        say(f"accuracy: particles level {k:+d} ({_mesh_label(level.scene)}, {level.dofs} dofs) "
+            f"{'solved' if summary['solved_now'] else 'read back'}: {level.value:.6g}")
+        solved.append(level)
+    return solved, ""
+
+
 def plan(scene: Scene, target: float | None = None, quantity: str | None = None, comm=MPI.COMM_WORLD,
          say=None) -> Plan:
-    """Solve the pilots (shell, then the membrane where the scene permits it), estimate the error of every level
+    """Solve the pilots (shell, then the membrane and the particles where the scene permits them), estimate the error of every level
     and choose the one of least work that meets the target (module docstring; `Plan.chosen` is None when no level
     does, `Plan.require` refuses)."""
     say = say or ((lambda m: print(m, flush=True)) if comm.rank == 0 else (lambda m: None))
@@ -403,11 +436,24 @@ def plan(scene: Scene, target: float | None = None, quantity: str | None = None,
         lv.cost_s = pilots[-1].wall_s * (lv.work / pilots[-1].work) ** a
     membrane, model_note = _membrane_pilots(scene, key, root, comm, say)
     best, best_error = (estimate.extrapolated, 0.0) if estimate.asymptotic else (pilots[-1].value, pilots[-1].error)
-    for lv in membrane:   # model + discretisation error: the difference to the shell's best value
+    particles, particle_note = _particle_pilots(scene, key, root, comm, say)
+    for lv in membrane + particles:   # model + discretisation error: the difference to the shell's best value
         lv.error = abs(lv.value - best) / (abs(best) or 1.0) + best_error
-    result = Plan(quantity, target, levels + membrane, estimate.order, estimate.extrapolated, estimate.asymptotic,
-                  estimate.note, model_note, window=window, full_time=full_time)
-    meeting = [lv for lv in result.levels if lv.error is not None and lv.error <= target]
+    offered = particles
+    if particles and len(particles) < len(PILOTS):   # the finest pilot did not solve: no floor, not offered
+        offered = []
+    elif particles and particles[-1].error > target:   # the particle model's error floor: its finest pilot's
+        offered = []
+        particle_note = (f"particles: error floor {particles[-1].error:.2e} (finest pilot "
+                         f"{_mesh_label(particles[-1].scene)}) above the target {target:.3g}; not offered")
+    elif particles:
+        particle_note = (f"particles: error floor {particles[-1].error:.2e} (finest pilot "
+                         f"{_mesh_label(particles[-1].scene)}) within the target {target:.3g}; offered")
+    model_note = "; ".join(n for n in (model_note, particle_note) if n)
+    result = Plan(quantity, target, levels + membrane + particles, estimate.order, estimate.extrapolated,
+                  estimate.asymptotic, estimate.note, model_note, window=window, full_time=full_time)
+    meeting = [lv for lv in result.levels if lv.error is not None and lv.error <= target
+               and (lv.model != "particles" or any(lv is o for o in offered))]
     result.chosen = min(meeting, key=lambda lv: lv.work) if meeting else None
     say(result.table())
     c = result.chosen
@@ -466,6 +512,8 @@ def run_accurate(scene: Scene, target: float | None = None, quantity: str | None
     (plan, SceneOutcome)."""
     chosen = plan(scene, target, quantity, comm)
     level = chosen.require()
+    if level.model == "particles":
+        return chosen, _deliver_particles(scene, chosen, level, comm)
     if scene.kind == "wear":   # the whole scene, not the pilots' window
         level = level_scene(scene, level.k, output_dir(scene), window=False)
     data = copy.deepcopy(level.scene.data)
@@ -474,6 +522,28 @@ def run_accurate(scene: Scene, target: float | None = None, quantity: str | None
     delivered = validate(data, source=f"accuracy level {chosen.chosen.k:+d}", path=scene.path)
     delivered.path = scene.path
     outcome = run_scene(delivered, comm)
+    _write_plan(scene, chosen, comm)
+    return chosen, outcome
+
+
+def _deliver_particles(scene: Scene, chosen: Plan, level: Level, comm) -> SceneOutcome:
+    """The chosen particle level solved into the scene's output folder (summary.json with the plan's entries)."""
+    out = output_dir(scene)
+    if comm.rank == 0:   # a previous delivery of another level is not read back
+        (out / "summary.json").unlink(missing_ok=True)
+    comm.barrier()
+    summary = particle_level.solve_particles(level.scene.data, out, comm)
+    io.update_json(out / "summary.json", {"scene": scene_name(scene), "ranks": comm.size}, comm)
+    if comm.rank == 0:
+        print(f"particles ({_mesh_label(level.scene)}, {level.dofs} dofs): {summary['newton_iterations']} Newton "
+              f"iterations, {summary['wall_s']:.3g} s; probe displacement {summary['probe_displacement_m']} m",
+              flush=True)
+    _write_plan(scene, chosen, comm)
+    return SceneOutcome(summary, "completed", out)
+
+
+def _write_plan(scene: Scene, chosen: Plan, comm) -> None:
+    """The plan's entries into the delivered run's summary.json, accuracy_plan.csv beside it, and the result."""
     out = output_dir(scene)
     io.update_json(out / "summary.json", chosen.summary(), comm)
     io.write_csv(out / "accuracy_plan.csv", list(chosen.header), chosen.rows(), comm)
@@ -483,4 +553,3 @@ def run_accurate(scene: Scene, target: float | None = None, quantity: str | None
         print(f"accuracy: {chosen.quantity} = {value} at level {chosen.chosen.k:+d} ({chosen.chosen.model}), "
               f"estimated relative error {chosen.chosen.error:.2e} (target {chosen.target:.3g}); "
               f"wrote {out}/accuracy_plan.csv", flush=True)
-    return chosen, outcome

@@ -242,6 +242,10 @@ class AccuracySection:
     membrane: bool = doc("a shell scene: also solve the membrane model at the pilot levels and choose it where its "
                          "difference to the shell's extrapolated value meets the target (not with edge moments or "
                          "rotation monitors)", True)
+    particles: bool = doc("a static plate scene: also solve the particle model ([Eischen2000]) on the pilot grids "
+                          "and offer it where its error floor (the finest particle pilot's difference to the shell's "
+                          "extrapolated value) meets the target (not with edge moments, pressure, fixed rotations, "
+                          "tubes or dynamics)", True)
     window: float | None = doc("wear, explicit engine: the pilots run only the first `window` seconds of body time "
                                "(donning, settling and motion phases as scheduled, cut there) [s]; the estimate is "
                                "that of the window's quantity; the chosen level then runs the whole scene "
