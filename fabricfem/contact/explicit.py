@@ -434,7 +434,10 @@ class ExplicitBodyContact:
         # t -> (K,) bool of the segments that take contact (an inactive segment is parked far from the garment)
         self.transverse_scale: Callable[[float], float] | None = None
         self.segment_active: Callable[[float], np.ndarray] | None = None
-        self.strict_projection = True   # False: see `correct`
+        # a body overlaps at its joints (hips, knees, elbow): by default a node trapped in such a lens keeps the small
+        # penetration the last push leaves (reported by the records' max_penetration) instead of stopping the run;
+        # True raises instead (`correct`)
+        self.strict_projection = False
 
     # ------------------------------------------------------------------ set-up and output
     def penalty_frequency(self) -> float:
@@ -640,8 +643,6 @@ class ExplicitBodyContact:
         if self.monitor_penetration:   # the positions d^{n+1} against the body at t_{n+1} (posed last step)
             self._monitor_penetration(self.reference + d[rows], self.body_at(t))
         x_trial = self.reference + d[rows] + dt * v[rows] + dt ** 2 * a[rows]
-        # not strict: a node trapped in the lens of overlapping segments (a walking body's hip) keeps the small
-        # penetration the last push leaves, reported by the records' max_penetration, instead of stopping the run
         stack = _Segments(ellipsoids)
         projected, active, seg = project_with_segment(x_trial, ellipsoids, strict=self.strict_projection,
                                                       segments=stack)

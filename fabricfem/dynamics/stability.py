@@ -148,8 +148,7 @@ def max_frequency(model, rotary_inertia_scale: float = 1.0, method: str = "eigen
     """omega_max [rad/s] of the model in its current state for the critical step [Man2006, eq. 2.86]:
     "eigenvalue" solves for the largest eigenvalue of the assembled system (`discrete_max_frequency`, the
     global estimate of explicit codes [Belytschko2000, ch. 6]); "estimate" is the element formula
-    `max_frequency_estimate`, an overestimate by 1.28-1.48 on the sleeve's Q2 meshes (measured in
-    docs/findings/2026-11-25-wear-speed.md)."""
+    `max_frequency_estimate`, an overestimate (measured in docs/findings/2026-11-26-critical-step.md)."""
     if method == "eigenvalue":
         return discrete_max_frequency(model, rotary_inertia_scale=rotary_inertia_scale)
     if method == "estimate":

@@ -159,8 +159,8 @@ class RouteSpec:
     time_step_safety: float = param("explicit: dt = safety x estimated critical step, in (0, 1)", 0.8)
     critical_step: str | None = param(
         "explicit: the critical step from the largest eigenvalue of the assembled system (eigenvalue) or from the "
-        "element formula (estimate, 1.3-1.9 x shorter); default: eigenvalue for the sleeve's flexion route, estimate "
-        "for the garment engine of wear scenes (the pants blew up in the obstacle crossing with the eigenvalue step)",
+        "element formula (estimate, shorter); default: eigenvalue for the sleeve's flexion route, estimate for the "
+        "garment engine of wear scenes (docs/garments.md)",
         None)
     mass_scale: float = param("explicit: factor >= 1 on every lumped mass (not on the weight nor the damping), dt x "
                               "sqrt(factor); check the kinetic / strain energy ratio of the run", 1.0)

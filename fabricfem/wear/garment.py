@@ -505,9 +505,6 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
     motion_time = timeline.motion_length(kin)
     posed = Body(list(body.segments.values()), DelayedKinematics(kin, timeline.start_of("motion")), body.schedule)
     contact = ExplicitBodyContact(model, posed, friction=friction, method=contact_method, penalty=penalty)
-    # a body overlaps at its joints (hips, knees, elbow): a node trapped in such a lens keeps a small, reported
-    # penetration instead of stopping the run
-    contact.strict_projection = False
     for spec in torques:
         contact.track_torque(spec.name, spec.joint, spec.axis, spec.segments)
     if timeline.grow_from < 1.0:

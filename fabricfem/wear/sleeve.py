@@ -643,7 +643,7 @@ class ExplicitSleeve(ArmOutputs):
     def describe(self) -> str:
         config = self.config
         return (f"explicit central differences, dt = {self.dt:.3g} s (critical step {self.dt_estimate:.3g} s by "
-                f"{config.route.critical_step or SLEEVE_CRITICAL_STEP} "
+                f"{sleeve_critical_step(config)} "
                 f"with rotary-inertia scale {config.route.rotary_inertia_scale:g}"
                 + (f" and mass scale {config.route.mass_scale:g}" if config.route.mass_scale != 1.0 else "")
                 + f"; the element formula gives {self.dt_estimate_unscaled:.3g} s "
@@ -659,9 +659,11 @@ class ExplicitSleeve(ArmOutputs):
         self.integrator.destroy()
 
 
-# the sleeve's flexion route: the eigenvalue step, 1.3-1.5 x longer than the element formula's, moves the torque curve
-# by 0.13-0.19 % RMS on meshes I and III (docs/findings/2026-11-26-critical-step.md)
-SLEEVE_CRITICAL_STEP = "eigenvalue"
+def sleeve_critical_step(config: SleeveConfig) -> str:
+    """How the sleeve's flexion route sets its critical step: `[route] critical_step`, by default from the largest
+    eigenvalue of the assembled system (measured against the element formula in
+    docs/findings/2026-11-26-critical-step.md)."""
+    return config.route.critical_step or "eigenvalue"
 
 
 def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> ExplicitSleeve:
@@ -685,15 +687,11 @@ def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> Exp
     body = default_arm(flexion, config.arm)
     contact = ExplicitBodyContact(model, body, friction=config.contact.friction, method=config.contact.method,
                                   penalty=config.contact.penalty)
-    # the upper arm and the forearm overlap at the elbow: a node trapped in that lens keeps the small penetration
-    # the last push leaves (reported in the records' max_penetration) instead of stopping the flexion (mesh III
-    # stopped at 56 of 57 degrees with the element-formula step; docs/findings/2026-11-25-wear-speed.md)
-    contact.strict_projection = False
     track_elbow_torques(contact, body)
     rayleigh = (config.damping, 0.0)
     omega_p = contact.penalty_frequency()
-    method = config.route.critical_step or SLEEVE_CRITICAL_STEP
-    omega = math.hypot(stability.max_frequency(model, config.route.rotary_inertia_scale, method), omega_p)
+    omega = math.hypot(stability.max_frequency(model, config.route.rotary_inertia_scale, sleeve_critical_step(config)),
+                       omega_p)
     omega_1 = math.hypot(stability.max_frequency_estimate(model, 1.0), omega_p)   # for the description only
     mass_scale = config.route.mass_scale
     dt_estimate = stability.critical_time_step(model, rayleigh, omega_max=omega, mass_scale=mass_scale)
