@@ -111,7 +111,8 @@ def main(argv: list[str] | None = None) -> int:
                          help="wear: sleeve meshes and the pants scene, comma-separated (I, II, III, IV, pants)")
     p_bench.add_argument("--duration", type=float, default=None,
                          help="wear: the pants' walk [s] (default: the scene's four strides)")
-    p_bench.add_argument("--variants", default="reference,kernels,eigenvalue step,mass x4,mass x16",
+    p_bench.add_argument("--variants",
+                         default="reference,kernels,eigenvalue step,quadrature geometry,mass x4,mass x16",
                          help="wear: variants, comma-separated (fabricfem.benchmarks.wear_speed.VARIANTS)")
     p_bench.add_argument("--repeats", type=int, default=3, help="wear, commits: runs of every variant (medians)")
     p_bench.add_argument("--old", help="commits: the baseline commit (e.g. a sha or a tag)")

@@ -27,6 +27,7 @@ from fabricfem.forms import loads as load_forms
 from fabricfem.forms import shell as shell_forms
 from fabricfem.forms.jit import KERNEL_JIT
 from fabricfem.materials import Fabric, SquareRootBending
+from fabricfem.shell_reference import REFERENCE_AT_QUADRATURE, ReferenceAtQuadrature
 
 Locator = str | Callable[[np.ndarray], np.ndarray]
 
@@ -142,10 +143,11 @@ class ShellModel:
             if isinstance(law, SquareRootBending) and eps is None:
                 eps = 1e-3 * law.kappa0
             self.bending_eps = eps
+            self._energy_args = dict(law=law, law_eps=eps, degrees=psri_degrees, cell_size=self.cell_size,
+                                     membrane_density=membrane_density)
             self.energy = shell_forms.naghdi_energy(
                 self.u, self.theta, self.phi0, self.n0, (self.a3, self.a1, self.a2), (self.t1, self.t2),
-                self.A, self.D, self.shear_stiffness, self.thickness, law=law, law_eps=eps,
-                degrees=psri_degrees, cell_size=self.cell_size, membrane_density=membrane_density)
+                self.A, self.D, self.shear_stiffness, self.thickness, **self._energy_args)
             self.d = shell_forms.director(self.theta, self.a3, self.a1, self.a2)
         else:
             self.energy = shell_forms.membrane_energy(self.u, self.phi0, self.t1, self.t2, self.A,
@@ -159,7 +161,10 @@ class ShellModel:
         self._point_moments: list[tuple[np.ndarray, np.ndarray]] = []   # (point [m], moment [N m])
         self.bcs: list = []
         self._scaled_bcs: list[tuple[fem.Function, np.ndarray]] = []
+        self._extra_energy: list = []   # energies added after the shell's own (symmetry penalties)
         self._compiled = False
+        self._reference = None          # ReferenceAtQuadrature of the internal force (built on first use)
+        self.reference_at_quadrature = REFERENCE_AT_QUADRATURE["enabled"] and model == "naghdi"
         self.rebase = rebase and model == "naghdi"
         self._rotation_prescribed = False
         self._base_turned = False   # the director base was turned to a symmetry plane (symmetry)
@@ -340,7 +345,9 @@ class ShellModel:
         h_min = self.comm.allreduce(float(self.cell_size.x.array.min(initial=np.inf)), op=MPI.MIN)
         k_u = penalty * float(np.abs(self.A.value).max()) / h_min
         n_c = fem.Constant(self.mesh, PETSc.ScalarType(n))
-        self.energy = self.energy + 0.5 * k_u * ufl.dot(self.u, n_c) ** 2 * self._ds(where)
+        penalty_energy = 0.5 * k_u * ufl.dot(self.u, n_c) ** 2 * self._ds(where)
+        self._extra_energy.append(penalty_energy)
+        self.energy = self.energy + penalty_energy
         return self
 
     def _edge_max(self, values: np.ndarray) -> float:
@@ -413,6 +420,8 @@ class ShellModel:
         b2 = np.cross(d, b1)
         for field_, values in ((self.a3, d), (self.a1, b1), (self.a2, b2)):
             field_.x.array[:] = values.reshape(-1)
+        if self._reference is not None:
+            self._reference.update()
         self.w.x.array[self._theta_dofs] = 0.0
 
     def director_field(self) -> fem.Function:
@@ -435,7 +444,8 @@ class ShellModel:
             self.residual_form = internal - self.load_factor * sum(self._director_loads[1:], self._director_loads[0])
         self.jacobian_form = ufl.derivative(self.residual_form, self.w, self.w_trial)
         self._R = fem.form(self.residual_form, jit_params=KERNEL_JIT)
-        self._R_internal = fem.form(internal, jit_params=KERNEL_JIT) if self._director_loads else self._R
+        self._R_internal = None   # the internal force's forms, compiled on first use (`_internal_form`)
+        self._kernel_jit = {key: list(value) for key, value in KERNEL_JIT.items()}   # the flags in effect now
         self._J_form = None       # compiled on first use (`_J`): explicit runs never need the tangent
         self.F_ref = fem_petsc.create_vector(self._R)
         with self.F_ref.localForm() as f:
@@ -474,12 +484,36 @@ class ShellModel:
             self._J_form = fem.form(self.jacobian_form)
         return self._J_form
 
+    @property
+    def _internal_form(self) -> list:
+        """The compiled forms of the internal force R_int of the explicit and dynamic integrators. For the Naghdi
+        shell (`reference_at_quadrature`) they are the derivatives of `naghdi_energy_on_reference`: the reference
+        geometry is evaluated once at the quadrature points (fabricfem.shell_reference) instead of at every step;
+        the same force up to round-off."""
+        self.compile()
+        if self._R_internal is None and not (self.reference_at_quadrature or self._director_loads):
+            self._R_internal = [self._R]
+        if self._R_internal is None:
+            if self.reference_at_quadrature:
+                self._reference = ReferenceAtQuadrature(self, self._energy_args["degrees"])
+                full, reduced = shell_forms.naghdi_energy_on_reference(
+                    self.u, self.theta, self._reference.full, self._reference.reduced, self.A, self.D,
+                    self.shear_stiffness, self.thickness, **self._energy_args)
+                energies = [sum(self._extra_energy, full), reduced]
+            else:
+                energies = [self.energy]
+            self._R_internal = [fem.form(ufl.derivative(e, self.w, self.w_test), jit_params=self._kernel_jit)
+                                for e in energies]
+        return self._R_internal
+
     def _assemble_internal(self, x: PETSc.Vec, b: PETSc.Vec, lift: bool):
         """b = R(x) (with the moments' work when lift, i.e. for the residual; R_int alone otherwise)."""
+        forms = [self._R] if lift else self._internal_form
         self.set_state(x)
         with b.localForm() as bl:
             bl.set(0.0)
-        fem_petsc.assemble_vector(b, self._R if lift else self._R_internal)
+        for form in forms:
+            fem_petsc.assemble_vector(b, form)
         if lift:
             fem_petsc.apply_lifting(b, [self._J], [self.bcs], x0=[x], scale=-1.0)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)

@@ -154,6 +154,103 @@ def naghdi_energy(u, theta, phi0, n0, director_base, warp_weft, A, D, shear_stif
             + (1.0 - alpha) * (psi_m + psi_s) * dx_reduced)
 
 
+# The reference quantities of the shell at a quadrature point, packed in this order (name, length): the material
+# frame e1, e2; g_i = F0 e_i; s0_i = g_i . n0; the director base a3, a1, a2; and, for the bending energy, the
+# derivatives of the base along e_j, (grad a) e_j, and the reference curvature k0 = voigt(1/2 (F0^T grad n0 +
+# grad n0^T F0)) [Eischen2000, eq. 5]. Everything here is fixed during a dynamic run (the base is not re-based).
+REFERENCE_MEMBRANE_SHEAR = (("e1", 3), ("e2", 3), ("g1", 3), ("g2", 3), ("s0", 2), ("a3", 3), ("a1", 3), ("a2", 3))
+REFERENCE_BENDING = (("Da3_1", 3), ("Da3_2", 3), ("Da1_1", 3), ("Da1_2", 3), ("Da2_1", 3), ("Da2_2", 3), ("k0", 3))
+
+
+def reference_layout(bending: bool) -> tuple[tuple[str, int], ...]:
+    """(name, length) of the packed reference quantities, with or without the bending ones."""
+    return REFERENCE_MEMBRANE_SHEAR + (REFERENCE_BENDING if bending else ())
+
+
+def reference_quantities(phi0, n0, director_base, warp_weft, bending: bool):
+    """The reference quantities of `reference_layout(bending)` as one UFL vector (to evaluate at quadrature points)."""
+    F0 = ufl.grad(phi0)
+    e1, e2 = material_frame(F0, *warp_weft)
+    g1, g2 = F0 * e1, F0 * e2
+    a3, a1, a2 = director_base
+    parts = [e1, e2, g1, g2, ufl.as_vector([ufl.dot(g1, n0), ufl.dot(g2, n0)]), a3, a1, a2]
+    if bending:
+        for a in (a3, a1, a2):
+            parts += [ufl.grad(a) * e1, ufl.grad(a) * e2]
+        grad_n0 = ufl.grad(n0)
+        parts.append(voigt(0.5 * (F0.T * grad_n0 + grad_n0.T * F0), e1, e2))
+    return ufl.as_vector([p[i] for p in parts for i in range(p.ufl_shape[0])])
+
+
+def _unpack(packed, bending: bool) -> dict:
+    """Named UFL views of a packed reference vector (reference_layout)."""
+    views, start = {}, 0
+    for name, length in reference_layout(bending):
+        views[name] = ufl.as_vector([packed[start + i] for i in range(length)])
+        start += length
+    return views
+
+
+def strains_on_reference(u, theta, packed, bending: bool):
+    """Membrane (Voigt), shear and, if `bending`, bending (Voigt) strains of the Naghdi shell from the packed
+    reference quantities (reference_quantities): the strains of `naghdi_energy` written in the frame,
+
+        eps_m = [g1.Du1 + |Du1|^2 / 2, g2.Du2 + |Du2|^2 / 2, g1.Du2 + g2.Du1 + Du1.Du2]      [Eischen2000, eq. 3]
+        gamma_i = (g_i + Du_i) . d - s0_i                                                [Eischen2000, eq. 4]
+        K_ij = -1/2 ((g_i + Du_i) . D_j d + D_i d . (g_j + Du_j)) + k0_ij                [Eischen2000, eq. 5]
+
+    with Du_i = (grad u) e_i and D_j d = (grad d) e_j by the chain rule through the angles and the base."""
+    r = _unpack(packed, bending)
+    du = [ufl.grad(u) * r["e1"], ufl.grad(u) * r["e2"]]
+    g = [r["g1"], r["g2"]]
+    fe = [g[0] + du[0], g[1] + du[1]]
+    eps_m = ufl.as_vector([ufl.dot(g[0], du[0]) + 0.5 * ufl.dot(du[0], du[0]),
+                           ufl.dot(g[1], du[1]) + 0.5 * ufl.dot(du[1], du[1]),
+                           ufl.dot(g[0], du[1]) + ufl.dot(g[1], du[0]) + ufl.dot(du[0], du[1])])
+    a3, a1, a2 = r["a3"], r["a1"], r["a2"]
+    d = director(theta, a3, a1, a2)
+    gamma = ufl.as_vector([ufl.dot(fe[i], d) - r["s0"][i] for i in range(2)])
+    if not bending:
+        return eps_m, gamma, None
+    c1, s1 = ufl.cos(theta[0]), ufl.sin(theta[0])
+    c2, s2 = ufl.cos(theta[1]), ufl.sin(theta[1])
+
+    def d_along(j: int):
+        dth = ufl.grad(theta) * r[f"e{j + 1}"]
+        return (c1 * c2 * r[f"Da3_{j + 1}"] + c1 * s2 * r[f"Da1_{j + 1}"] - s1 * r[f"Da2_{j + 1}"]
+                + (-s1 * c2 * dth[0] - c1 * s2 * dth[1]) * a3 + (-s1 * s2 * dth[0] + c1 * c2 * dth[1]) * a1
+                - c1 * dth[0] * a2)
+
+    dd = [d_along(0), d_along(1)]
+    k0 = r["k0"]
+    kappa = ufl.as_vector([-ufl.dot(fe[0], dd[0]) + k0[0], -ufl.dot(fe[1], dd[1]) + k0[1],
+                           -(ufl.dot(fe[0], dd[1]) + ufl.dot(dd[0], fe[1])) + k0[2]])
+    return eps_m, gamma, kappa
+
+
+def naghdi_energy_on_reference(u, theta, reference_full, reference_reduced, A, D, shear_stiffness, thickness,
+                               law=None, law_eps=None, degrees=(4, 2), cell_size=None, membrane_density=None):
+    """`naghdi_energy` with the reference geometry read from packed quadrature data (reference_quantities at the
+    points of the full and the reduced PSRI rule: Quadrature-element coefficients of those degrees) instead of
+    being recomputed from the P2 fields at every evaluation; the same energy up to round-off.
+
+    Returns the two parts (on the full rule, on the reduced rule) as separate forms: FFCx 0.5 cannot compare two
+    Quadrature elements with different points within one form."""
+    mesh = u.ufl_domain()
+    eps_full, gamma_full, kappa = strains_on_reference(u, theta, reference_full, bending=True)
+    eps_red, gamma_red, _ = strains_on_reference(u, theta, reference_reduced, bending=False)
+
+    def membrane_shear(eps_m, gamma):
+        psi_m = quadratic_energy(eps_m, A) if membrane_density is None else membrane_density(eps_m)
+        return psi_m + 0.5 * shear_stiffness * ufl.dot(gamma, gamma)
+
+    dx_full, dx_reduced = psri_measures(mesh, *degrees)
+    h = ufl.CellDiameter(mesh) if cell_size is None else cell_size
+    alpha = thickness ** 2 / h ** 2
+    return ((bending_energy(kappa, D, law, law_eps) + alpha * membrane_shear(eps_full, gamma_full)) * dx_full,
+            (1.0 - alpha) * membrane_shear(eps_red, gamma_red) * dx_reduced)
+
+
 def membrane_energy(u, phi0, t1, t2, A, degree: int = 4, membrane_density=None):
     """Membrane-only (no bending, no shear) strain energy 1/2 E.A E [J] ([Eischen2000, eq. 3], eq. 8), or
     int W(eps) dA with a callable membrane_density W [J/m^2] of the Voigt strain (forms.fitted)."""

@@ -1,0 +1,69 @@
+"""The shell's reference geometry at the quadrature points, for the internal force of explicit steps.
+
+`naghdi_energy` (fabricfem.forms.shell) recomputes the reference geometry (F0 = grad phi0, the material frame by
+Gram-Schmidt, the director base and its gradients, the reference curvature) from seven P2 fields at every
+quadrature point of every evaluation. In a dynamic run those are fixed (the director base is not re-based), so
+`ReferenceAtQuadrature` evaluates them once into Quadrature-element Functions at the points of the full and the
+reduced PSRI rules (the same points FFCx integrates with) and `naghdi_energy_on_reference` reads them from there.
+The two energies are the same function of the state up to round-off (tests/test_shell_reference.py).
+"""
+from __future__ import annotations
+
+from contextlib import contextmanager
+from typing import Iterator
+
+import numpy as np
+import ufl
+from dolfinx import fem
+from ffcx.element_interface import create_quadrature
+
+from fabricfem.forms import shell as shell_forms
+
+
+# Whether ShellModels created now evaluate the reference geometry once (True) or at every evaluation of the
+# internal force (False: the code before this lever, for a benchmark's baseline); read by ShellModel.__init__.
+REFERENCE_AT_QUADRATURE = {"enabled": True}
+
+
+@contextmanager
+def reference_geometry_per_evaluation() -> Iterator[None]:
+    """ShellModels created inside the block compute their internal force with the reference geometry recomputed at
+    every evaluation (`naghdi_energy`), as before this module existed: a benchmark's baseline."""
+    old = REFERENCE_AT_QUADRATURE["enabled"]
+    REFERENCE_AT_QUADRATURE["enabled"] = False
+    try:
+        yield
+    finally:
+        REFERENCE_AT_QUADRATURE["enabled"] = old
+
+
+class ReferenceAtQuadrature:
+    """Packed reference quantities (fabricfem.forms.shell.reference_layout) of a Naghdi ShellModel at the points of
+    its PSRI rules: `full` (with the bending quantities) and `reduced` are vector Quadrature Functions; `update()`
+    re-evaluates them after the director base changed (ShellModel.rebase_director)."""
+
+    def __init__(self, model, degrees: tuple[int, int]):
+        mesh = model.mesh
+        cell = mesh.ufl_cell()
+        base, frame = (model.a3, model.a1, model.a2), (model.t1, model.t2)
+        tdim = mesh.topology.dim
+        index_map = mesh.topology.index_map(tdim)
+        self._cells = np.arange(index_map.size_local + index_map.num_ghosts, dtype=np.int32)
+        self._parts = []
+        for degree, bending in zip(degrees, (True, False)):
+            quantities = shell_forms.reference_quantities(model.phi0, model.n0, base, frame, bending)
+            size = quantities.ufl_shape[0]
+            element = ufl.VectorElement("Quadrature", cell, degree, dim=size, quad_scheme="default")
+            space = fem.FunctionSpace(mesh, element)
+            points, _ = create_quadrature(cell.cellname(), degree, "default")
+            function = fem.Function(space, name=f"reference_degree_{degree}")
+            self._parts.append((fem.Expression(quantities, points), function, size))
+        self.full, self.reduced = self._parts[0][1], self._parts[1][1]
+        self.update()
+
+    def update(self) -> None:
+        """Evaluate the reference quantities at the quadrature points of every local cell (owned and ghost)."""
+        for expression, function, size in self._parts:
+            values = expression.eval(self._cells)                    # (cells, points x size), point-major
+            blocks = function.function_space.dofmap.list.array.reshape(len(self._cells), -1)
+            function.x.array.reshape(-1, size)[blocks.ravel()] = values.reshape(-1, size)

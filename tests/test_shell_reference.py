@@ -1,0 +1,135 @@
+"""The internal force with the reference geometry evaluated once at the quadrature points (fabricfem.shell_reference)
+against the shell's energy written on the P2 fields (fabricfem.forms.shell.naghdi_energy, differentiated by UFL).
+
+The two are the same function of the state written two ways (the strains expanded in the material frame, the
+director's gradient by the chain rule), so they must agree to round-off: the bound 1e-11 relative (in the
+max-norm over all dofs) is about 1e4 x machine epsilon, the cancellation of O(1) reference terms in strains of
+the displacements used here (0.1-1 % of the element size, rotations 0.05 rad).
+
+Serial:  python -m pytest -q tests/test_shell_reference.py;  MPI: mpirun -n 2 python -m pytest -m mpi ...
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from dolfinx import fem
+from mpi4py import MPI
+from petsc4py import PETSc
+
+from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
+from fabricfem.meshes import plate, tube
+from fabricfem.shell import ShellModel
+from fabricfem.shell_reference import reference_geometry_per_evaluation
+
+COMM = MPI.COMM_WORLD
+ROUND_OFF = 1e-11
+LAWS = {"linear": None, "kawabata": KawabataBending((2e-5, 1e-6, 3e-8)),
+        "square root": SquareRootBending(B0=1e-5, kappa0=20.0)}
+
+
+def fabric(law=None) -> Fabric:
+    """An orthotropic cotton-like sheet with the given bending law."""
+    return Fabric(E1=5e6, E2=2e6, nu12=0.3, G12=3e5, thickness=5e-4, density=400.0, bending_law=law)
+
+
+def perturbed_state(model: ShellModel, seed: int = 1) -> PETSc.Vec:
+    """A smooth-ish random state: displacements ~ 1e-4 m, rotations ~ 0.05 rad (same on every rank count:
+    values drawn from the dof coordinates)."""
+    x = model.create_vector()
+    u_space, u_dofs = model.W.sub(0).collapse()
+    t_space, t_dofs = model.W.sub(1).collapse()
+    coords_u = u_space.tabulate_dof_coordinates()
+    coords_t = t_space.tabulate_dof_coordinates()
+    rng = np.random.default_rng(seed)
+    k = rng.normal(size=(3, 3)) * 20.0
+    values = x.getArray()
+    n_owned = x.getLocalSize()
+    for dofs, coords, amplitude in ((u_dofs, coords_u, 1e-4), (t_dofs, coords_t, 0.05)):
+        bs = len(dofs) // len(coords)
+        phase = np.sin(coords @ k)                                 # (nodes, 3)
+        block = amplitude * phase[:, :bs]
+        dofs = np.asarray(dofs).reshape(-1, bs)
+        mask = dofs[:, 0] < n_owned
+        values[dofs[mask].ravel()] = block[mask].ravel()
+    x.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+    return x
+
+
+def force_difference(fabric_mesh_factory, law=None, symmetric: bool = False, rebase: bool = False) -> float:
+    """Max-norm relative difference of the internal forces of the two implementations at a perturbed state."""
+    forces = []
+    for per_evaluation in (False, True):
+        if per_evaluation:
+            with reference_geometry_per_evaluation():
+                model = ShellModel(fabric_mesh_factory(), fabric(law))
+        else:
+            model = ShellModel(fabric_mesh_factory(), fabric(law))
+        if symmetric:
+            model.symmetry("left", (1.0, 0.0, 0.0), penalty=1.0)   # a small penalty: its force does not dominate
+        model.compile()
+        b = model.create_vector()
+        if rebase:   # evaluate (building the quadrature data), turn the director base by a first state, evaluate again
+            first = perturbed_state(model, seed=2)
+            model.internal_force(first, b)
+            model.set_state(first)
+            model.rebase_director()
+        x = perturbed_state(model)
+        model.internal_force(x, b)
+        assert model.reference_at_quadrature is not per_evaluation
+        forces.append(b)
+    diff = forces[0].copy()
+    diff.axpy(-1.0, forces[1])
+    return diff.norm(PETSc.NormType.NORM_INFINITY) / forces[1].norm(PETSc.NormType.NORM_INFINITY)
+
+
+@pytest.mark.parametrize("law", list(LAWS))
+def test_curved_quadrilaterals_agree(law):
+    """A Q2 tube (curved: reference curvature 1 / R, a 9-node geometry) with each bending law."""
+    error = force_difference(lambda: tube(0.1, 0.03, 8, 3, comm=COMM, order=2), LAWS[law])
+    assert error < ROUND_OFF, error
+
+
+def test_triangles_with_bubble_agree():
+    """P2 + bubble triangles on a tube (6 and 3 point rules), linear bending law."""
+    error = force_difference(lambda: tube(0.1, 0.03, 8, 3, cell="triangle", comm=COMM, order=2))
+    assert error < ROUND_OFF, error
+
+
+def test_symmetry_penalty_is_carried_over():
+    """The symmetry plane's penalty energy is part of the internal force."""
+    error = force_difference(lambda: plate(0.1, 0.05, 4, 2, cell="quadrilateral", comm=COMM), symmetric=True)
+    assert error < ROUND_OFF, error
+
+
+def test_quadrature_data_follow_a_rebased_director():
+    """After rebase_director the quadrature data are re-evaluated (a stale base would differ at O(0.05))."""
+    error = force_difference(lambda: tube(0.1, 0.03, 8, 3, comm=COMM, order=2), rebase=True)
+    assert error < ROUND_OFF, error
+
+
+def test_force_is_the_gradient_of_the_energy():
+    """Independent of the other implementation: the internal force is the derivative of the shell's energy
+    (central differences of the assembled energy along a direction, relative error of O(h^2) ~ 1e-7)."""
+    model = ShellModel(tube(0.1, 0.03, 8, 3, comm=COMM, order=2), fabric(LAWS["kawabata"]))
+    model.compile()
+    x = perturbed_state(model)
+    direction = perturbed_state(model, seed=5)
+    b = model.create_vector()
+    model.internal_force(x, b)
+    energy = fem.form(model.energy)
+
+    def energy_at(step: float) -> float:
+        y = x.copy()
+        y.axpy(step, direction)
+        model.set_state(y)
+        return COMM.allreduce(fem.assemble_scalar(energy), op=MPI.SUM)
+
+    h = 1e-3
+    derivative = (energy_at(h) - energy_at(-h)) / (2 * h)
+    assert abs(derivative - b.dot(direction)) < 1e-6 * abs(b.dot(direction))
+
+
+@pytest.mark.mpi
+def test_two_ranks_agree():
+    """The same comparison on the distributed mesh (ghost cells get their quadrature data too)."""
+    assert force_difference(lambda: tube(0.1, 0.03, 8, 3, comm=COMM, order=2), LAWS["kawabata"]) < ROUND_OFF
