@@ -27,7 +27,7 @@ from fabricfem.forms import loads as load_forms
 from fabricfem.forms import shell as shell_forms
 from fabricfem.forms.jit import KERNEL_JIT
 from fabricfem.materials import Fabric, SquareRootBending
-from fabricfem.shell_reference import REFERENCE_AT_QUADRATURE, ReferenceAtQuadrature
+from fabricfem.shell_reference import REFERENCE_AT_QUADRATURE, PrepackedForms, ReferenceAtQuadrature
 
 Locator = str | Callable[[np.ndarray], np.ndarray]
 
@@ -422,6 +422,8 @@ class ShellModel:
             field_.x.array[:] = values.reshape(-1)
         if self._reference is not None:
             self._reference.update()
+        if self._R_internal is not None:
+            self._R_internal.repack()
         self.w.x.array[self._theta_dofs] = 0.0
 
     def director_field(self) -> fem.Function:
@@ -485,14 +487,15 @@ class ShellModel:
         return self._J_form
 
     @property
-    def _internal_form(self) -> list:
-        """The compiled forms of the internal force R_int of the explicit and dynamic integrators. For the Naghdi
+    def _internal_form(self) -> PrepackedForms:
+        """The compiled forms of the internal force R_int of the explicit and dynamic integrators (packed once,
+        fabricfem.shell_reference.PrepackedForms). For the Naghdi
         shell (`reference_at_quadrature`) they are the derivatives of `naghdi_energy_on_reference`: the reference
         geometry is evaluated once at the quadrature points (fabricfem.shell_reference) instead of at every step;
         the same force up to round-off."""
         self.compile()
         if self._R_internal is None and not (self.reference_at_quadrature or self._director_loads):
-            self._R_internal = [self._R]
+            self._R_internal = PrepackedForms([self._R], self.w, prepack=False)
         if self._R_internal is None:
             if self.reference_at_quadrature:
                 self._reference = ReferenceAtQuadrature(self, self._energy_args["degrees"])
@@ -502,18 +505,21 @@ class ShellModel:
                 energies = [sum(self._extra_energy, full), reduced]
             else:
                 energies = [self.energy]
-            self._R_internal = [fem.form(ufl.derivative(e, self.w, self.w_test), jit_params=self._kernel_jit)
-                                for e in energies]
+            self._R_internal = PrepackedForms(
+                [fem.form(ufl.derivative(e, self.w, self.w_test), jit_params=self._kernel_jit) for e in energies],
+                self.w, prepack=self.reference_at_quadrature)
         return self._R_internal
 
     def _assemble_internal(self, x: PETSc.Vec, b: PETSc.Vec, lift: bool):
         """b = R(x) (with the moments' work when lift, i.e. for the residual; R_int alone otherwise)."""
-        forms = [self._R] if lift else self._internal_form
+        internal = None if lift else self._internal_form
         self.set_state(x)
         with b.localForm() as bl:
             bl.set(0.0)
-        for form in forms:
-            fem_petsc.assemble_vector(b, form)
+        if lift:
+            fem_petsc.assemble_vector(b, self._R)
+        else:
+            internal.assemble(b)
         if lift:
             fem_petsc.apply_lifting(b, [self._J], [self.bcs], x0=[x], scale=-1.0)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)

@@ -15,6 +15,8 @@ from typing import Iterator
 import numpy as np
 import ufl
 from dolfinx import fem
+from dolfinx.fem import petsc as fem_petsc
+from dolfinx.fem.assemble import pack_coefficients
 from ffcx.element_interface import create_quadrature
 
 from fabricfem.forms import shell as shell_forms
@@ -67,3 +69,50 @@ class ReferenceAtQuadrature:
             values = expression.eval(self._cells)                    # (cells, points x size), point-major
             blocks = function.function_space.dofmap.list.array.reshape(len(self._cells), -1)
             function.x.array.reshape(-1, size)[blocks.ravel()] = values.reshape(-1, size)
+
+
+class PrepackedForms:
+    """Linear forms assembled many times with only the `state` Function changing (the internal force of an explicit
+    run): their coefficients are packed once (dolfinx packs every coefficient at every assembly otherwise) and
+    before each assembly only the state's block is refreshed, by one vectorised gather over the cells.
+
+    With `prepack` False (the per-evaluation baseline), forms on interior facets, or a state whose element needs dof
+    transformations, every coefficient is packed at every assembly as dolfinx does (`prepacked` is False)."""
+
+    def __init__(self, forms: list, state: fem.Function, prepack: bool = True):
+        self.forms, self.state = forms, state
+        element = state.function_space.element
+        types = {t for form in forms for t in form.integral_types}
+        self.prepacked = (prepack and not element.needs_dof_transformations
+                          and fem.IntegralType.interior_facet not in types)
+        self.coefficients = [None] * len(forms)
+        if self.prepacked:
+            self.repack()
+
+    def repack(self) -> None:
+        """Pack every coefficient again (after a fixed coefficient changed, e.g. ReferenceAtQuadrature.update)."""
+        if not self.prepacked:
+            return
+        dofmap = self.state.function_space.dofmap
+        cell_dofs = dofmap.list.array.reshape(-1, dofmap.dof_layout.num_dofs * dofmap.bs)
+        self._blocks = []
+        for k, form in enumerate(self.forms):
+            packed = pack_coefficients(form)
+            sizes = [c.function_space.element.space_dimension for c in form.coefficients]
+            position = next(i for i, c in enumerate(form.coefficients)
+                            if np.shares_memory(c.x.array, self.state.x.array))
+            start = int(np.sum(sizes[:position]))
+            for (integral_type, subdomain), array in packed.items():
+                entities = np.asarray(form.domains(integral_type, subdomain))
+                cells = entities if integral_type == fem.IntegralType.cell else entities.reshape(-1, 2)[:, 0]
+                self._blocks.append((array, slice(start, start + sizes[position]), cell_dofs[cells]))
+            self.coefficients[k] = packed
+
+    def assemble(self, b) -> None:
+        """Add the forms' vectors to the PETSc vector `b` (not zeroed, ghosts not accumulated) at the current state."""
+        if self.prepacked:
+            values = self.state.x.array
+            for array, columns, dofs in self._blocks:
+                array[:, columns] = values[dofs]
+        for form, coefficients in zip(self.forms, self.coefficients):
+            fem_petsc.assemble_vector(b, form, coeffs=coefficients)
