@@ -142,6 +142,17 @@ def discrete_max_frequency(model, iterations: int = 2000, rtol: float = 1e-6, ro
 
 
 CRITICAL_STEP_METHODS = ("eigenvalue", "estimate")
+# dt / dt_crit by default, per critical-step method: the eigenvalue is exact for the linearised current state, so
+# 0.9 leaves 10 % for its change during a run and for damping; the element formula overestimates omega_max (by
+# 1.3-1.9 on the garments), so 0.8 of it is far below the limit. Measured: docs/findings/2026-11-26-quadrature-geometry.md.
+STEP_SAFETY = {"eigenvalue": 0.9, "estimate": 0.8}
+
+
+def step_safety(value: float | None, method: str) -> float:
+    """The explicit step's fraction of the critical step: `value` if given, else STEP_SAFETY[method]."""
+    if method not in STEP_SAFETY:
+        raise ValueError(f"critical_step must be one of {CRITICAL_STEP_METHODS}, got {method!r}")
+    return STEP_SAFETY[method] if value is None else float(value)
 
 
 def max_frequency(model, rotary_inertia_scale: float = 1.0, method: str = "eigenvalue") -> float:
@@ -181,4 +192,5 @@ def measured_critical_time_step(run_is_stable: Callable[[float], bool], dt_low: 
 
 
 __all__ = ["plane_stress_wave_speed", "min_edge_length", "max_frequency_estimate", "critical_time_step",
-           "discrete_max_frequency", "max_frequency", "CRITICAL_STEP_METHODS", "measured_critical_time_step"]
+           "discrete_max_frequency", "max_frequency", "CRITICAL_STEP_METHODS", "STEP_SAFETY", "step_safety",
+           "measured_critical_time_step"]

@@ -29,7 +29,7 @@ from fabricfem.body.pose import Body, Segment
 from fabricfem.body.schedule import SegmentSchedule
 from fabricfem.contact.handles import Belt, EdgeGrip
 from fabricfem.contact.seams import SeamSpec
-from fabricfem.dynamics.stability import plane_stress_wave_speed
+from fabricfem.dynamics.stability import plane_stress_wave_speed, step_safety
 from fabricfem.fabrics import load_fabric
 from fabricfem.meshes import tube
 from fabricfem.meshes.pattern import Panel, check_pattern, read_garmentcode, read_pattern_toml
@@ -508,9 +508,11 @@ def plan(data: dict, fabric, scene_path: Path | None = None) -> WearPlan:
         except ValueError as exc:
             raise SceneError(f"donning.remove: {exc}") from None
     handles = handle_specs(donning, timeline)
+    critical_step = route.critical_step or ExplicitSettings.critical_step
     settings = ExplicitSettings(mass_damping=damping, rotary_inertia_scale=route.rotary_inertia_scale,
-                                time_step_safety=route.time_step_safety, mass_scale=route.mass_scale,
-                                critical_step=route.critical_step or ExplicitSettings.critical_step, gravity=gravity if route.gravity else None)
+                                time_step_safety=step_safety(route.time_step_safety, critical_step),
+                                mass_scale=route.mass_scale, critical_step=critical_step,
+                                gravity=gravity if route.gravity else None)
     return WearPlan(body, torques, timeline, settings, contact, axis, handles)
 
 

@@ -13,7 +13,7 @@ import math
 from dataclasses import dataclass, field, fields, replace
 
 from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
-from fabricfem.dynamics.stability import CRITICAL_STEP_METHODS, plane_stress_wave_speed
+from fabricfem.dynamics.stability import CRITICAL_STEP_METHODS, plane_stress_wave_speed, step_safety
 from fabricfem.fabrics import load_fabric
 from fabricfem.materials import Fabric
 from fabricfem.parameters import param
@@ -156,7 +156,9 @@ class RouteSpec:
                                  " quasistatic)", None)
     mass_damping: float = param("Rayleigh alpha of C = alpha M [1/s]", 10.0)
     rotary_inertia_scale: float = param("explicit: factor >= 1 on the rotational lumped masses", 100.0)
-    time_step_safety: float = param("explicit: dt = safety x estimated critical step, in (0, 1)", 0.8)
+    time_step_safety: float | None = param(
+        "explicit: dt = safety x critical step, in (0, 1); default 0.9 with the eigenvalue step, 0.8 with the "
+        "element formula", None)
     critical_step: str | None = param(
         "explicit: the critical step from the largest eigenvalue of the assembled system (eigenvalue) or from the "
         "element formula (estimate, shorter); default: eigenvalue for the sleeve's flexion route, estimate for the "
@@ -175,8 +177,10 @@ class RouteSpec:
             raise ValueError(f"solver must be one of {tuple(ROUTE_METHODS)}, got {self.solver!r}")
         if self.gravity is None:
             object.__setattr__(self, "gravity", self.solver in ("explicit", "implicit"))
-        _positive(self, "time_step_safety", "max_rotation_step", "max_displacement_step")
-        if self.time_step_safety >= 1.0:
+        _positive(self, "max_rotation_step", "max_displacement_step")
+        if self.time_step_safety is not None:
+            _positive(self, "time_step_safety")
+        if self.time_step_safety is not None and self.time_step_safety >= 1.0:
             raise ValueError(f"time_step_safety must lie in (0, 1), got {self.time_step_safety!r}")
         if self.critical_step is not None and self.critical_step not in CRITICAL_STEP_METHODS:
             raise ValueError(f"critical_step must be one of {CRITICAL_STEP_METHODS}, got {self.critical_step!r}")
@@ -301,9 +305,22 @@ class SleeveConfig:
         for name, default in ADDED_LATER.items():
             if items.get(name) == default:
                 del items[name]
+        items["time_step_safety"] = self.time_step_safety   # its default became per method: the value used
         return items
 
     # ---------------------------------------------------------------------------- derived quantities
+    @property
+    def critical_step(self) -> str:
+        """How the sleeve's flexion route sets its critical step: `[route] critical_step`, by default from the
+        largest eigenvalue of the assembled system (docs/findings/2026-11-26-critical-step.md)."""
+        return self.route.critical_step or "eigenvalue"
+
+    @property
+    def time_step_safety(self) -> float:
+        """dt / dt_crit of the explicit route: `[route] time_step_safety` or the default of its critical-step method
+        (fabricfem.dynamics.stability.STEP_SAFETY)."""
+        return step_safety(self.route.time_step_safety, self.critical_step)
+
     @property
     def fabric(self) -> Fabric:
         """The sleeve's Fabric (FabricSpec.fabric): the stored fabric or the SVK fabric of `material`."""

@@ -643,7 +643,7 @@ class ExplicitSleeve(ArmOutputs):
     def describe(self) -> str:
         config = self.config
         return (f"explicit central differences, dt = {self.dt:.3g} s (critical step {self.dt_estimate:.3g} s by "
-                f"{sleeve_critical_step(config)} "
+                f"{config.critical_step} "
                 f"with rotary-inertia scale {config.route.rotary_inertia_scale:g}"
                 + (f" and mass scale {config.route.mass_scale:g}" if config.route.mass_scale != 1.0 else "")
                 + f"; the element formula gives {self.dt_estimate_unscaled:.3g} s "
@@ -657,13 +657,6 @@ class ExplicitSleeve(ArmOutputs):
 
     def destroy(self) -> None:
         self.integrator.destroy()
-
-
-def sleeve_critical_step(config: SleeveConfig) -> str:
-    """How the sleeve's flexion route sets its critical step: `[route] critical_step`, by default from the largest
-    eigenvalue of the assembled system (measured against the element formula in
-    docs/findings/2026-11-26-critical-step.md)."""
-    return config.route.critical_step or "eigenvalue"
 
 
 def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> ExplicitSleeve:
@@ -690,13 +683,13 @@ def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> Exp
     track_elbow_torques(contact, body)
     rayleigh = (config.damping, 0.0)
     omega_p = contact.penalty_frequency()
-    omega = math.hypot(stability.max_frequency(model, config.route.rotary_inertia_scale, sleeve_critical_step(config)),
+    omega = math.hypot(stability.max_frequency(model, config.route.rotary_inertia_scale, config.critical_step),
                        omega_p)
     omega_1 = math.hypot(stability.max_frequency_estimate(model, 1.0), omega_p)   # for the description only
     mass_scale = config.route.mass_scale
     dt_estimate = stability.critical_time_step(model, rayleigh, omega_max=omega, mass_scale=mass_scale)
     dt_unscaled = stability.critical_time_step(model, rayleigh, omega_max=omega_1)
-    steps_per_record = math.ceil(record_time / (config.route.time_step_safety * dt_estimate))
+    steps_per_record = math.ceil(record_time / (config.time_step_safety * dt_estimate))
     dt = record_time / steps_per_record
     integrator = CentralDifference(model, dt, rayleigh=rayleigh, dt_crit=dt_estimate, energy_bound=None,
                                    rotary_inertia_scale=config.route.rotary_inertia_scale, contact=contact,
