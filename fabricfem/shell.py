@@ -164,6 +164,7 @@ class ShellModel:
         self._extra_energy: list = []   # energies added after the shell's own (symmetry penalties)
         self._compiled = False
         self._reference = None          # ReferenceAtQuadrature of the internal force (built on first use)
+        self._R_internal = None         # PrepackedForms of the internal force (`_internal_form`)
         self.reference_at_quadrature = REFERENCE_AT_QUADRATURE["enabled"] and model == "naghdi"
         self.rebase = rebase and model == "naghdi"
         self._rotation_prescribed = False
@@ -446,7 +447,6 @@ class ShellModel:
             self.residual_form = internal - self.load_factor * sum(self._director_loads[1:], self._director_loads[0])
         self.jacobian_form = ufl.derivative(self.residual_form, self.w, self.w_trial)
         self._R = fem.form(self.residual_form, jit_params=KERNEL_JIT)
-        self._R_internal = None   # the internal force's forms, compiled on first use (`_internal_form`)
         self._kernel_jit = {key: list(value) for key, value in KERNEL_JIT.items()}   # the flags in effect now
         self._J_form = None       # compiled on first use (`_J`): explicit runs never need the tangent
         self.F_ref = fem_petsc.create_vector(self._R)
@@ -488,11 +488,10 @@ class ShellModel:
 
     @property
     def _internal_form(self) -> PrepackedForms:
-        """The compiled forms of the internal force R_int of the explicit and dynamic integrators (packed once,
-        fabricfem.shell_reference.PrepackedForms). For the Naghdi
-        shell (`reference_at_quadrature`) they are the derivatives of `naghdi_energy_on_reference`: the reference
-        geometry is evaluated once at the quadrature points (fabricfem.shell_reference) instead of at every step;
-        the same force up to round-off."""
+        """The compiled internal force R_int of the explicit and dynamic integrators, compiled on first use. For the
+        Naghdi shell (`reference_at_quadrature`) it is the derivative of `naghdi_energy_on_reference`: the reference
+        geometry evaluated once at the quadrature points, the coefficients packed once
+        (fabricfem.shell_reference); the same force as `naghdi_energy`'s up to round-off."""
         self.compile()
         if self._R_internal is None and not (self.reference_at_quadrature or self._director_loads):
             self._R_internal = PrepackedForms([self._R], self.w, prepack=False)
@@ -512,16 +511,14 @@ class ShellModel:
 
     def _assemble_internal(self, x: PETSc.Vec, b: PETSc.Vec, lift: bool):
         """b = R(x) (with the moments' work when lift, i.e. for the residual; R_int alone otherwise)."""
-        internal = None if lift else self._internal_form
         self.set_state(x)
         with b.localForm() as bl:
             bl.set(0.0)
         if lift:
             fem_petsc.assemble_vector(b, self._R)
-        else:
-            internal.assemble(b)
-        if lift:
             fem_petsc.apply_lifting(b, [self._J], [self.bcs], x0=[x], scale=-1.0)
+        else:
+            self._internal_form.assemble(b)
         b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
 
     def residual(self, x: PETSc.Vec, b: PETSc.Vec):
