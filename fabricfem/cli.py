@@ -38,7 +38,7 @@ from fabricfem.solvers.newton import SolverError
 from fabricfem.studies import unit_cell as unit_cell_study
 from fabricfem.studies.fabric_link import OUT_DIR, run_fabric_link
 from fabricfem.studies.pants import run_pants_study
-from fabricfem.studies.sleeve import run_methods, run_study, variants
+from fabricfem.studies.sleeve import compare_figures, run_methods, run_study, variants
 from fabricfem.studies.sleeve_fit import DEFAULT_LONG_AXIS_FACTOR, FIT_SCALES, fit_configs, run_fit_study
 from fabricfem.verify import load_cases, load_reproductions
 from fabricfem.verify.report import report
@@ -133,6 +133,9 @@ def main(argv: list[str] | None = None) -> int:
                          help="sleeve: mesh of the parameter figures (friction, fit, thickness, fabrics)")
     p_study.add_argument("--meshes", default="I,II,III,IV", help="sleeve: meshes of the mesh series, e.g. I,II")
     p_study.add_argument("--fabrics", default="I,II,III", help="sleeve: fabric sets of the fabrics figure")
+    p_study.add_argument("--compare-with", default=None,
+                         help="sleeve: after the run, compare its torque curves with the figure CSVs in this folder "
+                              "(e.g. docs/figures/sleeve): comparison.csv, RMS over 10 deg to the end")
     p_study.add_argument("--mesh-frictions", default="0.1,0.5", help="sleeve: mu of the mesh series run, e.g. 0.5")
     p_study.add_argument("--only", default=None,
                          help="sleeve: run only these figures, e.g. mesh_mu0.5,fit (default: all)")
@@ -301,10 +304,16 @@ def _command(args) -> int:
             options["only"] = tuple(f.strip() for f in args.only.split(",") if f.strip())
         try:
             variants(**options)   # bad --fine / --meshes / --fabrics: a message, not a traceback
+            if args.compare_with is not None and not Path(args.compare_with).is_dir():
+                raise ValueError(f"--compare-with: {args.compare_with!r} is not a folder of study figures")
         except ValueError as exc:
             _print(f"fabricfem study sleeve: {exc}", file=sys.stderr)
             return 2
         run_study(args.out, ranks_per_variant=args.ranks_per_variant, **options)
+        if args.compare_with is not None:
+            for figure, label, error, stored, final in compare_figures(args.out, args.compare_with):
+                _print(f"{figure:11s} {label:22s} torque RMS difference {100 * error:6.2f} % over 10 deg to the end; "
+                       f"final {final:.5g} N m (stored {stored:.5g})")
         return 0
     if args.command == "bench":
         if args.name == "unit-cell":

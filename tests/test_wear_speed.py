@@ -3,9 +3,12 @@ measure against closed forms and the refusals of bad input before any run."""
 import numpy as np
 import pytest
 
+from fabricfem import io as fio
 from fabricfem.benchmarks.commits import compare_commits
-from fabricfem.benchmarks.wear_speed import mean_moment_error, pants_moment, torque_rms_error, wear_bench
+from fabricfem.benchmarks.wear_speed import mean_moment_error, pants_moment, wear_bench
+from fabricfem.studies.sleeve import compare_figures
 from fabricfem.wear.garment import WearStep
+from fabricfem.wear.outputs import torque_rms_error
 
 
 def test_torque_rms_error_of_an_offset_and_of_a_shifted_grid():
@@ -55,3 +58,21 @@ def test_bad_benchmark_input_is_refused_naming_it(tmp_path):
         compare_commits(scene, "HEAD", settings=("motion.strides",))
     with pytest.raises(ValueError, match="not a commit"):
         compare_commits(scene, "no-such-commit-xyz")
+
+
+def test_study_figures_compared_with_stored_ones(tmp_path):
+    """compare_figures: a variant whose torque is the stored one plus 2e-4 N m gives 2e-4 / mean|T| (10 deg on);
+    a variant missing from either side is skipped; a missing folder is refused naming the option."""
+    header = ("variant", "angle_deg", "torque_Nm")
+    angles = np.arange(0.0, 58.0)
+    stored = 0.02 + 1e-4 * angles
+    (tmp_path / "old").mkdir()
+    fio.write_csv(tmp_path / "old" / "friction.csv", header,
+                  [["mu = 0.1", a, t] for a, t in zip(angles, stored)] + [["only stored", 0.0, 1.0]])
+    fio.write_csv(tmp_path / "new" / "friction.csv", header, [["mu = 0.1", a, t + 2e-4] for a, t in zip(angles, stored)])
+    rows = compare_figures(tmp_path / "new", tmp_path / "old")
+    assert [r[:2] for r in rows] == [["friction", "mu = 0.1"]]
+    assert rows[0][2] == pytest.approx(2e-4 / np.mean(stored[angles >= 10.0]), rel=1e-12)
+    assert (tmp_path / "new" / "comparison.csv").exists()
+    with pytest.raises(ValueError, match="compare-with"):
+        compare_figures(tmp_path / "new", tmp_path / "nowhere")

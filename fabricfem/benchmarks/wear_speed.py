@@ -53,6 +53,7 @@ from fabricfem.scenes.schema import Scene
 from fabricfem.shell_reference import reference_geometry_per_evaluation
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.engine import TIMING_PARTS, kinetic_ratio
+from fabricfem.wear.outputs import torque_rms_error
 from fabricfem.wear.run import build_run
 
 MESHES = {"I": (10, 13), "II": (15, 20), "III": (20, 26), "IV": (30, 39)}
@@ -67,7 +68,6 @@ VARIANTS = {"reference": (DOLFINX_DEFAULT_FLAGS, ESTIMATED_STEP, False),
             "quadrature geometry": (KERNEL_FLAGS, EIGENVALUE_STEP, True),
             "safety 0.9": (KERNEL_FLAGS, {"critical_step": "eigenvalue", "time_step_safety": 0.9}, True),
             "mass x4": (KERNEL_FLAGS, {"mass_scale": 4.0}, True), "mass x16": (KERNEL_FLAGS, {"mass_scale": 16.0}, True)}
-ACCURACY_FROM = 10.0    # deg: the torque curve is compared from here to the final angle
 COLUMNS = ("mesh", "variant", "ranks", "runs", "steps", "ms_per_step", "wall_s", "speedup", "step_speedup",
            *(f"{p}_share" for p in TIMING_PARTS), "kinetic_ratio", "torque_rms_error", "torque_final_Nm")
 
@@ -82,17 +82,6 @@ class Measured:
     angles: np.ndarray | None = None                 # deg, records of the last run
     torques: np.ndarray | None = None                # N m
     kinetic_ratio: float = 0.0
-
-
-def torque_rms_error(angles: np.ndarray, torques: np.ndarray, ref_angles: np.ndarray, ref_torques: np.ndarray,
-                     start: float = ACCURACY_FROM) -> float:
-    """RMS of T - T_ref over the reference records at >= `start` deg (T interpolated linearly in the angle),
-    divided by the mean |T_ref| over them."""
-    mask = ref_angles >= start - 1e-9
-    if not mask.any():
-        raise ValueError(f"no reference record at or beyond {start} deg")
-    diff = np.interp(ref_angles[mask], angles, torques) - ref_torques[mask]
-    return float(np.sqrt(np.mean(diff ** 2)) / np.mean(np.abs(ref_torques[mask])))
 
 
 def pants_moment(history) -> tuple[np.ndarray, np.ndarray]:

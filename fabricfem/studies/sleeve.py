@@ -36,7 +36,7 @@ from fabricfem import io as fio
 from fabricfem.materials import positive_number
 from fabricfem.scenes.batch import Job, check, run_batch
 from fabricfem.wear.config import SleeveConfig
-from fabricfem.wear.outputs import plot_torque
+from fabricfem.wear.outputs import plot_torque, torque_rms_error
 from fabricfem.wear.run import build_run, run_sleeve
 from fabricfem.wear.sleeve import SleeveHistory, SleeveStep
 from fabricfem.wear.sleeve_implicit import run_implicit
@@ -168,6 +168,39 @@ def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
                if similar else ""))
     say(f"wrote {out}/<figure>.csv and .png for {sorted(results)} ({time.perf_counter() - t0:.0f} s)")
     return results
+
+
+FIGURES = ("mesh_mu0.1", "mesh_mu0.5", "friction", "fit", "thickness", "fabrics")   # the study's figure CSVs
+
+
+def _curves(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """variant -> (angles [deg], resisting torque [N m]) of a figure CSV written by `run_study`."""
+    curves: dict[str, list[tuple[float, float]]] = {}
+    with open(path, newline="") as f:
+        for row in csv.DictReader(f):
+            curves.setdefault(row["variant"], []).append((float(row["angle_deg"]), float(row["torque_Nm"])))
+    return {v: tuple(np.array(c).T) for v, c in curves.items()}
+
+
+def compare_figures(out: str | Path, stored: str | Path) -> list[list]:
+    """The torque curves of the figure CSVs under `out` against those under `stored` (e.g. docs/figures/sleeve, run
+    with other settings or code): per figure and variant present in both, the RMS over 10 deg to the end of the
+    difference relative to the stored mean |T| (fabricfem.wear.outputs.torque_rms_error) and both final torques
+    [N m]. Writes comparison.csv under `out` (rank 0) and returns its rows."""
+    out, stored = Path(out), Path(stored)
+    if not stored.is_dir():
+        raise ValueError(f"compare-with: {str(stored)!r} is not a folder of study figures")
+    rows = []
+    for name in FIGURES:
+        if not ((out / f"{name}.csv").exists() and (stored / f"{name}.csv").exists()):
+            continue
+        new, old = _curves(out / f"{name}.csv"), _curves(stored / f"{name}.csv")
+        for label in (v for v in old if v in new):
+            (a, t), (a0, t0) = new[label], old[label]
+            rows.append([name, label, torque_rms_error(a, t, a0, t0), float(t0[-1]), float(t[-1])])
+    fio.write_csv(out / "comparison.csv", ("figure", "variant", "torque_rms_error", "stored_final_Nm", "final_Nm"),
+                  rows)
+    return rows
 
 
 def _variant_path(out: Path, cfg: SleeveConfig) -> Path:

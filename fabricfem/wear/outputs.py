@@ -22,6 +22,20 @@ PA_PER_MMHG = 133.322387415      # Pa
 MMHG_PER_KPA = 1000.0 / PA_PER_MMHG
 
 
+TORQUE_ERROR_FROM = 10.0    # deg: a sleeve's torque curve is compared from here to the final angle
+
+
+def torque_rms_error(angles: np.ndarray, torques: np.ndarray, ref_angles: np.ndarray, ref_torques: np.ndarray,
+                     start: float = TORQUE_ERROR_FROM) -> float:
+    """RMS of T - T_ref over the reference records at >= `start` deg (T interpolated linearly in the angle),
+    divided by the mean |T_ref| over them."""
+    mask = ref_angles >= start - 1e-9
+    if not mask.any():
+        raise ValueError(f"no reference record at or beyond {start} deg")
+    diff = np.interp(ref_angles[mask], angles, torques) - ref_torques[mask]
+    return float(np.sqrt(np.mean(diff ** 2)) / np.mean(np.abs(ref_torques[mask])))
+
+
 def body_surface(ellipsoids, samples: int = 24) -> tuple[np.ndarray, np.ndarray]:
     """Triangulated surfaces of posed ellipsoids: (points (n, 3) [m], triangles (m, 3))."""
     points, cells, offset = [], [], 0
