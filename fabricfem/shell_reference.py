@@ -94,7 +94,8 @@ class PrepackedForms:
         if not self.prepacked:
             return
         dofmap = self.state.function_space.dofmap
-        cell_dofs = dofmap.list.array.reshape(-1, dofmap.dof_layout.num_dofs * dofmap.bs)
+        blocks = dofmap.list.array.reshape(-1, dofmap.dof_layout.num_dofs)           # per cell, node-major
+        cell_dofs = (blocks[:, :, None] * dofmap.bs + np.arange(dofmap.bs)).reshape(len(blocks), -1)
         self._blocks = []
         for k, form in enumerate(self.forms):
             packed = pack_coefficients(form)
