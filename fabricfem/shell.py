@@ -493,20 +493,20 @@ class ShellModel:
         geometry evaluated once at the quadrature points, the coefficients packed once
         (fabricfem.shell_reference); the same force as `naghdi_energy`'s up to round-off."""
         self.compile()
-        if self._R_internal is None and not (self.reference_at_quadrature or self._director_loads):
-            self._R_internal = PrepackedForms([self._R], self.w, prepack=False)
-        if self._R_internal is None:
-            if self.reference_at_quadrature:
-                self._reference = ReferenceAtQuadrature(self, self._energy_args["degrees"])
-                full, reduced = shell_forms.naghdi_energy_on_reference(
-                    self.u, self.theta, self._reference.full, self._reference.reduced, self.A, self.D,
-                    self.shear_stiffness, self.thickness, **self._energy_args)
-                energies = [sum(self._extra_energy, full), reduced]
-            else:
-                energies = [self.energy]
-            self._R_internal = PrepackedForms(
-                [fem.form(ufl.derivative(e, self.w, self.w_test), jit_params=self._kernel_jit) for e in energies],
-                self.w, prepack=self.reference_at_quadrature)
+        if self._R_internal is not None:
+            return self._R_internal
+        if self.reference_at_quadrature:
+            self._reference = ReferenceAtQuadrature(self, self._energy_args["degrees"])
+            full, reduced = shell_forms.naghdi_energy_on_reference(
+                self.u, self.theta, self._reference.full, self._reference.reduced, self.A, self.D,
+                self.shear_stiffness, self.thickness, **self._energy_args)
+            energies = [sum(self._extra_energy, full), reduced]
+        elif self._director_loads:      # the residual holds the moments' work: the internal force on its own
+            energies = [self.energy]
+        else:
+            energies = []               # the residual's form is the internal force
+        forms = [fem.form(ufl.derivative(e, self.w, self.w_test), jit_params=self._kernel_jit) for e in energies]
+        self._R_internal = PrepackedForms(forms or [self._R], self.w, prepack=self.reference_at_quadrature)
         return self._R_internal
 
     def _assemble_internal(self, x: PETSc.Vec, b: PETSc.Vec, lift: bool):

@@ -173,13 +173,19 @@ def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
 FIGURES = ("mesh_mu0.1", "mesh_mu0.5", "friction", "fit", "thickness", "fabrics")   # the study's figure CSVs
 
 
-def _curves(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+def read_figure(path: str | Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     """variant -> (angles [deg], resisting torque [N m]) of a figure CSV written by `run_study`."""
     curves: dict[str, list[tuple[float, float]]] = {}
     with open(path, newline="") as f:
         for row in csv.DictReader(f):
             curves.setdefault(row["variant"], []).append((float(row["angle_deg"]), float(row["torque_Nm"])))
-    return {v: tuple(np.array(c).T) for v, c in curves.items()}
+    return {v: (np.array([a for a, _ in c]), np.array([t for _, t in c])) for v, c in curves.items()}
+
+
+def read_figures(directory: str | Path) -> dict[str, dict[str, tuple[np.ndarray, np.ndarray]]]:
+    """figure -> `read_figure` of the study's figure CSVs (FIGURES) present in `directory`."""
+    directory = Path(directory)
+    return {name: read_figure(directory / f"{name}.csv") for name in FIGURES if (directory / f"{name}.csv").exists()}
 
 
 def compare_figures(out: str | Path, stored: str | Path) -> list[list]:
@@ -190,11 +196,10 @@ def compare_figures(out: str | Path, stored: str | Path) -> list[list]:
     out, stored = Path(out), Path(stored)
     if not stored.is_dir():
         raise ValueError(f"compare-with: {str(stored)!r} is not a folder of study figures")
+    new_figures, old_figures = read_figures(out), read_figures(stored)
     rows = []
-    for name in FIGURES:
-        if not ((out / f"{name}.csv").exists() and (stored / f"{name}.csv").exists()):
-            continue
-        new, old = _curves(out / f"{name}.csv"), _curves(stored / f"{name}.csv")
+    for name in (f for f in FIGURES if f in new_figures and f in old_figures):
+        new, old = new_figures[name], old_figures[name]
         for label in (v for v in old if v in new):
             (a, t), (a0, t0) = new[label], old[label]
             rows.append([name, label, torque_rms_error(a, t, a0, t0), float(t0[-1]), float(t[-1])])

@@ -20,35 +20,18 @@ reached, and the quantity names that angle; the model is not tuned to make a tre
 """
 from __future__ import annotations
 
-import csv
 import tempfile
-from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 from mpi4py import MPI
 
-from fabricfem.studies.sleeve import run_study
+from fabricfem.studies.sleeve import read_figures, run_study
 from fabricfem.verify import CaseResult, Timer, case, reproduction, result
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.run import run_sleeve
 
 STUDY_DIRS = (Path("docs/figures/sleeve"), Path("results/sleeve_study"))   # committed study first, then a local one
-FIGURES = ("mesh_mu0.1", "mesh_mu0.5", "friction", "fit", "thickness", "fabrics")
-
-
-def _read(path: Path) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    rows = defaultdict(list)
-    with open(path) as f:
-        for r in csv.DictReader(f):
-            rows[r["variant"]].append((float(r["angle_deg"]), float(r["torque_Nm"])))
-    return {k: (np.array([a for a, _ in v]), np.array([t for _, t in v])) for k, v in rows.items()}
-
-
-def _curves(directory: Path) -> dict[str, dict[str, tuple[np.ndarray, np.ndarray]]]:
-    return {name: _read(directory / f"{name}.csv") for name in FIGURES if (directory / f"{name}.csv").exists()}
-
-
 def _common(a, b) -> float:
     return float(min(a[0][-1], b[0][-1]))
 
@@ -128,11 +111,11 @@ def sleeve_trends() -> list[CaseResult]:
         if found:
             readme = found[0] / "README.txt"
             first = readme.read_text().splitlines()[0] if readme.exists() else "study"
-            figures, tag = _curves(found[0]), "[full study]" if first == "full study" else f"[{first}]"
+            figures, tag = read_figures(found[0]), "[full study]" if first == "full study" else f"[{first}]"
         else:
             with tempfile.TemporaryDirectory() as tmp:
                 run_study(tmp, quick=True, comm=MPI.COMM_SELF)
-                figures = _curves(Path(tmp))
+                figures = read_figures(Path(tmp))
             tag = "[reduced]"
     return trends(figures, tag, timer.elapsed)
 

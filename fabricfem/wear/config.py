@@ -180,8 +180,8 @@ class RouteSpec:
         _positive(self, "max_rotation_step", "max_displacement_step")
         if self.time_step_safety is not None:
             _positive(self, "time_step_safety")
-        if self.time_step_safety is not None and self.time_step_safety >= 1.0:
-            raise ValueError(f"time_step_safety must lie in (0, 1), got {self.time_step_safety!r}")
+            if self.time_step_safety >= 1.0:
+                raise ValueError(f"time_step_safety must lie in (0, 1), got {self.time_step_safety!r}")
         if self.critical_step is not None and self.critical_step not in CRITICAL_STEP_METHODS:
             raise ValueError(f"critical_step must be one of {CRITICAL_STEP_METHODS}, got {self.critical_step!r}")
         _non_negative(self, " [1/s]", "mass_damping")
