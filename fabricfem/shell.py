@@ -27,7 +27,13 @@ from fabricfem.forms import loads as load_forms
 from fabricfem.forms import shell as shell_forms
 from fabricfem.forms.jit import KERNEL_JIT
 from fabricfem.materials import Fabric, SquareRootBending
-from fabricfem.shell_reference import REFERENCE_AT_QUADRATURE, PrepackedForms, ReferenceAtQuadrature
+from fabricfem.shell_reference import (
+    HAND_KERNEL,
+    REFERENCE_AT_QUADRATURE,
+    PrepackedForms,
+    ReferenceAtQuadrature,
+    naghdi_kernel_form,
+)
 
 Locator = str | Callable[[np.ndarray], np.ndarray]
 
@@ -166,6 +172,9 @@ class ShellModel:
         self._reference = None          # ReferenceAtQuadrature of the internal force (built on first use)
         self._R_internal = None         # PrepackedForms of the internal force (`_internal_form`)
         self.reference_at_quadrature = REFERENCE_AT_QUADRATURE["enabled"] and model == "naghdi"
+        # the hand-written kernel covers the quadratic membrane energy (not a fitted membrane law)
+        self.hand_kernel = (self.reference_at_quadrature and HAND_KERNEL["enabled"]
+                            and fabric.membrane_law is None)
         self.rebase = rebase and model == "naghdi"
         self._rotation_prescribed = False
         self._base_turned = False   # the director base was turned to a symmetry plane (symmetry)
@@ -489,13 +498,19 @@ class ShellModel:
     @property
     def _internal_form(self) -> PrepackedForms:
         """The compiled internal force R_int of the explicit and dynamic integrators, compiled on first use. For the
-        Naghdi shell (`reference_at_quadrature`) it is the derivative of `naghdi_energy_on_reference`: the reference
-        geometry evaluated once at the quadrature points, the coefficients packed once
-        (fabricfem.shell_reference); the same force as `naghdi_energy`'s up to round-off."""
+        Naghdi shell (`reference_at_quadrature`) the reference geometry is evaluated once at the quadrature points
+        and the coefficients are packed once (fabricfem.shell_reference); the force is the hand-written kernel
+        (`hand_kernel`, fabricfem.forms.naghdi_kernel) or FFCx's derivative of `naghdi_energy_on_reference`: the
+        same force as `naghdi_energy`'s up to round-off."""
         self.compile()
         if self._R_internal is not None:
             return self._R_internal
-        if self.reference_at_quadrature:
+        energies, forms = [], []
+        if self.hand_kernel:
+            self._reference = ReferenceAtQuadrature(self, self._energy_args["degrees"], for_kernel=True)
+            forms = [naghdi_kernel_form(self, self._reference, self._kernel_jit["cffi_extra_compile_args"])]
+            energies = [sum(self._extra_energy[1:], self._extra_energy[0])] if self._extra_energy else []
+        elif self.reference_at_quadrature:
             self._reference = ReferenceAtQuadrature(self, self._energy_args["degrees"])
             full, reduced = shell_forms.naghdi_energy_on_reference(
                 self.u, self.theta, self._reference.full, self._reference.reduced, self.A, self.D,
@@ -503,9 +518,7 @@ class ShellModel:
             energies = [sum(self._extra_energy, full), reduced]
         elif self._director_loads:      # the residual holds the moments' work: the internal force on its own
             energies = [self.energy]
-        else:
-            energies = []               # the residual's form is the internal force
-        forms = [fem.form(ufl.derivative(e, self.w, self.w_test), jit_params=self._kernel_jit) for e in energies]
+        forms += [fem.form(ufl.derivative(e, self.w, self.w_test), jit_params=self._kernel_jit) for e in energies]
         self._R_internal = PrepackedForms(forms or [self._R], self.w, prepack=self.reference_at_quadrature)
         return self._R_internal
 

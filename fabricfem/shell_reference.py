@@ -14,17 +14,34 @@ from typing import Iterator
 
 import numpy as np
 import ufl
+from dolfinx import cpp as _cpp
 from dolfinx import fem
 from dolfinx.fem import petsc as fem_petsc
 from dolfinx.fem.assemble import pack_coefficients
 from ffcx.element_interface import create_quadrature
 
+from fabricfem.forms import naghdi_kernel
 from fabricfem.forms import shell as shell_forms
 
 
 # Whether ShellModels created now evaluate the reference geometry once (True) or at every evaluation of the
 # internal force (False: the code before this lever, for a benchmark's baseline); read by ShellModel.__init__.
 REFERENCE_AT_QUADRATURE = {"enabled": True}
+# Whether their internal force (with the reference at the quadrature points) is the hand-written C kernel
+# (fabricfem.forms.naghdi_kernel; True) or FFCx's derivative of `naghdi_energy_on_reference` (False).
+HAND_KERNEL = {"enabled": True}
+
+
+@contextmanager
+def ffcx_internal_force() -> Iterator[None]:
+    """ShellModels created inside the block compute their internal force with FFCx's kernels (the reference geometry
+    still at the quadrature points), as before the hand-written kernel: a benchmark's baseline."""
+    old = HAND_KERNEL["enabled"]
+    HAND_KERNEL["enabled"] = False
+    try:
+        yield
+    finally:
+        HAND_KERNEL["enabled"] = old
 
 
 @contextmanager
@@ -40,11 +57,12 @@ def reference_geometry_per_evaluation() -> Iterator[None]:
 
 
 class ReferenceAtQuadrature:
-    """Packed reference quantities (fabricfem.forms.shell.reference_layout) of a Naghdi ShellModel at the points of
-    its PSRI rules: `full` (with the bending quantities) and `reduced` are vector Quadrature Functions; `update()`
-    re-evaluates them after the director base changed (ShellModel.rebase_director)."""
+    """Packed reference quantities of a Naghdi ShellModel at the points of its PSRI rules: `full` (with the bending
+    quantities) and `reduced` are vector Quadrature Functions; `update()` re-evaluates them after the director base
+    changed (ShellModel.rebase_director). `for_kernel`: the layout of the hand-written kernel
+    (fabricfem.forms.naghdi_kernel.KERNEL_FULL / KERNEL_REDUCED) instead of fabricfem.forms.shell.reference_layout."""
 
-    def __init__(self, model, degrees: tuple[int, int]):
+    def __init__(self, model, degrees: tuple[int, int], for_kernel: bool = False):
         mesh = model.mesh
         cell = mesh.ufl_cell()
         base, frame = (model.a3, model.a1, model.a2), (model.t1, model.t2)
@@ -53,7 +71,11 @@ class ReferenceAtQuadrature:
         self._cells = np.arange(index_map.size_local + index_map.num_ghosts, dtype=np.int32)
         self._parts = []
         for degree, bending in zip(degrees, (True, False)):
-            quantities = shell_forms.reference_quantities(model.phi0, model.n0, base, frame, bending)
+            if for_kernel:
+                quantities = naghdi_kernel.kernel_reference_quantities(model.phi0, model.n0, base, frame,
+                                                                       model.thickness, model.cell_size, bending)
+            else:
+                quantities = shell_forms.reference_quantities(model.phi0, model.n0, base, frame, bending)
             size = quantities.ufl_shape[0]
             element = ufl.VectorElement("Quadrature", cell, degree, dim=size, quad_scheme="default")
             space = fem.FunctionSpace(mesh, element)
@@ -69,6 +91,25 @@ class ReferenceAtQuadrature:
             values = expression.eval(self._cells)                    # (cells, points x size), point-major
             blocks = function.function_space.dofmap.list.array.reshape(len(self._cells), -1)
             function.x.array.reshape(-1, size)[blocks.ravel()] = values.reshape(-1, size)
+
+
+def naghdi_kernel_form(model, reference: ReferenceAtQuadrature, flags: tuple[str, ...]):
+    """dolfinx Form (cpp) of the Naghdi shell's internal force by the hand-written kernel
+    (fabricfem.forms.naghdi_kernel) on the state space of `model`, with `reference` in the kernel's layout;
+    compiled with the C flags `flags`. The model's A, D, shear stiffness Constants are read at every assembly."""
+    args = model._energy_args
+    law, parameters = naghdi_kernel.law_parameters(args["law"], args["law_eps"])
+    law_constant = fem.Constant(model.mesh, np.asarray(parameters, dtype=float))
+    u_element = model.W.ufl_element().sub_elements()[0].sub_elements()[0]
+    theta_element = model.W.ufl_element().sub_elements()[1].sub_elements()[0]
+    source = naghdi_kernel.kernel_source(u_element, theta_element, model.mesh.ufl_cell().cellname(),
+                                         args["degrees"], law, len(parameters))
+    address = naghdi_kernel.compile_kernel(source, model.comm, tuple(flags))
+    constants = [model.A, model.D, model.shear_stiffness, law_constant]
+    form = _cpp.fem.Form_float64([model.W._cpp_object], {fem.IntegralType.cell: ([(-1, address)], None)},
+                                 [model.w._cpp_object, reference.full._cpp_object, reference.reduced._cpp_object],
+                                 [c._cpp_object for c in constants], False, model.mesh._mesh)
+    return form          # it holds the C++ Constants and Functions (shared pointers)
 
 
 class PrepackedForms:

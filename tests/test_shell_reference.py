@@ -1,7 +1,9 @@
-"""The internal force with the reference geometry evaluated once at the quadrature points (fabricfem.shell_reference)
-against the shell's energy written on the P2 fields (fabricfem.forms.shell.naghdi_energy, differentiated by UFL).
+"""The internal force with the reference geometry evaluated once at the quadrature points (fabricfem.shell_reference),
+by the hand-written C kernel (fabricfem.forms.naghdi_kernel, the default) and by FFCx's derivative of
+`naghdi_energy_on_reference`, against the shell's energy written on the P2 fields
+(fabricfem.forms.shell.naghdi_energy, differentiated by UFL).
 
-The two are the same function of the state written two ways (the strains expanded in the material frame, the
+They are the same function of the state written in different ways (the strains expanded in the material frame, the
 director's gradient by the chain rule), so they must agree to round-off: the bound 1e-11 relative (in the
 max-norm over all dofs) is about 1e4 x machine epsilon, the cancellation of O(1) reference terms in strains of
 the displacements used here (0.1-1 % of the element size, rotations 0.05 rad).
@@ -20,7 +22,7 @@ from petsc4py import PETSc
 from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
 from fabricfem.meshes import plate, tube
 from fabricfem.shell import ShellModel
-from fabricfem.shell_reference import PrepackedForms, reference_geometry_per_evaluation
+from fabricfem.shell_reference import PrepackedForms, ffcx_internal_force, reference_geometry_per_evaluation
 
 COMM = MPI.COMM_WORLD
 ROUND_OFF = 1e-11
@@ -56,15 +58,24 @@ def perturbed_state(model: ShellModel, seed: int = 1) -> PETSc.Vec:
     return x
 
 
-def force_difference(fabric_mesh_factory, law=None, symmetric: bool = False, rebase: bool = False) -> float:
-    """Max-norm relative difference of the internal forces of the two implementations at a perturbed state."""
+KERNELS = ("hand", "ffcx")
+
+
+def force_difference(fabric_mesh_factory, law=None, symmetric: bool = False, rebase: bool = False,
+                     kernel: str = "hand") -> float:
+    """Max-norm relative difference of the internal forces at a perturbed state: the reference geometry at the
+    quadrature points with the `kernel` (KERNELS) against `naghdi_energy`."""
     forces = []
     for per_evaluation in (False, True):
         if per_evaluation:
             with reference_geometry_per_evaluation():
                 model = ShellModel(fabric_mesh_factory(), fabric(law))
+        elif kernel == "ffcx":
+            with ffcx_internal_force():
+                model = ShellModel(fabric_mesh_factory(), fabric(law))
         else:
             model = ShellModel(fabric_mesh_factory(), fabric(law))
+        assert model.hand_kernel is (kernel == "hand" and not per_evaluation)
         if symmetric:
             model.symmetry("left", (1.0, 0.0, 0.0), penalty=1.0)   # a small penalty: its force does not dominate
         model.compile()
@@ -83,29 +94,46 @@ def force_difference(fabric_mesh_factory, law=None, symmetric: bool = False, reb
     return diff.norm(PETSc.NormType.NORM_INFINITY) / forces[1].norm(PETSc.NormType.NORM_INFINITY)
 
 
+@pytest.mark.parametrize("kernel", KERNELS)
 @pytest.mark.parametrize("law", list(LAWS))
-def test_curved_quadrilaterals_agree(law):
+def test_curved_quadrilaterals_agree(law, kernel):
     """A Q2 tube (curved: reference curvature 1 / R, a 9-node geometry) with each bending law."""
-    error = force_difference(lambda: tube(0.1, 0.03, 8, 3, comm=COMM, order=2), LAWS[law])
+    error = force_difference(lambda: tube(0.1, 0.03, 8, 3, comm=COMM, order=2), LAWS[law], kernel=kernel)
     assert error < ROUND_OFF, error
 
 
-def test_triangles_with_bubble_agree():
-    """P2 + bubble triangles on a tube (6 and 3 point rules), linear bending law."""
-    error = force_difference(lambda: tube(0.1, 0.03, 8, 3, cell="triangle", comm=COMM, order=2))
+@pytest.mark.parametrize("kernel", KERNELS)
+@pytest.mark.parametrize("law", ["linear", "square root"])
+def test_triangles_with_bubble_agree(law, kernel):
+    """P2 + bubble triangles on a tube (6 and 3 point rules; 7 displacement and 6 rotation nodes)."""
+    error = force_difference(lambda: tube(0.1, 0.03, 8, 3, cell="triangle", comm=COMM, order=2), LAWS[law],
+                             kernel=kernel)
     assert error < ROUND_OFF, error
 
 
-def test_symmetry_penalty_is_carried_over():
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_symmetry_penalty_is_carried_over(kernel):
     """The symmetry plane's penalty energy is part of the internal force."""
-    error = force_difference(lambda: plate(0.1, 0.05, 4, 2, cell="quadrilateral", comm=COMM), symmetric=True)
+    error = force_difference(lambda: plate(0.1, 0.05, 4, 2, cell="quadrilateral", comm=COMM), symmetric=True,
+                             kernel=kernel)
     assert error < ROUND_OFF, error
 
 
-def test_quadrature_data_follow_a_rebased_director():
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_quadrature_data_follow_a_rebased_director(kernel):
     """After rebase_director the quadrature data are re-evaluated (a stale base would differ at O(0.05))."""
-    error = force_difference(lambda: tube(0.1, 0.03, 8, 3, comm=COMM, order=2), rebase=True)
+    error = force_difference(lambda: tube(0.1, 0.03, 8, 3, comm=COMM, order=2), rebase=True, kernel=kernel)
     assert error < ROUND_OFF, error
+
+
+def test_fitted_membrane_law_keeps_the_ffcx_kernel():
+    """The hand-written kernel has the quadratic membrane energy only: a fitted membrane law keeps FFCx's form."""
+    from fabricfem.materials.fitted import FittedMembraneLaw   # noqa: PLC0415 (only this test needs it)
+
+    law = FittedMembraneLaw(exponents=((2, 0, 0), (0, 2, 0), (0, 0, 2)), coefficients=(1e3, 1e3, 1e2))
+    model = ShellModel(tube(0.1, 0.03, 8, 3, comm=COMM, order=2),
+                       Fabric(1e6, 1e6, 1e5, 0.3, 1e-3, density=400.0, membrane_law=law))
+    assert model.reference_at_quadrature and not model.hand_kernel
 
 
 def test_force_is_the_gradient_of_the_energy():
@@ -131,9 +159,11 @@ def test_force_is_the_gradient_of_the_energy():
 
 
 @pytest.mark.mpi
-def test_two_ranks_agree():
+@pytest.mark.parametrize("kernel", KERNELS)
+def test_two_ranks_agree(kernel):
     """The same comparison on the distributed mesh (ghost cells get their quadrature data too)."""
-    assert force_difference(lambda: tube(0.1, 0.03, 8, 3, comm=COMM, order=2), LAWS["kawabata"]) < ROUND_OFF
+    assert force_difference(lambda: tube(0.1, 0.03, 8, 3, comm=COMM, order=2), LAWS["kawabata"],
+                            kernel=kernel) < ROUND_OFF
 
 
 @pytest.mark.mpi
