@@ -19,15 +19,18 @@ points that move with the segments), with a penalty alternative.
 """
 from __future__ import annotations
 
+import functools
 import math
 import time
+from contextlib import contextmanager
 from dataclasses import dataclass
-from typing import Callable, Sequence
+from typing import Callable, Iterator, Sequence
 
 import numpy as np
 from mpi4py import MPI
 
 from fabricfem.body.ellipsoid import Ellipsoid, _ray_to_surface
+from fabricfem.contact import compiled
 from fabricfem.contact import friction as friction_law
 from fabricfem.contact import nodal
 from fabricfem.contact.nodal import (
@@ -40,10 +43,24 @@ from fabricfem.contact.nodal import (
 )
 from fabricfem.contact.torque import TorqueMonitor, local_torques
 
+# Whether ExplicitBodyContacts created now take the Lagrange step by the compiled loops (fabricfem.contact.compiled)
+# or by numpy (`numpy_contact`: a benchmark's baseline, and the reference the compiled loops are tested against)
+COMPILED_CONTACT = {"enabled": True}
 MAX_PROJECTION_PASSES = 8
 MAX_CREASE_ITERATIONS = 20   # bisector pushes out of overlapping segments after the passes (project_with_segment)
 INSIDE_TOLERANCE = 1e-12   # relative to the smallest radius: rounding of a projected point is not "inside"
 PARKED_AT = np.array([1e4, 1e4, 1e4])   # m: where an inactive segment waits (fabricfem.wear donning), far from any garment
+
+
+@contextmanager
+def numpy_contact() -> Iterator[None]:
+    """ExplicitBodyContacts created inside the block take the Lagrange step by numpy (COMPILED_CONTACT)."""
+    old = COMPILED_CONTACT["enabled"]
+    COMPILED_CONTACT["enabled"] = False
+    try:
+        yield
+    finally:
+        COMPILED_CONTACT["enabled"] = old
 
 
 def _points(name: str, x) -> np.ndarray:
@@ -269,6 +286,32 @@ def _push_out_of_creases(out: np.ndarray, moved: np.ndarray, segment: np.ndarray
                      "trap them); refine the time step")
 
 
+def project_compiled(reference: np.ndarray, rows: np.ndarray, d: np.ndarray, v: np.ndarray, a: np.ndarray,
+                     dt: float, segments: tuple[np.ndarray, np.ndarray, np.ndarray], ellipsoids: Sequence[Ellipsoid],
+                     strict: bool, comm: MPI.Comm) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """`project_with_segment` of the trial points x* = reference + d[rows] + dt v[rows] + dt^2 a[rows] by the
+    compiled loop (fabricfem.contact.compiled.project; `segments`: its stacked centres, rotations and radii), with
+    `_push_out_of_creases` for the points still inside after the passes; `comm`: the ranks that build the loops on
+    first use (compiled.module). Returns (trial points (M, 3), projected points (M, 3), segment (M,), moved (M,)
+    bool)."""
+    lib, ffi = compiled.module(comm)
+    p = functools.partial(compiled.pointer, ffi)
+    M = len(reference)
+    trial, position = np.empty((M, 3)), np.empty((M, 3))
+    segment, trapped = np.empty(M, dtype=np.int64), np.empty(M, dtype=np.int64)
+    moved = np.empty(M, dtype=bool)
+    n_trapped = lib.project(M, p(reference, "double"), p(rows, "int64_t"), p(d, "double"), p(v, "double"),
+                            p(a, "double"), dt, len(segments[0]), *(p(array, "double") for array in segments),
+                            INSIDE_TOLERANCE, MAX_PROJECTION_PASSES, p(trial, "double"), p(position, "double"),
+                            p(segment, "int64_t"), p(moved.view(np.uint8), "uint8_t"), p(trapped, "int64_t"))
+    if n_trapped:
+        stack = _Segments(ellipsoids)
+        stuck = trapped[:n_trapped].copy()
+        _push_out_of_creases(position, moved, segment, stuck, stack.normalised_radii(position[stuck]) < 1.0, stack,
+                             strict)
+    return trial, position, segment, moved
+
+
 @dataclass
 class ExplicitContact:
     """Correction of one explicit step ([Man2006, Box 5], step i).
@@ -438,6 +481,9 @@ class ExplicitBodyContact:
         # penetration the last push leaves (reported by the records' max_penetration) instead of stopping the run;
         # True raises instead (`correct`)
         self.strict_projection = False
+        # the Lagrange step by the compiled loops (fabricfem.contact.compiled) or by numpy (COMPILED_CONTACT)
+        self.compiled = COMPILED_CONTACT["enabled"] and method == "lagrange"
+        self._rows: np.ndarray | None = None      # (M, 3) int64 rows of the nodes in W (compiled loops)
 
     # ------------------------------------------------------------------ set-up and output
     def penalty_frequency(self) -> float:
@@ -642,6 +688,9 @@ class ExplicitBodyContact:
         rows = self.dofs
         if self.monitor_penetration:   # the positions d^{n+1} against the body at t_{n+1} (posed last step)
             self._monitor_penetration(self.reference + d[rows], self.body_at(t))
+        if self.compiled:
+            self._correct_compiled(integrator, ellipsoids, d, v, a)
+            return
         x_trial = self.reference + d[rows] + dt * v[rows] + dt ** 2 * a[rows]
         stack = _Segments(ellipsoids)
         projected, active, seg = project_with_segment(x_trial, ellipsoids, strict=self.strict_projection,
@@ -676,6 +725,31 @@ class ExplicitBodyContact:
         position = x_trial
         position[index] = final
         self._set_step(position, index, m * a_c, normal_force, seg, slip, dt)
+
+    def _correct_compiled(self, integrator, ellipsoids: list[Ellipsoid], d: np.ndarray, v: np.ndarray, a: np.ndarray):
+        """`correct` by the compiled loops of fabricfem.contact.compiled: the same projection, friction and
+        correction node by node (the crease push of trapped points stays `_push_out_of_creases`)."""
+        lib, ffi = compiled.module(self.comm)
+        dt = integrator.dt
+        if self._rows is None:
+            self._rows = np.ascontiguousarray(self.dofs, dtype=np.int64)
+        segments = compiled.stacked(ellipsoids)
+        trial, position, segment, moved = project_compiled(self.reference, self._rows, d, v, a, dt, segments,
+                                                           ellipsoids, self.strict_projection, self.comm)
+        index = np.flatnonzero(moved)
+        for buffer in (self.force, self.normal_force, self.slip):
+            buffer.fill(0)
+        p = functools.partial(compiled.pointer, ffi)
+        lib.friction(len(index), p(index, "int64_t"), p(self._rows, "int64_t"), p(trial, "double"),
+                     p(position, "double"), p(segment, "int64_t"), p(self._lumped_mass(integrator), "double"), dt,
+                     self.mu, *(p(array, "double") for array in segments), p(self._stick_segment, "int64_t"),
+                     p(self._stick_local, "double"), p(a, "double"), p(self.force, "double"),
+                     p(self.normal_force, "double"), p(self.slip.view(np.uint8), "uint8_t"))
+        if self.mu > 0.0:      # every node not in contact loses its stick point (as `_store_stick_points`)
+            self._stick_segment[~moved] = -1
+        self.position, self.segment = position, segment
+        self.active[:] = moved
+        self._accumulate(dt, index, position[index], self.force[index], segment[index], self.normal_force[index])
 
     def _set_step(self, position: np.ndarray, index: np.ndarray, force: np.ndarray, normal_force: np.ndarray,
                   segment: np.ndarray, slip: np.ndarray, dt: float):

@@ -1,5 +1,5 @@
-"""C compiler flags of the FFCx kernels on the hot path: the shell's residual (internal forces), assembled once
-per explicit step.
+"""C compiler flags of the kernels on the hot path (the shell's internal forces, assembled once per explicit step),
+and the build of hand-written C modules (`compile_c`).
 
 dolfinx compiles generated kernels with `-O2` by default; `-O3 -march=native` vectorises the quadrature
 loops for the machine that runs them (the kernels are compiled on it, at first use, and cached by flags).
@@ -9,8 +9,18 @@ for a kernel assembled once per Newton iteration. Measured in docs/findings/2026
 """
 from __future__ import annotations
 
+import hashlib
+import importlib.machinery
+import importlib.util
+import os
+import shutil
+import tempfile
 from contextlib import contextmanager
+from pathlib import Path
+from types import ModuleType
 from typing import Iterator, Sequence
+
+import cffi
 
 DOLFINX_DEFAULT_FLAGS = ("-O2", "-g0")           # dolfinx.jit's default cffi_extra_compile_args
 KERNEL_FLAGS = ("-O3", "-march=native", "-g0")
@@ -27,3 +37,35 @@ def kernel_flags(flags: Sequence[str]) -> Iterator[None]:
         yield
     finally:
         KERNEL_JIT["cffi_extra_compile_args"] = old
+
+
+_LOADED: list[ModuleType] = []   # compiled modules stay loaded while forms and callers point into them
+
+
+def compile_c(prefix: str, cdef: str, source: str, comm, flags: Sequence[str]) -> ModuleType:
+    """Compile C `source` declaring `cdef` with cffi (as dolfinx compiles FFCx's kernels) into the dolfinx cache
+    folder (XDG_CACHE_HOME/fenics/fabricfem), once per source and flags, and load it: rank 0 of `comm` builds, the
+    others wait. Processes that build the same module at once (a study's variants, one per rank) each build in
+    their own folder and move the library into place atomically. Returns the cffi module (`.ffi`, `.lib`)."""
+    digest = hashlib.sha1((cdef + source + " ".join(flags)).encode()).hexdigest()[:16]
+    name = f"{prefix}_{digest}"
+    cache = Path(os.getenv("XDG_CACHE_HOME", Path.home() / ".cache")) / "fenics" / "fabricfem"
+    library = cache / (name + importlib.machinery.EXTENSION_SUFFIXES[0])
+    if comm.rank == 0 and not library.exists():
+        cache.mkdir(parents=True, exist_ok=True)
+        build = Path(tempfile.mkdtemp(prefix=f"{name}-", dir=cache))
+        try:
+            ffi = cffi.FFI()
+            ffi.cdef(cdef)
+            ffi.set_source(name, source, extra_compile_args=list(flags), libraries=["m"])
+            os.replace(ffi.compile(tmpdir=str(build)), library)
+        finally:
+            shutil.rmtree(build, ignore_errors=True)
+    comm.barrier()
+    if not library.exists():
+        raise RuntimeError(f"the compiled module {library} was not built")
+    spec = importlib.util.spec_from_file_location(name, library)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    _LOADED.append(module)
+    return module

@@ -26,23 +26,16 @@ comes packed at the quadrature points (`kernel_reference_quantities`, evaluated 
 fabricfem.shell_reference.ReferenceAtQuadrature); the basis tables are tabulated by basix at the same points and
 written into the source. Bending laws: linear (M = D kap), Kawabata and square root on K11, K22 with linear
 coupling and twist, as `fabricfem.forms.shell.bending_energy`. A fitted membrane law is not covered (its model
-keeps the FFCx form). The kernel is compiled with cffi (as dolfinx compiles FFCx's) into the dolfinx cache.
+keeps the FFCx form). The kernel is compiled with cffi (fabricfem.forms.jit.compile_c).
 """
 from __future__ import annotations
-
-import hashlib
-import importlib.machinery
-import importlib.util
-import os
-import shutil
-import tempfile
-from pathlib import Path
 
 import numpy as np
 import ufl
 from ffcx.element_interface import create_element, create_quadrature
 
 from fabricfem.forms import shell as shell_forms
+from fabricfem.forms.jit import compile_c
 
 # Packed reference quantities per quadrature point (name, length): c_i = J^+ e_i are the material directions in
 # reference-cell coordinates (so that (grad u) e_i = grad_xi u c_i), |J| the surface's area factor, alpha the PSRI
@@ -300,34 +293,8 @@ void naghdi_force(double* restrict A, const double* restrict w, const double* re
 
 
 def compile_kernel(source: str, comm, flags: tuple[str, ...]) -> int:
-    """Compile `source` with cffi into the dolfinx cache (rank 0 of `comm` builds, the others wait) and return the
-    address of its `naghdi_force` (an int for dolfinx's Form). Processes that build the same kernel at once (a
-    study's variants, one per rank) each build in their own folder and move the library into place atomically."""
-    import cffi   # noqa: PLC0415 (the build tool, needed only when a kernel is built)
-
-    digest = hashlib.sha1((source + " ".join(flags)).encode()).hexdigest()[:16]
-    name = f"fabricfem_naghdi_{digest}"
-    cache = Path(os.getenv("XDG_CACHE_HOME", Path.home() / ".cache")) / "fenics" / "fabricfem"
-    library = cache / (name + importlib.machinery.EXTENSION_SUFFIXES[0])
-    if comm.rank == 0 and not library.exists():
-        cache.mkdir(parents=True, exist_ok=True)
-        build = Path(tempfile.mkdtemp(prefix=f"{name}-", dir=cache))
-        try:
-            ffi = cffi.FFI()
-            ffi.cdef("void naghdi_force(double*, const double*, const double*, const double*, const int*, "
-                     "const uint8_t*);")
-            ffi.set_source(name, source, extra_compile_args=list(flags), libraries=["m"])
-            os.replace(ffi.compile(tmpdir=str(build)), library)
-        finally:
-            shutil.rmtree(build, ignore_errors=True)
-    comm.barrier()
-    if not library.exists():
-        raise RuntimeError(f"the Naghdi kernel {library} was not built")
-    spec = importlib.util.spec_from_file_location(name, library)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    _LOADED.append(module)   # keep the library loaded while forms point into it
+    """Compile the kernel's `source` (fabricfem.forms.jit.compile_c) and return the address of its `naghdi_force`
+    (an int for dolfinx's Form)."""
+    module = compile_c("fabricfem_naghdi", "void naghdi_force(double*, const double*, const double*, const double*, "
+                       "const int*, const uint8_t*);", source, comm, flags)
     return int(module.ffi.cast("uintptr_t", module.ffi.addressof(module.lib, "naghdi_force")))
-
-
-_LOADED: list = []

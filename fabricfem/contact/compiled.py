@@ -1,0 +1,291 @@
+"""The explicit Lagrange-multiplier contact step compiled: one C loop over the nodes instead of numpy calls.
+
+`ExplicitBodyContact.correct` ([Man2006, Box 5] steps i-j with Coulomb friction, fabricfem.contact.explicit) spends
+its time in the overhead of a hundred numpy calls on small arrays. These two C functions do the same arithmetic
+node by node, in the same order as the numpy functions they replace (compiled without contraction of
+multiply-adds, `-ffp-contract=off`, so that the products and sums round as numpy's do):
+
+* `project`: the trial positions x* = X + d + dt v~ + dt^2 a, the normalised radius q = f + 1 of each segment
+  [Man2006, eq. 3.61], and for the points inside a segment the passes of `project_with_segment` (ray cast along
+  grad f / |grad f| against the segments the point is inside of, the deepest one, the move onto its surface,
+  [Man2006, Box 5] step i). A point still inside after MAX_PROJECTION_PASSES is returned as trapped, and
+  `_push_out_of_creases` (numpy) takes it, as in `project_with_segment`.
+* `friction`: for the nodes in contact, |lambda_N| = |m (x^c - x*)| / dt^2, the stick point's pull
+  d_T = P (s - x^c) limited by mu |lambda_N| (eq. 3.52), the stick points kept in the segments' frames, and
+  a^{n+1} += a^c = (x^c + d_T - x*) / dt^2 ([Man2006, Box 5] step j).
+
+The only difference from the numpy path is q, which numpy computes by one matrix product (rounded differently
+by BLAS); q only preselects the points that get ray casts, and the ray cast decides (INSIDE_TOLERANCE), so the two
+paths move the same nodes by the same amounts (tests/test_contact_compiled.py).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from fabricfem.forms.jit import compile_c
+
+FLAGS = ("-O3", "-march=native", "-ffp-contract=off", "-g0")
+MAX_SEGMENTS = 64          # the body segments a point is checked against (a stack array in `project`)
+
+CDEF = """
+int project(int M, const double* reference, const int64_t* rows, const double* d, const double* v, const double* a,
+            double dt, int K, const double* center, const double* rotation, const double* radii, double tolerance,
+            int passes, double* trial, double* position, int64_t* segment, uint8_t* moved, int64_t* trapped);
+void friction(int n, const int64_t* index, const int64_t* rows, const double* trial, double* position,
+              const int64_t* segment, const double* mass, double dt, double mu, const double* center,
+              const double* rotation, const double* radii, int64_t* stick_segment, double* stick_local,
+              double* a, double* force, double* normal_force, uint8_t* slip);
+"""
+
+SOURCE = r"""
+#include <math.h>
+#include <stdint.h>
+
+/* y = R^T (x - c) (the products and sums of numpy's matmul of a row by R: sequential over i) */
+static void to_local(const double* x, const double* c, const double* R, double* y)
+{
+  const double p0 = x[0] - c[0], p1 = x[1] - c[1], p2 = x[2] - c[2];
+  for (int j = 0; j < 3; ++j)
+    y[j] = (p0 * R[j] + p1 * R[3 + j]) + p2 * R[6 + j];
+}
+
+/* x = R y (+ c) */
+static void rotate(const double* y, const double* R, double* x)
+{
+  for (int i = 0; i < 3; ++i)
+    x[i] = (R[3 * i] * y[0] + R[3 * i + 1] * y[1]) + R[3 * i + 2] * y[2];
+}
+
+static double norm3(const double* v) { return sqrt((v[0] * v[0] + v[1] * v[1]) + v[2] * v[2]); }
+
+/* q = sum (y_i / r_i)^2 = f + 1 [Man2006, eq. 3.61] */
+static double normalised_radius(const double* x, const double* c, const double* R, const double* r)
+{
+  double y[3];
+  to_local(x, c, R, y);
+  const double a = y[0] / r[0], b = y[1] / r[1], e = y[2] / r[2];
+  return (a * a + b * b) + e * e;
+}
+
+/* fabricfem.body.ellipsoid._ray_to_surface: signed length of y - s u to the surface, hit flag */
+static double ray_to_surface(const double* y, const double* r, const double* u, const double* r2, double c, int* hit)
+{
+  const double u0 = u[0] / r[0], u1 = u[1] / r[1], u2 = u[2] / r[2];
+  const double a = (u0 * u0 + u1 * u1) + u2 * u2;
+  const double b = -2.0 * ((y[0] * u[0] / r2[0] + y[1] * u[1] / r2[1]) + y[2] * u[2] / r2[2]);
+  const double disc = b * b - 4.0 * a * c;
+  *hit = disc >= 0.0;
+  const double sq = sqrt(*hit ? disc : 0.0);
+  const double q = -0.5 * (b + copysign(sq, b));
+  const double s1 = q / a;
+  const double s2 = q != 0.0 ? c / q : s1;
+  const double s = fabs(s1) < fabs(s2) ? s1 : s2;
+  return *hit ? s : 0.0;
+}
+
+/* _Segments.ray_gap: signed gap [m] of local point y (one cast along grad f, towards the centre if it misses) */
+static double ray_gap(const double* y, const double* r)
+{
+  const double r2[3] = {r[0] * r[0], r[1] * r[1], r[2] * r[2]};
+  const double yr0 = y[0] / r[0], yr1 = y[1] / r[1], yr2 = y[2] / r[2];
+  const double q = (yr0 * yr0 + yr1 * yr1) + yr2 * yr2;
+  double u[3] = {y[0] / r2[0], y[1] / r2[1], y[2] / r2[2]};
+  const double norm = norm3(u);
+  if (norm == 0.0)
+  {
+    const int k = (r[1] < r[0]) ? ((r[2] < r[1]) ? 2 : 1) : ((r[2] < r[0]) ? 2 : 0);   /* np.argmin */
+    u[0] = u[1] = u[2] = 0.0;
+    u[k] = 1.0;
+  }
+  else
+    for (int i = 0; i < 3; ++i)
+      u[i] = u[i] / norm;
+  int hit;
+  double s = ray_to_surface(y, r, u, r2, q - 1.0, &hit);
+  if (!hit)
+  {
+    const double ny = norm3(y);
+    const double uc[3] = {y[0] / ny, y[1] / ny, y[2] / ny};
+    s = ray_to_surface(y, r, uc, r2, q - 1.0, &hit);
+  }
+  return fabs(s) * (q >= 1.0 ? 1.0 : -1.0);
+}
+
+/* _Segments.normal: unit grad f at local y of the segment (R, r), global */
+static void normal(const double* y, const double* R, const double* r, double* n)
+{
+  const double g[3] = {2.0 * y[0] / (r[0] * r[0]), 2.0 * y[1] / (r[1] * r[1]), 2.0 * y[2] / (r[2] * r[2])};
+  rotate(g, R, n);
+  const double l = norm3(n);
+  for (int i = 0; i < 3; ++i)
+    n[i] = n[i] / l;
+}
+
+static double smallest(const double* r) { return fmin(fmin(r[0], r[1]), r[2]); }
+
+/* trial positions and the projection passes of project_with_segment; returns the number of trapped points */
+int project(int M, const double* reference, const int64_t* rows, const double* d, const double* v, const double* a,
+            double dt, int K, const double* center, const double* rotation, const double* radii, double tolerance,
+            int passes, double* trial, double* position, int64_t* segment, uint8_t* moved, int64_t* trapped)
+{
+  int n_trapped = 0;
+  const double dt2 = dt * dt;
+  for (int p = 0; p < M; ++p)
+  {
+    double* x = position + 3 * p;
+    for (int i = 0; i < 3; ++i)
+    {
+      const int64_t row = rows[3 * p + i];
+      trial[3 * p + i] = x[i] = ((reference[3 * p + i] + d[row]) + dt * v[row]) + dt2 * a[row];
+    }
+    moved[p] = 0;
+    int inside[64];
+    int any = 0, best = 0;
+    double qmin = INFINITY;
+    for (int k = 0; k < K; ++k)
+    {
+      const double q = normalised_radius(x, center + 3 * k, rotation + 9 * k, radii + 3 * k);
+      inside[k] = q < 1.0;
+      any |= inside[k];
+      if (q < qmin)
+      {
+        qmin = q;
+        best = k;
+      }
+    }
+    segment[p] = best;
+    for (int pass = 0; any && pass < passes; ++pass)
+    {
+      int deepest = 0;
+      double g = INFINITY, y_deepest[3] = {0.0, 0.0, 0.0};
+      for (int k = 0; k < K; ++k)
+      {
+        if (!inside[k])
+          continue;
+        double y[3];
+        to_local(x, center + 3 * k, rotation + 9 * k, y);
+        const double gap = ray_gap(y, radii + 3 * k);
+        if (gap < g)
+        {
+          g = gap;
+          deepest = k;
+          y_deepest[0] = y[0], y_deepest[1] = y[1], y_deepest[2] = y[2];
+        }
+      }
+      if (pass == 0)
+        segment[p] = deepest;
+      if (!(g < -tolerance * smallest(radii + 3 * deepest)))
+      {
+        any = 0;
+        break;
+      }
+      double n[3];
+      normal(y_deepest, rotation + 9 * deepest, radii + 3 * deepest, n);
+      for (int i = 0; i < 3; ++i)
+        x[i] = x[i] - g * n[i];
+      segment[p] = deepest;
+      moved[p] = 1;
+      any = 0;
+      for (int k = 0; k < K; ++k)
+      {
+        inside[k] = normalised_radius(x, center + 3 * k, rotation + 9 * k, radii + 3 * k) < 1.0;
+        any |= inside[k];
+      }
+    }
+    if (any)
+      trapped[n_trapped++] = p;
+  }
+  return n_trapped;
+}
+
+/* friction and the acceleration correction of the n nodes `index` in contact (ExplicitBodyContact.correct) */
+void friction(int n, const int64_t* index, const int64_t* rows, const double* trial, double* position,
+              const int64_t* segment, const double* mass, double dt, double mu, const double* center,
+              const double* rotation, const double* radii, int64_t* stick_segment, double* stick_local,
+              double* a, double* force, double* normal_force, uint8_t* slip)
+{
+  const double dt2 = dt * dt;
+  for (int j = 0; j < n; ++j)
+  {
+    const int64_t p = index[j];
+    const int64_t k = segment[p];
+    const double* m = mass + 3 * p;
+    const double* x0 = trial + 3 * p;
+    double* x = position + 3 * p;
+    const double* c = center + 3 * k;
+    const double* R = rotation + 9 * k;
+    double dn[3] = {m[0] * (x[0] - x0[0]), m[1] * (x[1] - x0[1]), m[2] * (x[2] - x0[2])};
+    const double lambda = norm3(dn) / dt2;               /* |lambda_N| */
+    normal_force[p] = lambda;
+    slip[p] = 0;
+    if (mu > 0.0)
+    {
+      const int known = stick_segment[p] == k;
+      double stick[3];
+      if (known)
+      {
+        rotate(stick_local + 3 * p, R, stick);
+        for (int i = 0; i < 3; ++i)
+          stick[i] = stick[i] + c[i];
+      }
+      else
+        stick[0] = x[0], stick[1] = x[1], stick[2] = x[2];
+      double y[3], nrm[3];
+      to_local(x, c, R, y);
+      normal(y, R, radii + 3 * k, nrm);
+      const double diff[3] = {stick[0] - x[0], stick[1] - x[1], stick[2] - x[2]};
+      const double along = (diff[0] * nrm[0] + diff[1] * nrm[1]) + diff[2] * nrm[2];
+      double dT[3] = {diff[0] - along * nrm[0], diff[1] - along * nrm[1], diff[2] - along * nrm[2]};
+      const double mt[3] = {m[0] * dT[0], m[1] * dT[1], m[2] * dT[2]};
+      const double ft = norm3(mt) / dt2;
+      const double limit = mu * lambda;                 /* eq. 3.52: |t| <= mu lambda_N */
+      const int slips = known && (ft > limit);
+      const double scale = slips ? limit / (ft > 0.0 ? ft : 1.0) : 1.0;
+      for (int i = 0; i < 3; ++i)
+      {
+        dT[i] = known ? dT[i] * scale : 0.0;
+        x[i] = x[i] + dT[i];
+      }
+      slip[p] = slips;
+      /* the stick point stays on the segment when sticking, moves with the node when slipping, and is created at
+         the contact point for a node touching down */
+      const double* kept = (slips || !known) ? x : stick;
+      stick_segment[p] = k;
+      to_local(kept, c, R, stick_local + 3 * p);
+    }
+    for (int i = 0; i < 3; ++i)
+    {
+      const double ac = (x[i] - x0[i]) / dt2;
+      a[rows[3 * p + i]] += ac;
+      force[3 * p + i] = m[i] * ac;
+    }
+  }
+}
+"""
+
+_MODULE: dict = {}
+
+
+def module(comm):
+    """The compiled module: (lib, ffi), built on first use by rank 0 of `comm` while the others wait
+    (fabricfem.forms.jit.compile_c)."""
+    if "lib" not in _MODULE:
+        built = compile_c("fabricfem_contact", CDEF, SOURCE, comm, FLAGS)
+        _MODULE.update(lib=built.lib, ffi=built.ffi)
+    return _MODULE["lib"], _MODULE["ffi"]
+
+
+def pointer(ffi, array: np.ndarray, ctype: str):
+    """cffi pointer into a C-contiguous numpy array of the matching dtype."""
+    assert array.flags.c_contiguous, "compiled contact: arrays must be C-contiguous"
+    return ffi.cast(ctype + " *", array.ctypes.data)
+
+
+def stacked(ellipsoids) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(centres (K, 3), rotations (K, 3, 3), radii (K, 3)) [m] of the posed segments, C-contiguous, for the loops;
+    ValueError beyond MAX_SEGMENTS."""
+    if len(ellipsoids) > MAX_SEGMENTS:
+        raise ValueError(f"compiled contact: at most {MAX_SEGMENTS} body segments, got {len(ellipsoids)}")
+    return (np.ascontiguousarray([e.center for e in ellipsoids], dtype=float),
+            np.ascontiguousarray([e.rotation for e in ellipsoids], dtype=float),
+            np.ascontiguousarray([e.radii for e in ellipsoids], dtype=float))
