@@ -112,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     p_bench.add_argument("--duration", type=float, default=None,
                          help="wear: the pants' walk [s] (default: the scene's four strides)")
     p_bench.add_argument("--variants",
-                         default="reference,kernels,eigenvalue step,quadrature geometry,safety 0.9,hand kernel,mass x4,mass x16",
+                         default="reference,kernels,eigenvalue step,quadrature geometry,safety 0.9,hand kernel,compiled contact,mass x4,mass x16",
                          help="wear: variants, comma-separated (fabricfem.benchmarks.wear_speed.VARIANTS)")
     p_bench.add_argument("--repeats", type=int, default=3, help="wear, commits: runs of every variant (medians)")
     p_bench.add_argument("--old", help="commits: the baseline commit (e.g. a sha or a tag)")

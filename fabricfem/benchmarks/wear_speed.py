@@ -14,7 +14,9 @@ For each sleeve mesh (I-IV of [Man2006, sec. 5.3]: 10x13 ... 30x39 Q2) the expli
 * `safety 0.9`: `quadrature geometry` with dt = 0.9 of the eigenvalue's critical step (the sleeve route's
   default, fabricfem.dynamics.stability.STEP_SAFETY);
 * `hand kernel`: `safety 0.9` with the internal force by the hand-written C kernel (fabricfem.forms.naghdi_kernel)
-  instead of FFCx's: the default now;
+  instead of FFCx's;
+* `compiled contact`: `hand kernel` with the explicit contact step by the compiled loops (fabricfem.contact.compiled)
+  instead of numpy: the default now;
 * `mass xS`: the default plus mass scaling S (fabricfem.dynamics.explicit: every lumped mass x S, the weight and
   the damping of the physical mass, critical step x sqrt(S)).
 
@@ -49,6 +51,7 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from fabricfem.contact.explicit import numpy_contact
 from fabricfem.forms.jit import DOLFINX_DEFAULT_FLAGS, KERNEL_FLAGS, kernel_flags
 from fabricfem.scenes.run import build_wear_run
 from fabricfem.scenes.schema import Scene
@@ -61,7 +64,7 @@ from fabricfem.wear.run import build_run
 MESHES = {"I": (10, 13), "II": (15, 20), "III": (20, 26), "IV": (30, 39)}
 PANTS = "pants"          # the case of scenes/pants_walk.toml
 PANTS_SCENE = Path(__file__).resolve().parents[2] / "scenes" / "pants_walk.toml"
-# variant -> (compiler flags of the shell kernels, SleeveConfig changes, internal force: FORCES)
+# variant -> (compiler flags of the shell kernels, SleeveConfig changes, internal force: FORCES, contact: CONTACTS)
 ESTIMATED_STEP = {"critical_step": "estimate"}
 EIGENVALUE_STEP = {"critical_step": "eigenvalue", "time_step_safety": 0.8}
 SAFETY_09 = {"critical_step": "eigenvalue", "time_step_safety": 0.9}
@@ -69,13 +72,18 @@ SAFETY_09 = {"critical_step": "eigenvalue", "time_step_safety": 0.9}
 # quadrature points with FFCx's kernel, or with the hand-written kernel (the default)
 PER_EVALUATION, QUADRATURE_FFCX, HAND = "per evaluation", "quadrature, FFCx", "hand kernel"
 FORCES = {PER_EVALUATION: reference_geometry_per_evaluation, QUADRATURE_FFCX: ffcx_internal_force, HAND: nullcontext}
-VARIANTS = {"reference": (DOLFINX_DEFAULT_FLAGS, ESTIMATED_STEP, PER_EVALUATION),
-            "kernels": (KERNEL_FLAGS, ESTIMATED_STEP, PER_EVALUATION),
-            "eigenvalue step": (KERNEL_FLAGS, EIGENVALUE_STEP, PER_EVALUATION),
-            "quadrature geometry": (KERNEL_FLAGS, EIGENVALUE_STEP, QUADRATURE_FFCX),
-            "safety 0.9": (KERNEL_FLAGS, SAFETY_09, QUADRATURE_FFCX),
-            "hand kernel": (KERNEL_FLAGS, SAFETY_09, HAND),
-            "mass x4": (KERNEL_FLAGS, {"mass_scale": 4.0}, HAND), "mass x16": (KERNEL_FLAGS, {"mass_scale": 16.0}, HAND)}
+# how the explicit Lagrange contact step runs: numpy, or the compiled loops (the default)
+NUMPY, COMPILED = "numpy", "compiled"
+CONTACTS = {NUMPY: numpy_contact, COMPILED: nullcontext}
+VARIANTS = {"reference": (DOLFINX_DEFAULT_FLAGS, ESTIMATED_STEP, PER_EVALUATION, NUMPY),
+            "kernels": (KERNEL_FLAGS, ESTIMATED_STEP, PER_EVALUATION, NUMPY),
+            "eigenvalue step": (KERNEL_FLAGS, EIGENVALUE_STEP, PER_EVALUATION, NUMPY),
+            "quadrature geometry": (KERNEL_FLAGS, EIGENVALUE_STEP, QUADRATURE_FFCX, NUMPY),
+            "safety 0.9": (KERNEL_FLAGS, SAFETY_09, QUADRATURE_FFCX, NUMPY),
+            "hand kernel": (KERNEL_FLAGS, SAFETY_09, HAND, NUMPY),
+            "compiled contact": (KERNEL_FLAGS, SAFETY_09, HAND, COMPILED),
+            "mass x4": (KERNEL_FLAGS, {"mass_scale": 4.0}, HAND, COMPILED),
+            "mass x16": (KERNEL_FLAGS, {"mass_scale": 16.0}, HAND, COMPILED)}
 COLUMNS = ("mesh", "variant", "ranks", "runs", "steps", "ms_per_step", "wall_s", "speedup", "step_speedup",
            *(f"{p}_share" for p in TIMING_PARTS), "kinetic_ratio", "torque_rms_error", "torque_final_Nm")
 
@@ -109,8 +117,8 @@ def mean_moment_error(moments: np.ndarray, ref_moments: np.ndarray) -> float:
 def build_case(case: str, variant: str, final_angle: float, duration: float | None, comm: MPI.Comm):
     """The explicit run of a sleeve mesh (SleeveConfig, flexion to `final_angle` [deg]) or of the pants scene
     (scenes/pants_walk.toml, its walk cut to `duration` [s] if given) with the variant's flags and settings."""
-    flags, changes, force = VARIANTS[variant]
-    with kernel_flags(flags), FORCES[force]():
+    flags, changes, force, contact = VARIANTS[variant]
+    with kernel_flags(flags), FORCES[force](), CONTACTS[contact]():
         if case == PANTS:
             data = tomllib.loads(PANTS_SCENE.read_text())
             data.setdefault("route", {}).update(changes)

@@ -276,9 +276,10 @@ def module(comm):
 
 
 def pointer(ffi, array: np.ndarray, ctype: str):
-    """cffi pointer into a C-contiguous numpy array of the matching dtype."""
-    assert array.flags.c_contiguous, "compiled contact: arrays must be C-contiguous"
-    return ffi.cast(ctype + " *", array.ctypes.data)
+    """cffi pointer into a C-contiguous numpy array of the matching dtype (no copy)."""
+    if not array.flags.c_contiguous:
+        raise ValueError("compiled contact: arrays must be C-contiguous")
+    return ffi.from_buffer(ctype + "[]", array)
 
 
 def stacked(ellipsoids) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

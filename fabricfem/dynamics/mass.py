@@ -247,10 +247,9 @@ class InertiaDamping:
         self._damping_form = fem.form(consistent_damping) if consistent_damping is not None else None
         self.C = fem_petsc.create_matrix(self._damping_form) if self._damping_form is not None else None
         self._assemble_damping()
-
-    @property
-    def has_damping(self) -> bool:
-        return self.C is not None or (self.damping_diag is not None and self.damping_diag.norm() > 0)
+        self._work: PETSc.Vec | None = None        # C x and a diagonal at once (damping_action)
+        # whether C is non-zero: fixed by the construction (a norm is a reduction over the ranks: once, not per step)
+        self.has_damping = self.C is not None or (self.damping_diag is not None and self.damping_diag.norm() > 0)
 
     def _assemble_damping(self):
         if self.C is None:
@@ -276,14 +275,18 @@ class InertiaDamping:
 
     def damping_action(self, x: PETSc.Vec, out: PETSc.Vec):
         """out = C x."""
-        out.set(0.0)
-        if self.C is not None:
-            self.C.mult(x, out)
+        if self.C is None:
+            if self.damping_diag is None:
+                out.set(0.0)
+            else:
+                out.pointwiseMult(self.damping_diag, x)
+            return
+        self.C.mult(x, out)
         if self.damping_diag is not None:
-            tmp = x.duplicate()
-            tmp.pointwiseMult(self.damping_diag, x)
-            out.axpy(1.0, tmp)
-            tmp.destroy()
+            if self._work is None:
+                self._work = x.duplicate()
+            self._work.pointwiseMult(self.damping_diag, x)
+            out.axpy(1.0, self._work)
 
     def jacobian_form(self, c_mass, c_damp):
         """UFL form c_mass M + c_damp C of the non-diagonal parts (None if there are none); c_* are Constants."""

@@ -108,6 +108,9 @@ def kernel_source(u_element, theta_element, cellname: str, degrees: tuple[int, i
 
 
 KERNEL_C = r"""
+#ifndef _GNU_SOURCE
+#define _GNU_SOURCE                /* sincos */
+#endif
 #include <math.h>
 #include <stdint.h>
 
@@ -144,12 +147,10 @@ static void moments(const double* kap, const double* D, const double* law, doubl
 
 /* One rule's contribution: bending (1 on the full rule) with weight 1, membrane and shear with weight
    alpha (full) or 1 - alpha (reduced). */
-static inline void rule(double* restrict A, const double* restrict w, const double* restrict c,
-                        const double* restrict ref, int nq, int size, const double* weights,
-                        const double (*U)[3][NU], const double (*T)[3][NT], int bending)
+static inline void rule(double (*restrict Au)[NU], double (*restrict At)[NT], const double (*u)[NU],
+                        const double (*th)[NT], const double* restrict c, const double* restrict ref, int nq, int size,
+                        const double* weights, const double (*U)[3][NU], const double (*T)[3][NT], int bending)
 {
-  const double* u = w;
-  const double* th = w + 3 * NU;
   const double* Am = c;
   const double* D = c + 9;
   const double ks = c[18];
@@ -174,19 +175,20 @@ static inline void rule(double* restrict A, const double* restrict w, const doub
       DT[0][a] = c1[0] * T[q][1][a] + c1[1] * T[q][2][a];
       DT[1][a] = c2[0] * T[q][1][a] + c2[1] * T[q][2][a];
     }
+    /* the state and its derivatives along e1, e2 at the point (node-contiguous loops: vectorised) */
     double du[2][3] = {{0}}, t[2] = {0}, dt[2][2] = {{0}};
-    for (int a = 0; a < NU; ++a)
-      for (int k = 0; k < 3; ++k)
+    for (int k = 0; k < 3; ++k)
+      for (int a = 0; a < NU; ++a)
       {
-        du[0][k] += u[3 * a + k] * DU[0][a];
-        du[1][k] += u[3 * a + k] * DU[1][a];
+        du[0][k] += u[k][a] * DU[0][a];
+        du[1][k] += u[k][a] * DU[1][a];
       }
-    for (int a = 0; a < NT; ++a)
-      for (int k = 0; k < 2; ++k)
+    for (int k = 0; k < 2; ++k)
+      for (int a = 0; a < NT; ++a)
       {
-        t[k] += th[2 * a + k] * T[q][0][a];
-        dt[0][k] += th[2 * a + k] * DT[0][a];
-        dt[1][k] += th[2 * a + k] * DT[1][a];
+        t[k] += th[k][a] * T[q][0][a];
+        dt[0][k] += th[k][a] * DT[0][a];
+        dt[1][k] += th[k][a] * DT[1][a];
       }
     double f1[3], f2[3];
     for (int k = 0; k < 3; ++k)
@@ -197,7 +199,9 @@ static inline void rule(double* restrict A, const double* restrict w, const doub
     /* [Eischen2000, eq. 3] */
     const double eps[3] = {dot3(g1, du[0]) + 0.5 * dot3(du[0], du[0]), dot3(g2, du[1]) + 0.5 * dot3(du[1], du[1]),
                            dot3(g1, du[1]) + dot3(g2, du[0]) + dot3(du[0], du[1])};
-    const double C1 = cos(t[0]), S1 = sin(t[0]), C2 = cos(t[1]), S2 = sin(t[1]);
+    double C1, S1, C2, S2;          /* sincos: the values of sin and cos in one call */
+    sincos(t[0], &S1, &C1);
+    sincos(t[1], &S2, &C2);
     double d[3], d1[3], d2[3];
     for (int k = 0; k < 3; ++k)
     {
@@ -267,14 +271,14 @@ static inline void rule(double* restrict A, const double* restrict w, const doub
       P1[k] = scale * (N[0] * f1[k] + N[2] * f2[k] + Q[0] * d[k] - M[0] * Dd[0][k] - M[2] * Dd[1][k]);
       P2[k] = scale * (N[1] * f2[k] + N[2] * f1[k] + Q[1] * d[k] - M[1] * Dd[1][k] - M[2] * Dd[0][k]);
     }
-    for (int a = 0; a < NU; ++a)
-      for (int k = 0; k < 3; ++k)
-        A[3 * a + k] += P1[k] * DU[0][a] + P2[k] * DU[1][a];
+    for (int k = 0; k < 3; ++k)
+      for (int a = 0; a < NU; ++a)
+        Au[k][a] += P1[k] * DU[0][a] + P2[k] * DU[1][a];
     for (int k = 0; k < 2; ++k)
     {
       const double tk = scale * Tk[k], sk0 = scale * S[k][0], sk1 = scale * S[k][1];
       for (int a = 0; a < NT; ++a)
-        A[3 * NU + 2 * a + k] += tk * T[q][0][a] + sk0 * DT[0][a] + sk1 * DT[1][a];
+        At[k][a] += tk * T[q][0][a] + sk0 * DT[0][a] + sk1 * DT[1][a];
     }
   }
 }
@@ -285,9 +289,23 @@ void naghdi_force(double* restrict A, const double* restrict w, const double* re
                   const double* restrict coordinate_dofs, const int* restrict entity_local_index,
                   const uint8_t* restrict quadrature_permutation)
 {
+  /* the state and the residual component-major (the dofs are node-major: u at 3 a + k, th at 3 NU + 2 a + k) */
+  double u[3][NU], th[2][NT], Au[3][NU] = {{0}}, At[2][NT] = {{0}};
+  for (int a = 0; a < NU; ++a)
+    for (int k = 0; k < 3; ++k)
+      u[k][a] = w[3 * a + k];
+  for (int a = 0; a < NT; ++a)
+    for (int k = 0; k < 2; ++k)
+      th[k][a] = w[3 * NU + 2 * a + k];
   const double* full = w + 3 * NU + 2 * NT;
-  rule(A, w, c, full, NQF, SF, WF, UF, TF, 1);
-  rule(A, w, c, full + NQF * SF, NQR, SR, WR, UR, TR, 0);
+  rule(Au, At, u, th, c, full, NQF, SF, WF, UF, TF, 1);
+  rule(Au, At, u, th, c, full + NQF * SF, NQR, SR, WR, UR, TR, 0);
+  for (int a = 0; a < NU; ++a)
+    for (int k = 0; k < 3; ++k)
+      A[3 * a + k] += Au[k][a];
+  for (int a = 0; a < NT; ++a)
+    for (int k = 0; k < 2; ++k)
+      A[3 * NU + 2 * a + k] += At[k][a];
 }
 """
 
