@@ -11,8 +11,9 @@ multiply-adds, `-ffp-contract=off`, so that the products and sums round as numpy
   [Man2006, Box 5] step i). A point still inside after MAX_PROJECTION_PASSES is returned as trapped, and
   `_push_out_of_creases` (numpy) takes it, as in `project_with_segment`.
 * `friction`: for the nodes in contact, |lambda_N| = |m (x^c - x*)| / dt^2, the stick point's pull
-  d_T = P (s - x^c) limited by mu |lambda_N| (eq. 3.52), the stick points kept in the segments' frames, and
-  a^{n+1} += a^c = (x^c + d_T - x*) / dt^2 ([Man2006, Box 5] step j).
+  d_T = P (s - x^c) limited by mu |lambda_N| (eq. 3.52), the stick points kept in the segments' frames,
+  a^{n+1} += a^c = (x^c + d_T - x*) / dt^2 ([Man2006, Box 5] step j), and the torques of the registered monitors,
+  a . sum_i (x_i - J) x (-f_i) over the nodes on their segments (fabricfem.contact.torque.local_torques).
 
 The only difference from the numpy path is q, which numpy computes by one matrix product (rounded differently
 by BLAS); q only preselects the points that get ray casts, and the ray cast decides (INSIDE_TOLERANCE), so the two
@@ -26,6 +27,7 @@ from fabricfem.forms.jit import compile_c
 
 FLAGS = ("-O3", "-march=native", "-ffp-contract=off", "-g0")
 MAX_SEGMENTS = 64          # the body segments a point is checked against (a stack array in `project`)
+MAX_MONITORS = 64          # the torque monitors summed in `friction` (a stack array)
 
 CDEF = """
 int project(int M, const double* reference, const int64_t* rows, const double* d, const double* v, const double* a,
@@ -34,7 +36,8 @@ int project(int M, const double* reference, const int64_t* rows, const double* d
 void friction(int n, const int64_t* index, const int64_t* rows, const double* trial, double* position,
               const int64_t* segment, const double* mass, double dt, double mu, const double* center,
               const double* rotation, const double* radii, int64_t* stick_segment, double* stick_local,
-              double* a, double* force, double* normal_force, uint8_t* slip);
+              double* a, double* force, double* normal_force, uint8_t* slip, int K, int monitors,
+              const uint8_t* on_segments, const double* joints, const double* axes, double* torques);
 """
 
 SOURCE = r"""
@@ -202,9 +205,13 @@ int project(int M, const double* reference, const int64_t* rows, const double* d
 void friction(int n, const int64_t* index, const int64_t* rows, const double* trial, double* position,
               const int64_t* segment, const double* mass, double dt, double mu, const double* center,
               const double* rotation, const double* radii, int64_t* stick_segment, double* stick_local,
-              double* a, double* force, double* normal_force, uint8_t* slip)
+              double* a, double* force, double* normal_force, uint8_t* slip, int K, int monitors,
+              const uint8_t* on_segments, const double* joints, const double* axes, double* torques)
 {
   const double dt2 = dt * dt;
+  double moment[64][3];
+  for (int m = 0; m < monitors; ++m)
+    moment[m][0] = moment[m][1] = moment[m][2] = 0.0;
   for (int j = 0; j < n; ++j)
   {
     const int64_t p = index[j];
@@ -259,7 +266,22 @@ void friction(int n, const int64_t* index, const int64_t* rows, const double* tr
       a[rows[3 * p + i]] += ac;
       force[3 * p + i] = m[i] * ac;
     }
+    /* fabricfem.contact.torque.local_torques: (x - J) x (-f) summed over the nodes on each monitor's segments */
+    for (int mon = 0; mon < monitors; ++mon)
+    {
+      if (!on_segments[mon * K + k])
+        continue;
+      const double* J = joints + 3 * mon;
+      const double r[3] = {x[0] - J[0], x[1] - J[1], x[2] - J[2]};
+      const double f[3] = {-force[3 * p], -force[3 * p + 1], -force[3 * p + 2]};
+      moment[mon][0] += r[1] * f[2] - r[2] * f[1];
+      moment[mon][1] += r[2] * f[0] - r[0] * f[2];
+      moment[mon][2] += r[0] * f[1] - r[1] * f[0];
+    }
   }
+  for (int mon = 0; mon < monitors; ++mon)
+    torques[mon] = (moment[mon][0] * axes[3 * mon] + moment[mon][1] * axes[3 * mon + 1])
+                   + moment[mon][2] * axes[3 * mon + 2];
 }
 """
 

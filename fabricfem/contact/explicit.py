@@ -484,6 +484,7 @@ class ExplicitBodyContact:
         # the Lagrange step by the compiled loops (fabricfem.contact.compiled) or by numpy (COMPILED_CONTACT)
         self.compiled = COMPILED_CONTACT["enabled"] and method == "lagrange"
         self._rows: np.ndarray | None = None      # (M, 3) int64 rows of the nodes in W (compiled loops)
+        self._monitor_arrays: tuple | None = None  # the monitors' segment flags and axes (compiled loops)
 
     # ------------------------------------------------------------------ set-up and output
     def penalty_frequency(self) -> float:
@@ -497,6 +498,7 @@ class ExplicitBodyContact:
         `segments` (fabricfem.contact.torque.TorqueMonitor) under `name`."""
         self._monitors[name] = TorqueMonitor.build(self.names, joint, axis, segments)
         self._torque_impulse[name] = 0.0
+        self._monitor_arrays = None
 
     def torque(self, name: str) -> float:
         """The registered torque [N m] of the last step's forces (all ranks)."""
@@ -586,12 +588,14 @@ class ExplicitBodyContact:
         return cached[2]
 
     def _accumulate(self, dt: float, index: np.ndarray, position: np.ndarray, force: np.ndarray,
-                    segment: np.ndarray, normal_force: np.ndarray):
+                    segment: np.ndarray, normal_force: np.ndarray, step_torques: Sequence[float] | None = None):
         """Add dt x (torques, normal forces) of the nodes `index` in contact (their positions, forces on the
-        cloth, segments and normal forces) to the interval's impulses."""
+        cloth, segments and normal forces) to the interval's impulses; the monitors' torques of this rank's nodes
+        are summed here unless given (`step_torques`, the compiled loop's)."""
         tic = time.perf_counter()
-        step_torques = local_torques(list(self._monitors.values()), position, force, segment,
-                                     lambda joint: self.poses.joint(joint, self.time))
+        if step_torques is None:
+            step_torques = local_torques(list(self._monitors.values()), position, force, segment,
+                                         lambda joint: self.poses.joint(joint, self.time))
         for name, tau in zip(self._monitors, step_torques):
             self._torque_impulse[name] += dt * tau
         if self.trace is not None:
@@ -740,16 +744,27 @@ class ExplicitBodyContact:
         for buffer in (self.force, self.normal_force, self.slip):
             buffer.fill(0)
         p = functools.partial(compiled.pointer, ffi)
+        monitors = list(self._monitors.values())
+        if self._monitor_arrays is None:
+            if len(monitors) > compiled.MAX_MONITORS:
+                raise ValueError(f"compiled contact: at most {compiled.MAX_MONITORS} torque monitors")
+            self._monitor_arrays = (np.ascontiguousarray([m.on_segments for m in monitors], dtype=np.uint8),
+                                    np.ascontiguousarray([m.axis for m in monitors], dtype=float).reshape(-1, 3))
+        on_segments, axes = self._monitor_arrays
+        joints = np.array([self.poses.joint(m.joint, self.time) for m in monitors], dtype=float).reshape(-1, 3)
+        torques = np.zeros(len(monitors))
         lib.friction(len(index), p(index, "int64_t"), p(self._rows, "int64_t"), p(trial, "double"),
                      p(position, "double"), p(segment, "int64_t"), p(self._lumped_mass(integrator), "double"), dt,
                      self.mu, *(p(array, "double") for array in segments), p(self._stick_segment, "int64_t"),
                      p(self._stick_local, "double"), p(a, "double"), p(self.force, "double"),
-                     p(self.normal_force, "double"), p(self.slip.view(np.uint8), "uint8_t"))
+                     p(self.normal_force, "double"), p(self.slip.view(np.uint8), "uint8_t"), len(ellipsoids),
+                     len(monitors), p(on_segments, "uint8_t"), p(joints, "double"), p(axes, "double"),
+                     p(torques, "double"))
         if self.mu > 0.0:      # every node not in contact loses its stick point (as `_store_stick_points`)
             self._stick_segment[~moved] = -1
         self.position, self.segment = position, segment
         self.active[:] = moved
-        self._accumulate(dt, index, position[index], self.force[index], segment[index], self.normal_force[index])
+        self._accumulate(dt, index, None, None, None, self.normal_force[index], torques.tolist())
 
     def _set_step(self, position: np.ndarray, index: np.ndarray, force: np.ndarray, normal_force: np.ndarray,
                   segment: np.ndarray, slip: np.ndarray, dt: float):
@@ -776,6 +791,7 @@ class PoseCache:
         self.body = body
         self._positions: dict[float, dict] = {}
         self._ellipsoids: dict[float, list[Ellipsoid]] = {}
+        self._last_pose: dict[str, tuple[bytes, Ellipsoid]] = {}   # segment -> (its three points, its pose)
         self._validated = False
 
     def positions(self, t: float) -> dict:
@@ -795,12 +811,24 @@ class PoseCache:
                 self._ellipsoids.pop(next(iter(self._ellipsoids)))
             positions = self.positions(t)
             if self._validated:
-                e = [_posed_segment(s, positions) for s in self.body.segments.values()]
+                e = [self._posed(name, s, positions) for name, s in self.body.segments.items()]
             else:   # the first pose goes through the validating constructors (Segment.pose, Ellipsoid)
                 e = [s.pose(positions) for s in self.body.segments.values()]
                 self._validated = True
             self._ellipsoids[t] = e
         return e
+
+    def _posed(self, name: str, segment, positions: dict) -> Ellipsoid:
+        """`_posed_segment`, or the segment's last pose when its joints and marker have not moved (the same
+        function of the same three points: a still upper arm is posed once)."""
+        key = b"".join(np.asarray(positions[p], dtype=float).tobytes()
+                       for p in (segment.proximal, segment.distal, segment.marker))
+        last = self._last_pose.get(name)
+        if last is not None and last[0] == key:
+            return last[1]
+        posed = _posed_segment(segment, positions)
+        self._last_pose[name] = (key, posed)
+        return posed
 
     def joint(self, name: str, t: float) -> np.ndarray:
         """Position [m] of a joint or marker at time t (ValueError for an unknown name)."""
