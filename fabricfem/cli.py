@@ -23,6 +23,7 @@ from fabricfem import scenes as scene_module
 from fabricfem.benchmarks import stability_map
 from fabricfem.benchmarks.accuracy import accuracy_bench
 from fabricfem.benchmarks.commits import compare_commits
+from fabricfem.benchmarks.internal_force import internal_force_bench
 from fabricfem.benchmarks.rollup_profile import rollup_profile
 from fabricfem.benchmarks.sleeve_profile import sleeve_profile
 from fabricfem.benchmarks.speed_accuracy import speed_accuracy
@@ -101,20 +102,21 @@ def main(argv: list[str] | None = None) -> int:
     p_demo.add_argument("--out", default="results/demo", help="output folder (XDMF, PNG, CSV)")
     p_bench = sub.add_parser("bench", help="benchmarks (results/ CSV and PNG)")
     p_bench.add_argument("name", nargs="?", default="rollup-profile", choices=["rollup-profile", "stability-map", "speed-accuracy", "unit-cell",
-                                          "sleeve-profile", "accuracy", "wear", "commits"],
+                                          "sleeve-profile", "accuracy", "wear", "commits", "kernel"],
                          help="benchmark to run")
     p_bench.add_argument("--out", default="results/bench")
     p_bench.add_argument("--quick", action="store_true",
                          help="reduced smoke-test runs (stability-map: one k/rho, the smallest mesh, short runs; "
                               "speed-accuracy: t = 0.3 s, two levels per method, one timing)")
     p_bench.add_argument("--meshes", default="I,III",
-                         help="wear: sleeve meshes and the pants scene, comma-separated (I, II, III, IV, pants)")
+                         help="wear, kernel: sleeve meshes (and for wear the pants scene), comma-separated "
+                              "(I, II, III, IV, pants)")
     p_bench.add_argument("--duration", type=float, default=None,
                          help="wear: the pants' walk [s] (default: the scene's four strides)")
     p_bench.add_argument("--variants",
                          default="reference,kernels,eigenvalue step,quadrature geometry,safety 0.9,hand kernel,compiled contact,mass x4,mass x16",
                          help="wear: variants, comma-separated (fabricfem.benchmarks.wear_speed.VARIANTS)")
-    p_bench.add_argument("--repeats", type=int, default=3, help="wear, commits: runs of every variant (medians)")
+    p_bench.add_argument("--repeats", type=int, default=3, help="wear, commits, kernel: runs of every variant (medians)")
     p_bench.add_argument("--old", help="commits: the baseline commit (e.g. a sha or a tag)")
     p_bench.add_argument("--new", default="HEAD", help="commits: the commit compared with it")
     p_bench.add_argument("--scene", help="commits: the wear scene to time")
@@ -347,6 +349,13 @@ def _command(args) -> int:
             return 0
         if args.name == "sleeve-profile":
             sleeve_profile(args.out, quick=args.quick)
+            return 0
+        if args.name == "kernel":
+            try:
+                internal_force_bench(args.out, meshes=tuple(args.meshes.split(",")), repeats=args.repeats)
+            except ValueError as exc:
+                _print(f"fabricfem bench kernel: {exc}", file=sys.stderr)
+                return 2
             return 0
         rollup_profile(args.out)
         return 0

@@ -5,6 +5,7 @@ import pytest
 
 from fabricfem import io as fio
 from fabricfem.benchmarks.commits import compare_commits
+from fabricfem.benchmarks.internal_force import internal_force_bench
 from fabricfem.benchmarks.wear_speed import mean_moment_error, pants_moment, wear_bench
 from fabricfem.studies.sleeve import compare_figures
 from fabricfem.wear.garment import WearStep
@@ -76,3 +77,16 @@ def test_study_figures_compared_with_stored_ones(tmp_path):
     assert (tmp_path / "new" / "comparison.csv").exists()
     with pytest.raises(ValueError, match="compare-with"):
         compare_figures(tmp_path / "new", tmp_path / "nowhere")
+
+
+def test_internal_force_bench_rows_and_files(tmp_path):
+    """`fabricfem bench kernel` on mesh I, two evaluations: a row per implementation and the floor, the three
+    forces equal to round-off (the bound of tests/test_shell_reference.py), CSV and PNG written."""
+    rows = internal_force_bench(tmp_path, meshes=("I",), evaluations=2, repeats=1)
+    assert [r["implementation"] for r in rows] == ["per evaluation", "quadrature, FFCx", "hand kernel",
+                                                  "assembly floor"]
+    assert all(r["max_relative_difference"] < 1e-11 for r in rows[:3])
+    assert all(r["ms_per_evaluation"] > 0 for r in rows)
+    assert (tmp_path / "internal_force.csv").exists() and (tmp_path / "internal_force.png").exists()
+    with pytest.raises(ValueError, match="meshes"):
+        internal_force_bench(tmp_path, meshes=("V",))
