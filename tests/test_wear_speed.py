@@ -6,7 +6,7 @@ import pytest
 from fabricfem import io as fio
 from fabricfem.benchmarks.commits import compare_commits
 from fabricfem.benchmarks.internal_force import internal_force_bench
-from fabricfem.benchmarks.wear_speed import mean_moment_error, pants_moment, wear_bench
+from fabricfem.benchmarks.wear_speed import csv_moment, mean_moment_error, pants_moment, wear_bench
 from fabricfem.studies.sleeve import compare_figures
 from fabricfem.wear.garment import WearStep
 from fabricfem.wear.outputs import torque_rms_error
@@ -90,3 +90,16 @@ def test_internal_force_bench_rows_and_files(tmp_path):
     assert (tmp_path / "internal_force.csv").exists() and (tmp_path / "internal_force.png").exists()
     with pytest.raises(ValueError, match="meshes"):
         internal_force_bench(tmp_path, meshes=("V",))
+
+
+def test_knee_moment_of_a_run_csv(tmp_path):
+    """csv_moment reads the motion records of torque.csv and combines the right-knee monitors as pants_moment."""
+    path = tmp_path / "torque.csv"
+    path.write_text("time_s,phase,knee_r_torque_Nm,knee_r_x_torque_Nm,knee_l_torque_Nm\n"
+                    "0.1,sew,5.0,5.0,1.0\n0.2,motion,3.0,4.0,9.0\n0.3,motion,0.0,-2.0,9.0\n")
+    times, moments = csv_moment(path)
+    np.testing.assert_allclose(times, [0.2, 0.3])
+    np.testing.assert_allclose(moments, [5.0, 2.0], rtol=1e-15)
+    path.write_text("time_s,phase,knee_r_torque_Nm\n0.1,sew,1.0\n")
+    with pytest.raises(ValueError, match="motion"):
+        csv_moment(path)

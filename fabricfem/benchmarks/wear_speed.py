@@ -108,6 +108,19 @@ def pants_moment(history) -> tuple[np.ndarray, np.ndarray]:
             np.array([math.sqrt(sum(v ** 2 for k, v in s.torques.items() if k.startswith("knee_r"))) for s in motion]))
 
 
+def csv_moment(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """`pants_moment` of a finished run's torque.csv (fabricfem.wear.outputs): (times [s], magnitude of the
+    right-knee moment [N m]) over the motion records, e.g. the mean of `fabricfem run scenes/pants_walk.toml`:
+    `python -c "from fabricfem.benchmarks.wear_speed import csv_moment; print(csv_moment('DIR/torque.csv')[1].mean())"`."""
+    with open(path, newline="") as f:
+        rows = [r for r in csv.DictReader(f) if r["phase"] == "motion"]
+    if not rows:
+        raise ValueError(f"path: {path} has no motion records")
+    keys = [k for k in rows[0] if k.startswith("knee_r") and k.endswith("_torque_Nm")]
+    return (np.array([float(r["time_s"]) for r in rows]),
+            np.array([math.sqrt(sum(float(r[k]) ** 2 for k in keys)) for r in rows]))
+
+
 def mean_moment_error(moments: np.ndarray, ref_moments: np.ndarray) -> float:
     """|mean M - mean M_ref| / mean M_ref over the walk: the pants' accuracy measure (the walk amplifies round-off
     threefold per record, docs/studies/pants.md, so two runs agree in their statistics, not record by record)."""
