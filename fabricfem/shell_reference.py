@@ -105,11 +105,16 @@ def naghdi_kernel_form(model, reference: ReferenceAtQuadrature, flags: tuple[str
     source = naghdi_kernel.kernel_source(u_element, theta_element, model.mesh.ufl_cell().cellname(),
                                          args["degrees"], law, len(parameters))
     address = naghdi_kernel.compile_kernel(source, model.comm, tuple(flags))
-    constants = [model.A, model.D, model.shear_stiffness, law_constant]
-    form = _cpp.fem.Form_float64([model.W._cpp_object], {fem.IntegralType.cell: ([(-1, address)], None)},
+    return cell_kernel_form(model, reference, address, [model.A, model.D, model.shear_stiffness, law_constant])
+
+
+def cell_kernel_form(model, reference: ReferenceAtQuadrature, address: int, constants: list):
+    """dolfinx Form (cpp) of a compiled cell kernel at `address` on the state space of `model`, with the coefficients
+    (state, reference.full, reference.reduced) and `constants` packed in that order; it holds the C++ Constants and
+    Functions (shared pointers)."""
+    return _cpp.fem.Form_float64([model.W._cpp_object], {fem.IntegralType.cell: ([(-1, address)], None)},
                                  [model.w._cpp_object, reference.full._cpp_object, reference.reduced._cpp_object],
                                  [c._cpp_object for c in constants], False, model.mesh._mesh)
-    return form          # it holds the C++ Constants and Functions (shared pointers)
 
 
 class PrepackedForms:

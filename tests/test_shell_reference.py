@@ -19,7 +19,9 @@ from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from fabricfem.forms import naghdi_kernel
 from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
+from fabricfem.materials.fitted import FittedMembraneLaw
 from fabricfem.meshes import plate, tube
 from fabricfem.shell import ShellModel
 from fabricfem.shell_reference import PrepackedForms, ffcx_internal_force, reference_geometry_per_evaluation
@@ -126,10 +128,18 @@ def test_quadrature_data_follow_a_rebased_director(kernel):
     assert error < ROUND_OFF, error
 
 
+def test_kernel_layouts_share_their_offsets():
+    """The hand kernel reads the reduced rule's quantities at the full rule's offsets and |J|, alpha as the last two
+    values of both layouts."""
+    full = naghdi_kernel._offsets(naghdi_kernel.KERNEL_FULL)
+    reduced = naghdi_kernel._offsets(naghdi_kernel.KERNEL_REDUCED)
+    assert all(reduced[name] == full[name] for name, _ in naghdi_kernel.KERNEL_REDUCED[:-2])
+    for layout in (naghdi_kernel.KERNEL_FULL, naghdi_kernel.KERNEL_REDUCED):
+        assert [name for name, _ in layout[-2:]] == ["detJ", "alpha"]
+
+
 def test_fitted_membrane_law_keeps_the_ffcx_kernel():
     """The hand-written kernel has the quadratic membrane energy only: a fitted membrane law keeps FFCx's form."""
-    from fabricfem.materials.fitted import FittedMembraneLaw   # noqa: PLC0415 (only this test needs it)
-
     law = FittedMembraneLaw(exponents=((2, 0, 0), (0, 2, 0), (0, 0, 2)), coefficients=(1e3, 1e3, 1e2))
     model = ShellModel(tube(0.1, 0.03, 8, 3, comm=COMM, order=2),
                        Fabric(1e6, 1e6, 1e5, 0.3, 1e-3, density=400.0, membrane_law=law))

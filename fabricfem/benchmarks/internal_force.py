@@ -23,17 +23,21 @@ from contextlib import nullcontext
 from pathlib import Path
 
 import numpy as np
-from dolfinx import cpp as _cpp
-from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
-from fabricfem.forms.jit import KERNEL_FLAGS, compile_c
-from fabricfem.shell_reference import PrepackedForms, ffcx_internal_force, reference_geometry_per_evaluation
+from fabricfem.benchmarks.wear_speed import MESHES
+from fabricfem.forms import naghdi_kernel
+from fabricfem.forms.jit import KERNEL_FLAGS
+from fabricfem.shell_reference import (
+    PrepackedForms,
+    cell_kernel_form,
+    ffcx_internal_force,
+    reference_geometry_per_evaluation,
+)
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.sleeve import sleeve_shell
 
-MESHES = {"I": (10, 13), "II": (15, 20), "III": (20, 26), "IV": (30, 39)}
 IMPLEMENTATIONS = {"per evaluation": reference_geometry_per_evaluation, "quadrature, FFCx": ffcx_internal_force,
                    "hand kernel": nullcontext}
 FLOOR = "assembly floor"
@@ -45,14 +49,8 @@ COLUMNS = ("mesh", "implementation", "cells", "dofs", "ms_per_evaluation", "spee
 def _floor_evaluation(model):
     """An evaluation of the empty kernel on the hand kernel's space and coefficients (model: its internal force
     already built)."""
-    module = compile_c("fabricfem_empty", "void naghdi_force(double*, const double*, const double*, const double*, "
-                       "const int*, const uint8_t*);", EMPTY_KERNEL, model.comm, KERNEL_FLAGS)
-    address = int(module.ffi.cast("uintptr_t", module.ffi.addressof(module.lib, "naghdi_force")))
-    reference = model._reference
-    form = _cpp.fem.Form_float64([model.W._cpp_object], {fem.IntegralType.cell: ([(-1, address)], None)},
-                                 [model.w._cpp_object, reference.full._cpp_object, reference.reduced._cpp_object],
-                                 [], False, model.mesh._mesh)
-    packed = PrepackedForms([form], model.w)
+    address = naghdi_kernel.compile_kernel(EMPTY_KERNEL, model.comm, KERNEL_FLAGS)
+    packed = PrepackedForms([cell_kernel_form(model, model._reference, address, [])], model.w)
     b = model.create_vector()
 
     def evaluate():

@@ -104,8 +104,12 @@ def pants_moment(history) -> tuple[np.ndarray, np.ndarray]:
     """(body times [s], magnitude of the right-knee moment [N m]) of the motion records of a pants run (the
     scene's three knee monitors: the thesis's moment magnitude)."""
     motion = [s for s in history.steps if s.phase == "motion"]
-    return (np.array([s.time for s in motion]),
-            np.array([math.sqrt(sum(v ** 2 for k, v in s.torques.items() if k.startswith("knee_r"))) for s in motion]))
+    return np.array([s.time for s in motion]), np.array([right_knee_moment(s.torques) for s in motion])
+
+
+def right_knee_moment(torques: dict[str, float]) -> float:
+    """Magnitude [N m] of the right-knee moment from the monitors named knee_r* (their components)."""
+    return math.sqrt(sum(v ** 2 for k, v in torques.items() if k.startswith("knee_r")))
 
 
 def csv_moment(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
@@ -116,9 +120,9 @@ def csv_moment(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         rows = [r for r in csv.DictReader(f) if r["phase"] == "motion"]
     if not rows:
         raise ValueError(f"path: {path} has no motion records")
-    keys = [k for k in rows[0] if k.startswith("knee_r") and k.endswith("_torque_Nm")]
+    keys = [k for k in rows[0] if k.endswith("_torque_Nm")]
     return (np.array([float(r["time_s"]) for r in rows]),
-            np.array([math.sqrt(sum(float(r[k]) ** 2 for k in keys)) for r in rows]))
+            np.array([right_knee_moment({k: float(r[k]) for k in keys}) for r in rows]))
 
 
 def mean_moment_error(moments: np.ndarray, ref_moments: np.ndarray) -> float:

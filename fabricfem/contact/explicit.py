@@ -587,15 +587,19 @@ class ExplicitBodyContact:
             self._lumped = cached = (integrator, integrator.dt, m)
         return cached[2]
 
-    def _accumulate(self, dt: float, index: np.ndarray, position: np.ndarray, force: np.ndarray,
-                    segment: np.ndarray, normal_force: np.ndarray, step_torques: Sequence[float] | None = None):
-        """Add dt x (torques, normal forces) of the nodes `index` in contact (their positions, forces on the
-        cloth, segments and normal forces) to the interval's impulses; the monitors' torques of this rank's nodes
-        are summed here unless given (`step_torques`, the compiled loop's)."""
+    def _local_torques(self, position: np.ndarray, force: np.ndarray, segment: np.ndarray) -> list[float]:
+        """This rank's torques [N m] of the monitors for the nodes in contact (their positions, forces on the cloth
+        and segments)."""
         tic = time.perf_counter()
-        if step_torques is None:
-            step_torques = local_torques(list(self._monitors.values()), position, force, segment,
-                                         lambda joint: self.poses.joint(joint, self.time))
+        torques = local_torques(list(self._monitors.values()), position, force, segment,
+                                lambda joint: self.poses.joint(joint, self.time))
+        self.timings["pose_torque"] += time.perf_counter() - tic
+        return torques
+
+    def _accumulate(self, dt: float, index: np.ndarray, normal_force: np.ndarray, step_torques: Sequence[float]):
+        """Add dt x (the monitors' torques of this step, the normal forces of the nodes `index` in contact) to the
+        interval's impulses."""
+        tic = time.perf_counter()
         for name, tau in zip(self._monitors, step_torques):
             self._torque_impulse[name] += dt * tau
         if self.trace is not None:
@@ -764,7 +768,7 @@ class ExplicitBodyContact:
             self._stick_segment[~moved] = -1
         self.position, self.segment = position, segment
         self.active[:] = moved
-        self._accumulate(dt, index, None, None, None, self.normal_force[index], torques.tolist())
+        self._accumulate(dt, index, self.normal_force[index], torques.tolist())
 
     def _set_step(self, position: np.ndarray, index: np.ndarray, force: np.ndarray, normal_force: np.ndarray,
                   segment: np.ndarray, slip: np.ndarray, dt: float):
@@ -776,7 +780,7 @@ class ExplicitBodyContact:
             buffer[index] = values
         self.active.fill(False)
         self.active[index] = True
-        self._accumulate(dt, index, position[index], force, segment[index], normal_force)
+        self._accumulate(dt, index, normal_force, self._local_torques(position[index], force, segment[index]))
 
 
 class PoseCache:

@@ -37,34 +37,31 @@ from ffcx.element_interface import create_element, create_quadrature
 from fabricfem.forms import shell as shell_forms
 from fabricfem.forms.jit import compile_c
 
-# Packed reference quantities per quadrature point (name, length): c_i = J^+ e_i are the material directions in
-# reference-cell coordinates (so that (grad u) e_i = grad_xi u c_i), |J| the surface's area factor, alpha the PSRI
-# weight t^2 / h^2 of the cell.
-KERNEL_FULL = (("c1", 2), ("c2", 2), ("g1", 3), ("g2", 3), ("s0", 2), ("a3", 3), ("a1", 3), ("a2", 3),
-               ("Da3_1", 3), ("Da3_2", 3), ("Da1_1", 3), ("Da1_2", 3), ("Da2_1", 3), ("Da2_2", 3), ("k0", 3),
-               ("detJ", 1), ("alpha", 1))
-KERNEL_REDUCED = (("c1", 2), ("c2", 2), ("g1", 3), ("g2", 3), ("s0", 2), ("a3", 3), ("a1", 3), ("a2", 3),
-                  ("detJ", 1), ("alpha", 1))
+# Packed reference quantities per quadrature point (name, length): those of fabricfem.forms.shell.reference_layout
+# with the material directions e_i replaced by c_i = J^+ e_i, the directions in reference-cell coordinates (so that
+# (grad u) e_i = grad_xi u c_i), and |J| the surface's area factor and alpha the PSRI weight t^2 / h^2 of the cell
+# appended.
+_EXTRA = (("detJ", 1), ("alpha", 1))
+KERNEL_FULL = (("c1", 2), ("c2", 2)) + shell_forms.reference_layout(True)[2:] + _EXTRA
+KERNEL_REDUCED = (("c1", 2), ("c2", 2)) + shell_forms.reference_layout(False)[2:] + _EXTRA
 LAWS = {"linear": 0, "kawabata": 1, "square_root": 2}
 
 
 def kernel_reference_quantities(phi0, n0, director_base, warp_weft, thickness, cell_size, bending: bool):
     """The quantities of KERNEL_FULL (bending) or KERNEL_REDUCED as one UFL vector, to evaluate at quadrature points."""
     mesh = phi0.ufl_domain()
-    F0 = ufl.grad(phi0)
-    e1, e2 = shell_forms.material_frame(F0, *warp_weft)
+    parts = shell_forms.reference_parts(phi0, n0, director_base, warp_weft, bending)
     K = ufl.JacobianInverse(mesh)
-    g1, g2 = F0 * e1, F0 * e2
-    a3, a1, a2 = director_base
-    parts = [K * e1, K * e2, g1, g2, ufl.as_vector([ufl.dot(g1, n0), ufl.dot(g2, n0)]), a3, a1, a2]
-    if bending:
-        for a in (a3, a1, a2):
-            parts += [ufl.grad(a) * e1, ufl.grad(a) * e2]
-        grad_n0 = ufl.grad(n0)
-        parts.append(shell_forms.voigt(0.5 * (F0.T * grad_n0 + grad_n0.T * F0), e1, e2))
-    parts.append(ufl.as_vector([abs(ufl.JacobianDeterminant(mesh))]))
-    parts.append(ufl.as_vector([thickness ** 2 / cell_size ** 2]))
-    return ufl.as_vector([p[i] for p in parts for i in range(p.ufl_shape[0])])
+    parts[0], parts[1] = K * parts[0], K * parts[1]
+    parts += [ufl.as_vector([abs(ufl.JacobianDeterminant(mesh))]), ufl.as_vector([thickness ** 2 / cell_size ** 2])]
+    return shell_forms.stacked(parts)
+
+
+def _offsets(layout) -> dict[str, int]:
+    """Start of each quantity of a packed layout (name, length) in a point's values. The kernel reads both rules with
+    the full rule's offsets (AT_*) and |J|, alpha as their last two values (tests/test_shell_reference.py)."""
+    starts = np.cumsum([0] + [n for _, n in layout])
+    return {name: int(start) for (name, _), start in zip(layout, starts)}
 
 
 def law_parameters(law, law_eps) -> tuple[str, np.ndarray]:
@@ -99,7 +96,8 @@ def kernel_source(u_element, theta_element, cellname: str, degrees: tuple[int, i
     wr, ur = _basis(u_element, cellname, degrees[1])
     _, tr = _basis(theta_element, cellname, degrees[1])
     defines = {"NU": uf.shape[2], "NT": tf.shape[2], "NQF": len(wf), "NQR": len(wr), "LAW": LAWS[law],
-               "NLAW": n_law, "SF": sum(n for _, n in KERNEL_FULL), "SR": sum(n for _, n in KERNEL_REDUCED)}
+               "NLAW": n_law, "SF": sum(n for _, n in KERNEL_FULL), "SR": sum(n for _, n in KERNEL_REDUCED),
+               **{f"AT_{name}": start for name, start in _offsets(KERNEL_FULL).items()}}
     head = "".join(f"#define {k} {v}\n" for k, v in defines.items())
     tables = (f"static const double WF[NQF] = {_table(wf)};\nstatic const double WR[NQR] = {_table(wr)};\n"
               f"static const double UF[NQF][3][NU] = {_table(uf)};\nstatic const double TF[NQF][3][NT] = {_table(tf)};\n"
@@ -158,8 +156,8 @@ static inline void rule(double (*restrict Au)[NU], double (*restrict At)[NT], co
   for (int q = 0; q < nq; ++q)
   {
     const double* r = ref + q * size;
-    const double *c1 = r, *c2 = r + 2, *g1 = r + 4, *g2 = r + 7, *s0 = r + 10, *a3 = r + 12, *a1 = r + 15,
-                 *a2 = r + 18;
+    const double *c1 = r + AT_c1, *c2 = r + AT_c2, *g1 = r + AT_g1, *g2 = r + AT_g2, *s0 = r + AT_s0,
+                 *a3 = r + AT_a3, *a1 = r + AT_a1, *a2 = r + AT_a2;
     const double detJ = r[size - 2], alpha = r[size - 1];
     const double scale = weights[q] * detJ;
     const double wm = bending ? alpha : 1.0 - alpha;
@@ -222,8 +220,9 @@ static inline void rule(double (*restrict Au)[NU], double (*restrict At)[NT], co
     double S[2][2] = {{0.0, 0.0}, {0.0, 0.0}};
     if (bending)
     {
-      const double* Da[3][2] = {{r + 21, r + 24}, {r + 27, r + 30}, {r + 33, r + 36}};   /* Da3_j, Da1_j, Da2_j */
-      const double* k0 = r + 39;
+      const double* Da[3][2] = {{r + AT_Da3_1, r + AT_Da3_2}, {r + AT_Da1_1, r + AT_Da1_2},
+                                {r + AT_Da2_1, r + AT_Da2_2}};
+      const double* k0 = r + AT_k0;
       double d11[3], d12[3], d22[3];
       for (int k = 0; k < 3; ++k)
       {

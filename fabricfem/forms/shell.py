@@ -167,8 +167,8 @@ def reference_layout(bending: bool) -> tuple[tuple[str, int], ...]:
     return REFERENCE_MEMBRANE_SHEAR + (REFERENCE_BENDING if bending else ())
 
 
-def reference_quantities(phi0, n0, director_base, warp_weft, bending: bool):
-    """The reference quantities of `reference_layout(bending)` as one UFL vector (to evaluate at quadrature points)."""
+def reference_parts(phi0, n0, director_base, warp_weft, bending: bool) -> list:
+    """The reference quantities of `reference_layout(bending)`, one UFL vector each, in the layout's order."""
     F0 = ufl.grad(phi0)
     e1, e2 = material_frame(F0, *warp_weft)
     g1, g2 = F0 * e1, F0 * e2
@@ -179,7 +179,17 @@ def reference_quantities(phi0, n0, director_base, warp_weft, bending: bool):
             parts += [ufl.grad(a) * e1, ufl.grad(a) * e2]
         grad_n0 = ufl.grad(n0)
         parts.append(voigt(0.5 * (F0.T * grad_n0 + grad_n0.T * F0), e1, e2))
+    return parts
+
+
+def stacked(parts) -> ufl.core.expr.Expr:
+    """One UFL vector of the components of `parts` (vectors), in order (to evaluate at quadrature points)."""
     return ufl.as_vector([p[i] for p in parts for i in range(p.ufl_shape[0])])
+
+
+def reference_quantities(phi0, n0, director_base, warp_weft, bending: bool):
+    """The reference quantities of `reference_layout(bending)` as one UFL vector (to evaluate at quadrature points)."""
+    return stacked(reference_parts(phi0, n0, director_base, warp_weft, bending))
 
 
 def _unpack(packed, bending: bool) -> dict:
