@@ -6,7 +6,7 @@
 The same scene as a file: `fabricfem run scenes/sleeve.toml`.
 
 Data flow: configuration (wear.config.SleeveConfig: the tube, the fabric, the flexion, the contact, the route)
--> mesh (meshes.tube, Q2) -> forms (Naghdi shell) -> route (wear.run.build_run: explicit central differences
+-> mesh (meshes.tube, Q2) -> forms (Naghdi shell) -> route (wear.run.build_run: the garment engine's explicit central differences
 with lumped mass, the sleeve's weight and Lagrange-multiplier contact with Coulomb friction [Man2006, Box 5])
 -> outputs (wear.recorder.WearRecorder: cloth.xdmf and cloth_pressure.xdmf per degree, torque.sto,
 body.pvd, torque.csv, torque.png, pressure renders). The torque is the resisting torque of the contact forces
@@ -25,18 +25,19 @@ from fabricfem.wear.run import build_run
 
 
 def main(out: Path, quick: bool = False, comm=MPI.COMM_WORLD):
-    """Run into `out`; returns the torque history (wear.sleeve.SleeveHistory)."""
+    """Run into `out`; returns the history (fabricfem.wear.contract.WearHistory)."""
     config = SleeveConfig.of(n_around=10, n_along=13, final_angle=6.0 if quick else 57.0,       # mesh I
                              settle_time=0.1 if quick else 0.4, name="sleeve demo")
     run = build_run(config, comm)                                                               # mesh, forms
     recorder = WearRecorder(run, out, render_at=[config.motion.final_angle], render=not quick)
     say = print if comm.rank == 0 else (lambda *a, **k: None)
     say(f"sleeve demo: {run.model.ndofs} dofs, {run.describe()}")
-    history = run.run(on_step=lambda step: (recorder.record(step), say(f"  {step.angle:5.1f} deg: torque "
-                                                                       f"{step.torque:+.4e} N m")))   # route
+    history = run.run(on_step=lambda step: (recorder.record(step), say(f"  {step.phase:6s} {step.coordinate:5.1f} deg: "
+                                                                       f"torque {step.torques['elbow']:+.4e} N m")))
     recorder.close(history)                                                                     # outputs
     run.destroy()
-    say(f"done: torque at {history.angles[-1]:.0f} deg {history.torques[-1]:.4e} N m; wrote {out}")
+    angle, torque = history.motion_curve("elbow")
+    say(f"done: torque at {angle[-1]:.0f} deg {torque[-1]:.4e} N m; wrote {out}")
     return history
 
 

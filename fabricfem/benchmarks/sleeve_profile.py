@@ -84,7 +84,7 @@ def profile_flexion(mesh: str, final_angle: float, repeats: int, comm: MPI.Comm 
     shares = {p: statistics.median(t[f"{p}_share"] for t in timings) for p in TIMING_PARTS}
     return ProfileRow(case, mesh, comm.size, float(final_angle), int(repeats), int(timings[-1]["steps"]),
                       problem.model.ndofs, statistics.median(t["ms_per_step"] for t in timings),
-                      statistics.median(t["cpu_ms_per_step"] for t in timings), statistics.median(walls), shares, history.steps[-1].torque,
+                      statistics.median(t["cpu_ms_per_step"] for t in timings), statistics.median(walls), shares, history.steps[-1].torques["elbow"],
                       max(s.max_penetration for s in history.steps))
 
 

@@ -82,28 +82,40 @@ def critical_time_step_estimate(data: dict) -> float | None:
     return stability.critical_time_step(None, tuple(rayleigh), omega_max=omega)  # eq. 2.86
 
 
-# the part of SleeveConfig each parameter belongs to -> the scene section that sets it
-_SLEEVE_SECTION_OF = {"tube": "mesh", "material": "fabric", "motion": "motion", "contact": "contact", "route": "route"}
+# the part of SleeveConfig each parameter belongs to -> the wear scene's section that sets it
+_SLEEVE_SECTION_OF = {"tube": "garment", "material": "fabric", "motion": "motion", "contact": "contact",
+                      "route": "route"}
+
+
+def _own_keys(cls, table: dict) -> dict:
+    """The keys of `table` that are fields of dataclass `cls`."""
+    return {k: v for k, v in table.items() if k in cls.__dataclass_fields__}
 
 
 def sleeve_config(data: dict) -> SleeveConfig:
-    """The SleeveConfig of a sleeve scene's data ([mesh], [fabric], [body], [motion], [contact], [route]); its
-    checks (fabricfem.wear.config) become SceneErrors naming the section and key."""
+    """The SleeveConfig of an arm-in-tube wear scene ([garment] builder = "tube", [body] type = "arm", [motion]
+    type = "elbow_flexion") for the sleeve's Newton routes (quasistatic, implicit: E1 = E2); its checks
+    (fabricfem.wear.config) become SceneErrors naming the section and key."""
     fabric, name = data["fabric"], data.get("scene", {}).get("name", "sleeve")
-    build_fabric(fabric)                              # the values' own checks first (sign, range, finite)
-    if fabric["E1"] != fabric["E2"]:
-        raise SceneError(f"fabric.E2: the sleeve uses E1 = E2 [Man2006, sec. 5.3], got E1 = {fabric['E1']} and "
-                         f"E2 = {fabric['E2']}")
+    if "catalogue" in fabric:
+        material = FabricSpec(fabric_name=fabric["catalogue"])
+    else:
+        build_fabric(fabric)                              # the values' own checks first (sign, range, finite)
+        if fabric["E1"] != fabric["E2"]:
+            raise SceneError(f"fabric.E2: the sleeve's Newton routes use E1 = E2 [Man2006, sec. 5.3], got E1 = "
+                             f"{fabric['E1']} and E2 = {fabric['E2']} (the explicit route takes any fabric)")
+        material = FabricSpec(E=fabric["E1"], G=fabric["G12"], nu12=fabric["nu12"], thickness=fabric["thickness"],
+                              density=section(FabricSection, fabric).density)
     try:
+        garment = _own_keys(TubeSpec, data["garment"])
+        if "quadrature" in garment:
+            garment["quadrature"] = tuple(garment["quadrature"])
         return SleeveConfig(
-            tube=from_table(TubeSpec, data["mesh"], exclude=("type", "cell", "order", "allow_large")),
-            material=FabricSpec(E=fabric["E1"], G=fabric["G12"], nu12=fabric["nu12"], thickness=fabric["thickness"],
-                                density=section(FabricSection, fabric).density),
-            motion=from_table(FlexionSpec, data["motion"], exclude=("type",)),
+            tube=TubeSpec(**garment), material=material,
+            motion=from_table(FlexionSpec, _own_keys(FlexionSpec, data["motion"])),
             contact=from_table(ContactSpec, data.get("contact", {})),
-            route=from_table(RouteSpec, data.get("route", {})),
-            arm=from_table(ArmDimensions, {**vars(DEFAULT_ARM), **{k: v for k, v in data["body"].items()
-                                                                   if k != "type"}}),
+            route=from_table(RouteSpec, _own_keys(RouteSpec, data.get("route", {}))),
+            arm=from_table(ArmDimensions, {**vars(DEFAULT_ARM), **_own_keys(ArmDimensions, data["body"])}),
             name=name)
     except ValueError as exc:
         message = str(exc)
@@ -161,13 +173,11 @@ def check_objects(data: dict, path: Path | None = None) -> None:
     """Checks that need objects: an explicit dynamic scene's numeric dt must not exceed the critical time step
     (unless dynamics.force = true); a wear scene's fabric, body, motion (the file is read), monitors and pattern
     (read and checked, not meshed) are built (`path`: the scene file, for relative file names)."""
-    if "garment" in data or data.get("scene", {}).get("kind") == "wear":
+    if data["scene"]["kind"] == "wear":
         check_wear_objects(data, path)
         return
     check_size(data)
     build_fabric(data["fabric"])                      # every fabric value checked before meshing
-    if schema.SLEEVE_SECTIONS & set(data):
-        sleeve_config(data)
     dyn = data.get("dynamics")
     if not dyn:
         return
@@ -198,12 +208,8 @@ def load(path: str | Path) -> Scene:
 
 def check_wear_objects(data: dict, path: Path | None) -> None:
     """The object checks of a wear scene before meshing (module docstring of fabricfem.scenes.wear)."""
-    route = wear.route_of(data)
-    if route == "sleeve":
-        sleeve_config(wear.sleeve_data(data))
-        return
-    if route == "compression":
-        check_objects(wear.compression_data(data))
+    if wear.route_of(data) != "explicit":
+        sleeve_config(data)                           # the Newton routes' configuration and its checks
         return
     fabric = wear.wear_fabric(data, build_fabric)
     if not fabric.density > 0.0:

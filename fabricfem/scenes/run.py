@@ -22,7 +22,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fabricfem import io
-from fabricfem.body.ellipsoid import Ellipsoid
+from fabricfem.body.arm import ArmDimensions
 from fabricfem.contact.obstacles import Plane, RoundedBox, table_top
 from fabricfem.contact.problem import ContactProblem
 from fabricfem.dynamics import CentralDifference, NewmarkIntegrator, critical_time_step, node_monitor
@@ -30,15 +30,15 @@ from fabricfem.dynamics.strain_limit import FastProjection, attach
 from fabricfem.dynamics.ts import GeneralizedAlphaIntegrator
 from fabricfem.scenes import wear
 from fabricfem.scenes.build import build_fabric, build_mesh, sleeve_config
-from fabricfem.scenes.schema import ALL_NODES, Scene, SceneError, donning_start
+from fabricfem.scenes.schema import ALL_NODES, Scene, SceneError
 from fabricfem.scenes.sections import (
-    DonningSection,
     DynamicsSection,
     ModelSection,
     MonitorSection,
     OutputSection,
     SceneSection,
     SolverSection,
+    from_table,
     section,
 )
 from fabricfem.shell import ShellModel
@@ -46,9 +46,11 @@ from fabricfem.solvers.loadstep import LoadStep, solve_load_path
 from fabricfem.solvers.newton import NewtonSolver
 from fabricfem.solvers.system import base_model
 from fabricfem.wear.checkpoint import Checkpoint
-from fabricfem.wear.compression import fit_sleeve, pressure_report
-from fabricfem.wear.garment import build_garment_run
-from fabricfem.wear.run import interrupt_flag, run_sleeve_scene, run_wear
+from fabricfem.wear.config import ContactSpec, FlexionSpec, RouteSpec, TubeSpec, check_fit
+from fabricfem.wear.contract import WearHistory
+from fabricfem.wear.garment import GarmentRun, build_garment_run
+from fabricfem.wear.run import ROUTES, interrupt_flag, run_wear
+from fabricfem.wear.sleeve import tube_flexion_run
 
 
 def _components(values, n: int, where: str):
@@ -144,11 +146,11 @@ def scene_sha256(scene: Scene) -> str:
 
 
 def run_scene(scene: Scene, comm=MPI.COMM_WORLD, out: Path | None = None, resume: bool = False) -> SceneOutcome:
-    """Run a scene by its kind (static load stepping, dynamic, sleeve, compression, wear) into its output folder
-    (`out`, default [output] dir; io.OutputFolder: the previous run's outputs are removed first, summary.json
-    records the status). A wear scene on the explicit engine and a dynamic scene write checkpoints (every
-    CHECKPOINT_EVERY records, [dynamics] checkpoint_every) and, with `resume`, continue from the folder's
-    checkpoint (fabricfem.wear.checkpoint, `run_dynamic_scene`)."""
+    """Run a scene by its kind (RUNNERS: static load stepping, dynamic, wear) into its output folder (`out`,
+    default [output] dir; io.OutputFolder: the previous run's outputs are removed first, summary.json records the
+    status). A wear scene on the explicit engine and a dynamic scene write checkpoints (every CHECKPOINT_EVERY
+    records, [dynamics] checkpoint_every) and, with `resume`, continue from the folder's checkpoint
+    (fabricfem.wear.checkpoint, `run_dynamic_scene`)."""
     if out is not None:
         scene = Scene({**scene.data, "output": {**scene.data.get("output", {}), "dir": str(out)}}, scene.path,
                       scene.kind)
@@ -156,25 +158,13 @@ def run_scene(scene: Scene, comm=MPI.COMM_WORLD, out: Path | None = None, resume
     sha = scene_sha256(Scene({k: v for k, v in scene.data.items() if k != "output"}, None, scene.kind))
     folder = io.OutputFolder(out, scene_sha256(scene), comm, keep=resume)
     try:
-        if scene.kind == "wear":
-            result = run_wear_scene(scene, out, comm, resume, sha)
-        elif scene.kind == "sleeve":
-            config = sleeve_config(scene.data)
-            output = section(OutputSection, scene.get("output"))
-            result = run_sleeve_scene(config, out, output.render, output.render_angles, output.body_samples, comm)
-        elif scene.kind == "dynamic":
-            result = run_dynamic_scene(scene, comm, resume, sha)
-        elif scene.kind == "compression":
-            result = run_compression_scene(scene, comm)
-        else:
-            result = run_static_scene(scene, comm)
+        result = RUNNERS[scene.kind](scene, out, comm, resume, sha)
     except Exception as exc:
         folder.finish(f"failed: {' '.join(str(exc).split())}")
         raise
-    failure = getattr(result, "failure", "")
+    failure = result.failure if isinstance(result, (WearHistory, DynamicRun)) else ""
     status = f"stopped early: {failure}" if failure else "completed"
-    summary = result.summary() if callable(getattr(result, "summary", None)) else None
-    folder.finish(status, summary)
+    folder.finish(status, result.summary() if isinstance(result, WearHistory) else None)
     return SceneOutcome(result, status, out)
 
 
@@ -182,27 +172,67 @@ CHECKPOINT_EVERY = 25       # records between the checkpoints of a wear run (exp
 
 
 def run_wear_scene(scene: Scene, out: Path, comm=MPI.COMM_WORLD, resume: bool = False, sha: str = ""):
-    """`fabricfem run` for wear scenes (fabricfem.scenes.wear): the sleeve's and the compression sleeve's own
-    routes, or the explicit engine (fabricfem.wear.garment) for any garment on any body."""
-    data = scene.data
-    route = wear.route_of(data)
-    if route == "sleeve":
-        sleeve = wear.sleeve_data(data)
-        output = section(OutputSection, sleeve.get("output"))
-        return run_sleeve_scene(sleeve_config(sleeve), out, output.render, output.render_angles, output.body_samples,
-                                comm)
-    if route == "compression":
-        return run_compression_scene(Scene(wear.compression_data(data), scene.path, "compression"), comm)
+    """`fabricfem run` of a wear scene: its WearRun (`build_wear_run`) with progress, the recorder's outputs and
+    the summary (fabricfem.wear.run.run_wear); the explicit engine checkpoints and resumes."""
     run, headline, render_at, output = build_wear_run(scene, comm)
-    checkpoint = Checkpoint(out, comm, sha or scene_sha256(scene), CHECKPOINT_EVERY)
-    if resume and not checkpoint.exists():
-        raise SceneError(f"resume: no checkpoint in {out}/checkpoint (run the scene without --resume first)")
+    checkpoint = None
+    if isinstance(run, GarmentRun):
+        checkpoint = Checkpoint(out, comm, sha or scene_sha256(scene), CHECKPOINT_EVERY)
+        if resume and not checkpoint.exists():
+            raise SceneError(f"resume: no checkpoint in {out}/checkpoint (run the scene without --resume first)")
     return run_wear(run, out, headline, render_at, output.get("render", True), output.get("body_samples", 24),
                     checkpoint, resume)
 
 
 def build_wear_run(scene: Scene, comm=MPI.COMM_WORLD):
-    """The explicit engine's GarmentRun of a wear scene, its headline, the render coordinates and [output]."""
+    """The WearRun of a wear scene, its headline, the render coordinates and [output]: an arm in a tube flexing at
+    the elbow by its [route] solver (fabricfem.wear.sleeve.tube_flexion_run on the explicit engine, the Newton
+    routes of fabricfem.wear.run.ROUTES), any other garment on the explicit engine (`build_garment_run`)."""
+    data = scene.data
+    if wear.is_tube_flexion(data):
+        run = tube_scene_run(scene, comm)
+    else:
+        run = garment_scene_run(scene, comm)
+    output = data.get("output", {})
+    render_at = output.get("render_at")
+    if render_at is None:
+        end = run.duration if isinstance(run, GarmentRun) else None
+        render_at = ([run.axis_at(run.motion_start + f * (end - run.motion_start)) if run.axis is not None
+                      else f * end for f in (1 / 3, 2 / 3, 1.0)] if end is not None else
+                     [f * data["motion"].get("final_angle", 57.0) for f in (1 / 3, 2 / 3, 1.0)])
+    body = list(run.body.segments)
+    headline = (f"{run.name}: {run.model.ndofs} dofs, body {body}, {comm.size} rank(s); "
+                f"mu = {data.get('contact', {}).get('friction', 0.1 if wear.is_tube_flexion(data) else 0.0)}; "
+                f"{run.describe()}")
+    return run, headline, render_at, output
+
+
+def tube_scene_run(scene: Scene, comm):
+    """The arm-in-tube sleeve of a wear scene by its [route] solver: the explicit engine's run of the scene's
+    sections (any fabric) or a Newton route of its SleeveConfig (E1 = E2)."""
+    data = scene.data
+    solver = wear.route_of(data)
+    if solver != "explicit":
+        return ROUTES[solver](sleeve_config(data), comm)
+    fabric = wear.wear_fabric(data, build_fabric)
+    garment = {k: v for k, v in data["garment"].items() if k in TubeSpec.__dataclass_fields__}
+    if "quadrature" in garment:
+        garment["quadrature"] = tuple(garment["quadrature"])
+    try:
+        tube_spec = TubeSpec(**garment)
+        arm = from_table(ArmDimensions, {k: v for k, v in data["body"].items() if k in ArmDimensions.__dataclass_fields__})
+        motion = from_table(FlexionSpec, {k: v for k, v in data["motion"].items() if k in FlexionSpec.__dataclass_fields__})
+        contact = from_table(ContactSpec, data.get("contact", {}))
+        route = from_table(RouteSpec, {k: v for k, v in data.get("route", {}).items()
+                                       if k in RouteSpec.__dataclass_fields__})
+        check_fit(tube_spec.radius, arm)
+    except ValueError as exc:
+        raise SceneError(f"garment: {exc}") from None
+    return tube_flexion_run(scene_name(scene), fabric, tube_spec, arm, motion, contact, route, comm)
+
+
+def garment_scene_run(scene: Scene, comm) -> GarmentRun:
+    """The explicit engine's GarmentRun of a wear scene (fabricfem.scenes.wear.plan and garment_mesh)."""
     data = scene.data
     fabric = wear.wear_fabric(data, build_fabric)
     plan = wear.plan(data, fabric, scene.path)
@@ -211,22 +241,12 @@ def build_wear_run(scene: Scene, comm=MPI.COMM_WORLD):
         raise SceneError("donning: pull_edges and belt_edges name pattern edges; this garment is a tube")
     handles = wear.edge_handles(plan.handles, pattern_garment) if plan.handles else []
     garment = section(wear.GarmentSection, data["garment"])
-    name = scene_name(scene)
-    run = build_garment_run(name, fmesh, fabric, plan.body, seams=seams, holds=holds, torques=plan.torques,
-                            timeline=plan.timeline, settings=plan.settings,
-                            contact_method=plan.contact.method or "lagrange", friction=plan.contact.friction,
-                            penalty=plan.contact.penalty,
-                            psri_degrees=tuple(garment.quadrature) if garment.quadrature else (4, 2), axis=plan.axis,
-                            handles=handles)
-    output = data.get("output", {})
-    render_at = output.get("render_at")
-    if render_at is None:
-        end = run.phases[-1].records * plan.timeline.record_time
-        render_at = ([plan.axis[1](f * end) for f in (1 / 3, 2 / 3, 1.0)] if plan.axis is not None else
-                     [run.duration * f for f in (1 / 3, 2 / 3, 1.0)])
-    headline = (f"{name}: {run.model.ndofs} dofs, {len(seams)} seams, body {list(plan.body.segments)}, "
-                f"{comm.size} rank(s); mu = {plan.contact.friction}, {run.contact.method} contact; {run.describe()}")
-    return run, headline, render_at, output
+    return build_garment_run(scene_name(scene), fmesh, fabric, plan.body, seams=seams, holds=holds,
+                             torques=plan.torques, timeline=plan.timeline, settings=plan.settings,
+                             contact_method=plan.contact.method or "lagrange", friction=plan.contact.friction,
+                             penalty=plan.contact.penalty,
+                             psri_degrees=tuple(garment.quadrature) if garment.quadrature else (4, 2),
+                             axis=plan.axis, handles=handles)
 
 
 def run_static_scene(scene: Scene, comm=MPI.COMM_WORLD) -> list[LoadStep]:
@@ -593,44 +613,14 @@ class DynamicCheckpoint:
         return state["history"]
 
 
-def run_compression_scene(scene, comm=MPI.COMM_WORLD) -> dict | None:
-    """`fabricfem run` for compression scenes ([limb], optional [donning]): don the tube onto the
-    limb with progress lines (rank 0), write `pressure_report` into output.dir (default results/<name>), add
-    its summary (peak and mean pressure on the skin in Pa, kPa and mmHg with the peak's position, hoop tension)
-    to the run's summary.json and print it. Returns the summary on rank 0, None elsewhere."""
-    say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
-    fabric = build_fabric(scene["fabric"])                       # before meshing: a bad fabric fails fast
-    limb = Ellipsoid(np.array(scene["limb"]["center"], dtype=float), np.eye(3),
-                     np.array(scene["limb"]["radii"], dtype=float))
-    donning = section(DonningSection, scene.get("donning"))
-    name = section(SceneSection, scene.get("scene")).name or "compression"
-    out = output_dir(scene)
-    render = section(OutputSection, scene.get("output")).render
-    t0 = time.perf_counter()
-    fmesh = build_mesh(scene["mesh"], comm)
-    start, steps = donning_start(scene.data), int(donning.steps)
-    say(f"{name}: tube R = {scene['mesh']['radius']} m on a limb of radii {limb.radii.tolist()} m, growing from "
-        f"{start:.3g} of its size in {steps} steps, {comm.size} rank(s)")
-    clock = io.Progress("donning")
-    problem = fit_sleeve(fmesh, fabric, limb, start, steps, float(donning.tolerance),
-                         on_step=lambda s: say(f"  limb at {s.factor:5.3f}: {s.augmentations} augmentations, "
-                                               f"{s.newton_iterations} Newton iterations, penetration "
-                                               f"{s.max_penetration:.1e} m  "
-                                               f"{clock((s.factor - start) / max(1.0 - start, 1e-12))}"))
-    report = pressure_report(problem, limb, out, name, render=render)
-    memory = io.peak_memory_mib(comm)
-    if report is None:
-        return None
-    summary = {"scene": name, "kind": "compression", "ranks": comm.size, "wall_s": time.perf_counter() - t0,
-               "peak_memory_mib": memory["max_mib"], **report}
-    io.update_json(out / "summary.json", summary, MPI.COMM_SELF)
-    say(f"{name}: pressure on the skin: peak {report['peak_pressure_kPa']:.3f} kPa = "
-        f"{report['peak_pressure_mmHg']:.1f} mmHg at {tuple(round(c, 4) for c in report['peak_position_m'])} m, "
-        f"mean {report['mean_pressure_kPa']:.3f} kPa = {report['mean_pressure_mmHg']:.1f} mmHg over "
-        f"{report['contact_area_m2'] * 1e4:.1f} cm^2; range {report['min_mmHg']:.1f}-{report['max_mmHg']:.1f} mmHg "
-        f"(ring means {report['ring_min_mmHg']:.1f}-{report['ring_max_mmHg']:.1f} mmHg); ring nearest the limb's "
-        f"centre: p = T kappa, hoop tension T = {report['hoop_tension_N_per_m']:.1f} N/m, largest deviation "
-        f"{100 * report['laplace_deviation']:.2f}% of its peak")
-    say(f"wrote {out}/sleeve.xdmf (displacement [m], pressure_mmHg), pressure_profile.csv/.png, summary.json"
-        + (", pressure.png, skin_pressure.png" if render else ""))
-    return summary
+def _say_static_resume(scene: Scene, comm) -> None:
+    if comm.rank == 0:
+        print(f"{scene_name(scene)}: a static scene has no checkpoint; --resume solves it from the start", flush=True)
+
+
+# scene kind -> runner(scene, out, comm, resume, sha)
+RUNNERS = {
+    "static": lambda scene, out, comm, resume, sha: (_say_static_resume(scene, comm) if resume else None,
+                                                     run_static_scene(scene, comm))[1],
+    "dynamic": lambda scene, out, comm, resume, sha: run_dynamic_scene(scene, comm, resume, sha),
+    "wear": run_wear_scene}

@@ -38,16 +38,9 @@ typos). Units are SI. Example (scenes/rollup.toml):
     dir = "results/rollup"
     probe = [0.3, 0.0, 0.0]   # a node whose displacement is reported
 
-A sleeve scene (kind = "sleeve", scenes/sleeve.toml, run by fabricfem.wear) has a tube [mesh], a [fabric] with
-E1 = E2, no [solver] and no [[support]] (the shoulder end end0 is held), and [body], [motion], optional [contact]
-and [route]. Their keys, types and defaults are the fields of the dataclasses of fabricfem.wear.config
-(`fabricfem scenes` documents them; units in the field comments): [mesh] adds TubeSpec's quadrature and
-hold_rotations; [body] (type = "default_arm") ArmDimensions; [motion] (type = "elbow_flexion") FlexionSpec;
-[contact] ContactSpec; [route] RouteSpec. Older files that set motion.steps, motion.solver, motion.mass_damping,
-motion.rotary_inertia_scale, motion.dynamic_similarity or contact.gravity are refused with the new place
-of the key (MOVED_KEYS).
-
-[output] may add render_angles = [19.0, 38.0, 57.0] (deg) and body_samples (points per ellipsoid ring).
+Every scene names its kind: `[scene] kind = "static" | "dynamic" | "wear"` (a missing kind is refused naming
+it). A wear scene (a garment on a moving wearer, fabricfem.scenes.wear) has its own sections; the older sleeve and
+compression layouts are refused with every moved key in one message (fabricfem.scenes.legacy).
 
 A support may name a mesh node instead of an edge: point = [x, y, z] (m, a node within 1e-8 m).
 
@@ -104,17 +97,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fabricfem.body.arm import ArmDimensions
 from fabricfem.parameters import param_doc
 from fabricfem.scenes import wear as wear_module
 from fabricfem.scenes.errors import SceneError
 from fabricfem.scenes.errors import suggest as _suggest
+from fabricfem.scenes.legacy import is_old_layout, old_layout_message
 from fabricfem.scenes.sections import (
     AccuracySection,
-    DonningSection,
     DynamicsSection,
     FabricSection,
-    LimbSection,
     LoadSection,
     MeshSection,
     ModelSection,
@@ -127,22 +118,18 @@ from fabricfem.scenes.sections import (
     schema_of,
 )
 from fabricfem.scenes.wear import WEAR_LIST_SECTIONS, WEAR_SECTION_CLASSES, check_wear
-from fabricfem.wear.config import ContactSpec, FlexionSpec, RouteSpec, TubeSpec
 
-# section -> the dataclass(es) that declare its keys, types, defaults and units (fabricfem.scenes.sections, and
-# fabricfem.wear.config for a sleeve's); [mesh] of a sleeve adds TubeSpec's keys, [body] and [motion] a `type`
+# section -> the dataclass(es) that declare its keys, types, defaults and units (fabricfem.scenes.sections) of the
+# static and dynamic kinds (the wear kind's: fabricfem.scenes.wear.WEAR_SECTION_CLASSES)
 SECTION_CLASSES: dict[str, tuple] = {
-    "scene": (SceneSection,), "mesh": (MeshSection, TubeSpec), "fabric": (FabricSection,), "model": (ModelSection,),
+    "scene": (SceneSection,), "mesh": (MeshSection,), "fabric": (FabricSection,), "model": (ModelSection,),
     "support": (SupportSection,), "load": (LoadSection,), "solver": (SolverSection,), "output": (OutputSection,),
-    "body": (ArmDimensions,), "motion": (FlexionSpec,), "contact": (ContactSpec,), "route": (RouteSpec,),
-    "limb": (LimbSection,), "donning": (DonningSection,), "dynamics": (DynamicsSection,),
-    "dynamics.obstacles": (ObstacleSection,), "dynamics.monitors": (MonitorSection,),
-    "accuracy": (AccuracySection,)}
-TYPED_SECTIONS = {"body": "default_arm", "motion": "elbow_flexion"}   # sections with a required `type` key
+    "dynamics": (DynamicsSection,), "dynamics.obstacles": (ObstacleSection,),
+    "dynamics.monitors": (MonitorSection,), "accuracy": (AccuracySection,)}
 
 
 def _section_schema(name: str) -> dict[str, tuple[type | tuple, bool]]:
-    schema = {"type": (str, True)} if name in TYPED_SECTIONS else {}
+    schema: dict = {}
     for cls in SECTION_CLASSES[name]:
         schema.update({k: v for k, v in schema_of(cls).items() if k not in schema})
     return schema
@@ -188,12 +175,11 @@ def reference_markdown() -> str:
              "in degrees. A scene names its kind in `[scene] kind`: static ([mesh], [fabric], [[support]], [[load]], "
              "[solver]), dynamic ([dynamics] instead of [solver]), wear ([garment], [fabric], [body], [motion], "
              "optional [donning], [contact], [route], [[torque]], [output]: any garment on any moving wearer; "
-             "scenes/sleeve.toml, scenes/compression_sleeve.toml, scenes/trousers_standing.toml), and the older "
-             "layouts sleeve ([mesh], [body], [motion], optional [contact], [route]) and compression ([limb], "
-             "optional [donning]).", ""]
+             "scenes/sleeve.toml, scenes/compression_sleeve.toml, scenes/trousers_standing.toml). The older "
+             "sleeve and compression layouts are refused with every moved key in one message.", ""]
     for name, classes in SECTION_CLASSES.items():
         title = f"[[{name}]]" if name in LIST_SECTIONS or "." in name else f"[{name}]"
-        lines += _section_table(title, classes, TYPED_SECTIONS.get(name))
+        lines += _section_table(title, classes)
     lines += ["# Wear scenes (`kind = \"wear\"`)", "", " ".join((wear_module.__doc__ or "").split()), ""]
     for name, classes in WEAR_SECTION_CLASSES.items():
         title = f"[[{name}]] (wear)" if name in WEAR_LIST_SECTIONS else f"[{name}] (wear)"
@@ -210,16 +196,7 @@ STANDARD_COLUMNS = {"time", "kinetic", "strain", "external_work", "dissipated", 
                     "newton_iterations"}
 LIST_SECTIONS = {"support", "load"}
 REQUIRED_SECTIONS = {"mesh", "fabric", "solver"}
-SLEEVE_SECTIONS = {"body", "motion", "contact", "route"}   # a scene with any of them is a sleeve scene
-SLEEVE_MESH_KEYS = set(schema_of(TubeSpec)) - {"length", "radius", "n_around", "n_along"}   # sleeve-only [mesh] keys
-KINDS = ("static", "dynamic", "sleeve", "compression", "wear")
-# keys of older scene files that moved: old -> new (refused with the new name)
-MOVED_KEYS = {"motion.steps": "motion.angle_steps", "motion.solver": "route.solver",
-              "motion.mass_damping": "route.mass_damping", "motion.rotary_inertia_scale": "route.rotary_inertia_scale",
-              "motion.dynamic_similarity": "route.dynamic_similarity", "contact.gravity": "route.gravity"}
-COMPRESSION_SECTIONS = {"limb", "donning"}           # a scene with any of them is a compression scene
-BODY_TYPES = {"default_arm"}
-MOTION_TYPES = {"elbow_flexion"}
+KINDS = ("static", "dynamic", "wear")
 CELLS = ("quadrilateral", "triangle")
 EDGES = {"plate": ("left", "right", "bottom", "top"), "tube": ("end0", "end1")}   # edge tags of the builders
 ALL_NODES = "all"   # a support on every node (e.g. u = ["free", "free", 0]: an in-plane problem)
@@ -230,10 +207,6 @@ LOAD_TYPES = {"gravity", "body_force", "edge_traction", "pressure", "edge_moment
 def _check_table(section: str, table: dict, where: str):
     schema = SCHEMA[section] if section in SCHEMA else SUB_SCHEMA[section]
     for key, value in table.items():
-        if f"{section}.{key}" in MOVED_KEYS:
-            new_section, new_key = MOVED_KEYS[f"{section}.{key}"].split(".")
-            raise SceneError(f"{where}.{key}: this key has moved; write it as {new_key} = {value!r} in "
-                             f"[{new_section}]")
         if key not in schema:
             raise SceneError(f"{where}: unknown key {key!r}{_suggest(key, schema)}; allowed: {sorted(schema)}")
         types, _ = schema[key]
@@ -248,7 +221,7 @@ def _check_table(section: str, table: dict, where: str):
 
 @dataclass
 class Scene:
-    """A validated scene: its TOML data and its kind (static, dynamic, sleeve, compression)."""
+    """A validated scene: its TOML data and its kind (static, dynamic, wear)."""
 
     data: dict[str, Any]
     path: Path | None = None
@@ -261,39 +234,57 @@ class Scene:
         return self.data.get(key, default)
 
 
+def scene_kind(data: dict, source: str = "scene") -> str:
+    """The kind a scene names in [scene] kind (SceneError naming `[scene] kind` when it is missing or unknown, and
+    listing every moved key of a file in the older sleeve or compression layout)."""
+    if is_old_layout(data):
+        raise SceneError(old_layout_message(data, source))
+    table = data.get("scene", {})
+    kind = table.get("kind") if isinstance(table, dict) else None
+    if kind is None:
+        raise SceneError(f"{source}: [scene] kind is missing; every scene names its kind: write [scene] kind = "
+                         f"\"static\", \"dynamic\" or \"wear\"")
+    if kind not in KINDS:
+        raise SceneError(f"scene.kind: unknown kind {kind!r}{_suggest(str(kind), KINDS)}; allowed: {list(KINDS)}")
+    return kind
+
+
 def validate(data: dict, source: str = "scene") -> Scene:
-    """Check sections, keys, types and cross-references; raise SceneError naming the problem."""
-    if "garment" in data or data.get("scene", {}).get("kind") == "wear":
+    """Check sections, keys, types and cross-references of a scene by its kind; raise SceneError naming the
+    problem."""
+    kind = scene_kind(data, source)
+    if kind == "wear":
         check_wear(data, source)
         check_accuracy(data, "wear")
         return Scene(data, kind="wear")
+    _check_sections(data, kind, source)
+    _check_mesh(data["mesh"])
+    _check_loads_and_supports(data)
+    if data.get("output", {}).get("probe") is not None:
+        _numbers("output.probe", data["output"]["probe"], 3)
+    for key in ("E1", "E2", "G12", "nu12", "thickness", "density", "G13"):
+        if key in data["fabric"]:
+            _finite(f"fabric.{key}", data["fabric"][key])
+    if kind == "dynamic":
+        _check_dynamics(data)
+    check_accuracy(data, kind)
+    return Scene(data, kind=kind)
+
+
+def _check_sections(data: dict, kind: str, source: str) -> None:
+    """Known sections, the required ones of `kind`, and each table's keys and types."""
     for section in data:
         if section not in SCHEMA:
             raise SceneError(f"{source}: unknown section [{section}]{_suggest(section, SCHEMA)}; "
                              f"allowed: {sorted(SCHEMA)}")
-    sleeve = bool(SLEEVE_SECTIONS & set(data))
     dynamic = "dynamics" in data
-    compression = bool(COMPRESSION_SECTIONS & set(data))
-    inferred = "sleeve" if sleeve else "compression" if compression else "dynamic" if dynamic else "static"
-    kind = data.get("scene", {}).get("kind", inferred)
-    if kind not in KINDS:
-        raise SceneError(f"scene.kind: unknown kind {kind!r}{_suggest(str(kind), KINDS)}; allowed: {list(KINDS)}")
-    if dynamic and (sleeve or "solver" in data):
-        other = "[solver]" if "solver" in data else "[body]/[motion]/[contact]"
-        raise SceneError(f"{source}: [dynamics] and {other} given: a scene is either dynamic (time integration "
-                         f"from rest) or static/sleeve, not both")
-    if compression and (sleeve or dynamic or "solver" in data):
-        other = sorted((SLEEVE_SECTIONS | {"dynamics", "solver"}) & set(data))
-        raise SceneError(f"{source}: [limb]/[donning] (a compression scene) and {other} given: a compression "
-                         f"scene has [mesh], [fabric], [limb], optional [donning] and [output]")
-    if sleeve:
-        required = (REQUIRED_SECTIONS - {"solver"}) | {"body", "motion"}     # [contact], [route]: defaults
-    elif compression:
-        required = (REQUIRED_SECTIONS - {"solver"}) | {"limb"}
-    elif dynamic:
-        required = (REQUIRED_SECTIONS - {"solver"}) | {"dynamics"}
-    else:
-        required = REQUIRED_SECTIONS
+    if dynamic != (kind == "dynamic"):
+        which = "dynamic" if dynamic else "static"
+        raise SceneError(f"scene.kind: {kind!r} does not match the sections given, which make a {which!r} scene")
+    if dynamic and "solver" in data:
+        raise SceneError(f"{source}: [dynamics] and [solver] given: a scene is either dynamic (time integration "
+                         f"from rest) or static, not both")
+    required = (REQUIRED_SECTIONS - {"solver"}) | {"dynamics"} if dynamic else REQUIRED_SECTIONS
     for section in sorted(required):
         if section not in data:
             raise SceneError(f"{source}: missing section [{section}]")
@@ -307,7 +298,10 @@ def validate(data: dict, source: str = "scene") -> Scene:
             if not isinstance(content, dict):
                 raise SceneError(f"{source}: [{section}] must be a table")
             _check_table(section, content, section)
-    mesh = data["mesh"]
+
+
+def _check_mesh(mesh: dict) -> None:
+    """A known mesh type with its keys, finite and positive, and a known cell."""
     if mesh["type"] not in MESH_KEYS:
         raise SceneError(f"mesh.type: unknown mesh {mesh['type']!r}{_suggest(mesh['type'], MESH_KEYS)}; "
                          f"allowed: {sorted(MESH_KEYS)}")
@@ -318,6 +312,11 @@ def validate(data: dict, source: str = "scene") -> Scene:
         _finite(f"mesh.{key}", mesh[key], 0.0)
     if mesh.get("cell", "quadrilateral") not in CELLS:
         raise SceneError(f"mesh.cell: unknown cell {mesh['cell']!r}{_suggest(mesh['cell'], CELLS)}; allowed: {CELLS}")
+
+
+def _check_loads_and_supports(data: dict) -> None:
+    """Load types, values, points and edges; supports by edge or point with their components."""
+    mesh = data["mesh"]
     edges = EDGES[mesh["type"]]
     for i, load in enumerate(data.get("load", [])):
         if load["type"] not in LOAD_TYPES:
@@ -345,23 +344,6 @@ def validate(data: dict, source: str = "scene") -> Scene:
         if "edge" in support and support["edge"] not in (*edges, ALL_NODES):
             raise SceneError(f"support[{i}].edge: a {mesh['type']} has no edge {support['edge']!r}"
                              f"{_suggest(support['edge'], (*edges, ALL_NODES))}; edges: {[*edges, ALL_NODES]}")
-    if data.get("output", {}).get("probe") is not None:
-        _numbers("output.probe", data["output"]["probe"], 3)
-    for key in ("E1", "E2", "G12", "nu12", "thickness", "density", "G13"):
-        if key in data["fabric"]:
-            _finite(f"fabric.{key}", data["fabric"][key])
-    if kind != inferred:
-        raise SceneError(f"scene.kind: {kind!r} does not match the sections given, which make a {inferred!r} scene")
-    if not sleeve and SLEEVE_MESH_KEYS & set(mesh):
-        raise SceneError(f"mesh: {sorted(SLEEVE_MESH_KEYS & set(mesh))} are keys of a sleeve scene's tube only")
-    if sleeve:
-        _check_sleeve(data)
-    if compression:
-        _check_compression(data)
-    if dynamic:
-        _check_dynamics(data)
-    check_accuracy(data, kind)
-    return Scene(data, kind=kind)
 
 
 ACCURACY_KINDS = ("static", "dynamic", "wear")
@@ -396,7 +378,7 @@ def check_target(where: str, target) -> float:
 def accuracy_quantities(data: dict) -> dict[str, str]:
     """{quantity name: its summary.json key} that an accuracy target may name (AccuracySection.quantity; a dotted
     key names a nested entry of a wear run's summary, fabricfem.scenes.wear.wear_quantities)."""
-    if "garment" in data or data.get("scene", {}).get("kind") == "wear":
+    if data.get("scene", {}).get("kind") == "wear":
         return wear_module.wear_quantities(data)
     if "dynamics" in data:
         names = {m["name"]: f"final_{m['name']}" for m in data["dynamics"].get("monitors", [])}
@@ -415,60 +397,6 @@ def accuracy_summary_key(data: dict, quantity: str) -> str:
         raise SceneError(f"accuracy.quantity: {quantity!r} is not a monitored output of this scene"
                          f"{_suggest(str(quantity), allowed)}; allowed: {sorted(allowed)}{hint}")
     return allowed[quantity]
-
-
-def _positive(where: str, value) -> None:
-    if not value > 0:
-        raise SceneError(f"{where}: must be positive, got {value!r}")
-
-
-def _check_sleeve(data: dict) -> None:
-    """Sleeve scenes: a tube, a known body and motion; the parameters themselves (and E1 = E2) are checked by
-    fabricfem.wear.config.SleeveConfig (scenes.build.sleeve_config)."""
-    mesh, body, motion = data["mesh"], data["body"], data["motion"]
-    if mesh["type"] != "tube":
-        raise SceneError(f"mesh.type: a sleeve scene needs a 'tube' mesh, got {mesh['type']!r}")
-    if body["type"] not in BODY_TYPES:
-        raise SceneError(f"body.type: unknown body {body['type']!r}{_suggest(body['type'], BODY_TYPES)}; "
-                         f"allowed: {sorted(BODY_TYPES)}")
-    if motion["type"] not in MOTION_TYPES:
-        raise SceneError(f"motion.type: unknown motion {motion['type']!r}{_suggest(motion['type'], MOTION_TYPES)}; "
-                         f"allowed: {sorted(MOTION_TYPES)}")
-
-
-def donning_start(data: dict) -> float:
-    """donning.start, by default the largest that leaves the limb inside the tube: 0.95 R / max(r2, r3)."""
-    radii = data["limb"]["radii"]
-    return float(data.get("donning", {}).get("start", min(1.0, 0.95 * data["mesh"]["radius"] / max(radii[1:]))))
-
-
-def _check_compression(data: dict) -> None:
-    """Compression scenes: a tube (n_around a multiple of 4), a limb symmetric about y = 0 and z = 0 that
-    starts inside the tube, and donning increments that grow it to full size."""
-    mesh, limb, donning = data["mesh"], data["limb"], data.get("donning", {})
-    if mesh["type"] != "tube":
-        raise SceneError(f"mesh.type: a compression scene needs a 'tube' mesh, got {mesh['type']!r}")
-    for key in ("length", "radius"):
-        _positive(f"mesh.{key}", mesh[key])
-    if mesh["n_around"] % 4:
-        raise SceneError(f"mesh.n_around: must be a multiple of 4 in a compression scene (nodes on the symmetry "
-                         f"planes y = 0 and z = 0), got {mesh['n_around']}")
-    center = _numbers("limb.center", limb["center"], 3)
-    radii = _numbers("limb.radii", limb["radii"], 3)
-    if center[1] != 0.0 or center[2] != 0.0:
-        raise SceneError(f"limb.center: the limb must lie on the tube axis (y = z = 0), got {center}")
-    for r in radii:
-        _positive("limb.radii", r)
-    start = donning_start(data)
-    if not 0.0 < start <= 1.0:
-        raise SceneError(f"donning.start: the limb's starting size must lie in (0, 1] of its size, got {start!r}")
-    if start * max(radii[1:]) >= mesh["radius"]:
-        raise SceneError(f"donning.start: the limb at {start} of its radii ({start * max(radii[1:]):.4g} m) does not "
-                         f"fit inside the tube of mesh.radius {mesh['radius']} m; the limb must start inside")
-    if "steps" in donning:
-        _positive("donning.steps", donning["steps"])
-    if "tolerance" in donning:
-        _positive("donning.tolerance", donning["tolerance"])
 
 
 def _numbers(where: str, values, n: int | None = None, allow_inf: bool = False) -> list[float]:

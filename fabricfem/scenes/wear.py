@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fabricfem.body.arm import ArmDimensions, default_arm, elbow_flexion
+from fabricfem.body.arm import ArmDimensions, default_arm
 from fabricfem.body.blend import BlendedStart
 from fabricfem.body.crossing import obstacle_walk
 from fabricfem.body.lower_body import LowerBodyDimensions, lower_body, standing, winter_walking
@@ -29,7 +29,7 @@ from fabricfem.body.pose import Body, Segment
 from fabricfem.body.schedule import SegmentSchedule
 from fabricfem.contact.handles import Belt, EdgeGrip
 from fabricfem.contact.seams import SeamSpec
-from fabricfem.dynamics.stability import plane_stress_wave_speed, step_safety
+from fabricfem.dynamics.stability import step_safety
 from fabricfem.fabrics import load_fabric
 from fabricfem.meshes import tube
 from fabricfem.meshes.pattern import Panel, check_pattern, read_garmentcode, read_pattern_toml
@@ -46,8 +46,9 @@ from fabricfem.scenes.sections import (
     from_table,
     schema_of,
 )
-from fabricfem.wear.config import ContactSpec, FlexionSpec, RouteSpec, TubeSpec
+from fabricfem.wear.config import ContactSpec, FlexionSpec, RouteSpec
 from fabricfem.wear.garment import ExplicitSettings, Timeline, TorqueSpec
+from fabricfem.wear.sleeve import ARM_MONITORS, flexion_settings, flexion_timeline, similarity_factor
 
 GRAVITY = 9.81                     # m/s^2
 BODY_TYPES = ("arm", "default_arm", "limb", "lower_body")
@@ -218,18 +219,20 @@ def _choice(where: str, value, options) -> None:
         raise SceneError(f"{where}: unknown {value!r}{_suggest(str(value), options)}; allowed: {list(options)}")
 
 
+def is_tube_flexion(data: dict) -> bool:
+    """An arm in a tube sleeve flexing at the elbow (the sleeve of [Man2006, sec. 5.3]; its routes: ROUTES)."""
+    return (data["garment"].get("builder", "pattern") == "tube" and data["body"]["type"] in ("arm", "default_arm")
+            and data["motion"]["type"] == "elbow_flexion")
+
+
 def route_of(data: dict) -> str:
-    """"sleeve" (the SleeveConfig routes), "compression" (the quasi-static donning of a limb) or "engine"."""
+    """The [route] solver: "explicit" (the engine, every wear scene) or the tube sleeve's Newton routes
+    "quasistatic" and "implicit" (SceneError naming route.solver for any other scene)."""
     solver = data.get("route", {}).get("solver", "explicit")
-    if solver == "explicit":
-        return "engine"
-    body = data["body"]["type"]
-    if body in ("arm", "default_arm"):
-        return "sleeve"
-    if body == "limb" and solver == "quasistatic":
-        return "compression"
-    raise SceneError(f"route.solver: {solver!r} runs the arm in a sleeve (quasistatic, implicit) or a limb grown into "
-                     f"a tube (quasistatic); this scene's body {body!r} runs on the explicit engine")
+    if solver != "explicit" and not is_tube_flexion(data):
+        raise SceneError(f"route.solver: {solver!r} runs the arm in a tube sleeve flexing at the elbow; this scene "
+                         f"runs on the explicit engine (route.solver = \"explicit\")")
+    return solver
 
 
 def check_wear(data: dict, source: str = "scene") -> None:
@@ -280,15 +283,15 @@ def check_wear(data: dict, source: str = "scene") -> None:
     end = data.get("route", {}).get("end_time")
     if end is not None and not (math.isfinite(end) and end > 0):
         raise SceneError(f"route.end_time: must be a positive body time [s], got {end!r}")
-    if end is not None and route != "engine":
+    if end is not None and route != "explicit":
         raise SceneError("route.end_time: stops a run of the explicit engine (route.solver = \"explicit\"), not of "
                          f"the {route} route")
     accuracy = data.get("accuracy", {})
-    if accuracy and route == "sleeve":
+    if accuracy and route != "explicit":
         raise SceneError("accuracy: an accuracy target runs a wear scene on the explicit engine (route.solver = "
-                         "\"explicit\") or the compression route, not the sleeve's quasistatic or implicit route")
+                         "\"explicit\"), not the sleeve's quasistatic or implicit route")
     window, ratio = accuracy.get("window"), accuracy.get("ratio")
-    if window is not None and route != "engine":
+    if window is not None and route != "explicit":
         raise SceneError(f"accuracy.window: the {route} route is quasi-static (no body time to cut); leave it out")
     if window is not None and not (math.isfinite(window) and window > 0):
         raise SceneError(f"accuracy.window: must be a positive body time [s], got {window!r}")
@@ -296,20 +299,14 @@ def check_wear(data: dict, source: str = "scene") -> None:
         raise SceneError(f"accuracy.ratio: a refinement ratio in (1, 4], got {ratio!r}")
 
 
-ARM_MONITORS = (TorqueSpec("elbow", "elbow", (0.0, 0.0, 1.0), ("forearm",)),
-                TorqueSpec("elbow_both_segments", "elbow", (0.0, 0.0, 1.0), ("upper_arm", "forearm")))
-COMPRESSION_QUANTITIES = ("peak_pressure_Pa", "mean_pressure_Pa", "hoop_tension_N_per_m")
 
 
 def wear_quantities(data: dict) -> dict[str, str]:
     """{accuracy quantity: its summary.json key} of a wear scene (a dotted key names a nested entry): on the
     explicit engine the peak and final torque [N m] of each monitor over the motion (the arm's presets and the
     [[torque]] monitors), the peak and mean contact pressure [Pa] over the motion and the largest fabric strain
-    [-]; on the compression route the peak and mean pressure on the skin [Pa] and the hoop tension [N/m]."""
-    route = route_of(data)
-    if route == "compression":
-        return {name: name for name in COMPRESSION_QUANTITIES}
-    if route != "engine":
+    [-]; none on the sleeve's Newton routes."""
+    if route_of(data) != "explicit":
         return {}
     monitors = [m.name for m in ARM_MONITORS] if data["body"]["type"] in ("arm", "default_arm") else []
     out = {}
@@ -418,6 +415,53 @@ def _motion_file(motion: dict, scene_path: Path | None, body_names) -> object:
         raise SceneError(f"motion.path: {exc}") from None
 
 
+def _arm_plan(data: dict, fabric, route: RouteSpec) -> tuple:
+    """(body, torques, axis, record time [s], motion duration [s] or None, settle time [s], mass damping [1/s],
+    critical-step default) of an arm: flexing at the elbow (fabricfem.wear.sleeve.flexion_timeline) or still."""
+    body_spec, motion_spec = data["body"], data["motion"]
+    dims = _fields(ArmDimensions, body_spec)
+    duration = motion_spec.get("duration")
+    if motion_spec["type"] != "elbow_flexion":
+        kinematics = StillPose(default_arm(dimensions=dims).kinematics.positions(0.0), duration or 0.0)
+        return (default_arm(kinematics, dims), list(ARM_MONITORS), None, float(motion_spec.get("record_time") or 0.01),
+                duration, float(motion_spec.get("settle_time", 0.0)), route.mass_damping,
+                ExplicitSettings.critical_step)
+    flex = _fields(FlexionSpec, motion_spec)
+    similarity = similarity_factor(fabric, route)
+    body, timeline, axis = flexion_timeline(flex, route, similarity, dims)
+    settings = flexion_settings(route, similarity)
+    return (body, list(ARM_MONITORS), axis, timeline.record_time, timeline.motion_time, timeline.settle_time,
+            settings.mass_damping, settings.critical_step)
+
+
+def _lower_body_kinematics(data: dict, stand, scene_path: Path | None):
+    """The lower body's kinematics of [motion] (walking, obstacle_walk, file, or standing), entered from the
+    standing pose over motion.blend_time; and the motion's duration [s] (None: the kinematics' own)."""
+    motion_spec = data["motion"]
+    motion, duration = motion_spec["type"], motion_spec.get("duration")
+    try:
+        if motion == "walking":
+            kinematics = winter_walking(data["body_dims"], strides=int(motion_spec.get("strides", 2)),
+                                        cycle_time=float(motion_spec.get("cycle_time", 0.987)),
+                                        speed=float(motion_spec.get("speed", 1.43)))
+        elif motion == "obstacle_walk":
+            keys = ("strides", "crossing_stride", "obstacle_height", "obstacle_depth", "clearance",
+                    "trail_clearance", "cycle_time", "speed", "crossing_speed")
+            kinematics = obstacle_walk(data["body_dims"], **{k: motion_spec[k] for k in keys if k in motion_spec})
+        elif motion == "file":
+            kinematics = _motion_file(motion_spec, scene_path, stand.names)
+        else:
+            return stand, float(duration or 0.0)
+    except ValueError as exc:
+        if isinstance(exc, SceneError):
+            raise
+        raise SceneError(f"motion: {exc}") from None
+    if float(motion_spec.get("blend_time", 0.0)) > 0.0:
+        # the garment goes on the standing body; the motion is entered from the standing pose
+        kinematics = BlendedStart(kinematics, stand.positions(0.0), float(motion_spec["blend_time"]))
+    return kinematics, duration
+
+
 def plan(data: dict, fabric, scene_path: Path | None = None) -> WearPlan:
     """Body, monitors, phases and explicit settings of a wear scene on the engine (SceneError naming the key)."""
     body_spec, motion_spec = data["body"], data["motion"]
@@ -426,57 +470,20 @@ def plan(data: dict, fabric, scene_path: Path | None = None) -> WearPlan:
     route = _fields(RouteSpec, data.get("route", {}))
     contact = from_table(ContactSpec, data.get("contact", {}))
     garment = from_table(GarmentSection, data["garment"])
-    axis, torques, damping, similarity = None, [], route.mass_damping, 1.0
+    axis, torques, damping, critical_step = None, [], route.mass_damping, ExplicitSettings.critical_step
     gravity = (0.0, 0.0, -GRAVITY)
     duration = motion_spec.get("duration")
     record_time = float(motion_spec.get("record_time") or 0.01)
     settle = float(motion_spec.get("settle_time", 0.0)) if "settle_time" in motion_spec else 0.0
     if kind in ("arm", "default_arm"):
-        dims = _fields(ArmDimensions, body_spec)
         gravity = (0.0, -GRAVITY, 0.0)       # the sleeve's convention: the forearm rotates up, towards +y
-        torques = list(ARM_MONITORS)
-        if motion == "elbow_flexion":
-            flex = _fields(FlexionSpec, motion_spec)
-            if route.dynamic_similarity:
-                E_ref, rho_ref = route.similarity_reference
-                similarity = plane_stress_wave_speed(fabric) / math.sqrt(E_ref / rho_ref)
-            omega = math.radians(flex.angular_velocity * similarity)
-            flexion = elbow_flexion(dims, angular_velocity=omega, final_angle=math.radians(flex.final_angle))
-            kinematics = flexion
-            record_time = math.radians(flex.output_angle_step) / omega
-            duration = math.radians(flex.final_angle) / omega
-            settle = flex.settle_time / similarity if route.gravity else 0.0
-            axis = ("elbow angle [deg]", lambda t: min(math.degrees(flexion.angle(t)), flex.final_angle))
-            damping = route.mass_damping * similarity
-        else:
-            kinematics = StillPose(default_arm(dimensions=dims).kinematics.positions(0.0), duration or 0.0)
-        body = default_arm(kinematics, dims)
+        body, torques, axis, record_time, duration, settle, damping, critical_step = _arm_plan(data, fabric, route)
     elif kind == "limb":
         body = limb_body(body_spec["center"], body_spec["radii"], duration or 0.0)
     else:
         dims = _fields(LowerBodyDimensions, body_spec)
         stand = standing(dims, duration=float(duration) if duration else 1.0)
-        if motion == "walking":
-            try:
-                kinematics = winter_walking(dims, strides=int(motion_spec.get("strides", 2)),
-                                            cycle_time=float(motion_spec.get("cycle_time", 0.987)),
-                                            speed=float(motion_spec.get("speed", 1.43)))
-            except ValueError as exc:
-                raise SceneError(f"motion: {exc}") from None
-        elif motion == "obstacle_walk":
-            keys = ("strides", "crossing_stride", "obstacle_height", "obstacle_depth", "clearance", "trail_clearance",
-                    "cycle_time", "speed", "crossing_speed")
-            try:
-                kinematics = obstacle_walk(dims, **{k: motion_spec[k] for k in keys if k in motion_spec})
-            except ValueError as exc:
-                raise SceneError(f"motion: {exc}") from None
-        elif motion == "file":
-            kinematics = _motion_file(motion_spec, scene_path, stand.names)
-        else:
-            kinematics, duration = stand, float(duration or 0.0)
-        if motion in ("walking", "obstacle_walk", "file") and float(motion_spec.get("blend_time", 0.0)) > 0.0:
-            # the garment goes on the standing body; the motion is entered from the standing pose
-            kinematics = BlendedStart(kinematics, stand.positions(0.0), float(motion_spec["blend_time"]))
+        kinematics, duration = _lower_body_kinematics({**data, "body_dims": dims}, stand, scene_path)
         body = lower_body(dims, kinematics)
     if motion in ("walking", "obstacle_walk", "file") and duration is not None:
         start, end = body.kinematics.time_range
@@ -508,7 +515,7 @@ def plan(data: dict, fabric, scene_path: Path | None = None) -> WearPlan:
         except ValueError as exc:
             raise SceneError(f"donning.remove: {exc}") from None
     handles = handle_specs(donning, timeline)
-    critical_step = route.critical_step or ExplicitSettings.critical_step
+    critical_step = route.critical_step or critical_step
     settings = ExplicitSettings(mass_damping=damping, rotary_inertia_scale=route.rotary_inertia_scale,
                                 time_step_safety=step_safety(route.time_step_safety, critical_step),
                                 mass_scale=route.mass_scale, critical_step=critical_step,
@@ -617,30 +624,3 @@ def garment_mesh(data: dict, scene_path: Path | None, comm):
     seams = [SeamSpec(s.name, s.points_a, s.panel_tag_a, s.points_b, s.panel_tag_b, float(np.mean(s.lengths)))
              for s in garment.stitches]
     return garment.fabric, seams, list(g.hold), garment
-
-
-def sleeve_data(data: dict) -> dict:
-    """The sleeve-kind data (fabricfem.scenes.build.sleeve_config) of an arm-in-tube wear scene."""
-    g = {k: v for k, v in data["garment"].items() if k in TubeSpec.__dataclass_fields__}
-    out = {"scene": {**data.get("scene", {}), "kind": "sleeve"}, "mesh": {"type": "tube", **g},
-           "fabric": data["fabric"], "body": {**data["body"], "type": "default_arm"},
-           "motion": {k: v for k, v in data["motion"].items() if k in FlexionSpec.__dataclass_fields__ or k == "type"}}
-    for name in ("contact", "route", "output"):
-        if name in data:
-            out[name] = data[name]
-    if "render_at" in out.get("output", {}):
-        out["output"] = {**{k: v for k, v in out["output"].items() if k != "render_at"},
-                         "render_angles": out["output"]["render_at"]}
-    return out
-
-
-def compression_data(data: dict) -> dict:
-    """The compression-kind data (fabricfem.scenes.run.run_compression_scene) of a limb-in-tube wear scene."""
-    g = data["garment"]
-    mesh = {"type": "tube", **{k: g[k] for k in ("length", "radius", "n_around", "n_along", "order") if k in g}}
-    donning = {k: v for k, v in data.get("donning", {}).items() if k in ("start", "steps", "tolerance")}
-    out = {"scene": {**data.get("scene", {}), "kind": "compression"}, "mesh": mesh, "fabric": data["fabric"],
-           "limb": {"center": data["body"]["center"], "radii": data["body"]["radii"]}, "donning": donning}
-    if "output" in data:
-        out["output"] = {k: v for k, v in data["output"].items() if k != "render_at"}
-    return out

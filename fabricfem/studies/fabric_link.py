@@ -51,6 +51,7 @@ from fabricfem.meshes.yarn_geometry import PlainWeave
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.loadstep import solve_load_path
 from fabricfem.studies.unit_cell import MATERIALS, PRESTRETCH
+from fabricfem.studies.sleeve import curve_rows
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.outputs import plot_torque
 from fabricfem.wear.run import run_sleeve
@@ -393,15 +394,11 @@ def sleeve_comparison(out_dir: str | Path = OUT_DIR, n_around: int = 10, n_along
     if comm.rank == 0:
         out.mkdir(parents=True, exist_ok=True)
         tag = f"{n_around}x{n_along}"
-        with open(out / f"sleeve_torque_{tag}.csv", "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(["fabric", "angle_deg", "torque_Nm", "torque_both_segments_Nm", "contact_force_N",
-                        "strain_energy_J", "failure"])
-            for name, h in histories.items():
-                for s in h.steps:
-                    w.writerow([name, f"{s.angle:.6g}", f"{s.torque:.8g}", f"{s.torque_all:.8g}",
-                                f"{s.contact_force:.8g}", f"{s.strain_energy:.8g}", h.failure])
-        plot_torque(out / f"sleeve_torque_{tag}.png", {n: (h.angles, h.torques) for n, h in histories.items()},
+        fio.write_csv(out / f"sleeve_torque_{tag}.csv", ("fabric", "angle_deg", "torque_Nm", "torque_both_segments_Nm",
+                                                         "contact_force_N", "strain_energy_J", "failure"),
+                      [[name, *(row[k] for k in (0, 1, 2, 5, 10)), h.failure] for name, h in histories.items()
+                       for row in curve_rows(h)])
+        plot_torque(out / f"sleeve_torque_{tag}.png", {n: h.motion_curve() for n, h in histories.items()},
                     title=f"Sleeve, mesh {tag}, mu = {friction}: unit-cell fabric vs SVK (same A0)")
     return histories
 

@@ -37,8 +37,8 @@ from fabricfem.materials import positive_number
 from fabricfem.scenes.batch import Job, check, run_batch
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.outputs import plot_torque, torque_rms_error
+from fabricfem.wear.contract import WearHistory, WearStep
 from fabricfem.wear.run import build_run, run_sleeve
-from fabricfem.wear.sleeve import SleeveHistory, SleeveStep
 from fabricfem.wear.sleeve_implicit import run_implicit
 
 MESHES = {"I": (10, 13), "II": (15, 20), "III": (20, 26), "IV": (30, 39)}
@@ -49,6 +49,35 @@ FIGURE_TITLES = {"mesh_mu0.1": "mesh convergence, mu = 0.1 (Fig. 37)",
                  "mesh_mu0.5": "mesh convergence, mu = 0.5 (Fig. 39)",
                  "friction": "friction 0.1 vs 0.5 (Fig. 42)", "fit": "fit R = 0.06 vs 0.07 m, mu = 0.5 (Fig. 44)",
                  "thickness": "thickness 1 vs 2 mm, mu = 0.5 (Fig. 45)", "fabrics": "fabrics I-III, mu = 0.1 (Fig. 46)"}
+
+
+# the columns of a variant's curve (the motion's records and the start state before them)
+CURVE_HEADER = ("angle_deg", "torque_Nm", "torque_both_segments_Nm", "newton_iterations", "max_penetration_m",
+                "contact_force_N", "wall_s", "drag_ratio", "time_steps", "kinetic_energy_J", "strain_energy_J")
+
+
+def curve_rows(h: WearHistory) -> list[list]:
+    """CURVE_HEADER rows of a sleeve history: the start state (the last record before the motion) and the motion."""
+    first = next((k for k, s in enumerate(h.steps) if s.phase == "motion"), len(h.steps))
+    return [[s.coordinate, s.torques["elbow"], s.torques["elbow_both_segments"], s.newton_iterations,
+             s.max_penetration, s.contact_force, s.wall, s.drag_ratio, s.time_steps, s.kinetic_energy,
+             s.strain_energy] for s in h.steps[max(first - 1, 0):]]
+
+
+def curve_history(name: str, rows: list[dict]) -> WearHistory:
+    """A WearHistory of the records of CURVE_HEADER rows (the start record's phase "settle", then "motion")."""
+    h = WearHistory(name)
+    for k, r in enumerate(rows):
+        h.steps.append(WearStep(
+            phase="motion" if k else "settle", time=math.nan,
+            torques={"elbow": float(r["torque_Nm"]), "elbow_both_segments": float(r["torque_both_segments_Nm"])},
+            peak_pressure=0.0, peak_segment="", peak_position=(math.nan,) * 3, mean_pressure=0.0,
+            max_penetration=float(r["max_penetration_m"]), contact_force=float(r["contact_force_N"]), seam_gap=0.0,
+            seam_forces={}, max_strain=0.0, time_steps=int(float(r["time_steps"])),
+            kinetic_energy=float(r["kinetic_energy_J"]), strain_energy=float(r["strain_energy_J"]),
+            wall=float(r["wall_s"]), axis_value=float(r["angle_deg"]),
+            newton_iterations=int(float(r["newton_iterations"])), drag_ratio=float(r["drag_ratio"])))
+    return h
 
 
 def variants(quick: bool = False, fine: str = "III", meshes: tuple[str, ...] = ("I", "II", "III", "IV"),
@@ -105,7 +134,7 @@ def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
               comm: MPI.Comm = MPI.COMM_WORLD, fine: str = "III",
               meshes: tuple[str, ...] = ("I", "II", "III", "IV"),
               fabrics: tuple[str, ...] = ("I", "II", "III"), mesh_frictions: tuple[float, ...] = (0.1, 0.5),
-              only: tuple[str, ...] | None = None, ranks_per_variant: int = 1) -> dict[str, dict[str, SleeveHistory]]:
+              only: tuple[str, ...] | None = None, ranks_per_variant: int = 1) -> dict[str, dict[str, WearHistory]]:
     """Run every distinct variant once as one batch (fabricfem.scenes.batch.run_batch: groups of
     `ranks_per_variant` ranks, longest first by `relative_cost` to the least loaded group; a variant saved in
     <out>/variants is read back, not rerun), then write CSV + PNG per figure from the saved variants. A variant
@@ -125,7 +154,7 @@ def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
         h = run_sleeve(cfg, sub, stop_on_failure=False)
         if sub.rank == 0:
             _save_variant(out, cfg, h)
-        return (f"reached {h.angles[-1]:.1f} deg, torque {h.torques[-1]:.4e} N m"
+        return (f"reached {h.steps[-1].coordinate:.1f} deg, torque {h.steps[-1].torques['elbow']:.4e} N m"
                 + (f" STOPPED: {h.failure}" if h.failure else ""))
 
     jobs = [Job(f"variant {i + 1}/{len(unique)} ({_describe(cfg)})", relative_cost(cfg),
@@ -139,20 +168,12 @@ def run_study(out: str | Path = "results/sleeve_study", quick: bool = False,
         out.mkdir(parents=True, exist_ok=True)
         failures = []
         for name, curves in results.items():
-            with open(out / f"{name}.csv", "w", newline="") as f:
-                w = csv.writer(f)
-                w.writerow(["variant", *SleeveHistory.HEADER])
-                for label, h in curves.items():
-                    for row in h.rows():
-                        w.writerow([label, *row])
-                    if h.failure:
-                        failures.append([name, label, h.failure])
-            plot_torque(out / f"{name}.png", {label: (h.angles, h.torques) for label, h in curves.items()},
+            fio.write_csv(out / f"{name}.csv", ("variant", *CURVE_HEADER),
+                          [[label, *row] for label, h in curves.items() for row in curve_rows(h)])
+            failures += [[name, label, h.failure] for label, h in curves.items() if h.failure]
+            plot_torque(out / f"{name}.png", {label: h.motion_curve("elbow") for label, h in curves.items()},
                         FIGURE_TITLES[name] + (" [quick]" if quick else ""))
-        with open(out / "failures.csv", "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(["figure", "variant", "reason"])
-            w.writerows(failures)
+        fio.write_csv(out / "failures.csv", ("figure", "variant", "reason"), failures)
         similar = [label for label, cfg in figures.get("fabrics", {}).items() if cfg.similarity_factor != 1.0]
         (out / "README.txt").write_text(
             ("QUICK (reduced) study: mesh I only, 6 degrees\n" if quick else
@@ -210,22 +231,22 @@ def compare_figures(out: str | Path, stored: str | Path) -> list[list]:
 
 def _variant_path(out: Path, cfg: SleeveConfig) -> Path:
     """Checkpoint of one finished variant: <out>/variants/<sha1 of the configuration>.csv."""
-    key = hashlib.sha1(repr(sorted(cfg.key_items().items())).encode()).hexdigest()[:16]
+    key = hashlib.sha1(repr(("engine", sorted(cfg.key_items().items()))).encode()).hexdigest()[:16]
     return Path(out) / "variants" / f"{key}.csv"
 
 
-def _save_variant(out: Path, cfg: SleeveConfig, h: SleeveHistory):
-    """Write a finished variant (its configuration on the first line, then the history rows) so that an
+def _save_variant(out: Path, cfg: SleeveConfig, h: WearHistory):
+    """Write a finished variant (its configuration on the first line, then its curve rows) so that an
     interrupted study resumes without rerunning it (`_load_variant`)."""
     text = io.StringIO()
     text.write(f"# {repr(sorted(cfg.flat().items()))} | wall {h.wall:.1f} | failure {h.failure}\n")
     w = csv.writer(text)
-    w.writerow(SleeveHistory.HEADER)
-    w.writerows(h.rows())
+    w.writerow(CURVE_HEADER)
+    w.writerows(curve_rows(h))
     fio.write_text_whole(_variant_path(out, cfg), text.getvalue())
 
 
-def _load_variant(out: Path, cfg: SleeveConfig) -> SleeveHistory | None:
+def _load_variant(out: Path, cfg: SleeveConfig) -> WearHistory | None:
     """The history saved by `_save_variant` for exactly this configuration, or None."""
     path = _variant_path(out, cfg)
     if not path.exists():
@@ -235,9 +256,7 @@ def _load_variant(out: Path, cfg: SleeveConfig) -> SleeveHistory | None:
         if not first.startswith(f"# {repr(sorted(cfg.flat().items()))} |"):
             return None
         rows = list(csv.DictReader(f))
-    h = SleeveHistory(cfg)
-    h.steps = [SleeveStep(*(int(float(r[k])) if k in ("newton_iterations", "time_steps") else float(r[k])
-                            for k in SleeveHistory.HEADER)) for r in rows]
+    h = curve_history(cfg.name, rows)
     h.wall = float(first.split("| wall ")[1].split(" |")[0])
     h.failure = first.split("| failure ")[1].strip()
     return h
@@ -304,7 +323,7 @@ def _run_method(method: str, base: SleeveConfig, comm: MPI.Comm, al_budget: floa
         problem.contact.start_trace()
         h = problem.run(stop_on_failure=False)
         trace = problem.contact.trace_array()
-        angles = np.degrees([problem.flexion.angle(t) for t in trace[:, 0]])
+        angles = np.array([problem.axis_at(t) for t in trace[:, 0]])
         rms, rel = torque_bounce(angles, -trace[:, 1], problem.steps_per_record)
         row.update(max_penetration_m=problem.contact.max_penetration_all(), bounce_rms_Nm=rms, bounce_relative=rel,
                    work=f"{sum(s.time_steps for s in h.steps)} steps of {problem.dt:.3g} s",
@@ -324,10 +343,10 @@ def _run_method(method: str, base: SleeveConfig, comm: MPI.Comm, al_budget: floa
                    note=("penetration after every step (Uzawa to " f"{cfg.contact.augmentation_tolerance:g} m)"
                          + (f"; STOPPED: {h.failure}" if h.failure else "")))
     problem.destroy()
-    reached = float(h.angles[-1])
+    reached = float(h.steps[-1].coordinate)
     row.update(mesh=f"{base.tube.n_around}x{base.tube.n_along}", ndofs=h.ndofs, reached_deg=reached,
                gravity="on" if problem.config.route.gravity else "off",
-               torque_57_Nm=h.torque_at(base.motion.final_angle) if reached >= base.motion.final_angle - 1e-9 else math.nan,
+               torque_57_Nm=h.torque_at(base.motion.final_angle, "elbow") if reached >= base.motion.final_angle - 1e-9 else math.nan,
                wall_s=h.wall, cpu_s=time.process_time() - cpu_start)
     return row
 

@@ -56,10 +56,10 @@ from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
 from fabricfem.forms import shell as sf
 from fabricfem.materials import positive_number
 from fabricfem.scenes.batch import Job, check, run_batch
-from fabricfem.studies.sleeve import relative_cost
+from fabricfem.studies.sleeve import CURVE_HEADER, curve_history, curve_rows, relative_cost
 from fabricfem.wear.config import SleeveConfig, check_fit
 from fabricfem.wear.run import build_run
-from fabricfem.wear.sleeve import SleeveHistory, SleeveStep
+from fabricfem.wear.contract import WearHistory, WearStep
 
 FIT_SCALES = (1.0, 1.04, 1.0771)
 DEFAULT_LONG_AXIS_FACTOR = 0.5      # r1 = L / 2: the arm of fabricfem.body.arm (no girth at the elbow)
@@ -133,7 +133,7 @@ def energy_split(model, forms: dict, state=None) -> dict[str, float]:
 
 # ------------------------------------------------------------------------------------------------ one run
 def run_case(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_SELF, split_angles: tuple[float, ...] | None = None,
-             on_step=None) -> tuple[SleeveHistory, dict[float, dict[str, float]]]:
+             on_step=None) -> tuple[WearHistory, dict[float, dict[str, float]]]:
     """One explicit flexion; returns its history and the strain-energy split at the records of
     `split_angles` [deg] (default: rest and the final angle) plus the process's CPU time in history.timings."""
     if config.route.solver != "explicit":
@@ -145,9 +145,9 @@ def run_case(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_SELF, split_angles:
     forms = energy_split_forms(problem.model, config.tube.quadrature)
     splits: dict[float, dict[str, float]] = {}
 
-    def record(step: SleeveStep):
+    def record(step: WearStep):
         for a in angles:
-            if abs(step.angle - a) < 1e-9:
+            if step.axis_value is not None and abs(step.axis_value - a) < 1e-9 and step.phase != "sew":
                 saved = problem.model.w.x.array.copy()      # leave the integrator's view of the model as it was
                 splits[a] = energy_split(problem.model, forms, problem.integrator.d)
                 problem.model.w.x.array[:] = saved
@@ -212,30 +212,29 @@ def _key(config: SleeveConfig) -> str:
     items = config.key_items()
     if items["arm"].get("long_axis_factor") == DEFAULT_LONG_AXIS_FACTOR:
         del items["arm"]["long_axis_factor"]
-    return repr(sorted(items.items()))
+    return repr(("engine", sorted(items.items())))
 
 
 def _checkpoint(out: Path, config: SleeveConfig) -> Path:
     return out / "runs" / f"{hashlib.sha1(_key(config).encode()).hexdigest()[:16]}.json"
 
 
-def _save(out: Path, config: SleeveConfig, history: SleeveHistory, splits: dict) -> None:
+def _save(out: Path, config: SleeveConfig, history: WearHistory, splits: dict) -> None:
     fio.write_text_whole(_checkpoint(out, config), json.dumps({
-        "config": _key(config), "rows": history.rows(), "splits": {str(a): s for a, s in splits.items()},
+        "config": _key(config), "rows": curve_rows(history), "splits": {str(a): s for a, s in splits.items()},
         "wall_s": history.wall, "cpu_s": history.timings.get("run_cpu_s", math.nan), "failure": history.failure,
         "ndofs": history.ndofs}))
 
 
-def _load(out: Path, config: SleeveConfig) -> tuple[SleeveHistory, dict, float] | None:
+def _load(out: Path, config: SleeveConfig) -> tuple[WearHistory, dict, float] | None:
     path = _checkpoint(out, config)
     if not path.exists():
         return None
     data = json.loads(path.read_text())
     if data["config"] != _key(config):
         return None
-    history = SleeveHistory(config, ndofs=data["ndofs"], wall=data["wall_s"], failure=data["failure"])
-    history.steps = [SleeveStep(*(int(v) if k in ("newton_iterations", "time_steps") else float(v)
-                                  for k, v in zip(SleeveHistory.HEADER, row))) for row in data["rows"]]
+    history = curve_history(config.name, [dict(zip(CURVE_HEADER, row)) for row in data["rows"]])
+    history.ndofs, history.wall, history.failure = data["ndofs"], data["wall_s"], data["failure"]
     return history, {float(a): s for a, s in data["splits"].items()}, data["cpu_s"]
 
 
@@ -262,7 +261,7 @@ def run_fit_study(out: str | Path = "results/sleeve_fit", mesh: str = "II", scal
         history, splits = run_case(cfg, sub)
         if sub.rank == 0:
             _save(out, cfg, history, splits)
-        return f"torque at rest {float(history.torques[0]):.4e} N m" + (
+        return f"torque at rest {float(history.motion_curve()[1][0]):.4e} N m" + (
             f"; STOPPED: {history.failure}" if history.failure else "")
 
     jobs = [Job(f"run {k + 1}/{len(runs)}: arm scale {scale:g}, r1 = {factor:g} L (clearance "
@@ -276,11 +275,11 @@ def run_fit_study(out: str | Path = "results/sleeve_fit", mesh: str = "II", scal
             curves = {}
             for label, cfg in cases.items():
                 history, splits, cpu = _load(out, cfg)
-                curves[label] = (history.angles, history.torques)
+                curves[label] = history.motion_curve()
                 rest, end = splits.get(0.0, {}), splits.get(float(final_angle), {})
                 run_rows.append({"scale": scale, "long_axis_factor": factor, "case": label, "radius_m": cfg.tube.radius, "thickness_m": cfg.material.thickness,
-                                 "ndofs": history.ndofs, "reached_deg": float(history.angles[-1]),
-                                 "torque_rest_Nm": float(history.torques[0]),
+                                 "ndofs": history.ndofs, "reached_deg": float(history.steps[-1].coordinate),
+                                 "torque_rest_Nm": float(history.motion_curve()[1][0]),
                                  "torque_57_Nm": history.torque_at(final_angle) if not history.failure else math.nan,
                                  "bending_share_rest": rest.get("bending_share", math.nan),
                                  "bending_share_57": end.get("bending_share", math.nan),

@@ -4,7 +4,7 @@ A run is a sequence of phases on one body clock t [s] (sewing, donning, settling
 number of record intervals of `steps_per_record` central-difference steps (fabricfem.dynamics.explicit with the
 body contact and the seams as its hooks). A phase reports every record ("each") or only its last ("end": a
 settling phase whose end state is the start record of the motion). The record maker of the caller turns the
-state into a step record (the sleeve's SleeveStep, the garment's WearStep); `run_phases` owns the loop, the
+state into a step record (fabricfem.wear.contract.WearStep); `run_phases` owns the loop, the
 blow-up check and the wall-time breakdown, so that every explicit wear run shares them.
 """
 from __future__ import annotations
@@ -17,23 +17,6 @@ from typing import Callable
 import numpy as np
 
 from fabricfem.solvers.newton import SolverError
-
-
-@dataclass
-class RunHistory:
-    """What every wear run's history holds besides its steps' kind (the sleeve's SleeveHistory, the garment's
-    WearHistory): the records, dofs, wall time [s], timings, the smallest start gap [m] and why it stopped early."""
-
-    steps: list = field(default_factory=list, kw_only=True)
-    ndofs: int = field(default=0, kw_only=True)
-    wall: float = field(default=0.0, kw_only=True)
-    timings: dict = field(default_factory=dict, kw_only=True)
-    initial_gap: float = field(default=math.nan, kw_only=True)   # m, smallest garment-body gap at the start
-    failure: str = field(default="", kw_only=True)                # "" when the run reached its end
-
-    @property
-    def completed(self) -> bool:
-        return not self.failure
 
 
 class WearError(SolverError):

@@ -43,9 +43,8 @@ from fabricfem.dynamics.explicit import CentralDifference
 from fabricfem.dynamics.strain_limit import FastProjection
 from fabricfem.materials import Fabric
 from fabricfem.shell import ShellModel
-from fabricfem.wear.engine import Phase, RunHistory, kinetic_ratio, run_phases
-
-PA_PER_MMHG = 133.322387415      # Pa per mmHg
+from fabricfem.wear.contract import WearHistory, WearStep
+from fabricfem.wear.engine import Phase, run_phases
 
 
 @dataclass(frozen=True)
@@ -151,132 +150,6 @@ class DelayedKinematics:
         """The source's positions at its own time start + (t - t0), held at its start before t0 and at its end
         after it (the explicit contact poses the body one step ahead of the last record)."""
         return self.source.positions(min(self._start + max(float(t) - self.t0, 0.0), self._end))
-
-
-@dataclass
-class WearStep:
-    """One record of a garment run (means over the record interval; SI units)."""
-
-    phase: str
-    time: float                       # s, body clock
-    torques: dict[str, float]         # N m, resisting torque per monitor
-    peak_pressure: float              # Pa, on the body per unit deformed cloth area
-    peak_segment: str                 # the segment under the peak ("" without contact)
-    peak_position: tuple[float, float, float]   # m
-    mean_pressure: float              # Pa, over the nodes in contact (area-weighted)
-    max_penetration: float            # m
-    contact_force: float              # N, |sum of contact forces on the cloth|
-    seam_gap: float                   # m, largest distance of stitched nodes
-    seam_forces: dict[str, float]     # N/m, mean seam line force per seam
-    max_strain: float                 # largest warp/weft Green strain
-    time_steps: int
-    kinetic_energy: float             # J
-    strain_energy: float              # J
-    wall: float                       # s since the start
-    axis_value: float | None = None   # the record on the run's axis (a joint angle [deg]), None: the time
-
-    @property
-    def coordinate(self) -> float:
-        """The record's coordinate on the run's axis (GarmentRun.axis: time [s] or a joint angle [deg])."""
-        return self.axis_value if self.axis_value is not None else self.time
-
-    @property
-    def output_time(self) -> float:
-        """The record's time coordinate in the output files (the body time [s], increasing)."""
-        return self.time
-
-    def work(self) -> str:
-        ratio = self.kinetic_energy / self.strain_energy if self.strain_energy else 0.0
-        return f"steps {self.time_steps:5d}  KE/SE {ratio:.1e}"
-
-    def line(self) -> str:
-        """The record's progress line: phase, time (and axis), torques, peak pressure, seam gap, work."""
-        axis = f" ({self.axis_value:6.2f})" if self.axis_value is not None else ""
-        torques = "".join(f"  {n} {v:+.4e} N m" for n, v in self.torques.items())
-        return (f"{self.phase:6s} t {self.time:7.4f} s{axis}{torques}  peak p {self.peak_pressure / 1e3:7.3f} kPa"
-                f"  seam gap {self.seam_gap:.1e} m  penetration {self.max_penetration:.1e} m  {self.work()}")
-
-
-@dataclass
-class WearHistory(RunHistory):
-    """The records (WearStep) of a garment run."""
-
-    name: str
-
-    @property
-    def times(self) -> np.ndarray:
-        return np.array([s.time for s in self.steps])
-
-    def torque(self, name: str) -> np.ndarray:
-        return np.array([s.torques[name] for s in self.steps])
-
-    @property
-    def monitors(self) -> list[str]:
-        return list(self.steps[0].torques) if self.steps else []
-
-    @property
-    def seams(self) -> list[str]:
-        return list(self.steps[0].seam_forces) if self.steps else []
-
-    @property
-    def header(self) -> tuple[str, ...]:
-        return ("time_s", "phase", *(f"{n}_torque_Nm" for n in self.monitors), "peak_pressure_Pa",
-                "peak_pressure_mmHg", "peak_segment", "peak_x_m", "peak_y_m", "peak_z_m", "mean_pressure_Pa",
-                "max_penetration_m", "contact_force_N", "seam_gap_m", *(f"seam_{n}_N_per_m" for n in self.seams),
-                "max_strain", "time_steps", "kinetic_energy_J", "strain_energy_J", "wall_s")
-
-    def rows(self) -> list[list]:
-        return [[s.time, s.phase, *s.torques.values(), s.peak_pressure, s.peak_pressure / PA_PER_MMHG,
-                 s.peak_segment, *s.peak_position, s.mean_pressure, s.max_penetration, s.contact_force, s.seam_gap,
-                 *s.seam_forces.values(), s.max_strain, s.time_steps, s.kinetic_energy, s.strain_energy, s.wall]
-                for s in self.steps]
-
-    def torque_curves(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-        """Resisting torque [N m] per monitor against the record coordinate."""
-        x = np.array([s.coordinate for s in self.steps])
-        return {name: (x, self.torque(name)) for name in self.monitors}
-
-    def work(self) -> str:
-        steps = sum(s.time_steps for s in self.steps)
-        ratio = kinetic_ratio(np.array([s.kinetic_energy for s in self.steps if s.phase == "motion"]),
-                              np.array([s.strain_energy for s in self.steps if s.phase == "motion"]))
-        return f"{steps} explicit steps, largest KE/SE in the motion {ratio:.2e}"
-
-    def summary(self) -> dict:
-        """Over the motion phase: peak and final per torque monitor (with their time and axis value), pressure
-        peak and mean (Pa, kPa, mmHg) with the segment and position of the peak; after the sewing: the largest
-        strain, penetration and seam gap; the dofs, wall time [s], explicit step dt_s [s] and the number of
-        steps (fabricfem.scenes.accuracy reads them)."""
-        out: dict = {"records": len(self.steps), "completed": self.completed, "ndofs": self.ndofs,
-                     "wall_s": self.wall, "dt_s": self.timings.get("dt"),
-                     "time_steps": int(sum(s.time_steps for s in self.steps))}
-        if not self.steps:
-            return out
-        # torque peaks over the motion (the settling and donning records carry the garment's landing)
-        motion = [s for s in self.steps if s.phase == "motion"] or self.steps
-        for name in self.monitors:
-            tau = np.array([s.torques[name] for s in motion])
-            k = int(np.argmax(np.abs(tau)))
-            entry = {"peak_Nm": float(tau[k]), "peak_time_s": motion[k].time,
-                     "final_Nm": float(tau[-1]), "final_time_s": motion[-1].time}
-            if motion[k].axis_value is not None:
-                entry.update(peak_at=motion[k].axis_value, final_at=motion[-1].axis_value)
-            out[f"torque_{name}"] = entry
-        # pressures over the motion; strain and penetration once the seams are sewn (sewing draws the panels
-        # across the body with large transient strains)
-        k = int(np.argmax([s.peak_pressure for s in motion]))
-        peak = motion[k]
-        contact = [s.mean_pressure for s in motion if s.mean_pressure > 0.0]
-        mean = float(np.mean(contact)) if contact else 0.0
-        out["pressure"] = {"peak_Pa": peak.peak_pressure, "peak_kPa": peak.peak_pressure / 1e3,
-                           "peak_mmHg": peak.peak_pressure / PA_PER_MMHG, "peak_time_s": peak.time,
-                           "peak_segment": peak.peak_segment, "peak_position_m": list(peak.peak_position),
-                           "mean_Pa": mean, "mean_kPa": mean / 1e3, "mean_mmHg": mean / PA_PER_MMHG}
-        sewn = [s for s in self.steps if s.phase != "sew"] or self.steps
-        out["max_strain"] = max(s.max_strain for s in sewn)
-        out["max_penetration_m"] = max(s.max_penetration for s in sewn)
-        out["max_seam_gap_after_sewing_m"] = max(s.seam_gap for s in sewn)
-        return out
 
 
 @dataclass
@@ -467,7 +340,7 @@ class GarmentRun:
 
 
 def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Sequence[SeamSpec] = (),
-                      holds: Sequence[str] = (), torques: Sequence[TorqueSpec] = (), timeline: Timeline = Timeline(),
+                      holds: Sequence[str] = (), clamped: Sequence[str] = (), torques: Sequence[TorqueSpec] = (), timeline: Timeline = Timeline(),
                       settings: ExplicitSettings = ExplicitSettings(), contact_method: str = "lagrange",
                       friction: float = 0.0, penalty: float | None = None,
                       psri_degrees: tuple[int, int] = (4, 2), measure_strain: bool = True,
@@ -477,7 +350,7 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
 
     Args:
         fmesh: the garment mesh (FabricMesh; Q2 quadrilaterals for the nodal contact); `holds` names its
-            facet tags whose nodes are held in place (u = 0).
+            facet tags whose nodes are held in place (u = 0), `clamped` those of them whose rotations are held too.
         body: the wearer; its kinematics start after the sewing, donning and settling phases.
         seams: the stitches to sew and hold (fabricfem.contact.seams); sewn during `timeline.sewing_time`.
         torques: the torque monitors (their segments and joints are checked against the body).
@@ -497,7 +370,7 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
             raise ValueError(f"torques.{spec.name}: {exc}") from None
     model = ShellModel(fmesh, fabric, rebase=False, psri_degrees=psri_degrees)
     for tag in holds:
-        model.constrain(tag, u=(0.0, 0.0, 0.0))
+        model.constrain(tag, u=(0.0, 0.0, 0.0), theta=(0.0, 0.0) if tag in clamped else None)
     if settings.gravity is not None:
         model.add_gravity(tuple(settings.gravity))
     model.compile()

@@ -47,7 +47,7 @@ class WearRecorder:
         self.renders: list[str] = []     # names of the pressure renders written
         self.skin_frames: list = []      # (name, title, (points, triangles, values [Pa]), garment surface), rank 0
         self.peak = 0.0                  # Pa, the largest peak pressure of the motion's records so far
-        self.label = getattr(run, "axis_label", "elbow angle [deg]")
+        self.label = run.axis_label
         self.unit = "deg" if "[deg]" in self.label else "s"
 
     def record(self, step) -> None:
@@ -67,8 +67,8 @@ class WearRecorder:
         while self.render and self.pending and x >= self.pending[0] - 1e-9:
             at = self.pending.pop(0)
             self._keep_skin_frame(step, f"pressure_{at:05.2f}{self.unit}.png")
-        peak = getattr(step, "peak_pressure", None)
-        if self.render and peak is not None and getattr(step, "phase", "motion") == "motion" and peak > self.peak:
+        peak = step.peak_pressure
+        if self.render and step.phase == "motion" and peak > self.peak:
             # the peak pressure map: the skin at the record of the largest pressure of the motion so far
             self.peak = peak
             self.skin_frames = [f for f in self.skin_frames if f[0] != "pressure_peak.png"]
@@ -98,7 +98,7 @@ class WearRecorder:
         radius = 2.0 * max(spacing, 1e-6)
         skin = skin_pressure(run.posed_bodies(step.coordinate), 2 * self.samples, points, values, radius)
         what = self.label.split(" [")[0]
-        title = f"{getattr(run, 'name', '') or run.config.name}: {what} {step.coordinate:.2f} {self.unit}, pressure on the skin"
+        title = f"{run.name}: {what} {step.coordinate:.2f} {self.unit}, pressure on the skin"
         self.skin_frames.append((name, title, skin, (points, cells)))
 
     def close(self, history) -> None:
@@ -124,5 +124,5 @@ class WearRecorder:
                 render_skin_pressure(self.out / name, points, triangles, values / 1e3, title, (0.0, max(top, 1e-9)),
                                      garment)
                 self.renders.append(name)
-        plot_torque(self.out / "torque.png", history.torque_curves(), f"{getattr(history, 'name', '') or ''} resisting torque",
+        plot_torque(self.out / "torque.png", history.torque_curves(), f"{history.name} resisting torque",
                     xlabel=self.label)

@@ -11,13 +11,14 @@ from mpi4py import MPI
 
 from fabricfem import io as fio
 from fabricfem.wear.config import SleeveConfig
-from fabricfem.wear.contract import WearRun
+from fabricfem.wear.contract import WearHistory, WearRun, WearStep
 from fabricfem.wear.engine import format_breakdown
+from fabricfem.wear.quasistatic import build_sleeve
 from fabricfem.wear.recorder import WearRecorder
-from fabricfem.wear.sleeve import SleeveHistory, SleeveStep, build_explicit, build_sleeve
+from fabricfem.wear.sleeve import build_explicit
 from fabricfem.wear.sleeve_implicit import build_implicit
 
-# route name (SleeveConfig.solver) -> builder of its WearRun
+# route name ([route] solver) -> builder of the sleeve's WearRun from its configuration
 ROUTES: dict[str, Callable[[SleeveConfig, MPI.Comm], WearRun]] = {
     "explicit": build_explicit, "implicit": build_implicit, "quasistatic": build_sleeve}
 
@@ -28,28 +29,14 @@ def build_run(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> WearRun:
 
 
 def run_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
-               on_step: Callable[[SleeveStep], None] | None = None, stop_on_failure: bool = True) -> SleeveHistory:
-    """Build and flex one sleeve configuration by its route; returns its torque history."""
+               on_step: Callable[[WearStep], None] | None = None, stop_on_failure: bool = True) -> WearHistory:
+    """Build and flex one sleeve configuration by its route; returns its history."""
     t0 = time.perf_counter()
     run = build_run(config, comm)
     history = run.run(on_step=on_step, stop_on_failure=stop_on_failure)
     run.destroy()
     history.wall = time.perf_counter() - t0
     return history
-
-
-def run_sleeve_scene(config: SleeveConfig, out: Path, render: bool = True, render_angles: list[float] | None = None,
-                     body_samples: int = 24, comm: MPI.Comm = MPI.COMM_WORLD) -> SleeveHistory:
-    """`fabricfem run` for the sleeve's routes (SleeveConfig): flex the arm and write the recorder's outputs under
-    `out` (pressure renders at `render_angles` [deg], default the thirds of the flexion)."""
-    run = build_run(config, comm)
-    headline = (f"sleeve: {config.tube.n_around} x {config.tube.n_along} Q2 tube, {run.model.ndofs} dofs, "
-                f"{comm.size} rank(s); mu = {config.contact.friction}, {config.contact.method} contact, gravity "
-                f"{'on' if config.route.gravity else 'off'}; flexion to {config.motion.final_angle} deg by "
-                f"{run.describe()}")
-    final = config.motion.final_angle
-    return run_wear(run, out, headline, [final / 3, 2 * final / 3, final] if render_angles is None else render_angles,
-                    render, body_samples)
 
 
 def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], render: bool = True,
@@ -69,7 +56,7 @@ def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], ren
 
     def on_step(step):
         recorder.record(step)
-        say(f"  {step.line()}  {clock(run.fraction(step), getattr(step, 'phase', None))}")
+        say(f"  {step.line()}  {clock(run.fraction(step), step.phase)}")
 
     if checkpoint is None:
         history = run.run(on_step=on_step, stop_on_failure=False)

@@ -36,7 +36,7 @@ carry over to the next step. Coulomb friction: the stick points are committed af
 (ContactProblem.after_converged_step). A failed step is undone and halved down to `min_angle_step` / omega,
 then SleeveError names the time and the elbow angle.
 
-Records (SleeveHistory, as the explicit route): every `output_angle_step` degrees; the torque of a record is the
+Records (WearHistory of WearSteps, as the explicit route): every `output_angle_step` degrees; the torque of a record is the
 dt-weighted mean of the per-step resisting torques over the record interval (the explicit route averages over
 the interval too); the start record (angle 0) is the mean over the last record interval of the rest. The
 per-step values are kept in `ImplicitSleeve.trace` (`trace_array`: t [s], angle [deg], torque [N m],
@@ -58,18 +58,12 @@ from fabricfem.contact.problem import ContactProblem
 from fabricfem.dynamics.backward_euler import BackwardEulerInertia
 from fabricfem.dynamics.mass import lumped_mass
 from fabricfem.materials import positive_number
-from fabricfem.solvers.newton import NewtonSolver, SolverError
+from fabricfem.solvers.newton import NewtonSolver
 from fabricfem.solvers.system import CompositeSystem
 from fabricfem.wear.config import SleeveConfig
-from fabricfem.wear.sleeve import (
-    SleeveError,
-    SleeveHistory,
-    SleeveProblem,
-    SleeveStep,
-    StepLimiter,
-    sleeve_shell,
-    track_elbow_torques,
-)
+from fabricfem.wear.contract import WearHistory, WearStep
+from fabricfem.wear.quasistatic import SleeveError, SleeveProblem, StepLimiter, newton_record, solve_once
+from fabricfem.wear.sleeve import sleeve_shell, track_elbow_torques
 
 # active-set ties (ContactProblem.tie_tolerance) = this x augmentation_tolerance: a node on the contact switch keeps
 # its status within a gap of 1e-6 m (default tolerance 1e-5 m), an order below what the Uzawa loop accepts
@@ -139,8 +133,8 @@ class ImplicitSleeve(SleeveProblem):
         return (f"backward Euler, dt = {self.dt:.3g} s, {self.settle_steps} settling steps, records every "
                 f"{self.config.motion.output_angle_step:g} deg")
 
-    def run(self, on_step: Callable[[SleeveStep], None] | None = None,
-            stop_on_failure: bool = True) -> SleeveHistory:
+    def run(self, on_step: Callable[[WearStep], None] | None = None,
+            stop_on_failure: bool = True) -> WearHistory:
         return run_implicit(self, on_step=on_step, stop_on_failure=stop_on_failure)
 
 
@@ -190,19 +184,6 @@ def build_implicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                           record_time=record_time, energy_form=fem.form(model.energy))
 
 
-def _solve_once(problem: ImplicitSleeve) -> tuple[bool, int, str]:
-    """Newton (+ Uzawa updates for method augmented) at the current pose and step; (converged, its, reason)."""
-    contact, cfg = problem.contact, problem.config
-    try:
-        if cfg.contact.method == "augmented":
-            report = contact.solve_augmented(problem.solver, tolerance=cfg.contact.augmentation_tolerance)
-            return True, sum(report.newton_iterations), "augmented"
-        result = contact.solve(problem.solver)
-    except SolverError as exc:
-        return False, 0, str(exc)
-    return result.converged, result.iterations, result.reason
-
-
 def _solve_step(problem: ImplicitSleeve) -> tuple[bool, int, str]:
     """One step's equilibrium: Newton with the active-set strategy of ReturnMapContact (frozen contact set and
     segments) and, if that fails (sets that keep changing, or a stalled solve, cut at ACTIVE_SET_MAX_ITERATIONS),
@@ -210,13 +191,13 @@ def _solve_step(problem: ImplicitSleeve) -> tuple[bool, int, str]:
     contact set may then change between iterates). Both solve the same equations; (converged, its, reason)."""
     contact, snes = problem.contact, problem.solver.snes
     if not contact.active_set:
-        return _solve_once(problem)
+        return solve_once(problem)
     start, multiplier = problem.system.w.x.array.copy(), contact.multiplier.copy()
     # the converged active-set solves of the settling sleeve took <= 22 iterations (mesh I); a stalled one is
     # cut at ACTIVE_SET_MAX_ITERATIONS instead of newton_max_iterations (a stall costs that per sequence)
     snes.setTolerances(max_it=min(ACTIVE_SET_MAX_ITERATIONS, problem.config.route.newton_max_iterations))
     try:
-        ok, its, reason = _solve_once(problem)
+        ok, its, reason = solve_once(problem)
     finally:
         snes.setTolerances(max_it=problem.config.route.newton_max_iterations)
     if ok:
@@ -227,14 +208,14 @@ def _solve_step(problem: ImplicitSleeve) -> tuple[bool, int, str]:
     contact.multiplier = multiplier
     contact.active_set = False
     try:
-        ok, more, plain = _solve_once(problem)
+        ok, more, plain = solve_once(problem)
     finally:
         contact.active_set = True
     return ok, its + more, f"active set: {reason}; plain Newton: {plain}"
 
 
-def run_implicit(problem: ImplicitSleeve, on_step: Callable[[SleeveStep], None] | None = None,
-                 stop_on_failure: bool = True, max_wall_time: float | None = None) -> SleeveHistory:
+def run_implicit(problem: ImplicitSleeve, on_step: Callable[[WearStep], None] | None = None,
+                 stop_on_failure: bool = True, max_wall_time: float | None = None) -> WearHistory:
     """Rest (settle_steps steps) and flexion to final_angle by backward-Euler steps (module docstring); returns
     the torque history with a record every output_angle_step degrees (the first: angle 0, the settled sleeve).
 
@@ -244,7 +225,7 @@ def run_implicit(problem: ImplicitSleeve, on_step: Callable[[SleeveStep], None] 
     cfg, contact, system, flexion = problem.config, problem.contact, problem.system, problem.flexion
     inertia = problem.inertia
     t0, cpu0 = time.perf_counter(), time.process_time()
-    history = SleeveHistory(cfg, ndofs=problem.model.ndofs)
+    history = WearHistory(cfg.name, ndofs=problem.model.ndofs)
     contact.set_time(0.0)
     gap0 = problem.min_gap()
     if gap0 <= 0.0:
@@ -298,7 +279,7 @@ def run_implicit(problem: ImplicitSleeve, on_step: Callable[[SleeveStep], None] 
                                   reason="STEP_TOO_SMALL")
         return total
 
-    def record(angle: float, iterations: int, since: float) -> SleeveStep:
+    def record(angle: float, iterations: int, since: float) -> WearStep:
         trace = problem.trace_array()
         window = trace[trace[:, 0] > since + 1e-12] if len(trace) else trace
         if len(window):
@@ -306,13 +287,8 @@ def run_implicit(problem: ImplicitSleeve, on_step: Callable[[SleeveStep], None] 
             penetration = float(window[:, 3].max())
         else:
             torque, penetration = problem.resisting_torque(), contact.max_penetration()
-        if not math.isfinite(torque):
-            raise SleeveError(f"sleeve: the torque is not finite at {angle} deg")
-        return SleeveStep(angle=angle, torque=torque, torque_all=problem.resisting_torque_all(),
-                          newton_iterations=iterations, max_penetration=penetration,
-                          contact_force=float(np.linalg.norm(contact.total_force())), wall=time.perf_counter() - t0,
-                          time_steps=len(window), kinetic_energy=inertia.kinetic_energy(),
-                          strain_energy=problem.strain_energy())
+        return newton_record(problem, angle, iterations, t0, torque=torque, penetration=penetration,
+                             time_steps=len(window), energies=(inertia.kinetic_energy(), problem.strain_energy()))
 
     n_records = round(cfg.motion.final_angle / cfg.motion.output_angle_step)
     if not math.isclose(n_records * cfg.motion.output_angle_step, cfg.motion.final_angle, rel_tol=1e-9):
