@@ -26,8 +26,8 @@ from fabricfem.wear.run import build_run
 
 def main(out: Path, quick: bool = False, comm=MPI.COMM_WORLD):
     """Run into `out`; returns the history (fabricfem.wear.contract.WearHistory)."""
-    config = SleeveConfig.of(n_around=10, n_along=13, final_angle=6.0 if quick else 57.0,       # mesh I
-                             settle_time=0.1 if quick else 0.4, name="sleeve demo")
+    config = SleeveConfig.of(n_around=10, n_along=13, name="sleeve",                           # mesh I
+                             **(dict(final_angle=6.0, output_angle_step=3.0, angle_steps=2) if quick else {}))
     run = build_run(config, comm)                                                               # mesh, forms
     recorder = WearRecorder(run, out, render_at=[config.motion.final_angle], render=not quick)
     say = print if comm.rank == 0 else (lambda *a, **k: None)
