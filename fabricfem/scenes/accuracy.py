@@ -59,9 +59,8 @@ from petsc4py import PETSc
 
 from fabricfem import io
 from fabricfem.dynamics.newmark import DynamicsError
-from fabricfem.scenes import wear
+from fabricfem.scenes import particle_level, wear
 from fabricfem.scenes.batch import read_summary
-from fabricfem.scenes import particle_level
 from fabricfem.scenes.build import build_fabric, critical_time_step_estimate, estimated_dofs, validate
 from fabricfem.scenes.richardson import ORDERS, richardson
 from fabricfem.scenes.run import SceneOutcome, output_dir, run_scene, scene_name, scene_sha256

@@ -2,6 +2,8 @@
 critical time step before meshing). `load` and `validate` are the entry points of fabricfem.scenes."""
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import os
 from pathlib import Path
@@ -14,7 +16,16 @@ from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
 from fabricfem.meshes import plate, tube
 from fabricfem.scenes import schema, wear
 from fabricfem.scenes.schema import Scene, SceneError
-from fabricfem.scenes.sections import DynamicsSection, FabricSection, MeshSection, ModelSection, from_table, section
+from fabricfem.scenes.sections import (
+    DynamicsSection,
+    FabricSection,
+    MeshSection,
+    ModelSection,
+    OutputSection,
+    SceneSection,
+    from_table,
+    section,
+)
 from fabricfem.wear.config import SECTIONS, ContactSpec, FabricSpec, FlexionSpec, RouteSpec, SleeveConfig, TubeSpec
 
 
@@ -216,3 +227,21 @@ def check_wear_objects(data: dict, path: Path | None) -> None:
         raise SceneError(f"fabric.density: the explicit engine needs a positive density [kg/m^3], got {fabric.density}")
     wear.check_window(data, wear.plan(data, fabric, path))
     wear.check_garment(data, path)
+
+
+def scene_name(scene: Scene) -> str:
+    """[scene] name, else the file's stem, else "scene"."""
+    return section(SceneSection, scene.get("scene")).name or (scene.path.stem if scene.path is not None else "scene")
+
+
+def output_dir(scene: Scene) -> Path:
+    """[output] dir, else results/<scene name>."""
+    return Path(section(OutputSection, scene.get("output")).dir or f"results/{scene_name(scene)}")
+
+
+# ---------------------------------------------------------------------------------------- dynamic scenes
+
+
+def scene_sha256(scene: Scene) -> str:
+    """SHA-256 of the scene's data (canonical JSON): identifies the scene a summary belongs to."""
+    return hashlib.sha256(json.dumps(scene.data, sort_keys=True, default=str).encode()).hexdigest()

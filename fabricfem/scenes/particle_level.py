@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from fabricfem import io
-from fabricfem.particles import DivergenceError, Problem, ParticleSystem, relax_newton, rectangular_grid
+from fabricfem.particles import DivergenceError, ParticleSystem, Problem, rectangular_grid, relax_newton
 from fabricfem.scenes.schema import ALL_NODES, SceneError
 from fabricfem.scenes.sections import FabricSection, MeshSection, OutputSection, SolverSection, section
 

@@ -1,0 +1,355 @@
+"""Dynamic scenes ([dynamics]): time integration from rest, with obstacles, monitors, strain limiting and
+checkpoints.
+
+Outputs of a dynamic scene <name>: <dir>/<name>.xdmf (displacement time series), <dir>/<name>.csv (time [s],
+energies [J], monitors, max vertex Green strain [-], Newton iterations), <dir>/<name>.png (monitors and energies
+over time) and <dir>/summary.json.
+"""
+from __future__ import annotations
+
+import copy
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from mpi4py import MPI
+
+from fabricfem import io
+from fabricfem.contact.obstacles import Plane, RoundedBox, table_top
+from fabricfem.contact.problem import ContactProblem
+from fabricfem.dynamics import CentralDifference, NewmarkIntegrator, critical_time_step, node_monitor
+from fabricfem.dynamics.strain_limit import FastProjection, attach
+from fabricfem.dynamics.ts import GeneralizedAlphaIntegrator
+from fabricfem.scenes.build import output_dir, scene_name, scene_sha256
+from fabricfem.scenes.schema import Scene, SceneError
+from fabricfem.scenes.sections import (
+    DynamicsSection,
+    MonitorSection,
+    section,
+)
+from fabricfem.scenes.static import build_model
+from fabricfem.shell import ShellModel
+from fabricfem.solvers.system import base_model
+from fabricfem.wear.run import interrupt_flag
+
+CHECKPOINT_EVERY = 25       # records between the checkpoints of a dynamic scene or a wear run (explicit engine)
+
+
+def build_obstacles(spec: list[dict]) -> list:
+    """Plane / RoundedBox obstacles of [[dynamics.obstacles]] (validated by fabricfem.scenes.schema), SI units."""
+    out = []
+    for i, o in enumerate(spec):
+        try:
+            if o["type"] == "plane":
+                out.append(Plane(o["point"], o["normal"]))
+            elif o["type"] == "box":
+                out.append(RoundedBox(o["lower"], o["upper"], float(o["radius"])))
+            else:
+                out.append(table_top(o["center"], float(o["half_x"]), float(o["half_y"]), float(o["height"]),
+                                     float(o["fillet_radius"])))
+        except ValueError as exc:
+            raise SceneError(f"dynamics.obstacles[{i}]: {exc}") from None
+    return out
+
+
+@dataclass
+class DynamicRun:
+    """Result of `run_dynamic_scene`: the recorded history, step data, wall time [s], peak memory [MiB]."""
+    history: object
+    steps: int
+    dt: float
+    dt_crit: float | None
+    wall_s: float
+    peak_memory_mib: float
+    summary: dict = field(default_factory=dict)
+    outputs: dict[str, Path] = field(default_factory=dict)
+    failure: str = ""           # why the run stopped before end_time (an interrupt), "" when it completed
+
+
+def _load_function(ramp_time: float):
+    """lambda(t) = min(t / ramp_time, 1) (1 at once when ramp_time = 0)."""
+    if ramp_time > 0.0:
+        return lambda t: min(t / ramp_time, 1.0)
+    return 1.0
+
+
+# [dynamics] integrator -> its class (build_integrator)
+INTEGRATORS = {"explicit": CentralDifference, "newmark": NewmarkIntegrator,
+               "generalized-alpha": GeneralizedAlphaIntegrator}
+
+
+def build_integrator(spec: dict, model):
+    """(integrator, n_steps, dt [s], dt_crit [s] or None) for a [dynamics] section; dt is end_time / n_steps.
+    `model`: the ShellModel or a CompositeSystem of it (fabricfem.solvers.system, e.g. with obstacle contact)."""
+    d = section(DynamicsSection, spec)
+    kind = d.integrator
+    end_time = float(d.end_time)
+    rayleigh = tuple(float(c) for c in d.rayleigh)
+    common = dict(load_factor=_load_function(float(d.ramp_time)), rayleigh=rayleigh, air_drag=float(d.air_drag))
+    dt_crit = critical_time_step(base_model(model), rayleigh) if kind == "explicit" else None
+    dt = float(d.dt_fraction) * dt_crit if d.dt == "auto" else float(d.dt)
+    n_steps = max(1, math.ceil(end_time / dt * (1.0 - 1e-12)))
+    dt = end_time / n_steps
+    if kind == "explicit":
+        force = bool(d.force)
+        if dt > dt_crit and not force:
+            raise SceneError(f"dynamics.dt: {dt:.6g} s exceeds the critical time step {dt_crit:.6g} s of this mesh "
+                             f"(ratio {dt / dt_crit:.3g}, [Man2006, eqs. 2.86-2.87]); use a smaller dt or force = true")
+        integrator = CentralDifference(model, dt, force=force, dt_crit=dt_crit, **common)
+    elif kind == "newmark":
+        integrator = NewmarkIntegrator(model, dt, beta=float(d.beta), gamma=float(d.gamma), lumped=bool(d.lumped),
+                                       **common)
+    else:
+        integrator = GeneralizedAlphaIntegrator(model, dt, rho_inf=float(d.rho_inf), lumped=bool(d.lumped), **common)
+    return integrator, n_steps, dt, dt_crit
+
+
+class _StrainMeter:
+    """Vertex Green strains (patch averages of fabricfem.dynamics.strain_limit) once per recorded step."""
+
+    def __init__(self, projection, integrator):
+        self.projection, self.integrator = projection, integrator
+        self._step, self._summary = None, None
+
+    def summary(self) -> dict[str, float]:
+        if self._step != self.integrator.step_count:
+            self._summary = self.projection.strain_summary()
+            self._step = self.integrator.step_count
+        return self._summary
+
+    def max_strain(self) -> float:
+        s = self.summary()
+        return max(s["max_warp"], s["max_weft"])
+
+
+def _max_displacement(model: ShellModel) -> float:
+    """max over nodes of |u| [m], all ranks."""
+    u = model.displacement().x.array.reshape(-1, 3)
+    local = float(np.linalg.norm(u, axis=1).max(initial=0.0))
+    return model.comm.allreduce(local, op=MPI.MAX)
+
+
+def build_monitors(spec: list[dict], model: ShellModel, meter: _StrainMeter) -> dict:
+    """{name: callable} of [[dynamics.monitors]] (point values on all ranks, global quantities)."""
+    quantities = {"max_warp_strain": lambda: meter.summary()["max_warp"],
+                  "max_weft_strain": lambda: meter.summary()["max_weft"],
+                  "mean_warp_strain": lambda: meter.summary()["mean_warp"],
+                  "mean_weft_strain": lambda: meter.summary()["mean_weft"],
+                  "max_displacement": lambda: _max_displacement(model)}
+    monitors = {}
+    for i, table in enumerate(spec):
+        m = section(MonitorSection, table)
+        if m.quantity is not None:
+            monitors[m.name] = quantities[m.quantity]
+            continue
+        try:
+            monitors[m.name] = node_monitor(model, m.point, m.field,
+                                            m.component if m.component is not None else 2 if m.field == "u" else 0)
+        except ValueError as exc:
+            raise SceneError(f"dynamics.monitors[{i}].point: {exc}") from None
+    return monitors
+
+
+def _progress(comm, n_steps: int, say):
+    """Progress callback of TimeIntegrator.run: about 10 lines with the estimated time left (rank 0)."""
+    every = max(1, math.ceil(n_steps / 10))
+    clock = io.Progress()
+
+    def report(step: int, total: int, t: float, elapsed: float):
+        if step == 1 or step % every == 0 or step == total:
+            line = clock(step / total)
+            if step != 1:
+                say(f"  step {step:6d}/{total}  t = {t:.5g} s  {line}")
+    return report
+
+
+def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD, resume: bool = False, sha: str = "") -> DynamicRun:
+    """Integrate a [dynamics] scene from rest to end_time; write <name>.xdmf/.csv/.png and summary.json.
+
+    Checkpoints (`DynamicCheckpoint`) every [dynamics] checkpoint_every records (default CHECKPOINT_EVERY);
+    `resume` continues from the output folder's checkpoint; Ctrl-C (SIGINT, any rank) stops the run at the next
+    record with valid outputs and a checkpoint there (`DynamicRun.failure` says so). `sha`: the scene's hash
+    the checkpoint is checked against (default scene_sha256(scene))."""
+    say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
+    spec = scene["dynamics"]
+    d = section(DynamicsSection, spec)
+    name = scene_name(scene)
+    out = output_dir(scene)
+    t0 = time.perf_counter()
+    checkpoint = DynamicCheckpoint(out, comm, sha or scene_sha256(scene), d.checkpoint_every)
+    # before meshing: an integrator that cannot resume, a missing or a foreign checkpoint fail fast
+    saved = checkpoint.read(INTEGRATORS.get(d.integrator)) if resume else None
+    obstacles = build_obstacles(d.obstacles)
+    model = build_model(scene, comm)
+    system, contact = model, None
+    if obstacles:   # penalty contact with the fixed rigid obstacles: a ResidualTerm of the shell
+        model.compile()
+        contact = ContactProblem(model, obstacles, penalty=d.contact_penalty)
+        system = contact.system
+    integrator, n_steps, dt, dt_crit = build_integrator(spec, system)
+    limit = d.strain_limit
+    # the projection's strain form also measures the strains (limit 1 when nothing is limited, as in
+    # fabricfem.verify.strain_limit)
+    projection = FastProjection(model, float(limit) if limit else 1.0, tol=float(d.strain_limit_tol))
+    log = attach(projection, integrator) if limit else []
+    meter = _StrainMeter(projection, integrator)
+    monitors = build_monitors(d.monitors, model, meter)
+    monitors["max_strain"] = meter.max_strain
+    output_every = int(d.output_every if d.output_every is not None else max(1, n_steps // 100))
+    xdmf = out / f"{name}.xdmf"
+    checkpoint.attach(xdmf, integrator, log, contact)
+    history = checkpoint.restore(saved) if resume else None
+    say(f"{name}: {model.model} model, {model.ndofs} dofs, {comm.size} rank(s); {d.integrator} "
+        f"dt = {dt:.4g} s" + (f" (critical {dt_crit:.4g} s)" if dt_crit else "") +
+        f", {n_steps} steps to t = {float(d.end_time):g} s" + (f", strain limit {limit:g}" if limit else "")
+        + (f", {len(obstacles)} obstacle(s)" if obstacles else "")
+        + (f"; resumed at t = {history.time[-1]:.6g} s (record {len(history.time) - 1})" if resume else ""))
+    series = io.SurfaceSeries(xdmf, model.mesh, append=resume)
+    checkpoint.series = series
+    start = time.perf_counter()
+    try:
+        with interrupt_flag(comm) as interrupted:
+            history = integrator.run(n_steps, monitors=monitors, xdmf=series, output_every=output_every,
+                                     progress=_progress(comm, n_steps, say), history=history,
+                                     after_record=checkpoint.after_record, should_stop=interrupted)
+        if history.stopped and checkpoint.records != len(history.time) - 1:
+            checkpoint.save(history)        # the interrupted run resumes from its last record
+    finally:
+        series.close()
+    run_wall = time.perf_counter() - start
+    summary, outputs = _write_outputs(scene, history, model, n_steps, dt, dt_crit, run_wall, t0, log, comm)
+    if history.stopped:
+        say(f"STOPPED EARLY: {history.stopped}; continue with --resume")
+    integrator.destroy()
+    projection.destroy()
+    return DynamicRun(history, n_steps, dt, dt_crit, summary["wall_s"], summary["peak_memory_mib"], summary, outputs,
+                      history.stopped)
+
+
+def _write_outputs(scene: Scene, history, model, n_steps: int, dt: float, dt_crit: float | None, run_wall: float,
+                   t0: float, log: list, comm) -> tuple[dict, dict]:
+    """The CSV, the PNG and summary.json of a finished (or interrupted) dynamic run, and the closing lines;
+    returns (summary, {kind: path})."""
+    say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
+    d = section(DynamicsSection, scene["dynamics"])
+    name, out, limit = scene_name(scene), output_dir(scene), d.strain_limit
+    xdmf = out / f"{name}.xdmf"
+    header, rows = history.columns()
+    header.append("newton_iterations")
+    rows = [row + [its] for row, its in zip(rows, history.newton_iterations)]
+    io.write_csv(out / f"{name}.csv", header, rows, comm)
+    user = [m["name"] for m in d.monitors]
+    panels = {m: {m: history.monitors[m]} for m in user}
+    panels["energy [J]"] = {"kinetic": history.kinetic, "strain": history.strain, "total": list(history.total)}
+    panels["max strain [-]"] = {"max vertex Green strain": history.monitors["max_strain"]}
+    io.plot_time_series(out / f"{name}.png", history.time, panels, title=name, comm=comm)
+    wall = time.perf_counter() - t0
+    memory = io.peak_memory_mib(comm)
+    iterations = [r.iterations for r in log]
+    summary = {"scene": name, "kind": "dynamic", "integrator": d.integrator, "ranks": comm.size,
+               "ndofs": model.ndofs, "steps": n_steps, "dt_s": dt, "dt_crit_s": dt_crit,
+               "end_time_s": history.time[-1], "wall_s": wall, "time_integration_wall_s": run_wall,
+               "kinetic_J": history.kinetic[-1], "strain_J": history.strain[-1],
+               "external_work_J": history.external_work[-1], "dissipated_J": history.dissipated[-1],
+               "max_strain_final": history.monitors["max_strain"][-1],
+               "max_strain_recorded": max(history.monitors["max_strain"]),
+               "newton_iterations": int(sum(history.newton_iterations)),
+               "projection_iterations": int(sum(iterations)), "max_projection_iterations": max(iterations, default=0),
+               "peak_memory_mib": memory["max_mib"], "peak_memory_total_mib": memory["total_mib"],
+               "peak_memory_per_rank_mib": memory["per_rank_mib"],
+               **{f"final_{m}": float(history.monitors[m][-1]) for m in user}}
+    outputs = {"xdmf": xdmf, "csv": out / f"{name}.csv", "png": out / f"{name}.png",
+               "summary": out / "summary.json"}
+    io.write_json(outputs["summary"], summary, comm)
+    say(f"done: {n_steps} steps in {run_wall:.1f} s (total {wall:.1f} s); final kinetic {summary['kinetic_J']:.4g} J, "
+        f"strain {summary['strain_J']:.4g} J, external work {summary['external_work_J']:.4g} J, dissipated "
+        f"{summary['dissipated_J']:.4g} J; max strain {summary['max_strain_final']:.4g}"
+        + (f"; projection iterations {sum(iterations)} (max {max(iterations, default=0)} per step)" if limit else "")
+        + f"; peak memory {memory['max_mib']:.0f} MiB (max over {comm.size} rank(s))")
+    say(f"wrote {', '.join(str(p) for p in outputs.values())}")
+    return summary, outputs
+
+
+class DynamicCheckpoint:
+    """The checkpoints of a dynamic scene's run (fabricfem.io.Checkpoint files under <out>/checkpoint/).
+
+    Every `every` records (default CHECKPOINT_EVERY) each rank saves the integrator's `state()` (d, v, a, t, step
+    counts, work and dissipation, the step-halving state of Newmark; fabricfem.dynamics.newmark.TimeIntegrator),
+    the strain-limit projection's log (its iterations per step; the projection keeps nothing else between steps),
+    the obstacle contact's multipliers and stick points, the History so far and the record count; the XDMF series
+    is closed and copied beside it (series_<records>.xdmf/.h5, rank 0; io.SurfaceSeries.snapshot) before the
+    state is written, and older copies are removed after. `read()` checks the files (before the model is built),
+    `restore(state)` puts the copy back as <name>.xdmf/.h5 (a kill may have left a broken HDF5 file) and
+    restores the state: the run appends the later records to it. An
+    integrator whose state cannot be saved exactly (PETSc TS, generalized-alpha) is refused naming it, and its
+    runs write no checkpoints."""
+
+    CONTACT_STATE = ("multiplier", "_stick_local", "_stick_segment", "active", "sliding", "segment", "time")
+
+    def __init__(self, out: Path, comm, sha: str, every: int | None):
+        every = CHECKPOINT_EVERY if every is None else every
+        try:
+            self.files = io.Checkpoint(out, comm, sha, every)
+        except ValueError as exc:
+            raise SceneError(f"dynamics.checkpoint_every: {exc}") from None
+        self.out, self.comm, self.every = Path(out), comm, every
+        self.xdmf, self.integrator, self.log, self.contact = None, None, [], None
+        self.series: io.SurfaceSeries | None = None
+        self.records = 0            # records of the last checkpoint written or read
+
+    def attach(self, xdmf: Path, integrator, log: list, contact=None) -> None:
+        """The run's XDMF file, integrator, strain-limit log (fabricfem.dynamics.strain_limit.attach) and
+        obstacle contact (or None) whose state the checkpoints hold."""
+        self.xdmf, self.integrator, self.log, self.contact = Path(xdmf), integrator, log, contact
+
+    def after_record(self, history) -> None:
+        if self.integrator.resumable and (len(history.time) - 1) % self.every == 0:
+            self.save(history)
+
+    def save(self, history) -> None:
+        """Write the checkpoint of the run's state after its last record (all ranks)."""
+        if not self.integrator.resumable:
+            return
+        records = len(history.time) - 1
+        tag = f"series_{records}"
+        self.series.snapshot(self.files.folder, tag)
+        contact = {k: copy.deepcopy(getattr(self.contact, k)) for k in self.CONTACT_STATE
+                   if self.contact is not None and hasattr(self.contact, k)}
+        self.files.write({"records": records, "history": history, "integrator": self.integrator.state(),
+                          "projection_log": list(self.log), "contact": contact, "series": tag})
+        if self.comm.rank == 0:
+            for old in self.files.folder.glob("series_*"):
+                if old.stem != tag:
+                    old.unlink()
+        self.records = records
+
+    def read(self, integrator_class=None) -> dict:
+        """This rank's saved state; SceneError when the run's `integrator_class` cannot resume, when there is no
+        checkpoint or it is of another scene or rank count."""
+        if integrator_class is not None and not integrator_class.resumable:
+            raise SceneError(f"resume: the {integrator_class.__name__} integrator cannot resume from a checkpoint: "
+                             f"{integrator_class.not_resumable}")
+        if not self.files.exists():
+            raise SceneError(f"resume: no checkpoint in {self.files.folder} (run the scene without --resume first)")
+        try:
+            return self.files.read()
+        except ValueError as exc:
+            raise SceneError(str(exc)) from None
+
+    def restore(self, state: dict):
+        """Restore a `read` state into the attached run (class docstring); returns the History of its records."""
+        integ = self.integrator
+        if not integ.resumable:
+            raise SceneError(f"resume: the {type(integ).__name__} integrator cannot resume from a checkpoint: "
+                             f"{integ.not_resumable}")
+        integ.restore(state["integrator"])
+        self.log[:] = state["projection_log"]
+        for key, value in state["contact"].items():
+            setattr(self.contact, key, copy.deepcopy(value))
+        io.SurfaceSeries.restore(self.xdmf, self.files.folder, state["series"], self.comm)
+        self.records = state["records"]
+        return state["history"]
+
+

@@ -1,0 +1,146 @@
+"""The sections of a wear scene (`[scene] kind = "wear"`): each key's type, default and unit declared once as a
+field of a frozen dataclass (fabricfem.parameters.param), beside those of fabricfem.wear.config (ContactSpec,
+RouteSpec, FlexionSpec) and fabricfem.body (ArmDimensions, LowerBodyDimensions); the schema is read from them."""
+from __future__ import annotations
+
+import dataclasses
+
+from fabricfem.body.arm import ArmDimensions
+from fabricfem.body.lower_body import LowerBodyDimensions
+from fabricfem.parameters import param as doc
+from fabricfem.scenes.sections import AccuracySection, FabricSection, OutputSection, SceneSection, schema_of
+from fabricfem.wear.config import ContactSpec, FlexionSpec, RouteSpec
+
+
+@dataclasses.dataclass(frozen=True)
+class GarmentSection:
+    """[garment]: a tube along +x (fabricfem.meshes.tube) or the panels of a sewing pattern (fabricfem.meshes.pattern)
+    sewn along its stitches."""
+
+    builder: str = doc("tube | pattern", "pattern")
+    pattern: str | None = doc("pattern: a shipped pattern name (fabricfem/patterns) or a GarmentCode JSON / TOML file, "
+                              "relative to the scene file", None)
+    h: float = doc("pattern: element size [m]", 0.05)
+    order: int = doc("geometry order (2: curved edges and tubes without facets)", 2)
+    stitch_tolerance: float = doc("pattern: largest relative length difference of stitched edges", 0.02)
+    sewing_time: float = doc("pattern: time the seams take to close [s] (0: they must start closed)", 0.0)
+    scale: float = doc("pattern: grading factor on the panels' outlines and placements (1: as drawn)", 1.0)
+    rotate: list | None = doc("pattern: [rx, ry, rz] extrinsic XYZ Euler angles [deg] applied to the placed garment "
+                              "(GarmentCode files are Y-up: [90, 0, 0] turns them Z-up)", None)
+    translate: list | None = doc("pattern: [x, y, z] [m] added after `rotate`", None)
+    hold: list = doc("edge tags whose nodes are held in place (tube: end0 at x = 0, end1)", default_factory=list)
+    length: float | None = doc("tube: length along x [m]", None)
+    radius: float | None = doc("tube: radius [m]", None)
+    n_around: int | None = doc("tube: Q2 cells around", None)
+    n_along: int | None = doc("tube: Q2 cells along", None)
+    quadrature: list | None = doc("tube and pattern: (full, reduced) PSRI quadrature degrees", None)
+    hold_rotations: bool = doc("tube (quasistatic and implicit sleeve routes): clamp the rotations of end0", False)
+
+
+@dataclasses.dataclass(frozen=True)
+class WearFabricSection:
+    """[fabric] of a wear scene: a stored fabric by name (`catalogue`) or the keys of [fabric]."""
+
+    catalogue: str | None = doc("a stored fabric (fabricfem.fabrics: a name or a .json path) instead of E1 ...", None)
+
+
+@dataclasses.dataclass(frozen=True)
+class WearBodySection:
+    """[body]: the wearer, a preset of named ellipsoid segments: arm (upper arm + forearm, ANSUR II; the keys of
+    ArmDimensions), lower_body (trunk, pelvis, thighs, shanks, feet, ANSUR II; the keys of LowerBodyDimensions),
+    limb (one ellipsoid along x: center, radii)."""
+
+    type: str = doc("arm | lower_body | limb (default_arm = arm)")
+    center: list | None = doc("limb: [x, y, z] centre [m]", None)
+    radii: list | None = doc("limb: [r1, r2, r3] semi-axes along x, y, z [m]", None)
+
+
+@dataclasses.dataclass(frozen=True)
+class WearMotionSection:
+    """[motion]: what drives the body: elbow_flexion (arm; FlexionSpec's keys), still (the start pose held),
+    walking (lower body: Winter's normative gait, both legs), obstacle_walk (Winter's gait with one stride over a
+    box, fabricfem.body.crossing) or file (a C3D, TRC, BVH or CSV motion capture with
+    a mapping of its markers or joints to the body's joint and marker names)."""
+
+    type: str = doc("elbow_flexion | still | walking | obstacle_walk | file")
+    duration: float | None = doc("still: length of the motion phase [s]; file, walking: at most this long", None)
+    record_time: float | None = doc("record interval [s] (elbow_flexion: output_angle_step / angular velocity)", None)
+    strides: int = doc("walking, obstacle_walk: gait cycles", 2)
+    cycle_time: float = doc("walking, obstacle_walk: duration of one gait cycle [s]", 0.987)
+    speed: float = doc("walking, obstacle_walk: forward speed of the pelvis [m/s]", 1.43)
+    crossing_stride: int = doc("obstacle_walk: the stride that steps over the obstacle", 3)
+    obstacle_height: float = doc("obstacle_walk: height of the obstacle [m]", 0.5)
+    obstacle_depth: float = doc("obstacle_walk: depth of the obstacle along the walk [m]", 0.1)
+    clearance: float = doc("obstacle_walk: lead foot's clearance over the obstacle [m]", 0.12)
+    trail_clearance: float = doc("obstacle_walk: trail foot's clearance over the obstacle [m]", 0.05)
+    crossing_speed: float = doc("obstacle_walk: pelvis speed during the crossing stride [m/s]", 0.6)
+    path: str | None = doc("file: the motion file (.c3d, .trc, .bvh, .csv), relative to the scene file", None)
+    units: str | None = doc("file: length unit of the file (mm, cm, m, in; default the file's metadata; BVH: "
+                            "required)", None)
+    up: str | None = doc("file: the file's up axis (y: mapped to z; default the reader's)", None)
+    fill_gaps: bool = doc("file: fill marker gaps by interpolation instead of refusing them", False)
+    blend_time: float = doc("walking, file (lower body): the body stands during the donning and enters the motion "
+                            "over this time [s] (fabricfem.body.blend; 0: it starts in the motion's first pose)", 0.0)
+    mapping: dict | None = doc("file: body joint/marker name -> file marker or joint name (default: the same "
+                               "names)", None)
+
+
+@dataclasses.dataclass(frozen=True)
+class WearDonningSection:
+    """[donning]: putting the garment on. grow: the body starts at `start` x its transverse radii and grows to full
+    size over `time` [s] (explicit) or in `steps` quasi-static increments (the compression route)."""
+
+    method: str = doc("none | grow", "none")
+    remove: list | None = doc("segments switched off while the garment goes on (the thesis removes the feet)", None)
+    restore_at: float | None = doc("time [s] at which the removed segments come back (default: the start of the "
+                                   "belt phase, after the pull and the growth)", None)
+    pull_edges: list | None = doc("pattern edges \"panel.edge\" gripped and pulled along pull_path (the waistband)",
+                                  None)
+    pull_path: list | None = doc("[[dx, dy, dz], ...] offsets [m] of the grip at equal times over pull_time "
+                                 "(the first usually [0, 0, 0])", None)
+    pull_time: float = doc("duration of the pull [s]", 0.0)
+    belt_edges: list | None = doc("pattern edges \"panel.edge\" tensioned as one drawstring (a belt, a cuff)", None)
+    belt_tension: float = doc("the belt's tension [N] (a drawstring force along the edges)", 0.0)
+    belt_time: float = doc("the belt's tension ramps from 0 over this time [s]", 0.0)
+    start: float | None = doc("grow: starting size of the body's transverse radii (0, 1]", None)
+    time: float = doc("grow, explicit: growth time [s]", 0.1)
+    steps: int = doc("grow, quasistatic: growth increments", 10)
+    tolerance: float = doc("grow, quasistatic: penetration tolerance of the augmented Lagrangian [m]", 1e-7)
+
+
+@dataclasses.dataclass(frozen=True)
+class TorqueSection:
+    """[[torque]]: a resisting-torque monitor about a joint from the contact forces on chosen segments."""
+
+    name: str = doc("column name")
+    joint: str = doc("joint name of the body")
+    axis: list = doc("[ax, ay, az] flexion axis (positive torque opposes a right-handed rotation about it)")
+    segments: list = doc("segment names whose contact forces count")
+
+
+@dataclasses.dataclass(frozen=True)
+class WearRouteSection:
+    """[route] keys of the explicit engine besides RouteSpec's."""
+
+    end_time: float | None = doc("explicit engine: stop the run at this body time [s] (the phases as scheduled, cut "
+                                 "there; the accuracy pilots' window); default: the whole scene", None)
+
+
+# section -> the dataclasses that declare its keys (the wear kind's own table; fabricfem.scenes.schema has the
+# other kinds')
+WEAR_SECTION_CLASSES: dict[str, tuple] = {
+    "scene": (SceneSection,), "garment": (GarmentSection,), "fabric": (FabricSection, WearFabricSection),
+    "body": (WearBodySection, ArmDimensions, LowerBodyDimensions), "motion": (WearMotionSection, FlexionSpec),
+    "donning": (WearDonningSection,), "contact": (ContactSpec,), "route": (RouteSpec, WearRouteSection),
+    "torque": (TorqueSection,), "output": (OutputSection,), "accuracy": (AccuracySection,)}
+WEAR_LIST_SECTIONS = {"torque"}
+
+
+def _schema(name: str) -> dict:
+    out: dict = {}
+    for cls in WEAR_SECTION_CLASSES[name]:
+        out.update({k: v for k, v in schema_of(cls).items() if k not in out})
+    return out
+
+
+WEAR_SCHEMA = {name: _schema(name) for name in WEAR_SECTION_CLASSES}
