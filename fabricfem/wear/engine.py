@@ -92,76 +92,104 @@ def run_phases(integrator, contact, phases: list[Phase], steps_per_record: int |
     skipped (a restored state, fabricfem.wear.checkpoint); `after_record(n)` is called after the n-th interval's
     record (a checkpoint); `should_stop()` is asked then too: a non-empty reason (an interrupt) ends the run
     there, `history.failure` set to it, the outputs up to this record valid."""
-    output_time, pending = 0.0, 0
-    loop, cpu, steps_timed = 0.0, 0.0, 0
-    internal = contact_hooks = pose = 0.0
-    done = 0                     # record intervals run or skipped so far, over all phases
+    loop = _Loop(integrator, contact, history, make_record, on_step, steps_per_record, start_record, after_record,
+                 should_stop)
     for phase in phases:
-        steps_run = 0
-        clock = timed(phase)
         base_int, base_contact = dict(integrator.timings), dict(contact.timings)
         start, cpu_start = time.perf_counter(), time.process_time()
-        output_phase = 0.0
+        try:
+            steps_run, output_phase, stopped = loop.phase(phase, label)
+        except WearError:
+            if stop_on_failure:
+                raise
+            return {}
+        if stopped:
+            return {}
+        if on_phase_end is not None:
+            on_phase_end(phase)
+        if phase.report == "end":
+            output_phase += loop.report(phase, phase.records - 1)
+        if timed(phase):
+            loop.add_timings(time.perf_counter() - start, time.process_time() - cpu_start, steps_run, output_phase,
+                             integrator.timings, base_int, contact.timings["pose_torque"] - base_contact["pose_torque"])
+    return loop.timings()
+
+
+class _Loop:
+    """The record intervals of `run_phases` and their timing sums (internal forces, contact hooks, pose and
+    torque, output [s], CPU [s], steps)."""
+
+    def __init__(self, integrator, contact, history, make_record, on_step, steps_per_record, start_record,
+                 after_record, should_stop):
+        self.integrator, self.contact, self.history = integrator, contact, history
+        self.make_record, self.on_step = make_record, on_step
+        self.steps_per_record, self.start_record = steps_per_record, start_record
+        self.after_record, self.should_stop = after_record, should_stop
+        self.pending = self.done = 0
+        self.sums = {"loop": 0.0, "cpu": 0.0, "steps": 0, "internal": 0.0, "hooks": 0.0, "pose": 0.0, "output": 0.0}
+
+    def phase(self, phase: Phase, label: str) -> tuple[int, float, bool]:
+        """Run the record intervals of `phase`: (steps run, output time [s], stopped by should_stop). A non-finite
+        state sets history.failure and raises WearError naming the phase, the time and the step."""
+        steps_run, output = 0, 0.0
+        integ = self.integrator
         for k in range(phase.records):
-            if done < start_record:
-                done += 1
+            if self.done < self.start_record:
+                self.done += 1
                 continue
-            contact.reset_means()
-            n_steps = steps_per_record() if callable(steps_per_record) else steps_per_record
+            self.contact.reset_means()
+            n_steps = self.steps_per_record() if callable(self.steps_per_record) else self.steps_per_record
             try:
                 for _ in range(n_steps):
-                    integrator.step()
-                    integrator.step_count += 1
-                if not (math.isfinite(integrator.d.norm()) and math.isfinite(integrator.v.norm())):
+                    integ.step()
+                    integ.step_count += 1
+                if not (math.isfinite(integ.d.norm()) and math.isfinite(integ.v.norm())):
                     raise ValueError("non-finite displacement or velocity")
             except ValueError as exc:
-                message = (f"{label}: the explicit run stopped in phase {phase.name!r} before t = {integrator.t:.6g} s "
-                           f"(step {integrator.step_count}, dt = {integrator.dt:.3g} s): {exc}")
-                if stop_on_failure:
-                    raise WearError(message, reason="EXPLICIT_BLOW_UP") from exc
-                history.failure = message
-                return {}
-            pending += n_steps
-            done += 1
+                message = (f"{label}: the explicit run stopped in phase {phase.name!r} before t = {integ.t:.6g} s "
+                           f"(step {integ.step_count}, dt = {integ.dt:.3g} s): {exc}")
+                self.history.failure = message
+                raise WearError(message, reason="EXPLICIT_BLOW_UP") from exc
+            self.pending += n_steps
+            self.done += 1
             steps_run += n_steps
             if phase.report == "each":
-                tic = time.perf_counter()
-                record = make_record(phase, k, pending)
-                pending = 0
-                history.steps.append(record)
-                if on_step:
-                    on_step(record)
-                if after_record is not None:
-                    after_record(done)
-                output_phase += time.perf_counter() - tic
-                reason = should_stop() if should_stop is not None else ""
+                output += self.report(phase, k)
+                if self.after_record is not None:
+                    self.after_record(self.done)
+                reason = self.should_stop() if self.should_stop is not None else ""
                 if reason:
-                    history.failure = f"{reason} at t = {integrator.t:.6g} s (record {done})"
-                    return {}
-        if phase.report == "end":
-            if on_phase_end is not None:
-                on_phase_end(phase)
-            tic = time.perf_counter()
-            record = make_record(phase, phase.records - 1, pending)
-            pending = 0
-            history.steps.append(record)
-            if on_step:
-                on_step(record)
-            output_phase += time.perf_counter() - tic
-        elif on_phase_end is not None:
-            on_phase_end(phase)
-        if clock:
-            loop += time.perf_counter() - start
-            cpu += time.process_time() - cpu_start
-            steps_timed += steps_run
-            internal += integrator.timings["internal_forces"] - base_int["internal_forces"]
-            contact_hooks += integrator.timings["contact"] - base_int["contact"]
-            pose += contact.timings["pose_torque"] - base_contact["pose_torque"]
-            output_time += output_phase
-    timings = step_breakdown(loop, internal, contact_hooks, pose, output_time, steps_timed)
-    timings["cpu_s"] = cpu
-    timings["cpu_ms_per_step"] = 1e3 * cpu / max(steps_timed, 1)
-    return timings
+                    self.history.failure = f"{reason} at t = {integ.t:.6g} s (record {self.done})"
+                    return steps_run, output, True
+        return steps_run, output, False
+
+    def report(self, phase: Phase, k: int) -> float:
+        """Append the record after interval k of `phase` and call on_step; returns the time it took [s]."""
+        tic = time.perf_counter()
+        record = self.make_record(phase, k, self.pending)
+        self.pending = 0
+        self.history.steps.append(record)
+        if self.on_step:
+            self.on_step(record)
+        return time.perf_counter() - tic
+
+    def add_timings(self, loop: float, cpu: float, steps: int, output: float, integ_timings: dict, base_int: dict,
+                    pose: float) -> None:
+        s = self.sums
+        s["loop"] += loop
+        s["cpu"] += cpu
+        s["steps"] += steps
+        s["output"] += output
+        s["internal"] += integ_timings["internal_forces"] - base_int["internal_forces"]
+        s["hooks"] += integ_timings["contact"] - base_int["contact"]
+        s["pose"] += pose
+
+    def timings(self) -> dict:
+        s = self.sums
+        out = step_breakdown(s["loop"], s["internal"], s["hooks"], s["pose"], s["output"], s["steps"])
+        out["cpu_s"] = s["cpu"]
+        out["cpu_ms_per_step"] = 1e3 * s["cpu"] / max(s["steps"], 1)
+        return out
 
 
 def kinetic_ratio(kinetic: np.ndarray, strain: np.ndarray) -> float:

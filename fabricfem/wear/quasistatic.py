@@ -371,6 +371,19 @@ def newton_record(problem: SleeveProblem, angle: float, iterations: int, t0: flo
                     drag_ratio=drag_ratio)
 
 
+def _give_up(problem: SleeveProblem, history: WearHistory, message: str, reason: str, current: float,
+             iterations: int, t0: float, ratio: float, stop_on_failure: bool) -> WearHistory:
+    """End the flexion at the last converged angle `current` [deg]: SleeveError, or (stop_on_failure=False) the
+    history with a record there and `failure` set."""
+    if stop_on_failure:
+        raise SleeveError(message, last_converged_load_factor=current, reason=reason)
+    if current > history.steps[-1].coordinate:
+        history.steps.append(newton_record(problem, current, iterations, t0, ratio))
+    history.failure = message
+    history.wall = time.perf_counter() - t0
+    return history
+
+
 def run_quasistatic(problem: SleeveProblem, angles: np.ndarray | None = None,
                     on_step: Callable[[WearStep], None] | None = None,
                     stop_on_failure: bool = True, max_wall_time: float | None = None) -> WearHistory:
@@ -413,13 +426,8 @@ def run_quasistatic(problem: SleeveProblem, angles: np.ndarray | None = None,
             if max_wall_time is not None and time.perf_counter() - t0 > max_wall_time:
                 message = (f"sleeve: wall-time budget of {max_wall_time:g} s used up at elbow angle {current:.4g} deg "
                            f"(last converged)")
-                if stop_on_failure:
-                    raise SleeveError(message, last_converged_load_factor=current, reason="WALL_TIME")
-                if current > history.steps[-1].coordinate:
-                    history.steps.append(newton_record(problem, current, iterations, t0, worst_ratio))
-                history.failure = message
-                history.wall = time.perf_counter() - t0
-                return history
+                return _give_up(problem, history, message, "WALL_TIME", current, iterations, t0, worst_ratio,
+                                stop_on_failure)
             trial = min(current + step, target)
             saved = system.w.x.array.copy()
             saved_multiplier = contact.multiplier.copy()
@@ -441,13 +449,8 @@ def run_quasistatic(problem: SleeveProblem, angles: np.ndarray | None = None,
                 message = (f"sleeve: Newton failed at elbow angle {trial:.4g} deg ({reason}); the angle step fell "
                            f"below min_angle_step = {cfg.motion.min_angle_step} deg; last converged angle "
                            f"{current:.4g} deg")
-                if stop_on_failure:
-                    raise SleeveError(message, last_converged_load_factor=current, reason=reason)
-                if current > history.steps[-1].coordinate:
-                    history.steps.append(newton_record(problem, current, iterations, t0, worst_ratio))
-                history.failure = message
-                history.wall = time.perf_counter() - t0
-                return history
+                return _give_up(problem, history, message, reason, current, iterations, t0, worst_ratio,
+                                stop_on_failure)
         record = newton_record(problem, target, iterations, t0, worst_ratio)
         history.steps.append(record)
         if on_step:

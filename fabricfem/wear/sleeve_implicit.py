@@ -214,6 +214,79 @@ def _solve_step(problem: ImplicitSleeve) -> tuple[bool, int, str]:
     return ok, its + more, f"active set: {reason}; plain Newton: {plain}"
 
 
+class _March:
+    """The backward-Euler march of `run_implicit`: steps (halved on failure down to min_angle_step / omega), the
+    body time `t` [s] reached, and the records (the torque averaged over the steps of a record interval)."""
+
+    def __init__(self, problem: ImplicitSleeve, t0: float, max_wall_time: float | None):
+        self.problem, self.t0, self.max_wall_time = problem, t0, max_wall_time
+        cfg = problem.config
+        self.min_dt = math.radians(cfg.motion.min_angle_step) / math.radians(cfg.flexion_speed)
+        self.t = 0.0
+
+    def angle_at(self, t: float) -> float:
+        return math.degrees(self.problem.flexion.angle(t))
+
+    def step_once(self, h: float) -> tuple[bool, int, str]:
+        """One backward-Euler step of `h` [s]; undone when Newton fails. (converged, iterations, reason)"""
+        problem = self.problem
+        system, contact = problem.system, problem.contact
+        saved = system.w.x.array.copy()
+        saved_multiplier = contact.multiplier.copy()
+        problem.inertia.set_time_step(h)
+        problem.inertia.predict()
+        contact.set_time(self.t + h)
+        ok, its, reason = _solve_step(problem)
+        if ok:
+            self.t += h
+            system.after_converged_step()    # friction stick points, then v^{n+1}, x^n
+            problem.trace.append((self.t, self.angle_at(self.t), problem.resisting_torque(),
+                                  contact.max_penetration(), its, h))
+            return True, its, reason
+        system.w.x.array[:] = saved
+        contact.multiplier = saved_multiplier
+        contact.set_time(self.t)
+        return False, its, reason
+
+    def advance_to(self, target: float) -> int:
+        """Steps of dt (halved on failure, down to min_dt) until t = target [s]; returns the Newton iterations."""
+        problem, total = self.problem, 0
+        h = problem.dt
+        while self.t < target - 1e-12 * max(1.0, target):
+            if self.max_wall_time is not None and time.perf_counter() - self.t0 > self.max_wall_time:
+                raise SleeveError(f"sleeve: wall-time budget of {self.max_wall_time:g} s used up at t = {self.t:.4g} "
+                                  f"s, elbow angle {self.angle_at(self.t):.4g} deg (last converged)",
+                                  last_converged_load_factor=self.angle_at(self.t), reason="WALL_TIME")
+            trial = min(h, target - self.t)
+            ok, its, reason = self.step_once(trial)
+            total += its
+            if ok:
+                h = min(problem.dt, 2.0 * h)    # back towards the nominal step after a halving
+                continue
+            h = 0.5 * trial
+            if h < self.min_dt * (1.0 - 1e-9):
+                raise SleeveError(f"sleeve: backward-Euler step failed at t = {self.t + trial:.4g} s, elbow angle "
+                                  f"{self.angle_at(self.t + trial):.4g} deg ({reason}); the step fell below "
+                                  f"min_angle_step = {problem.config.motion.min_angle_step} deg; last converged "
+                                  f"angle {self.angle_at(self.t):.4g} deg",
+                                  last_converged_load_factor=self.angle_at(self.t), reason="STEP_TOO_SMALL")
+        return total
+
+    def record(self, angle: float, iterations: int, since: float) -> WearStep:
+        """The record at `angle` [deg]: torque and penetration over the steps after body time `since` [s]."""
+        problem = self.problem
+        trace = problem.trace_array()
+        window = trace[trace[:, 0] > since + 1e-12] if len(trace) else trace
+        if len(window):
+            torque = float(np.sum(window[:, 2] * window[:, 5]) / np.sum(window[:, 5]))
+            penetration = float(window[:, 3].max())
+        else:
+            torque, penetration = problem.resisting_torque(), problem.contact.max_penetration()
+        return newton_record(problem, angle, iterations, self.t0, torque=torque, penetration=penetration,
+                             time_steps=len(window),
+                             energies=(problem.inertia.kinetic_energy(), problem.strain_energy()))
+
+
 def run_implicit(problem: ImplicitSleeve, on_step: Callable[[WearStep], None] | None = None,
                  stop_on_failure: bool = True, max_wall_time: float | None = None) -> WearHistory:
     """Rest (settle_steps steps) and flexion to final_angle by backward-Euler steps (module docstring); returns
@@ -222,99 +295,39 @@ def run_implicit(problem: ImplicitSleeve, on_step: Callable[[WearStep], None] | 
     A failed step is halved down to min_angle_step / omega; then SleeveError naming the time and angle, or,
     with stop_on_failure=False, the history up to the last record with `history.failure` set. `max_wall_time`
     [s] stops the same way. `history.timings` gets cpu_s (time.process_time of the run) and steps."""
-    cfg, contact, system, flexion = problem.config, problem.contact, problem.system, problem.flexion
-    inertia = problem.inertia
+    cfg, flexion = problem.config, problem.flexion
     t0, cpu0 = time.perf_counter(), time.process_time()
     history = WearHistory(cfg.name, ndofs=problem.model.ndofs)
-    contact.set_time(0.0)
+    problem.contact.set_time(0.0)
     gap0 = problem.min_gap()
     if gap0 <= 0.0:
         raise ValueError(f"radius: the arm penetrates the undeformed sleeve (min gap {gap0:.3e} m)")
     history.initial_gap = gap0
-    system.set_load_factor(1.0)             # gravity (the dead load) on
-    min_dt = math.radians(cfg.motion.min_angle_step) / math.radians(cfg.flexion_speed)
-    state = {"t": 0.0}
-
-    def angle_at(t: float) -> float:
-        return math.degrees(flexion.angle(t))
-
-    def step_once(h: float) -> tuple[bool, int, str]:
-        saved = system.w.x.array.copy()
-        saved_multiplier = contact.multiplier.copy()
-        inertia.set_time_step(h)
-        inertia.predict()
-        contact.set_time(state["t"] + h)
-        ok, its, reason = _solve_step(problem)
-        if ok:
-            state["t"] += h
-            system.after_converged_step()    # friction stick points, then v^{n+1}, x^n
-            problem.trace.append((state["t"], angle_at(state["t"]), problem.resisting_torque(),
-                                  contact.max_penetration(), its, h))
-            return True, its, reason
-        system.w.x.array[:] = saved
-        contact.multiplier = saved_multiplier
-        contact.set_time(state["t"])
-        return False, its, reason
-
-    def advance_to(target: float) -> int:
-        """Steps of dt (halved on failure, down to min_dt) until t = target; returns the Newton iterations."""
-        h, total = problem.dt, 0
-        while state["t"] < target - 1e-12 * max(1.0, target):
-            if max_wall_time is not None and time.perf_counter() - t0 > max_wall_time:
-                raise SleeveError(f"sleeve: wall-time budget of {max_wall_time:g} s used up at t = {state['t']:.4g} s, "
-                                  f"elbow angle {angle_at(state['t']):.4g} deg (last converged)",
-                                  last_converged_load_factor=angle_at(state["t"]), reason="WALL_TIME")
-            trial = min(h, target - state["t"])
-            ok, its, reason = step_once(trial)
-            total += its
-            if ok:
-                h = min(problem.dt, 2.0 * h)    # back towards the nominal step after a halving
-                continue
-            h = 0.5 * trial
-            if h < min_dt * (1.0 - 1e-9):
-                raise SleeveError(f"sleeve: backward-Euler step failed at t = {state['t'] + trial:.4g} s, elbow angle "
-                                  f"{angle_at(state['t'] + trial):.4g} deg ({reason}); the step fell below "
-                                  f"min_angle_step = {cfg.motion.min_angle_step} deg; last converged angle "
-                                  f"{angle_at(state['t']):.4g} deg", last_converged_load_factor=angle_at(state["t"]),
-                                  reason="STEP_TOO_SMALL")
-        return total
-
-    def record(angle: float, iterations: int, since: float) -> WearStep:
-        trace = problem.trace_array()
-        window = trace[trace[:, 0] > since + 1e-12] if len(trace) else trace
-        if len(window):
-            torque = float(np.sum(window[:, 2] * window[:, 5]) / np.sum(window[:, 5]))
-            penetration = float(window[:, 3].max())
-        else:
-            torque, penetration = problem.resisting_torque(), contact.max_penetration()
-        return newton_record(problem, angle, iterations, t0, torque=torque, penetration=penetration,
-                             time_steps=len(window), energies=(inertia.kinetic_energy(), problem.strain_energy()))
-
-    n_records = round(cfg.motion.final_angle / cfg.motion.output_angle_step)
-    if not math.isclose(n_records * cfg.motion.output_angle_step, cfg.motion.final_angle, rel_tol=1e-9):
-        n_records = math.ceil(cfg.motion.final_angle / cfg.motion.output_angle_step)
+    problem.system.set_load_factor(1.0)             # gravity (the dead load) on
+    march = _March(problem, t0, max_wall_time)
+    step_angle = cfg.motion.output_angle_step
+    n_records = round(cfg.motion.final_angle / step_angle)
+    if not math.isclose(n_records * step_angle, cfg.motion.final_angle, rel_tol=1e-9):
+        n_records = math.ceil(cfg.motion.final_angle / step_angle)
     try:
-        its = advance_to(flexion.t_start)
+        its = march.advance_to(flexion.t_start)
         if problem.settle_steps:
-            history.timings.update(settle_s=flexion.t_start, settle_kinetic_energy=inertia.kinetic_energy())
-        start = record(0.0, its, flexion.t_start - problem.record_time)
-        history.steps.append(start)
-        if on_step:
-            on_step(start)
-        for k in range(n_records):
-            angle = min((k + 1) * cfg.motion.output_angle_step, cfg.motion.final_angle)
-            since = state["t"]
-            its = advance_to(problem.time_at(angle))
-            step = record(angle, its, since)
-            history.steps.append(step)
+            history.timings.update(settle_s=flexion.t_start, settle_kinetic_energy=problem.inertia.kinetic_energy())
+        records = [(0.0, flexion.t_start, flexion.t_start - problem.record_time)]
+        records += [(a, problem.time_at(a), None) for a in
+                    (min((k + 1) * step_angle, cfg.motion.final_angle) for k in range(n_records))]
+        for angle, until, since in records:
+            since = march.t if since is None else since
+            its = march.advance_to(until) if angle > 0.0 else its
+            history.steps.append(march.record(angle, its, since))
             if on_step:
-                on_step(step)
+                on_step(history.steps[-1])
     except SleeveError as exc:
         if stop_on_failure:
             raise
         history.failure = str(exc)
         if not history.steps:
-            history.steps.append(record(0.0, 0, -math.inf))
+            history.steps.append(march.record(0.0, 0, -math.inf))
     history.timings.update(dt=problem.dt, steps=len(problem.trace), cpu_s=time.process_time() - cpu0)
     history.wall = time.perf_counter() - t0
     return history
