@@ -86,7 +86,7 @@ static double ray_to_surface(const double* y, const double* r, const double* u, 
   return *hit ? s : 0.0;
 }
 
-/* _Segments.ray_gap: signed gap [m] of local point y (one cast along grad f, towards the centre if it misses) */
+/* SegmentStack.ray_gap: signed gap [m] of local point y (one cast along grad f, towards the centre if it misses) */
 static double ray_gap(const double* y, const double* r)
 {
   const double r2[3] = {r[0] * r[0], r[1] * r[1], r[2] * r[2]};
@@ -114,7 +114,7 @@ static double ray_gap(const double* y, const double* r)
   return fabs(s) * (q >= 1.0 ? 1.0 : -1.0);
 }
 
-/* _Segments.normal: unit grad f at local y of the segment (R, r), global */
+/* SegmentStack.normal: unit grad f at local y of the segment (R, r), global */
 static void normal(const double* y, const double* R, const double* r, double* n)
 {
   const double g[3] = {2.0 * y[0] / (r[0] * r[0]), 2.0 * y[1] / (r[1] * r[1]), 2.0 * y[2] / (r[2] * r[2])};
