@@ -182,6 +182,31 @@ class Trajectory:
     provot_sweeps: int = 0
 
 
+def _initial_state(problem: Problem, x0: np.ndarray | None, v0: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Copies of the start positions [m] (default the reference ones) and velocities [m/s] (default 0), zero on
+    the particles that are not free; ValueError on a non-positive movable mass or wrong shapes."""
+    sys_ = problem.system
+    if np.any(sys_.mass[problem.movable] <= 0):
+        raise ValueError("every movable particle needs a positive mass for explicit dynamics")
+    x = (sys_.positions if x0 is None else np.asarray(x0, dtype=float)).copy()
+    v = np.zeros_like(x) if v0 is None else np.asarray(v0, dtype=float).copy()
+    if x.shape != (sys_.n, 3) or v.shape != (sys_.n, 3):
+        raise ValueError(f"x0 and v0 must have shape ({sys_.n}, 3)")
+    v[~problem.free] = 0.0
+    return x, v
+
+
+def _energy_bound(problem: Problem, E0: float, v: np.ndarray, energy_growth: float) -> float:
+    """Blow-up bound [J] of the total energy: E_0 + energy_growth (|E_0| + E_scale + kinetic energy of v), E_scale =
+    (m_total |g| + sum |point loads|) diag, diag the size of the reference configuration [m] (or the spacing)."""
+    sys_ = problem.system
+    diag = float(np.linalg.norm(np.ptp(sys_.positions, axis=0))) or sys_.spacing
+    scale_loads = float(np.sum(sys_.mass) * np.linalg.norm(problem.gravity))
+    if problem.point_forces is not None:
+        scale_loads += float(np.sum(np.linalg.norm(problem.point_forces, axis=1)))
+    return E0 + energy_growth * (abs(E0) + scale_loads * diag + problem.kinetic_energy(v))
+
+
 def simulate(problem: Problem, dt: float, n_steps: int, x0: np.ndarray | None = None, v0: np.ndarray | None = None,
              strain_limit: float | None = None, limited_sets: tuple[str, ...] = ("structural", "shear"),
              record_every: int = 1, energy_growth: float = 10.0, strain_limit_sweeps: int = 2000) -> Trajectory:
@@ -206,15 +231,9 @@ def simulate(problem: Problem, dt: float, n_steps: int, x0: np.ndarray | None = 
         raise ValueError(f"record_every must be an integer >= 1, got {record_every!r}")
     sys_ = problem.system
     m = sys_.mass
-    if np.any(m[problem.movable] <= 0):
-        raise ValueError("every movable particle needs a positive mass for explicit dynamics")
-    x = (sys_.positions if x0 is None else np.asarray(x0, dtype=float)).copy()
-    v = np.zeros_like(x) if v0 is None else np.asarray(v0, dtype=float).copy()
-    if x.shape != (sys_.n, 3) or v.shape != (sys_.n, 3):
-        raise ValueError(f"x0 and v0 must have shape ({sys_.n}, 3)")
+    x, v = _initial_state(problem, x0, v0)
     movable = problem.movable
     free = problem.free
-    v[~free] = 0.0
     limited = tuple(s for s in sys_.springs if s.name in limited_sets) if strain_limit is not None else ()
     if strain_limit is not None and not limited:
         raise ValueError(f"limited_sets {limited_sets} match no spring set of the system")
@@ -228,12 +247,7 @@ def simulate(problem: Problem, dt: float, n_steps: int, x0: np.ndarray | None = 
     def total_energy(x_, v_):
         return problem.kinetic_energy(v_) + problem.potential_energy(x_)
 
-    diag = float(np.linalg.norm(np.ptp(sys_.positions, axis=0))) or sys_.spacing
-    scale_loads = float(np.sum(m) * np.linalg.norm(problem.gravity))
-    if problem.point_forces is not None:
-        scale_loads += float(np.sum(np.linalg.norm(problem.point_forces, axis=1)))
-    E0 = total_energy(x, v)
-    E_bound = E0 + energy_growth * (abs(E0) + scale_loads * diag + problem.kinetic_energy(v))
+    E_bound = _energy_bound(problem, total_energy(x, v), v, energy_growth)
 
     times, energies, max_strain, positions = [], [], [], []
 
