@@ -28,6 +28,9 @@ from fabricfem.solvers.newton import SolverError, prefixed_options
 
 @dataclass
 class ArcLengthStep:
+    """One converged step: load factor lambda, corrector iterations, arc length used (m and rad of the state) and
+    the residual norms |P - lambda F_ref| [N] of its iterations."""
+
     load_factor: float
     iterations: int
     arc_length: float
@@ -39,6 +42,92 @@ def acceleration_factor(step_index: int, target_iterations: int, last_iterations
     if step_index <= 1:
         return 1.0
     return target_iterations / max(last_iterations, 1)
+
+
+class _ArcLengthSolver:
+    """The linear algebra of one arc-length step of a model ([Eischen2000, eqs. 21-25]): the tangent K, factorised
+    once per iteration (MUMPS LU unless petsc_options say otherwise) for both K du_I = F_ref and K du_II = F_ext - P,
+    the predictor along du_I and the corrector iterations. psi scales the load factor against the state (eq. 19);
+    convergence as documented in arc_length (rtol, stol, max_iterations)."""
+
+    PREFIX = "fabricfem_arclength_"
+
+    def __init__(self, model, psi: float, rtol: float, stol: float, max_iterations: int,
+                 petsc_options: dict | None):
+        model.compile()
+        self.model, self.psi, self.rtol, self.stol, self.max_iterations = model, psi, rtol, stol, max_iterations
+        self.K = model.create_matrix()
+        self.residual, self.du_I, self.du_II = model.create_vector(), model.create_vector(), model.create_vector()
+        self.ksp = PETSc.KSP().create(model.comm)
+        self.ksp.setOperators(self.K)
+        self.ksp.setOptionsPrefix(self.PREFIX)
+        self.ksp_options = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps",
+                            **(petsc_options or {})}
+        with prefixed_options(self.PREFIX, self.ksp_options):
+            self.ksp.setFromOptions()
+        self.fscale = max(model.F_ref.norm(), 1e-300)  # |F_ref|
+
+    def linear_solve(self, rhs: PETSc.Vec, out: PETSc.Vec) -> None:
+        """K out = rhs; the options are in the database while the LU factor is set up (MUMPS ICNTL)."""
+        with prefixed_options(self.PREFIX, self.ksp_options):
+            self.ksp.solve(rhs, out)
+
+    def assemble_and_factor(self, xv: PETSc.Vec, lam: float) -> None:
+        """residual = P(xv) - lam F_ref and K = dP/dx at xv, K set as the operator (factorised at the next solve)."""
+        self.model.set_load_factor(lam)
+        self.model.residual(xv, self.residual)  # residual = P - lambda F_ref
+        self.model.jacobian(xv, self.K)
+        self.ksp.setOperators(self.K)
+
+    def predict(self, x: PETSc.Vec, lam_n: float, length: float, direction: tuple | None) -> float:
+        """Predictor along the tangent du_I = K^-1 F_ref from the converged state x (lam_n): x moves by dlam du_I
+        with |(dPhi, psi dlam)| = length, the sign along the previous increment `direction` (dPhi, dlambda);
+        returns lam_n + dlam."""
+        psi = self.psi
+        self.assemble_and_factor(x, lam_n)
+        self.linear_solve(self.model.F_ref, self.du_I)
+        dlam = length / np.sqrt(self.du_I.dot(self.du_I) + psi ** 2)
+        if direction is not None and (self.du_I.dot(direction[0]) + psi ** 2 * direction[1]) < 0:
+            dlam = -dlam
+        x.axpy(dlam, self.du_I)
+        return lam_n + dlam
+
+    def correct(self, x: PETSc.Vec, x_n: PETSc.Vec, lam_n: float, lam: float, length: float
+                ) -> tuple[bool, int, list[float], float]:
+        """Corrector iterations (eqs. 21-22) on x (in place) and lam with the constraint of eq. 19 about (x_n,
+        lam_n). Returns (converged, iterations, residual norms |P - lambda F_ref|, lam)."""
+        psi, du_I, du_II, residual = self.psi, self.du_I, self.du_II, self.residual
+        norms, converged, it = [], False, 0
+        for it in range(1, self.max_iterations + 1):
+            self.assemble_and_factor(x, lam)
+            rnorm = residual.norm()
+            norms.append(rnorm)
+            delta = x - x_n
+            ell = np.sqrt(delta.dot(delta) + psi ** 2 * (lam - lam_n) ** 2)
+            f = ell - length
+            if not np.isfinite(rnorm):
+                break
+            if rnorm < self.rtol * self.fscale * max(abs(lam), 1.0) and abs(f) < 1e-9 * length:
+                converged = True
+                break
+            self.linear_solve(self.model.F_ref, du_I)
+            residual.scale(-1.0)  # F_ext - P
+            self.linear_solve(residual, du_II)
+            dl = -(f * (f + length) + delta.dot(du_II)) / (psi ** 2 * (lam - lam_n) + delta.dot(du_I))   # eq. 21
+            du_II.axpy(dl, du_I)  # the correction of eq. 22
+            x.axpy(1.0, du_II)
+            lam += dl
+            delta.destroy()
+            # Converged when the correction is at round-off (like SNES's step criterion)
+            if (du_II.norm() <= self.stol * x.norm() and abs(dl) <= self.stol * max(abs(lam), 1.0)
+                    and abs(f) < 1e-6 * length):
+                converged = True
+                break
+        return converged, it, norms, lam
+
+    def destroy(self) -> None:
+        """Free the solver (the matrix and vectors go with the garbage collector, as before)."""
+        self.ksp.destroy()
 
 
 def arc_length(model, ds: float, max_steps: int, lambda_max: float | None = None,
@@ -59,78 +148,22 @@ def arc_length(model, ds: float, max_steps: int, lambda_max: float | None = None
                          "use loads (F_ext = lambda F_ref)")
     if ds <= 0:
         raise ValueError(f"ds must be positive, got {ds}")
-    model.compile()
-    K = model.create_matrix()
-    residual, du_I, du_II = model.create_vector(), model.create_vector(), model.create_vector()
+    solver = _ArcLengthSolver(model, psi, rtol, stol, max_iterations, petsc_options)
     x = model.create_vector()
     model.w.vector.copy(x)
-    ksp = PETSc.KSP().create(model.comm)
-    ksp.setOperators(K)
-    ksp.setOptionsPrefix("fabricfem_arclength_")
-    ksp_options = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps",
-                   **(petsc_options or {})}
-    with prefixed_options("fabricfem_arclength_", ksp_options):
-        ksp.setFromOptions()
-
-    def linear_solve(rhs: PETSc.Vec, out: PETSc.Vec):
-        """K out = rhs; the options are in the database while the LU factor is set up (MUMPS ICNTL)."""
-        with prefixed_options("fabricfem_arclength_", ksp_options):
-            ksp.solve(rhs, out)
-    F_ref = model.F_ref
-    fscale = max(F_ref.norm(), 1e-300)
-
     lam_n = float(model.load_factor.value)
     x_n = x.copy()
     direction = None  # previous converged increment (dPhi, dlambda) for the predictor sign
     history: list[ArcLengthStep] = []
     last_iterations = target_iterations
     ds_min = 1e-6 * ds
-
-    def assemble_and_factor(xv, lam):
-        model.set_load_factor(lam)
-        model.residual(xv, residual)  # residual = P - lambda F_ref
-        model.jacobian(xv, K)
-        ksp.setOperators(K)
-
     for n in range(1, max_steps + 1):
-        gamma = float(np.clip(acceleration_factor(n, target_iterations, last_iterations), *gamma_bounds))
+        gamma = float(np.clip(acceleration_factor(n, target_iterations, last_iterations), *gamma_bounds))  # eq. 20
         length = gamma * ds
         while True:
-            # Predictor along the tangent du_I = K^-1 F_ref
             x_n.copy(x)
-            assemble_and_factor(x, lam_n)
-            linear_solve(F_ref, du_I)
-            dlam = length / np.sqrt(du_I.dot(du_I) + psi ** 2)
-            if direction is not None and (du_I.dot(direction[0]) + psi ** 2 * direction[1]) < 0:
-                dlam = -dlam
-            x.axpy(dlam, du_I)
-            lam = lam_n + dlam
-            norms, converged, it = [], False, 0
-            for it in range(1, max_iterations + 1):
-                assemble_and_factor(x, lam)
-                rnorm = residual.norm()
-                norms.append(rnorm)
-                delta = x - x_n
-                ell = np.sqrt(delta.dot(delta) + psi ** 2 * (lam - lam_n) ** 2)
-                f = ell - length
-                if not np.isfinite(rnorm):
-                    break
-                if rnorm < rtol * fscale * max(abs(lam), 1.0) and abs(f) < 1e-9 * length:
-                    converged = True
-                    break
-                linear_solve(F_ref, du_I)
-                residual.scale(-1.0)  # F_ext - P
-                linear_solve(residual, du_II)
-                dl = -(f * (f + length) + delta.dot(du_II)) / (psi ** 2 * (lam - lam_n) + delta.dot(du_I))
-                du_II.axpy(dl, du_I)  # the correction of eq. 22
-                x.axpy(1.0, du_II)
-                lam += dl
-                delta.destroy()
-                # Converged when the correction is at round-off (like SNES's step criterion)
-                if (du_II.norm() <= stol * x.norm() and abs(dl) <= stol * max(abs(lam), 1.0)
-                        and abs(f) < 1e-6 * length):
-                    converged = True
-                    break
+            lam = solver.predict(x, lam_n, length, direction)
+            converged, it, norms, lam = solver.correct(x, x_n, lam_n, lam, length)
             if converged:
                 break
             length *= 0.5
@@ -154,5 +187,5 @@ def arc_length(model, ds: float, max_steps: int, lambda_max: float | None = None
             on_step(record)
         if lambda_max is not None and lam >= lambda_max:
             break
-    ksp.destroy()
+    solver.destroy()
     return history
