@@ -32,11 +32,9 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Callable, Mapping, Sequence, Union
 
-import dolfinx.cpp as _cpp
 import dolfinx.fem as fem
 import dolfinx.fem.petsc as fem_petsc
 import dolfinx.mesh as dmesh
-import dolfinx_mpc
 import numpy as np
 import ufl
 from mpi4py import MPI
@@ -44,38 +42,18 @@ from petsc4py import PETSc
 
 from fabricfem.solvers.mpc_newton import MPCNewtonSolver
 from fabricfem.solvers.newton import SolverError
+from fabricfem.weave.periodic import (
+    GEOMETRIC_TOLERANCE,
+    Locator,
+    PeriodicPair,
+    SlaveFaces,
+    allreduce,
+    bounding_box,
+    periodic_constraint,
+    pin_point,
+)
 
 StrainEnergy = Callable[[ufl.core.expr.Expr], ufl.core.expr.Expr]
-Locator = Callable[[np.ndarray], np.ndarray]
-
-GEOMETRIC_TOLERANCE = 1e-8  # relative to the cell diagonal: points closer than this coincide
-
-
-@dataclass(frozen=True)
-class PeriodicPair:
-    """Two opposite faces with u*_i(x) = s_i u*_i(m(x)) for x on the slave face, where the master
-    point is m(x) = x - translation or m(x) = relation(x), and s = component_scale.
-
-    `slave` and `master` are facet-tag values (with `facet_tags` given to the problem) or,
-    for geometric pairs, `slave` is a locator x (3, n) -> bool (n,) and `translation` or
-    `relation` is required. `translation` [m] is the vector from the master face to the slave face;
-    with tags it defaults to the difference of the faces' vertex centroids (exact for meshes whose
-    opposite faces match, which dolfinx_mpc does not otherwise require). `relation` x (3, n) ->
-    (3, n) [m] is a general point map from the slave face onto the master face (e.g.
-    UnitCellMesh.periodic_relation(name) of the quarter cell: half-period shift and z -> -z);
-    give either `relation` or `translation`. `component_scale` (s_x, s_y, s_z), non-zero and
-    dimensionless, is (1, 1, -1) for the anti-symmetric quarter cell [Man2006, sec. 4.3.3].
-    `components` lists the displacement components (0, 1, 2) that are coupled; the others are left
-    free by this pair (e.g. u*_z when it is prescribed on both faces by `fixed_facets`, the thesis'
-    end-face condition of sec. 4.3.5.3).
-    """
-
-    slave: int | Locator
-    master: int | None = None
-    translation: Sequence[float] | None = None
-    relation: Callable[[np.ndarray], np.ndarray] | None = None
-    component_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
-    components: tuple[int, ...] = (0, 1, 2)
 
 
 @dataclass
@@ -142,88 +120,6 @@ def load_path(Phi, steps: int) -> list[np.ndarray]:
     return [np.eye(3) + (n / steps) * H for n in range(1, int(steps) + 1)]
 
 
-def _facet_vertex_coordinates(mesh: dmesh.Mesh, facets: np.ndarray) -> np.ndarray:
-    """Coordinates (n, 3) of the vertices of the given facets, gathered from all ranks, each vertex
-    once (by global index), so that every rank sees the same complete face."""
-    tdim = mesh.topology.dim
-    mesh.topology.create_connectivity(tdim - 1, 0)
-    f2v = mesh.topology.connectivity(tdim - 1, 0)
-    per_facet = f2v.offsets[1] - f2v.offsets[0]  # one facet type per mesh
-    verts = np.unique(f2v.array.reshape(-1, per_facet)[facets].ravel()).astype(np.int32)
-    nodes = _cpp.mesh.entities_to_geometry(mesh._mesh, 0, verts, False).ravel()
-    global_ids = mesh.topology.index_map(0).local_to_global(verts)
-    ids = np.concatenate(mesh.comm.allgather(np.asarray(global_ids, dtype=np.int64)))
-    x = np.concatenate(mesh.comm.allgather(mesh.geometry.x[nodes]))
-    return x[np.unique(ids, return_index=True)[1]]
-
-
-@dataclass(frozen=True)
-class _Face:
-    """A planar face: centroid c, unit normal n and bounding box, for geometric membership tests."""
-
-    centroid: np.ndarray
-    normal: np.ndarray
-    lower: np.ndarray
-    upper: np.ndarray
-    tolerance: float
-
-    def contains(self, x: np.ndarray) -> np.ndarray:
-        on_plane = np.abs(self.normal @ (x - self.centroid[:, None])) <= self.tolerance
-        inside = np.all((x >= self.lower[:, None] - self.tolerance) & (x <= self.upper[:, None] + self.tolerance),
-                        axis=0)
-        return on_plane & inside
-
-
-def _tagged_face(mesh: dmesh.Mesh, facet_tags, tag: int, tolerance: float) -> _Face:
-    """Fit the plane of the facets tagged `tag` (same result on all ranks); ValueError if missing or
-    not planar."""
-    x = _facet_vertex_coordinates(mesh, facet_tags.indices[facet_tags.values == tag])
-    if len(x) < 3:
-        raise ValueError(f"periodic_pairs: facet tag {tag} marks no face of the mesh (found {len(x)} vertices)")
-    centroid = x.mean(axis=0)
-    d = x - centroid
-    normal = np.linalg.eigh(d.T @ d)[1][:, 0]  # direction of least spread
-    offplane = float(np.abs(d @ normal).max())
-    if offplane > tolerance:
-        raise ValueError(f"periodic_pairs: the face with facet tag {tag} is not planar "
-                         f"(vertices up to {offplane:.3g} m off its mean plane)")
-    return _Face(centroid, normal, x.min(axis=0), x.max(axis=0), tolerance)
-
-
-def _allreduce(comm: MPI.Comm, a: np.ndarray, op: MPI.Op) -> np.ndarray:
-    """Element-wise reduction of a float array over `comm` (the pickle path cannot MIN/MAX arrays)."""
-    a = np.ascontiguousarray(a, dtype=np.float64)
-    out = np.empty_like(a)
-    comm.Allreduce(a, out, op=op)
-    return out
-
-
-def _bounding_box(mesh: dmesh.Mesh) -> tuple[np.ndarray, np.ndarray]:
-    x = mesh.geometry.x
-    lower = x.min(axis=0) if len(x) else np.full(3, np.inf)
-    upper = x.max(axis=0) if len(x) else np.full(3, -np.inf)
-    return _allreduce(mesh.comm, lower, MPI.MIN), _allreduce(mesh.comm, upper, MPI.MAX)
-
-
-def _pin_point(mesh: dmesh.Mesh, excluded: Callable[[np.ndarray], np.ndarray], target: np.ndarray) -> np.ndarray:
-    """The mesh vertex nearest `target` that no slave face contains (same choice on every rank)."""
-    nv = mesh.topology.index_map(0).size_local
-    nodes = _cpp.mesh.entities_to_geometry(mesh._mesh, 0, np.arange(nv, dtype=np.int32), False).ravel()
-    x = mesh.geometry.x[nodes]
-    x = x[~excluded(x.T)] if len(x) else x
-    if len(x):
-        dist = np.linalg.norm(x - target, axis=1)
-        # ties broken by coordinates so that every partition picks the same vertex
-        best = x[np.lexsort((x[:, 2], x[:, 1], x[:, 0], np.round(dist, 12)))[0]]
-        candidate = (round(float(np.linalg.norm(best - target)), 12), *best.tolist())
-    else:
-        candidate = (np.inf, 0.0, 0.0, 0.0)
-    winner = min(mesh.comm.allgather(candidate))
-    if not np.isfinite(winner[0]):
-        raise ValueError("periodic_pairs: every vertex lies on a slave face; no point left to pin")
-    return np.array(winner[1:])
-
-
 class UnitCellProblem:
     """Finite-strain periodic unit cell; build once, then `solve(Phi, steps)` along load paths.
 
@@ -254,103 +150,52 @@ class UnitCellProblem:
                  rtol: float = 1e-10, stol: float = 1e-13, max_it: int = 25,
                  pins: Sequence[tuple[Sequence[float], Sequence[int]]] | None = None,
                  fixed_facets: Sequence[tuple[int, Sequence[int]]] | None = None):
+        self._check_arguments(mesh, degree, volume_fraction)
+        self.mesh, self.comm = mesh, mesh.comm
+        lower, upper = bounding_box(mesh)
+        self.length_scale = float(np.linalg.norm(upper - lower))  # cell diagonal [m]
+        tol = GEOMETRIC_TOLERANCE * self.length_scale
+        materials = self._materials(psi, cell_tags)
+        q = 2 * degree if quadrature_degree is None else int(quadrature_degree)
+        self.dx = ufl.Measure("dx", domain=mesh, subdomain_data=cell_tags, metadata={"quadrature_degree": q})
+        V = fem.VectorFunctionSpace(mesh, ("Lagrange", degree))
+        faces = SlaveFaces(mesh, periodic_pairs, facet_tags, tol)
+        self._set_conditions(V, faces, pins, fixed_facets, facet_tags, periodic_pairs, 0.5 * (lower + upper), tol)
+        self.mpc = periodic_constraint(V, faces, periodic_pairs, facet_tags, self.bcs)
+        self.u = fem.Function(self.mpc.function_space, name="fluctuation")  # u* [m]
+        self._set_forms(V, materials, q, rtol, stol, max_it)
+        self._set_volumes(materials, float(np.prod(upper - lower)), volume_fraction)
+
+    @staticmethod
+    def _check_arguments(mesh: dmesh.Mesh, degree: int, volume_fraction: float | None) -> None:
+        """ValueError unless the mesh is a 3D volume mesh, degree 1 or 2 and volume_fraction None or in (0, 1]."""
         if mesh.topology.dim != 3 or mesh.geometry.dim != 3:
             raise ValueError("mesh must be a 3D volume mesh")
         if degree not in (1, 2):
             raise ValueError(f"degree must be 1 or 2, got {degree!r}")
         if volume_fraction is not None and not (np.isfinite(volume_fraction) and 0.0 < volume_fraction <= 1.0):
             raise ValueError(f"volume_fraction must lie in (0, 1], got {volume_fraction!r}")
-        self.mesh, self.comm = mesh, mesh.comm
-        lower, upper = _bounding_box(mesh)
-        self.length_scale = float(np.linalg.norm(upper - lower))  # cell diagonal [m]
-        tol = GEOMETRIC_TOLERANCE * self.length_scale
 
-        materials = self._materials(psi, cell_tags)
-        q = 2 * degree if quadrature_degree is None else int(quadrature_degree)
-        self.dx = ufl.Measure("dx", domain=mesh, subdomain_data=cell_tags, metadata={"quadrature_degree": q})
-
-        V = fem.VectorFunctionSpace(mesh, ("Lagrange", degree))
-        slave_faces, maps, scales = self._pairs(periodic_pairs, facet_tags, tol)
-        coupled = [tuple(sorted(set(int(c) for c in p.components))) for p in periodic_pairs]
-        for comps in coupled:
-            if not comps or any(c not in (0, 1, 2) for c in comps):
-                raise ValueError(f"periodic_pairs: components must be a non-empty subset of (0, 1, 2), got {comps!r}")
-
-        def on_slave_face(x: np.ndarray) -> np.ndarray:
-            hit = np.zeros(x.shape[1], dtype=bool)
-            for face in slave_faces:
-                hit |= face(x)
-            return hit
-
-        def chain(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            # A point on several slave faces (edge, corner) is mapped by each pair in turn, until it
-            # lies on no slave face (no chained constraints); its sign is the product of the pairs'.
-            out, sign = np.array(x, dtype=np.float64, copy=True), np.ones((3, x.shape[1]))
-            for _ in range(2 * len(slave_faces) + 1):
-                moved = False
-                for face, point_map, s in zip(slave_faces, maps, scales):
-                    hit = face(out)
-                    if np.any(hit):
-                        out[:, hit] = point_map(out[:, hit])
-                        sign[:, hit] *= s[:, None]
-                        moved = True
-                if not moved:
-                    return out, sign
-            raise ValueError("periodic_pairs: the maps send slave points back onto slave faces (cycle); "
-                             "each pair must map its slave face onto a master face")
-
+    def _set_conditions(self, V: fem.FunctionSpace, faces: SlaveFaces, pins, fixed_facets, facet_tags,
+                        periodic_pairs: Sequence[PeriodicPair], centre: np.ndarray, tol: float) -> None:
+        """The Dirichlet conditions: the vertex nearest the cell centre [m] off the slave faces pinned (self.pin),
+        or the component pins; then the fixed facets. self.pin_bcs holds the pins only."""
         if pins is None:
-            self.pin = _pin_point(mesh, on_slave_face, 0.5 * (lower + upper))
+            self.pin = pin_point(self.mesh, faces.contains, centre)
             pinned = fem.locate_dofs_geometrical(V, lambda x: np.linalg.norm(x - self.pin[:, None], axis=0) <= tol)
             self.bcs = [fem.dirichletbc(np.zeros(3, dtype=np.float64), pinned, V)]
         else:
             self.pin = None
-            self.bcs = self._component_pins(V, pins, on_slave_face, tol)
+            self.bcs = self._component_pins(V, pins, faces.contains, tol)
         self.pin_bcs = list(self.bcs)
         if fixed_facets:
-            self.bcs += self._facet_conditions(V, fixed_facets, facet_tags, periodic_pairs, coupled)
+            self.bcs += self._facet_conditions(V, fixed_facets, facet_tags, periodic_pairs, faces.coupled)
 
-        mpc = dolfinx_mpc.MultiPointConstraint(V)
-        if all(np.all(s == 1.0) for s in scales) and all(c == (0, 1, 2) for c in coupled):
-            def to_master(x: np.ndarray) -> np.ndarray:
-                return chain(x)[0]
-            if isinstance(periodic_pairs[0].slave, (int, np.integer)):
-                slave_facets = np.unique(np.concatenate(
-                    [facet_tags.indices[facet_tags.values == p.slave] for p in periodic_pairs]))
-                all_slaves = dmesh.meshtags(mesh, mesh.topology.dim - 1, slave_facets.astype(np.int32), 1)
-                mpc.create_periodic_constraint_topological(V, all_slaves, 1, to_master, self.bcs)
-            else:
-                mpc.create_periodic_constraint_geometrical(V, on_slave_face, to_master, self.bcs)
-        else:
-            # one constraint u*_c(x) = s u*_c(m(x)) per component c and per sign s occurring at the
-            # slave points (products over the pairs meeting at an edge or corner)
-            signs = {1.0}
-            for s in scales:
-                signs |= {round(float(a * b), 12) for a in signs for b in s}
-            for c in range(3):
-                faces_c = [face for face, comps in zip(slave_faces, coupled) if c in comps]
-                if not faces_c:
-                    continue
-
-                def on_slave_face_c(x: np.ndarray, faces_c=faces_c) -> np.ndarray:
-                    hit = np.zeros(x.shape[1], dtype=bool)
-                    for face in faces_c:
-                        hit |= face(x)
-                    return hit
-                for value in sorted(signs):
-                    def indicator(x: np.ndarray, c: int = c, value: float = value,
-                                  on_face: Locator = on_slave_face_c) -> np.ndarray:
-                        hit = on_face(x)
-                        sign = np.zeros(x.shape[1])
-                        if np.any(hit):
-                            sign[hit] = chain(x[:, hit])[1][c]
-                        return hit & np.isclose(sign, value, rtol=0, atol=1e-12)
-                    mpc.create_periodic_constraint_geometrical(V.sub(c), indicator, lambda x: chain(x)[0],
-                                                               self.bcs, scale=value)
-        mpc.finalize()
-        self.mpc = mpc
-        self.u = fem.Function(mpc.function_space, name="fluctuation")  # u* [m]
-
+    def _set_forms(self, V: fem.FunctionSpace, materials: list[tuple[int | None, StrainEnergy]], q: int,
+                   rtol: float, stol: float, max_it: int) -> None:
+        """Phi (a Constant), the residual (eq. 4.61) with its MPC Newton solver, and the one compiled form of the
+        volume integrals of S and P (18 components against a DG0 test function)."""
+        mesh = self.mesh
         self.Phi = fem.Constant(mesh, np.eye(3))
         F = self.Phi + ufl.grad(self.u)  # eq. 4.54
         C = F.T * F
@@ -358,11 +203,9 @@ class UnitCellProblem:
         energy = sum(w(C) * self._dx(tag) for tag, w in materials)
         residual = ufl.derivative(energy, self.u, v)  # eq. 4.61: int P : grad(du*) dV
         self.residual = residual
-        self.newton = MPCNewtonSolver(residual, self.u, mpc, self.bcs, rtol=rtol, stol=stol, max_it=max_it,
+        self.newton = MPCNewtonSolver(residual, self.u, self.mpc, self.bcs, rtol=rtol, stol=stol, max_it=max_it,
                                       form_compiler_params={"quadrature_degree": q})
         self._plain_residual = self.newton.L
-
-        # Volume integrals of S and P (18 components) against a DG0 test function: one compiled form.
         averages = []
         for tag, w in materials:
             Cv = ufl.variable(C)
@@ -378,10 +221,12 @@ class UnitCellProblem:
         self._stress_vector = fem_petsc.create_vector(self._stress_form)
         self._owned_stress = W.dofmap.index_map.size_local * W.dofmap.index_map_bs
 
-        one = fem.Constant(mesh, 1.0)
+    def _set_volumes(self, materials: list[tuple[int | None, StrainEnergy]], box_volume: float,
+                     volume_fraction: float | None) -> None:
+        """|Y_s| [m^3] (solid_volume), phi (given, or |Y_s| / box_volume) and |Y| = |Y_s| / phi (cell_volume)."""
+        one = fem.Constant(self.mesh, 1.0)
         self.solid_volume = self.comm.allreduce(
             fem.assemble_scalar(fem.form(sum(one * self._dx(tag) for tag, _ in materials))), op=MPI.SUM)
-        box_volume = float(np.prod(upper - lower))
         self.volume_fraction = self.solid_volume / box_volume if volume_fraction is None else float(volume_fraction)
         if not (0.0 < self.volume_fraction <= 1.0 + 1e-12):
             raise ValueError(f"volume_fraction computed from the mesh is {self.volume_fraction:.6g}, outside (0, 1]")
@@ -462,51 +307,6 @@ class UnitCellProblem:
                              "energy there); mesh only the solid and give every cell a material")
         return list(psi.items())
 
-    def _pairs(self, pairs, facet_tags, tol) -> tuple[list[Locator], list[Callable], list[np.ndarray]]:
-        """Slave-face locators, slave -> master point maps and component signs of the pairs."""
-        if not pairs:
-            raise ValueError("periodic_pairs must contain at least one PeriodicPair")
-        by_tag = [isinstance(p.slave, (int, np.integer)) for p in pairs]
-        if any(by_tag) and not all(by_tag):
-            raise ValueError("periodic_pairs must be all by facet tag or all by locator, not mixed")
-        faces, maps, scales = [], [], []
-        for p in pairs:
-            if p.relation is not None and p.translation is not None:
-                raise ValueError("periodic_pairs: give either a relation or a translation, not both")
-            if p.relation is not None and not callable(p.relation):
-                raise ValueError(f"periodic_pairs: relation must be a callable x (3, n) -> (3, n), got {p.relation!r}")
-            scale = np.asarray(p.component_scale, dtype=float)
-            if scale.shape != (3,) or not np.all(np.isfinite(scale)) or np.any(scale == 0.0):
-                raise ValueError(f"periodic_pairs: component_scale must be three finite non-zero numbers, "
-                                 f"got {p.component_scale!r}")
-            if by_tag[0]:
-                if facet_tags is None:
-                    raise ValueError("facet_tags are required for periodic_pairs given by tag")
-                slave = _tagged_face(self.mesh, facet_tags, int(p.slave), tol)
-                if p.translation is None and p.relation is None:
-                    if p.master is None:
-                        raise ValueError(f"periodic_pairs: pair with slave tag {p.slave} needs a master tag, "
-                                         "a translation or a relation")
-                    master = _tagged_face(self.mesh, facet_tags, int(p.master), tol)
-                    t = slave.centroid - master.centroid
-                else:
-                    t = None if p.translation is None else np.asarray(p.translation, dtype=float)
-                faces.append(slave.contains)
-            else:
-                if not callable(p.slave) or (p.translation is None and p.relation is None):
-                    raise ValueError("periodic_pairs: a pair given by locator needs a callable slave and a "
-                                     "translation or a relation")
-                faces.append(p.slave)
-                t = None if p.translation is None else np.asarray(p.translation, dtype=float)
-            if p.relation is not None:
-                maps.append(lambda x, r=p.relation: np.asarray(r(x), dtype=np.float64).reshape(3, -1))
-            else:
-                if t.shape != (3,) or not np.all(np.isfinite(t)) or np.linalg.norm(t) <= tol:
-                    raise ValueError(f"periodic_pairs: translation must be a non-zero finite 3-vector, got {t!r}")
-                maps.append(lambda x, t=t: x - t[:, None])
-            scales.append(scale)
-        return faces, maps, scales
-
     @property
     def ndofs(self) -> int:
         return self.newton.ndofs
@@ -518,7 +318,7 @@ class UnitCellProblem:
             b_local.set(0.0)
         fem_petsc.assemble_vector(b, self._stress_form)
         local = b.array_r[: self._owned_stress].reshape(-1, 18).sum(axis=0)
-        total = _allreduce(self.comm, local, MPI.SUM)
+        total = allreduce(self.comm, local, MPI.SUM)
         scale = self.volume_fraction / self.solid_volume  # eq. 4.64
         return scale * total[:9].reshape(3, 3), scale * total[9:].reshape(3, 3)
 
@@ -569,7 +369,7 @@ def solve_unit_cell(mesh: dmesh.Mesh, psi: Union[StrainEnergy, Mapping[int, Stra
 def box_periodic_pairs(mesh: dmesh.Mesh, axes: Sequence[int] = (0, 1, 2)):
     """Facet tags of an axis-aligned box mesh (faces min/max of axis a tagged 2a+1 / 2a+2) and the
     PeriodicPairs (slave = max face, master = min face) along `axes`."""
-    lower, upper = _bounding_box(mesh)
+    lower, upper = bounding_box(mesh)
     tol = GEOMETRIC_TOLERANCE * float(np.linalg.norm(upper - lower))
     fdim = mesh.topology.dim - 1
     indices, values = [], []
