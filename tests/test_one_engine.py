@@ -85,3 +85,28 @@ def test_an_old_compression_layout_is_refused_with_its_moved_keys():
     for moved in ("limb.center -> body.center", "limb.radii -> body.radii", "donning.steps -> donning.time",
                   "mesh.n_along -> garment.n_along"):
         assert moved in str(err.value)
+
+
+@pytest.mark.parametrize("path", sorted((ROOT / "scenes").glob("*.toml")), ids=lambda p: p.stem)
+def test_every_shipped_scene_parses_once_into_its_kinds_frozen_sections(path):
+    import dataclasses
+
+    from fabricfem.scenes.contract import DynamicScene, StaticScene, WearScene
+    scene = scene_module.load(path)
+    parsed = scene.parsed
+    assert type(parsed) is {"static": StaticScene, "dynamic": DynamicScene, "wear": WearScene}[scene.kind]
+    assert scene.parsed is parsed                      # parsed once
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        parsed.scene = None
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        scene.kind = "static"
+
+
+def test_one_schema_table_for_every_kind():
+    from fabricfem.scenes.schema import SCHEMA
+    assert set(SCHEMA) == {"static", "dynamic", "wear"}
+    assert "garment" in SCHEMA["wear"] and "garment" not in SCHEMA["static"]
+    data = tomllib.loads((ROOT / "scenes" / "sleeve.toml").read_text())
+    data["garment"]["lenght"] = 0.5
+    with pytest.raises(scene_module.SceneError, match=r"garment: unknown key 'lenght' \(did you mean 'length'\?\)"):
+        scene_module.validate(data)

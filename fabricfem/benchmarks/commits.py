@@ -33,14 +33,13 @@ from fabricfem.scenes.sweep import parse_value, set_key
 
 # run in the checked-out commit: build, time run.run(), print one JSON line (rank 0)
 TIMER = r"""
-import json, sys, time, tomllib
+import dataclasses, json, sys, time, tomllib
 from pathlib import Path
 from mpi4py import MPI
 from fabricfem.scenes.run import build_wear_run
 from fabricfem.scenes.schema import validate
 path, data = Path(sys.argv[1]), json.loads(sys.argv[2])
-scene = validate(data, str(path))
-scene.path = path
+scene = dataclasses.replace(validate(data, str(path)), path=path)
 run = build_wear_run(scene, MPI.COMM_WORLD)[0]
 MPI.COMM_WORLD.Barrier()
 t0 = time.perf_counter()

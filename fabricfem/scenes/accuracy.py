@@ -70,7 +70,7 @@ from fabricfem.solvers.newton import SolverError
 
 PILOTS = (-2, -1, 0)             # levels solved to estimate the error
 MESH_COUNTS = {"plate": ("nx", "ny"), "tube": ("n_around", "n_along")}
-LEAST_AROUND = {"engine": 6, "compression": 8}   # cells around a tube at the coarsest wear pilot (default ratio)
+LEAST_AROUND = 6   # cells around a tube at the coarsest wear pilot (default ratio)
 
 
 @dataclass
@@ -217,9 +217,7 @@ def with_window(scene: Scene, window: float | None) -> Scene:
         return scene
     data = copy.deepcopy(scene.data)
     data.setdefault("accuracy", {})["window"] = float(window)
-    out = validate(data, source="--window", path=scene.path)
-    out.path = scene.path
-    return out
+    return validate(data, source="--window", path=scene.path)
 
 
 def target_of(scene: Scene, target: float | None = None, quantity: str | None = None) -> tuple[str, float]:
@@ -230,9 +228,9 @@ def target_of(scene: Scene, target: float | None = None, quantity: str | None = 
     if scene.kind not in ACCURACY_KINDS:
         raise SceneError(f"--accuracy: an accuracy target is for {', '.join(ACCURACY_KINDS)} scenes, not "
                          f"{scene.kind!r} ones")
-    if scene.kind == "wear" and wear.route_of(scene.data) == "sleeve":
+    if scene.kind == "wear" and wear.route_of(scene.data) != "explicit":
         raise SceneError("route.solver: an accuracy target runs a wear scene on the explicit engine (route.solver = "
-                         "\"explicit\") or the compression route, not the sleeve's quasistatic or implicit route")
+                         "\"explicit\"), not the sleeve's quasistatic or implicit route")
     if target is None:
         raise SceneError("accuracy.target: give a relative error target (--accuracy 2% or [accuracy] target)")
     if quantity is None:
@@ -267,7 +265,7 @@ def wear_ratio(data: dict) -> float:
     g = data["garment"]
     if ratio is not None or g.get("builder", "pattern") != "tube":
         return float(ratio or 2.0)
-    least = LEAST_AROUND[wear.route_of(data)]
+    least = LEAST_AROUND
     ratio = min(2.0, (g["n_around"] / least) ** (1.0 / -min(PILOTS)))
     if ratio < 1.1:
         raise SceneError(f"garment.n_around: {g['n_around']} cells around leave no room for two coarser pilot "
@@ -284,8 +282,7 @@ def wear_level(scene: Scene, k: int, out: Path, window: bool) -> Level:
     ratio, g = wear_ratio(scene.data), data["garment"]
     scale = ratio ** k
     if g.get("builder", "pattern") == "tube":
-        quarter = wear.route_of(data) == "compression"   # symmetry planes y = 0, z = 0: a multiple of 4 around
-        around = 4 * max(1, round(g["n_around"] * scale / 4)) if quarter else max(3, round(g["n_around"] * scale))
+        around = max(3, round(g["n_around"] * scale))
         g.update(n_around=around, n_along=max(1, round(g["n_along"] * scale)))
         size = 1.0 / math.sqrt(g["n_around"] * g["n_along"])
         dofs = estimated_dofs({"type": "tube", "n_around": g["n_around"], "n_along": g["n_along"]})
@@ -296,9 +293,7 @@ def wear_level(scene: Scene, k: int, out: Path, window: bool) -> Level:
         data.setdefault("route", {})["end_time"] = spec.window
     data.setdefault("output", {}).update(dir=str(out), render=False)
     level = validate(data, source=f"accuracy level {k:+d}", path=scene.path)
-    level.path = scene.path
-    steps = data.get("donning", {}).get("steps", 10) if wear.route_of(data) == "compression" else 1
-    return Level(k, level, dofs, None, steps, size)
+    return Level(k, level, dofs, None, 1, size)
 
 
 def level_scene(scene: Scene, k: int, out: Path, data: dict | None = None, window: bool = True) -> Level:
@@ -327,8 +322,7 @@ def level_scene(scene: Scene, k: int, out: Path, data: dict | None = None, windo
         step = d.dt if d.dt != "auto" else (d.dt_fraction * (critical_time_step_estimate(data) or math.nan))
         steps = max(1, math.ceil(d.end_time / step * (1.0 - 1e-12))) if math.isfinite(step) else 1
     data.setdefault("output", {}).update(dir=str(out), render=False)
-    level = validate(data, source=f"accuracy level {k:+d}")
-    level.path = scene.path
+    level = validate(data, source=f"accuracy level {k:+d}", path=scene.path)
     return Level(k, level, estimated_dofs(data["mesh"], section(ModelSection, data.get("model")).kind), step, steps,
                  2.0 ** -k)
 
@@ -482,10 +476,8 @@ def _meshed_sizes(scene: Scene, levels: list[Level]) -> None:
 
 def _orders(scene: Scene) -> tuple[float, float]:
     """Plausible observed orders (fabricfem.scenes.richardson.ORDERS): a wear scene on the explicit engine as a
-    dynamic one (its step follows the mesh), the compression route as a static one."""
-    if scene.kind != "wear":
-        return ORDERS[scene.kind]
-    return ORDERS["static" if wear.route_of(scene.data) == "compression" else "dynamic"]
+    dynamic one (its step follows the mesh)."""
+    return ORDERS["dynamic" if scene.kind == "wear" else scene.kind]
 
 
 def _window(scene: Scene) -> tuple[float | None, float | None]:
@@ -494,8 +486,8 @@ def _window(scene: Scene) -> tuple[float | None, float | None]:
     window = section(AccuracySection, scene.get("accuracy")).window
     if scene.kind != "wear" or window is None:
         return None, None
-    data = scene.data
-    return window, wear.scene_body_time(wear.plan(data, wear.wear_fabric(data, build_fabric), scene.path))
+    parsed = scene.parsed
+    return window, wear.scene_body_time(wear.plan(parsed, wear.wear_fabric(parsed, build_fabric), scene.path))
 
 
 def _cost_exponent(coarse: Level, fine: Level) -> float:
@@ -519,7 +511,6 @@ def run_accurate(scene: Scene, target: float | None = None, quantity: str | None
     data["output"] = {**scene.get("output", {}), "dir": str(output_dir(scene))}
     data.setdefault("scene", {})["name"] = scene_name(scene)
     delivered = validate(data, source=f"accuracy level {chosen.chosen.k:+d}", path=scene.path)
-    delivered.path = scene.path
     outcome = run_scene(delivered, comm)
     _write_plan(scene, chosen, comm)
     return chosen, outcome

@@ -2,6 +2,7 @@
 critical time step before meshing). `load` and `validate` are the entry points of fabricfem.scenes."""
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -10,11 +11,12 @@ from pathlib import Path
 
 import numpy as np
 
-from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
+from fabricfem.body.arm import ArmDimensions
 from fabricfem.dynamics import stability
 from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
 from fabricfem.meshes import plate, tube
 from fabricfem.scenes import schema, wear
+from fabricfem.scenes.contract import WearScene
 from fabricfem.scenes.schema import Scene, SceneError
 from fabricfem.scenes.sections import (
     DynamicsSection,
@@ -23,10 +25,9 @@ from fabricfem.scenes.sections import (
     ModelSection,
     OutputSection,
     SceneSection,
-    from_table,
     section,
 )
-from fabricfem.wear.config import SECTIONS, ContactSpec, FabricSpec, FlexionSpec, RouteSpec, SleeveConfig, TubeSpec
+from fabricfem.wear.config import SECTIONS, FabricSpec, SleeveConfig, TubeSpec
 
 
 def build_fabric(spec: dict) -> Fabric:
@@ -98,36 +99,32 @@ _SLEEVE_SECTION_OF = {"tube": "garment", "material": "fabric", "motion": "motion
                       "route": "route"}
 
 
-def _own_keys(cls, table: dict) -> dict:
-    """The keys of `table` that are fields of dataclass `cls`."""
-    return {k: v for k, v in table.items() if k in cls.__dataclass_fields__}
+def tube_spec(wear: WearScene) -> TubeSpec:
+    """The TubeSpec of a tube garment: [garment] length, radius, n_around, n_along, quadrature, hold_rotations
+    (ValueError naming a refused value)."""
+    g = wear.garment
+    return TubeSpec(length=g.length, radius=g.radius, n_around=g.n_around, n_along=g.n_along,
+                    quadrature=tuple(g.quadrature) if g.quadrature else TubeSpec.quadrature,
+                    hold_rotations=g.hold_rotations)
 
 
-def sleeve_config(data: dict) -> SleeveConfig:
-    """The SleeveConfig of an arm-in-tube wear scene ([garment] builder = "tube", [body] type = "arm", [motion]
-    type = "elbow_flexion") for the sleeve's Newton routes (quasistatic, implicit: E1 = E2); its checks
-    (fabricfem.wear.config) become SceneErrors naming the section and key."""
-    fabric, name = data["fabric"], data.get("scene", {}).get("name", "sleeve")
-    if "catalogue" in fabric:
-        material = FabricSpec(fabric_name=fabric["catalogue"])
+def sleeve_config(wear: WearScene) -> SleeveConfig:
+    """The SleeveConfig of an arm-in-tube wear scene (WearScene.is_tube_flexion) for the sleeve's Newton routes
+    (quasistatic, implicit: E1 = E2); its checks (fabricfem.wear.config) become SceneErrors naming the section and
+    key."""
+    fabric = wear.fabric
+    if wear.catalogue is not None:
+        material = FabricSpec(fabric_name=wear.catalogue)
     else:
-        build_fabric(fabric)                              # the values' own checks first (sign, range, finite)
+        build_fabric(dict(fabric))                    # the values' own checks first (sign, range, finite)
         if fabric["E1"] != fabric["E2"]:
             raise SceneError(f"fabric.E2: the sleeve's Newton routes use E1 = E2 [Man2006, sec. 5.3], got E1 = "
                              f"{fabric['E1']} and E2 = {fabric['E2']} (the explicit route takes any fabric)")
         material = FabricSpec(E=fabric["E1"], G=fabric["G12"], nu12=fabric["nu12"], thickness=fabric["thickness"],
-                              density=section(FabricSection, fabric).density)
+                              density=section(FabricSection, dict(fabric)).density)
     try:
-        garment = _own_keys(TubeSpec, data["garment"])
-        if "quadrature" in garment:
-            garment["quadrature"] = tuple(garment["quadrature"])
-        return SleeveConfig(
-            tube=TubeSpec(**garment), material=material,
-            motion=from_table(FlexionSpec, _own_keys(FlexionSpec, data["motion"])),
-            contact=from_table(ContactSpec, data.get("contact", {})),
-            route=from_table(RouteSpec, _own_keys(RouteSpec, data.get("route", {}))),
-            arm=from_table(ArmDimensions, {**vars(DEFAULT_ARM), **_own_keys(ArmDimensions, data["body"])}),
-            name=name)
+        return SleeveConfig(tube=tube_spec(wear), material=material, motion=wear.flexion, contact=wear.contact,
+                            route=wear.route, arm=wear.arm, name=wear.scene.name or "sleeve")
     except ValueError as exc:
         message = str(exc)
         key = message.split(" ")[0].rstrip(":")
@@ -180,19 +177,19 @@ def check_size(data: dict) -> None:
                          f"{have / 2**30:.0f} GiB; use fewer cells or set mesh.allow_large = true")
 
 
-def check_objects(data: dict, path: Path | None = None) -> None:
+def check_objects(scene: Scene) -> None:
     """Checks that need objects: an explicit dynamic scene's numeric dt must not exceed the critical time step
     (unless dynamics.force = true); a wear scene's fabric, body, motion (the file is read), monitors and pattern
-    (read and checked, not meshed) are built (`path`: the scene file, for relative file names)."""
-    if data["scene"]["kind"] == "wear":
-        check_wear_objects(data, path)
+    (read and checked, not meshed) are built (relative file names from the scene's path)."""
+    if scene.kind == "wear":
+        check_wear_objects(scene.parsed, scene.path)
         return
+    data = scene.data
     check_size(data)
     build_fabric(data["fabric"])                      # every fabric value checked before meshing
-    dyn = data.get("dynamics")
-    if not dyn:
+    if scene.kind != "dynamic":
         return
-    d = section(DynamicsSection, dyn)
+    d = scene.parsed.dynamics
     if d.integrator != "explicit" or isinstance(d.dt, str) or d.force:
         return
     dt, dt_crit = d.dt, critical_time_step_estimate(data)
@@ -205,28 +202,28 @@ def check_objects(data: dict, path: Path | None = None) -> None:
 def validate(data: dict, source: str = "scene", path: Path | None = None) -> Scene:
     """schema.validate, then the object checks (`path`: the scene file, for relative file names); SceneError
     names the key."""
-    scene = schema.validate(data, source)
-    check_objects(data, path)
+    scene = dataclasses.replace(schema.validate(data, source), path=path)
+    check_objects(scene)
     return scene
 
 
 def load(path: str | Path) -> Scene:
     """Read a scene file and validate it completely (data and objects) before anything is meshed."""
     scene = schema.load(path)
-    check_objects(scene.data, scene.path)
+    check_objects(scene)
     return scene
 
 
-def check_wear_objects(data: dict, path: Path | None) -> None:
+def check_wear_objects(wear_scene: WearScene, path: Path | None) -> None:
     """The object checks of a wear scene before meshing (module docstring of fabricfem.scenes.wear)."""
-    if wear.route_of(data) != "explicit":
-        sleeve_config(data)                           # the Newton routes' configuration and its checks
+    if wear_scene.route.solver != "explicit":
+        sleeve_config(wear_scene)                     # the Newton routes' configuration and its checks
         return
-    fabric = wear.wear_fabric(data, build_fabric)
+    fabric = wear.wear_fabric(wear_scene, build_fabric)
     if not fabric.density > 0.0:
         raise SceneError(f"fabric.density: the explicit engine needs a positive density [kg/m^3], got {fabric.density}")
-    wear.check_window(data, wear.plan(data, fabric, path))
-    wear.check_garment(data, path)
+    wear.check_window(wear_scene, wear.plan(wear_scene, fabric, path))
+    wear.check_garment(wear_scene, path)
 
 
 def scene_name(scene: Scene) -> str:

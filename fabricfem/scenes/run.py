@@ -12,18 +12,13 @@ from pathlib import Path
 from mpi4py import MPI
 
 from fabricfem import io
-from fabricfem.body.arm import ArmDimensions
 from fabricfem.scenes import wear
-from fabricfem.scenes.build import build_fabric, output_dir, scene_name, scene_sha256, sleeve_config  # noqa: F401 (public here)
+from fabricfem.scenes.build import build_fabric, output_dir, scene_name, scene_sha256, sleeve_config, tube_spec  # noqa: F401 (public here)
 from fabricfem.scenes.dynamic import CHECKPOINT_EVERY, DynamicCheckpoint, DynamicRun, run_dynamic_scene  # noqa: F401
 from fabricfem.scenes.schema import Scene, SceneError
-from fabricfem.scenes.sections import (
-    from_table,
-    section,
-)
 from fabricfem.scenes.static import build_model, run_static_scene  # noqa: F401 (public here)
 from fabricfem.wear.checkpoint import Checkpoint
-from fabricfem.wear.config import ContactSpec, FlexionSpec, RouteSpec, TubeSpec, check_fit
+from fabricfem.wear.config import check_fit
 from fabricfem.wear.contract import WearHistory
 from fabricfem.wear.garment import GarmentRun, build_garment_run
 from fabricfem.wear.run import ROUTES, run_wear
@@ -70,13 +65,13 @@ def run_scene(scene: Scene, comm=MPI.COMM_WORLD, out: Path | None = None, resume
 def run_wear_scene(scene: Scene, out: Path, comm=MPI.COMM_WORLD, resume: bool = False, sha: str = ""):
     """`fabricfem run` of a wear scene: its WearRun (`build_wear_run`) with progress, the recorder's outputs and
     the summary (fabricfem.wear.run.run_wear); the explicit engine checkpoints and resumes."""
-    run, headline, render_at, output = build_wear_run(scene, comm)
+    run, headline, render_at, _ = build_wear_run(scene, comm)
     checkpoint = None
     if isinstance(run, GarmentRun):
         checkpoint = Checkpoint(out, comm, sha or scene_sha256(scene), CHECKPOINT_EVERY)
         if resume and not checkpoint.exists():
             raise SceneError(f"resume: no checkpoint in {out}/checkpoint (run the scene without --resume first)")
-    return run_wear(run, out, headline, render_at, output.get("render", True), output.get("body_samples", 24),
+    return run_wear(run, out, headline, render_at, scene.parsed.output.render, scene.parsed.output.body_samples,
                     checkpoint, resume)
 
 
@@ -84,59 +79,45 @@ def build_wear_run(scene: Scene, comm=MPI.COMM_WORLD):
     """The WearRun of a wear scene, its headline, the render coordinates and [output]: an arm in a tube flexing at
     the elbow by its [route] solver (fabricfem.wear.sleeve.tube_flexion_run on the explicit engine, the Newton
     routes of fabricfem.wear.run.ROUTES), any other garment on the explicit engine (`build_garment_run`)."""
-    data = scene.data
-    if wear.is_tube_flexion(data):
-        run = tube_scene_run(scene, comm)
-    else:
-        run = garment_scene_run(scene, comm)
-    output = data.get("output", {})
-    render_at = output.get("render_at")
-    if render_at is None:
-        end = run.duration if isinstance(run, GarmentRun) else None
-        render_at = ([run.axis_at(run.motion_start + f * (end - run.motion_start)) if run.axis is not None
-                      else f * end for f in (1 / 3, 2 / 3, 1.0)] if end is not None else
-                     [f * data["motion"].get("final_angle", 57.0) for f in (1 / 3, 2 / 3, 1.0)])
-    body = list(run.body.segments)
-    headline = (f"{run.name}: {run.model.ndofs} dofs, body {body}, {comm.size} rank(s); "
-                f"mu = {data.get('contact', {}).get('friction', 0.1 if wear.is_tube_flexion(data) else 0.0)}; "
-                f"{run.describe()}")
-    return run, headline, render_at, output
+    parsed = scene.parsed
+    run = tube_scene_run(scene, comm) if parsed.is_tube_flexion else garment_scene_run(scene, comm)
+    render_at = parsed.output.render_at
+    if render_at is None and isinstance(run, GarmentRun):
+        start, end = run.motion_start, run.duration
+        render_at = [run.axis_at(start + f * (end - start)) if run.axis is not None else f * end
+                     for f in (1 / 3, 2 / 3, 1.0)]
+    elif render_at is None:
+        render_at = [f * parsed.flexion.final_angle for f in (1 / 3, 2 / 3, 1.0)]
+    headline = (f"{run.name}: {run.model.ndofs} dofs, body {list(run.body.segments)}, {comm.size} rank(s); "
+                f"mu = {parsed.contact.friction}; {run.describe()}")
+    return run, headline, render_at, parsed.output
 
 
 def tube_scene_run(scene: Scene, comm):
     """The arm-in-tube sleeve of a wear scene by its [route] solver: the explicit engine's run of the scene's
     sections (any fabric) or a Newton route of its SleeveConfig (E1 = E2)."""
-    data = scene.data
-    solver = wear.route_of(data)
-    if solver != "explicit":
-        return ROUTES[solver](sleeve_config(data), comm)
-    fabric = wear.wear_fabric(data, build_fabric)
-    garment = {k: v for k, v in data["garment"].items() if k in TubeSpec.__dataclass_fields__}
-    if "quadrature" in garment:
-        garment["quadrature"] = tuple(garment["quadrature"])
+    parsed = scene.parsed
+    if parsed.route.solver != "explicit":
+        return ROUTES[parsed.route.solver](sleeve_config(parsed), comm)
     try:
-        tube_spec = TubeSpec(**garment)
-        arm = from_table(ArmDimensions, {k: v for k, v in data["body"].items() if k in ArmDimensions.__dataclass_fields__})
-        motion = from_table(FlexionSpec, {k: v for k, v in data["motion"].items() if k in FlexionSpec.__dataclass_fields__})
-        contact = from_table(ContactSpec, data.get("contact", {}))
-        route = from_table(RouteSpec, {k: v for k, v in data.get("route", {}).items()
-                                       if k in RouteSpec.__dataclass_fields__})
-        check_fit(tube_spec.radius, arm)
+        tube = tube_spec(parsed)
+        check_fit(tube.radius, parsed.arm)
     except ValueError as exc:
         raise SceneError(f"garment: {exc}") from None
-    return tube_flexion_run(scene_name(scene), fabric, tube_spec, arm, motion, contact, route, comm)
+    return tube_flexion_run(scene_name(scene), wear.wear_fabric(parsed, build_fabric), tube, parsed.arm,
+                            parsed.flexion, parsed.contact, parsed.route, comm)
 
 
 def garment_scene_run(scene: Scene, comm) -> GarmentRun:
     """The explicit engine's GarmentRun of a wear scene (fabricfem.scenes.wear.plan and garment_mesh)."""
-    data = scene.data
-    fabric = wear.wear_fabric(data, build_fabric)
-    plan = wear.plan(data, fabric, scene.path)
-    fmesh, seams, holds, pattern_garment = wear.garment_mesh(data, scene.path, comm)
+    parsed = scene.parsed
+    fabric = wear.wear_fabric(parsed, build_fabric)
+    plan = wear.plan(parsed, fabric, scene.path)
+    fmesh, seams, holds, pattern_garment = wear.garment_mesh(parsed, scene.path, comm)
     if plan.handles and pattern_garment is None:
         raise SceneError("donning: pull_edges and belt_edges name pattern edges; this garment is a tube")
     handles = wear.edge_handles(plan.handles, pattern_garment) if plan.handles else []
-    garment = section(wear.GarmentSection, data["garment"])
+    garment = parsed.garment
     return build_garment_run(scene_name(scene), fmesh, fabric, plan.body, seams=seams, holds=holds,
                              torques=plan.torques, timeline=plan.timeline, settings=plan.settings,
                              contact_method=plan.contact.method or "lagrange", friction=plan.contact.friction,

@@ -89,6 +89,7 @@ with both numbers unless force = true.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import importlib.util
 import math
 import tomllib
@@ -99,45 +100,26 @@ from typing import Any
 
 from fabricfem.parameters import param_doc
 from fabricfem.scenes import wear as wear_module
+from fabricfem.scenes.contract import LIST_SECTIONS, REQUIRED_OF, SECTIONS_OF, parse
 from fabricfem.scenes.errors import SceneError
 from fabricfem.scenes.errors import suggest as _suggest
 from fabricfem.scenes.legacy import is_old_layout, old_layout_message
 from fabricfem.scenes.sections import (
-    AccuracySection,
-    DynamicsSection,
-    FabricSection,
-    LoadSection,
-    MeshSection,
-    ModelSection,
-    MonitorSection,
-    ObstacleSection,
-    OutputSection,
-    SceneSection,
-    SolverSection,
-    SupportSection,
     schema_of,
 )
-from fabricfem.scenes.wear import WEAR_LIST_SECTIONS, WEAR_SECTION_CLASSES, check_wear
-
-# section -> the dataclass(es) that declare its keys, types, defaults and units (fabricfem.scenes.sections) of the
-# static and dynamic kinds (the wear kind's: fabricfem.scenes.wear.WEAR_SECTION_CLASSES)
-SECTION_CLASSES: dict[str, tuple] = {
-    "scene": (SceneSection,), "mesh": (MeshSection,), "fabric": (FabricSection,), "model": (ModelSection,),
-    "support": (SupportSection,), "load": (LoadSection,), "solver": (SolverSection,), "output": (OutputSection,),
-    "dynamics": (DynamicsSection,), "dynamics.obstacles": (ObstacleSection,),
-    "dynamics.monitors": (MonitorSection,), "accuracy": (AccuracySection,)}
+from fabricfem.scenes.wear import check_wear
 
 
-def _section_schema(name: str) -> dict[str, tuple[type | tuple, bool]]:
+def section_schema(kind: str, name: str) -> dict[str, tuple[type | tuple, bool]]:
+    """{key: (TOML types, required)} of section `name` of a `kind` scene, from its dataclasses (SECTIONS_OF)."""
     schema: dict = {}
-    for cls in SECTION_CLASSES[name]:
+    for cls in SECTIONS_OF[kind][name]:
         schema.update({k: v for k, v in schema_of(cls).items() if k not in schema})
     return schema
 
 
-# section -> key -> (TOML types, required)
-SCHEMA = {name: _section_schema(name) for name in SECTION_CLASSES if "." not in name}
-SUB_SCHEMA = {name: _section_schema(name) for name in SECTION_CLASSES if "." in name}   # arrays of tables
+# kind -> section -> key -> (TOML types, required): the one schema of every scene file
+SCHEMA = {kind: {name: section_schema(kind, name) for name in sections} for kind, sections in SECTIONS_OF.items()}
 
 
 def _section_table(title: str, classes: tuple, typed: str | None = None) -> list[str]:
@@ -177,13 +159,13 @@ def reference_markdown() -> str:
              "optional [donning], [contact], [route], [[torque]], [output]: any garment on any moving wearer; "
              "scenes/sleeve.toml, scenes/compression_sleeve.toml, scenes/trousers_standing.toml). The older "
              "sleeve and compression layouts are refused with every moved key in one message.", ""]
-    for name, classes in SECTION_CLASSES.items():
-        title = f"[[{name}]]" if name in LIST_SECTIONS or "." in name else f"[{name}]"
-        lines += _section_table(title, classes)
-    lines += ["# Wear scenes (`kind = \"wear\"`)", "", " ".join((wear_module.__doc__ or "").split()), ""]
-    for name, classes in WEAR_SECTION_CLASSES.items():
-        title = f"[[{name}]] (wear)" if name in WEAR_LIST_SECTIONS else f"[{name}] (wear)"
-        lines += _section_table(title, classes)
+    for kind, sections in SECTIONS_OF.items():
+        lines += [f"# {kind.capitalize()} scenes (`kind = \"{kind}\"`)", ""]
+        if kind == "wear":
+            lines += [" ".join((wear_module.__doc__ or "").split()), ""]
+        for name, classes in sections.items():
+            title = f"[[{name}]]" if name in LIST_SECTIONS or "." in name else f"[{name}]"
+            lines += _section_table(title, classes)
     return "\n".join(lines)
 
 
@@ -194,9 +176,7 @@ MONITOR_QUANTITIES = {"max_warp_strain", "max_weft_strain", "mean_warp_strain", 
                       "max_displacement"}
 STANDARD_COLUMNS = {"time", "kinetic", "strain", "external_work", "dissipated", "total", "max_strain",
                     "newton_iterations"}
-LIST_SECTIONS = {"support", "load"}
-REQUIRED_SECTIONS = {"mesh", "fabric", "solver"}
-KINDS = ("static", "dynamic", "wear")
+KINDS = tuple(SECTIONS_OF)
 CELLS = ("quadrilateral", "triangle")
 EDGES = {"plate": ("left", "right", "bottom", "top"), "tube": ("end0", "end1")}   # edge tags of the builders
 ALL_NODES = "all"   # a support on every node (e.g. u = ["free", "free", 0]: an in-plane problem)
@@ -204,28 +184,57 @@ MESH_KEYS = {"plate": {"lx", "ly", "nx", "ny"}, "tube": {"length", "radius", "n_
 LOAD_TYPES = {"gravity", "body_force", "edge_traction", "pressure", "edge_moment", "point"}
 
 
-def _check_table(section: str, table: dict, where: str):
-    schema = SCHEMA[section] if section in SCHEMA else SUB_SCHEMA[section]
+def check_table(kind: str, section: str, table, where: str) -> None:
+    """Keys and TOML types of one table of a `kind` scene against SCHEMA (SceneError naming the key)."""
+    if not isinstance(table, dict):
+        raise SceneError(f"{where}: must be a table")
+    schema = SCHEMA[kind][section]
     for key, value in table.items():
         if key not in schema:
             raise SceneError(f"{where}: unknown key {key!r}{_suggest(key, schema)}; allowed: {sorted(schema)}")
         types, _ = schema[key]
-        if isinstance(value, bool) and bool not in (types if isinstance(types, tuple) else (types,)):
-            raise SceneError(f"{where}.{key}: expected {types}, got a boolean")
-        if not isinstance(value, types):
+        accepted = types if isinstance(types, tuple) else (types,)
+        if (isinstance(value, bool) and bool not in accepted) or not isinstance(value, types):
             raise SceneError(f"{where}.{key}: expected {getattr(types, '__name__', types)}, got {value!r}")
     for key, (_, required) in schema.items():
-        if required and key not in table:
+        if required and key not in table and not (section == "fabric" and "catalogue" in table):
             raise SceneError(f"{where}: missing required key {key!r}")
 
 
-@dataclass
+def check_sections(data: dict, kind: str, source: str) -> None:
+    """The sections of a `kind` scene: known names, the required ones, arrays of tables where declared, and each
+    table's keys and types (the one validator of every kind's tables)."""
+    sections = {name for name in SECTIONS_OF[kind] if "." not in name}
+    for name in data:
+        if name not in sections:
+            raise SceneError(f"{source}: unknown section [{name}] for a {kind} scene{_suggest(name, sections)}; "
+                             f"allowed: {sorted(sections)}")
+    for name in REQUIRED_OF[kind]:
+        if name not in data:
+            raise SceneError(f"{source}: missing section [{name}] of a {kind} scene")
+    for name, content in data.items():
+        if name in LIST_SECTIONS:
+            if not isinstance(content, list):
+                raise SceneError(f"{source}: [{name}] must be an array of tables: write [[{name}]]")
+            for i, table in enumerate(content):
+                check_table(kind, name, table, f"{name}[{i}]")
+        else:
+            check_table(kind, name, content, name)
+    # the arrays inside a section ([[dynamics.obstacles]]) are checked with their section (_array_of_tables)
+
+
+@dataclass(frozen=True)
 class Scene:
-    """A validated scene: its TOML data and its kind (static, dynamic, wear)."""
+    """A validated scene: its TOML data, the file it came from and its kind (static, dynamic, wear); `parsed` is
+    the data parsed once into the kind's frozen dataclass of typed sections (fabricfem.scenes.contract)."""
 
     data: dict[str, Any]
     path: Path | None = None
     kind: str = "static"
+
+    @functools.cached_property
+    def parsed(self):
+        return parse(self.data, self.kind)
 
     def __getitem__(self, key):
         return self.data[key]
@@ -253,11 +262,12 @@ def validate(data: dict, source: str = "scene") -> Scene:
     """Check sections, keys, types and cross-references of a scene by its kind; raise SceneError naming the
     problem."""
     kind = scene_kind(data, source)
+    check_sections(data, kind, source)
     if kind == "wear":
-        check_wear(data, source)
+        check_wear(data)
         check_accuracy(data, "wear")
-        return Scene(data, kind="wear")
-    _check_sections(data, kind, source)
+        return _parsed(Scene(data, kind="wear"))
+    _check_kind_sections(data, kind, source)
     _check_mesh(data["mesh"])
     _check_loads_and_supports(data)
     if data.get("output", {}).get("probe") is not None:
@@ -268,36 +278,21 @@ def validate(data: dict, source: str = "scene") -> Scene:
     if kind == "dynamic":
         _check_dynamics(data)
     check_accuracy(data, kind)
-    return Scene(data, kind=kind)
+    return _parsed(Scene(data, kind=kind))
 
 
-def _check_sections(data: dict, kind: str, source: str) -> None:
-    """Known sections, the required ones of `kind`, and each table's keys and types."""
-    for section in data:
-        if section not in SCHEMA:
-            raise SceneError(f"{source}: unknown section [{section}]{_suggest(section, SCHEMA)}; "
-                             f"allowed: {sorted(SCHEMA)}")
-    dynamic = "dynamics" in data
-    if dynamic != (kind == "dynamic"):
-        which = "dynamic" if dynamic else "static"
-        raise SceneError(f"scene.kind: {kind!r} does not match the sections given, which make a {which!r} scene")
-    if dynamic and "solver" in data:
-        raise SceneError(f"{source}: [dynamics] and [solver] given: a scene is either dynamic (time integration "
-                         f"from rest) or static, not both")
-    required = (REQUIRED_SECTIONS - {"solver"}) | {"dynamics"} if dynamic else REQUIRED_SECTIONS
-    for section in sorted(required):
-        if section not in data:
-            raise SceneError(f"{source}: missing section [{section}]")
-    for section, content in data.items():
-        if section in LIST_SECTIONS:
-            if not isinstance(content, list):
-                raise SceneError(f"{source}: [{section}] must be an array of tables: write [[{section}]]")
-            for i, table in enumerate(content):
-                _check_table(section, table, f"{section}[{i}]")
-        else:
-            if not isinstance(content, dict):
-                raise SceneError(f"{source}: [{section}] must be a table")
-            _check_table(section, content, section)
+def _parsed(scene: Scene) -> Scene:
+    """The scene with its sections parsed (a value a section's dataclass refuses raises SceneError now)."""
+    scene.parsed
+    return scene
+
+
+def _check_kind_sections(data: dict, kind: str, source: str) -> None:
+    """A static scene has no [dynamics] and a dynamic one no [solver]: the sections must match the kind."""
+    other = {"static": "dynamics", "dynamic": "solver"}[kind]
+    if other in data:
+        raise SceneError(f"scene.kind: {kind!r} does not match the sections given: [{other}] belongs to a "
+                         f"{'dynamic' if other == 'dynamics' else 'static'} scene")
 
 
 def _check_mesh(mesh: dict) -> None:
@@ -492,7 +487,7 @@ def _array_of_tables(dyn: dict, key: str) -> list[tuple[str, dict]]:
         where = f"dynamics.{key}[{i}]"
         if not isinstance(item, dict):
             raise SceneError(f"{where}: must be a table: write [[dynamics.{key}]]")
-        _check_table(f"dynamics.{key}", item, where)
+        check_table("dynamic", f"dynamics.{key}", item, where)
         checked.append((where, item))
     return checked
 
@@ -566,6 +561,4 @@ def load(path: str | Path) -> Scene:
         raise SceneError(f"{path}: not a UTF-8 text file (a scene is a TOML text file)") from None
     except tomllib.TOMLDecodeError as exc:
         raise SceneError(f"{path}: not valid TOML: {exc}") from None
-    scene = validate(data, str(path))
-    scene.path = path
-    return scene
+    return dataclasses.replace(validate(data, str(path)), path=path)

@@ -59,7 +59,7 @@ class SceneSection:
 
     name: str | None = doc("name of the run (default: the file's stem); outputs go to results/<name>", None)
     description: str | None = doc("free text", None)
-    kind: str | None = doc("static | dynamic | sleeve | compression (default: inferred from the sections)", None)
+    kind: str | None = doc("static | dynamic | wear (required: every scene names its kind)", None)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -147,27 +147,9 @@ class OutputSection:
     dir: str | None = doc("output folder (default results/<name>)", None)
     probe: list | None = doc("[x, y, z] [m] of a node whose displacement is reported", None)
     render: bool = doc("write PNG renders", True)
-    render_angles: list | None = doc("sleeve: elbow angles [deg] of the pressure renders (default: thirds)", None)
-    body_samples: int = doc("sleeve: points per ellipsoid ring of the body surfaces", 24)
+    body_samples: int = doc("wear: points per ellipsoid ring of the body surfaces", 24)
     render_at: list | None = doc("wear: record coordinates (angle [deg] or time [s]) of the pressure renders "
                                  "(default: the thirds of the motion)", None)
-
-
-@dataclasses.dataclass(frozen=True)
-class LimbSection:
-    """[limb]: the limb ellipsoid of a compression scene."""
-
-    center: list = doc("[x, 0, 0] centre [m] on the tube axis")
-    radii: list = doc("[r1, r2, r3] semi-axes [m]")
-
-
-@dataclasses.dataclass(frozen=True)
-class DonningSection:
-    """[donning]: the limb grows from `start` x its size to full size inside the tube."""
-
-    start: float | None = doc("starting size (default 0.95 R / max(r2, r3))", None)
-    steps: int = doc("growth increments", 10)
-    tolerance: float = doc("penetration tolerance of the augmented Lagrangian [m]", 1e-7)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -126,10 +126,9 @@ def variants(base: Scene, varies: list[tuple[str, list]], out: str | Path) -> li
             for key, value in values.items():
                 set_key(data, key, value)
             data.setdefault("output", {})["dir"] = str(Path(out) / name)
-            scene = validate(data, source=f"variant {name}")
+            scene = validate(data, source=f"variant {name}", path=base.path)
         except SceneError as exc:
             raise SceneError(f"variant {name}: {exc}") from None
-        scene.path = base.path
         result.append(Variant(name, values, scene))
     return result
 

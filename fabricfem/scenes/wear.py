@@ -20,10 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
-from fabricfem.body.arm import ArmDimensions, default_arm
+from fabricfem.body.arm import default_arm
 from fabricfem.body.blend import BlendedStart
 from fabricfem.body.crossing import obstacle_walk
-from fabricfem.body.lower_body import LowerBodyDimensions, lower_body, standing, winter_walking
+from fabricfem.body.lower_body import lower_body, standing, winter_walking
 from fabricfem.body.mocap import load_motion
 from fabricfem.body.pose import Body, Segment
 from fabricfem.body.schedule import SegmentSchedule
@@ -35,13 +35,10 @@ from fabricfem.meshes import tube
 from fabricfem.meshes.pattern import Panel, check_pattern, read_garmentcode, read_pattern_toml
 from fabricfem.meshes.pattern_mesh import RigidPlacement, mesh_pattern
 from fabricfem.patterns import pattern_path
+from fabricfem.scenes.contract import WearScene
 from fabricfem.scenes.errors import SceneError
 from fabricfem.scenes.errors import suggest as _suggest
-from fabricfem.scenes.sections import from_table
 from fabricfem.scenes.wear_sections import (  # noqa: F401 (the sections are public here)
-    WEAR_LIST_SECTIONS,
-    WEAR_SCHEMA,
-    WEAR_SECTION_CLASSES,
     GarmentSection,
     TorqueSection,
     WearBodySection,
@@ -50,7 +47,7 @@ from fabricfem.scenes.wear_sections import (  # noqa: F401 (the sections are pub
     WearMotionSection,
     WearRouteSection,
 )
-from fabricfem.wear.config import ContactSpec, FlexionSpec, RouteSpec
+from fabricfem.wear.config import ContactSpec
 from fabricfem.wear.garment import ExplicitSettings, Timeline, TorqueSpec
 from fabricfem.wear.sleeve import ARM_MONITORS, flexion_settings, flexion_timeline, similarity_factor
 
@@ -58,23 +55,6 @@ GRAVITY = 9.81                     # m/s^2
 BODY_TYPES = ("arm", "default_arm", "limb", "lower_body")
 MOTION_TYPES = ("elbow_flexion", "still", "walking", "obstacle_walk", "file")
 BUILDERS = ("tube", "pattern")
-
-
-def _table(name: str, table, where: str) -> None:
-    """Keys and TOML types of one table against WEAR_SCHEMA (SceneError naming the key)."""
-    if not isinstance(table, dict):
-        raise SceneError(f"{where}: must be a table")
-    schema = WEAR_SCHEMA[name]
-    for key, value in table.items():
-        if key not in schema:
-            raise SceneError(f"{where}: unknown key {key!r}{_suggest(key, schema)}; allowed: {sorted(schema)}")
-        types, _ = schema[key]
-        accepted = types if isinstance(types, tuple) else (types,)
-        if (isinstance(value, bool) and bool not in accepted) or not isinstance(value, types):
-            raise SceneError(f"{where}.{key}: expected {getattr(types, '__name__', types)}, got {value!r}")
-    for key, (_, required) in schema.items():
-        if required and key not in table and not (name == "fabric" and "catalogue" in table):
-            raise SceneError(f"{where}: missing required key {key!r}")
 
 
 def _vector(where: str, value, n: int = 3) -> np.ndarray:
@@ -105,22 +85,9 @@ def route_of(data: dict) -> str:
     return solver
 
 
-def check_wear(data: dict, source: str = "scene") -> None:
-    """The data checks of a wear scene (sections, keys, types, choices, cross-references), before any meshing."""
-    for name, content in data.items():
-        if name not in WEAR_SCHEMA:
-            raise SceneError(f"{source}: unknown section [{name}] for a wear scene{_suggest(name, WEAR_SCHEMA)}; "
-                             f"allowed: {sorted(WEAR_SCHEMA)}")
-        if name in WEAR_LIST_SECTIONS:
-            if not isinstance(content, list):
-                raise SceneError(f"{source}: [{name}] must be an array of tables: write [[{name}]]")
-            for i, table in enumerate(content):
-                _table(name, table, f"{name}[{i}]")
-        else:
-            _table(name, content, name)
-    for name in ("garment", "fabric", "body", "motion"):
-        if name not in data:
-            raise SceneError(f"{source}: missing section [{name}] of a wear scene")
+def check_wear(data: dict) -> None:
+    """The data checks of a wear scene beyond its tables' keys and types (fabricfem.scenes.schema.check_sections):
+    choices, vectors and cross-references, before any meshing."""
     garment, body, motion = data["garment"], data["body"], data["motion"]
     _choice("garment.builder", garment.get("builder", "pattern"), BUILDERS)
     if garment.get("builder", "pattern") == "tube":
@@ -193,29 +160,28 @@ def scene_body_time(plan: WearPlan) -> float:
     return sum(records.values()) * timeline.record_time
 
 
-def check_window(data: dict, plan: WearPlan) -> None:
+def check_window(wear: WearScene, plan: WearPlan) -> None:
     """accuracy.window must not exceed the scene's body time (SceneError naming it, before meshing)."""
-    window = data.get("accuracy", {}).get("window")
+    window = wear.accuracy.window
     if window is not None and window > (total := scene_body_time(plan)) + 1e-12:
         raise SceneError(f"accuracy.window: {window:g} s is longer than the scene ({total:.6g} s of body time: "
                          f"donning, settling and motion); give a shorter window or leave it out")
 
 
 # ------------------------------------------------------------------------------------------ objects
-def wear_fabric(data: dict, build_fabric):
+def wear_fabric(wear: WearScene, build_fabric):
     """The scene's Fabric: the stored one named by fabric.catalogue, else `build_fabric` of [fabric]."""
-    spec = data["fabric"]
-    if "catalogue" in spec:
+    if wear.catalogue is not None:
         try:
-            return load_fabric(spec["catalogue"])
+            return load_fabric(wear.catalogue)
         except (ValueError, FileNotFoundError) as exc:
             raise SceneError(f"fabric.catalogue: {exc}") from None
-    return build_fabric(spec)
+    return build_fabric(dict(wear.fabric))
 
 
-def pattern_file(data: dict, scene_path: Path | None) -> Path:
+def pattern_file(wear: WearScene, scene_path: Path | None) -> Path:
     """The pattern file of [garment] pattern: a shipped name, or a path (relative to the scene file)."""
-    name = data["garment"]["pattern"]
+    name = wear.garment.pattern
     candidate = Path(name)
     if not candidate.is_absolute() and scene_path is not None:
         candidate = Path(scene_path).parent / candidate
@@ -260,109 +226,95 @@ class WearPlan:
     handles: list = dataclasses.field(default_factory=list)   # (kind, edge names, options) of the donning handles
 
 
-def _fields(cls, table: dict):
-    """An instance of dataclass `cls` from the keys of `table` that are its fields (SceneError naming the key)."""
-    try:
-        return from_table(cls, {k: v for k, v in table.items() if k in cls.__dataclass_fields__})
-    except ValueError as exc:
-        raise SceneError(f"{exc}") from None
-
-
-def _motion_file(motion: dict, scene_path: Path | None, body_names) -> object:
+def _motion_file(motion: WearMotionSection, scene_path: Path | None, body_names) -> object:
     """The kinematics of [motion] type = "file": the file read, mapped to the body's joint and marker names."""
-    if not motion.get("path"):
+    if not motion.path:
         raise SceneError("motion.path: a file motion needs the path of its motion file")
-    path = Path(motion["path"])
+    path = Path(motion.path)
     if not path.is_absolute() and scene_path is not None:
         path = Path(scene_path).parent / path
     if not path.is_file():
         raise SceneError(f"motion.path: no motion file {str(path)!r}")
-    mapping = motion.get("mapping") or {name: name for name in body_names}
+    mapping = dict(motion.mapping) if motion.mapping else {name: name for name in body_names}
     try:
-        return load_motion(path, mapping, units=motion.get("units"), up=motion.get("up"),
-                           fill_gaps=motion.get("fill_gaps", False))
+        return load_motion(path, mapping, units=motion.units, up=motion.up, fill_gaps=motion.fill_gaps)
     except ValueError as exc:
         raise SceneError(f"motion.path: {exc}") from None
 
 
-def _arm_plan(data: dict, fabric, route: RouteSpec) -> tuple:
+def _arm_plan(wear: WearScene, fabric) -> tuple:
     """(body, torques, axis, record time [s], motion duration [s] or None, settle time [s], mass damping [1/s],
     critical-step default) of an arm: flexing at the elbow (fabricfem.wear.sleeve.flexion_timeline) or still."""
-    body_spec, motion_spec = data["body"], data["motion"]
-    dims = _fields(ArmDimensions, body_spec)
-    duration = motion_spec.get("duration")
-    if motion_spec["type"] != "elbow_flexion":
-        kinematics = StillPose(default_arm(dimensions=dims).kinematics.positions(0.0), duration or 0.0)
-        return (default_arm(kinematics, dims), list(ARM_MONITORS), None, float(motion_spec.get("record_time") or 0.01),
-                duration, float(motion_spec.get("settle_time", 0.0)), route.mass_damping,
-                ExplicitSettings.critical_step)
-    flex = _fields(FlexionSpec, motion_spec)
+    motion, route, dims = wear.motion, wear.route, wear.arm
+    if wear.flexion is None:
+        kinematics = StillPose(default_arm(dimensions=dims).kinematics.positions(0.0), motion.duration or 0.0)
+        return (default_arm(kinematics, dims), list(ARM_MONITORS), None, float(motion.record_time or 0.01),
+                motion.duration, wear.settle_time, route.mass_damping, ExplicitSettings.critical_step)
     similarity = similarity_factor(fabric, route)
-    body, timeline, axis = flexion_timeline(flex, route, similarity, dims)
+    body, timeline, axis = flexion_timeline(wear.flexion, route, similarity, dims)
     settings = flexion_settings(route, similarity)
     return (body, list(ARM_MONITORS), axis, timeline.record_time, timeline.motion_time, timeline.settle_time,
             settings.mass_damping, settings.critical_step)
 
 
-def _lower_body_kinematics(data: dict, stand, scene_path: Path | None):
+def _lower_body_kinematics(wear: WearScene, stand, scene_path: Path | None):
     """The lower body's kinematics of [motion] (walking, obstacle_walk, file, or standing), entered from the
     standing pose over motion.blend_time; and the motion's duration [s] (None: the kinematics' own)."""
-    motion_spec = data["motion"]
-    motion, duration = motion_spec["type"], motion_spec.get("duration")
+    motion, dims = wear.motion, wear.lower_body
     try:
-        if motion == "walking":
-            kinematics = winter_walking(data["body_dims"], strides=int(motion_spec.get("strides", 2)),
-                                        cycle_time=float(motion_spec.get("cycle_time", 0.987)),
-                                        speed=float(motion_spec.get("speed", 1.43)))
-        elif motion == "obstacle_walk":
-            keys = ("strides", "crossing_stride", "obstacle_height", "obstacle_depth", "clearance",
-                    "trail_clearance", "cycle_time", "speed", "crossing_speed")
-            kinematics = obstacle_walk(data["body_dims"], **{k: motion_spec[k] for k in keys if k in motion_spec})
-        elif motion == "file":
-            kinematics = _motion_file(motion_spec, scene_path, stand.names)
+        if motion.type == "walking":
+            kinematics = winter_walking(dims, strides=motion.strides or 2, cycle_time=motion.cycle_time,
+                                        speed=motion.speed)
+        elif motion.type == "obstacle_walk":
+            kinematics = obstacle_walk(dims, strides=motion.strides or 4, crossing_stride=motion.crossing_stride,
+                                       obstacle_height=motion.obstacle_height, obstacle_depth=motion.obstacle_depth,
+                                       clearance=motion.clearance, trail_clearance=motion.trail_clearance,
+                                       cycle_time=motion.cycle_time, speed=motion.speed,
+                                       crossing_speed=motion.crossing_speed)
+        elif motion.type == "file":
+            kinematics = _motion_file(motion, scene_path, stand.names)
         else:
-            return stand, float(duration or 0.0)
+            return stand, float(motion.duration or 0.0)
     except ValueError as exc:
         if isinstance(exc, SceneError):
             raise
         raise SceneError(f"motion: {exc}") from None
-    if float(motion_spec.get("blend_time", 0.0)) > 0.0:
+    if motion.blend_time > 0.0:
         # the garment goes on the standing body; the motion is entered from the standing pose
-        kinematics = BlendedStart(kinematics, stand.positions(0.0), float(motion_spec["blend_time"]))
-    return kinematics, duration
+        kinematics = BlendedStart(kinematics, stand.positions(0.0), motion.blend_time)
+    return kinematics, motion.duration
 
 
-def plan(data: dict, fabric, scene_path: Path | None = None) -> WearPlan:
-    """Body, monitors, phases and explicit settings of a wear scene on the engine (SceneError naming the key)."""
-    body_spec, motion_spec = data["body"], data["motion"]
-    kind, motion = body_spec["type"], motion_spec["type"]
-    donning = from_table(WearDonningSection, data.get("donning", {}))
-    route = _fields(RouteSpec, data.get("route", {}))
-    contact = from_table(ContactSpec, data.get("contact", {}))
-    garment = from_table(GarmentSection, data["garment"])
-    axis, torques, damping, critical_step = None, [], route.mass_damping, ExplicitSettings.critical_step
-    gravity = (0.0, 0.0, -GRAVITY)
-    duration = motion_spec.get("duration")
-    record_time = float(motion_spec.get("record_time") or 0.01)
-    settle = float(motion_spec.get("settle_time", 0.0)) if "settle_time" in motion_spec else 0.0
-    if kind in ("arm", "default_arm"):
-        gravity = (0.0, -GRAVITY, 0.0)       # the sleeve's convention: the forearm rotates up, towards +y
-        body, torques, axis, record_time, duration, settle, damping, critical_step = _arm_plan(data, fabric, route)
-    elif kind == "limb":
-        body = limb_body(body_spec["center"], body_spec["radii"], duration or 0.0)
+def _body_plan(wear: WearScene, fabric, scene_path: Path | None) -> tuple:
+    """(body, torques, axis, record time [s], motion duration [s], settle time [s], mass damping [1/s], gravity
+    [m/s^2], critical-step default) of the scene's body and motion (SceneError naming the key)."""
+    motion, route = wear.motion, wear.route
+    if wear.arm is not None:           # the sleeve's convention: the forearm rotates up, towards +y
+        return (*_arm_plan(wear, fabric), (0.0, -GRAVITY, 0.0))
+    duration = motion.duration
+    if wear.body.type == "limb":
+        body = limb_body(wear.body.center, wear.body.radii, duration or 0.0)
     else:
-        dims = _fields(LowerBodyDimensions, body_spec)
-        stand = standing(dims, duration=float(duration) if duration else 1.0)
-        kinematics, duration = _lower_body_kinematics({**data, "body_dims": dims}, stand, scene_path)
-        body = lower_body(dims, kinematics)
-    if motion in ("walking", "obstacle_walk", "file") and duration is not None:
+        stand = standing(wear.lower_body, duration=float(duration) if duration else 1.0)
+        kinematics, duration = _lower_body_kinematics(wear, stand, scene_path)
+        body = lower_body(wear.lower_body, kinematics)
+    if motion.type in ("walking", "obstacle_walk", "file") and duration is not None:
         start, end = body.kinematics.time_range
         duration = min(float(duration), end - start)
-    for i, spec in enumerate(data.get("torque", [])):
-        torques.append(TorqueSpec(spec["name"], spec["joint"], tuple(spec["axis"]), tuple(spec["segments"])))
+    return (body, [], None, float(motion.record_time or 0.01), duration, wear.settle_time, route.mass_damping,
+            ExplicitSettings.critical_step, (0.0, 0.0, -GRAVITY))
+
+
+def plan(wear: WearScene, fabric, scene_path: Path | None = None) -> WearPlan:
+    """Body, monitors, phases and explicit settings of a wear scene on the engine (SceneError naming the key)."""
+    donning, route, garment = wear.donning, wear.route, wear.garment
+    body, torques, axis, record_time, duration, settle, damping, critical_step, gravity = _body_plan(
+        wear, fabric, scene_path)
+    for i, spec in enumerate(wear.torques):
+        torques.append(TorqueSpec(spec.name, spec.joint, tuple(spec.axis), tuple(spec.segments)))
         try:
-            body.check_joint(spec["joint"])
-            body.check_segments(spec["segments"])
+            body.check_joint(spec.joint)
+            body.check_segments(spec.segments)
         except ValueError as exc:
             raise SceneError(f"torque[{i}]: {exc}") from None
     grow_from = donning.start if (donning.method == "grow" and donning.start is not None) else 1.0
@@ -371,7 +323,7 @@ def plan(data: dict, fabric, scene_path: Path | None = None) -> WearPlan:
                             donning_time=donning.time if donning.method == "grow" else 0.0, grow_from=grow_from,
                             settle_time=settle, motion_time=duration, pull_time=donning.pull_time,
                             belt_time=donning.belt_time if donning.belt_edges else 0.0,
-                            end_time=data.get("route", {}).get("end_time"))
+                            end_time=wear.end_time)
     except ValueError as exc:
         raise SceneError(f"donning: {exc}") from None
     if donning.pull_edges and not (donning.pull_path and donning.pull_time > 0):
@@ -390,14 +342,14 @@ def plan(data: dict, fabric, scene_path: Path | None = None) -> WearPlan:
                                 time_step_safety=step_safety(route.time_step_safety, critical_step),
                                 mass_scale=route.mass_scale, critical_step=critical_step,
                                 gravity=gravity if route.gravity else None)
-    return WearPlan(body, torques, timeline, settings, contact, axis, handles)
+    return WearPlan(body, torques, timeline, settings, wear.contact, axis, handles)
 
 
-def read_pattern(data: dict, scene_path: Path | None):
+def read_pattern(wear: WearScene, scene_path: Path | None):
     """The [garment] pattern, read, graded by `scale` and checked (stitches, outlines, stitched lengths) before
     meshing (SceneError naming the item)."""
-    g = from_table(GarmentSection, data["garment"])
-    path = pattern_file(data, scene_path)
+    g = wear.garment
+    path = pattern_file(wear, scene_path)
     try:
         pattern = read_pattern_toml(path) if path.suffix == ".toml" else read_garmentcode(path)
         if g.scale != 1.0:
@@ -410,12 +362,11 @@ def read_pattern(data: dict, scene_path: Path | None):
     return pattern
 
 
-def check_garment(data: dict, scene_path: Path | None) -> None:
+def check_garment(wear: WearScene, scene_path: Path | None) -> None:
     """The garment's checks before meshing: a pattern is read and checked; a tube's sizes are positive."""
-    g = from_table(GarmentSection, data["garment"])
-    donning = from_table(WearDonningSection, data.get("donning", {}))
+    g, donning = wear.garment, wear.donning
     if g.builder == "pattern":
-        pattern = read_pattern(data, scene_path)
+        pattern = read_pattern(wear, scene_path)
         for key in ("pull_edges", "belt_edges"):
             for name in getattr(donning, key) or []:
                 panel, _, index = str(name).rpartition(".")
@@ -470,13 +421,13 @@ def edge_handles(specs, garment) -> list:
     return builders
 
 
-def garment_mesh(data: dict, scene_path: Path | None, comm):
+def garment_mesh(wear: WearScene, scene_path: Path | None, comm):
     """(FabricMesh, seams [SeamSpec], hold tags, the GarmentMesh of a pattern or None) of [garment]."""
-    g = from_table(GarmentSection, data["garment"])
+    g = wear.garment
     if g.builder == "tube":
         return tube(g.length, g.radius, g.n_around, g.n_along, cell="quadrilateral", order=g.order, comm=comm), [], \
             list(g.hold), None
-    pattern = read_pattern(data, scene_path)
+    pattern = read_pattern(wear, scene_path)
     rotation = np.eye(3)
     if g.rotate is not None:
         rotation = Panel("frame", np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), rotation=tuple(g.rotate)

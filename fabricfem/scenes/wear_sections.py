@@ -5,11 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from fabricfem.body.arm import ArmDimensions
-from fabricfem.body.lower_body import LowerBodyDimensions
 from fabricfem.parameters import param as doc
-from fabricfem.scenes.sections import AccuracySection, FabricSection, OutputSection, SceneSection, schema_of
-from fabricfem.wear.config import ContactSpec, FlexionSpec, RouteSpec
 
 
 @dataclasses.dataclass(frozen=True)
@@ -65,7 +61,7 @@ class WearMotionSection:
     type: str = doc("elbow_flexion | still | walking | obstacle_walk | file")
     duration: float | None = doc("still: length of the motion phase [s]; file, walking: at most this long", None)
     record_time: float | None = doc("record interval [s] (elbow_flexion: output_angle_step / angular velocity)", None)
-    strides: int = doc("walking, obstacle_walk: gait cycles", 2)
+    strides: int | None = doc("walking, obstacle_walk: gait cycles (default: walking 2, obstacle_walk 4)", None)
     cycle_time: float = doc("walking, obstacle_walk: duration of one gait cycle [s]", 0.987)
     speed: float = doc("walking, obstacle_walk: forward speed of the pelvis [m/s]", 1.43)
     crossing_stride: int = doc("obstacle_walk: the stride that steps over the obstacle", 3)
@@ -124,23 +120,3 @@ class WearRouteSection:
 
     end_time: float | None = doc("explicit engine: stop the run at this body time [s] (the phases as scheduled, cut "
                                  "there; the accuracy pilots' window); default: the whole scene", None)
-
-
-# section -> the dataclasses that declare its keys (the wear kind's own table; fabricfem.scenes.schema has the
-# other kinds')
-WEAR_SECTION_CLASSES: dict[str, tuple] = {
-    "scene": (SceneSection,), "garment": (GarmentSection,), "fabric": (FabricSection, WearFabricSection),
-    "body": (WearBodySection, ArmDimensions, LowerBodyDimensions), "motion": (WearMotionSection, FlexionSpec),
-    "donning": (WearDonningSection,), "contact": (ContactSpec,), "route": (RouteSpec, WearRouteSection),
-    "torque": (TorqueSection,), "output": (OutputSection,), "accuracy": (AccuracySection,)}
-WEAR_LIST_SECTIONS = {"torque"}
-
-
-def _schema(name: str) -> dict:
-    out: dict = {}
-    for cls in WEAR_SECTION_CLASSES[name]:
-        out.update({k: v for k, v in schema_of(cls).items() if k not in out})
-    return out
-
-
-WEAR_SCHEMA = {name: _schema(name) for name in WEAR_SECTION_CLASSES}

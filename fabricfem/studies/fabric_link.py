@@ -34,6 +34,7 @@ import numpy as np
 from mpi4py import MPI
 from scipy.optimize import brentq
 
+from fabricfem import io as fio
 from fabricfem.fabrics import FABRICS_DIR, save_fabric
 from fabricfem.materials import Fabric
 from fabricfem.materials.fitted import (
@@ -50,8 +51,8 @@ from fabricfem.meshes.unit_cell import unit_cell
 from fabricfem.meshes.yarn_geometry import PlainWeave
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.loadstep import solve_load_path
-from fabricfem.studies.unit_cell import MATERIALS, PRESTRETCH
 from fabricfem.studies.sleeve import curve_rows
+from fabricfem.studies.unit_cell import MATERIALS, PRESTRETCH
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.outputs import plot_torque
 from fabricfem.wear.run import run_sleeve

@@ -31,6 +31,7 @@ from mpi4py import MPI
 
 from fabricfem import io as fio
 from fabricfem.body.blend import BlendedStart
+from fabricfem.scenes.contract import parse
 from fabricfem.scenes import build as scene_build
 from fabricfem.scenes import wear
 from fabricfem.scenes.batch import Job, check, completed, run_batch
@@ -82,8 +83,8 @@ def crossing_window(data: dict) -> tuple[float, float] | None:
     and the blend), None for another motion."""
     if data["motion"].get("type") != "obstacle_walk":
         return None
-    fabric = wear.wear_fabric(data, scene_build.build_fabric)
-    plan = wear.plan(data, fabric)
+    parsed = parse(data, "wear")
+    plan = wear.plan(parsed, wear.wear_fabric(parsed, scene_build.build_fabric))
     walk = plan.body.kinematics
     blend = 0.0
     if isinstance(walk, BlendedStart):
@@ -109,7 +110,7 @@ def _run_variant(data: dict, out: Path, comm: MPI.Comm) -> str:
                                                                                         starts["motion"])
                                                                   for f in (1 / 3, 2 / 3, 1.0)]
     body = run.body
-    history = run_wear(run, out, headline, sorted({round(t, 6) for t in frames if t > 0}), output.get("render", True))
+    history = run_wear(run, out, headline, sorted({round(t, 6) for t in frames if t > 0}), output.render)
     times = np.array([s.time for s in history.steps])
     fio.write_csv(out / "knee.csv", ["time_s", "knee_flexion_deg"], np.column_stack([times, knee_flexion(body, times)]),
                   comm)

@@ -11,6 +11,7 @@ from mpi4py import MPI
 
 from fabricfem.body.lower_body import lower_body
 from fabricfem.contact.torque import TorqueMonitor
+from fabricfem.scenes.contract import parse
 from fabricfem.scenes import wear
 from fabricfem.scenes.build import build_fabric
 from fabricfem.verify import Timer, case, reproduction, result
@@ -80,9 +81,10 @@ def pants_donning() -> list:
     data["route"]["gravity"] = False      # the belt alone loads the waistband (the weight would add its own share)
     data["donning"]["belt_tension"] = BELT_TENSION
     with Timer() as timer:
-        fabric = wear.wear_fabric(data, build_fabric)
-        plan = wear.plan(data, fabric)
-        fmesh, seams, holds, garment = wear.garment_mesh(data, None, MPI.COMM_WORLD)
+        parsed = parse(data, "wear")
+        fabric = wear.wear_fabric(parsed, build_fabric)
+        plan = wear.plan(parsed, fabric)
+        fmesh, seams, holds, garment = wear.garment_mesh(parsed, None, MPI.COMM_WORLD)
         handles = wear.edge_handles(plan.handles, garment)
         run = build_garment_run("pants-donning", fmesh, fabric, plan.body, seams=seams, torques=plan.torques,
                                 timeline=plan.timeline, settings=plan.settings, friction=plan.contact.friction,

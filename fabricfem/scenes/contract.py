@@ -1,0 +1,179 @@
+"""The scene contract: a scene file parsed once, by kind, into a frozen dataclass of typed sections.
+
+`parse(data, kind)` turns the validated TOML data of a scene into a `StaticScene`, `DynamicScene` or `WearScene`
+whose fields are the section dataclasses (fabricfem.scenes.sections, fabricfem.scenes.wear_sections,
+fabricfem.wear.config, fabricfem.body): every parameter, its type, default and unit declared once, there. The
+builders (fabricfem.scenes.build, fabricfem.scenes.wear, fabricfem.scenes.static, fabricfem.scenes.dynamic) read
+these, not the raw tables. Which sections a kind has, and which dataclasses declare each one's keys, is the one
+schema table `SECTIONS_OF`; fabricfem.scenes.schema checks a file against it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from types import MappingProxyType
+from typing import Mapping
+
+from fabricfem.body.arm import ArmDimensions
+from fabricfem.body.lower_body import LowerBodyDimensions
+from fabricfem.scenes.errors import SceneError
+from fabricfem.scenes.sections import (
+    AccuracySection,
+    DynamicsSection,
+    FabricSection,
+    LoadSection,
+    MeshSection,
+    ModelSection,
+    MonitorSection,
+    ObstacleSection,
+    OutputSection,
+    SceneSection,
+    SolverSection,
+    SupportSection,
+    from_table,
+)
+from fabricfem.scenes.wear_sections import (
+    GarmentSection,
+    TorqueSection,
+    WearBodySection,
+    WearDonningSection,
+    WearFabricSection,
+    WearMotionSection,
+    WearRouteSection,
+)
+from fabricfem.wear.config import ContactSpec, FlexionSpec, RouteSpec
+
+_COMMON = {"scene": (SceneSection,), "fabric": (FabricSection,), "output": (OutputSection,),
+           "accuracy": (AccuracySection,)}
+# kind -> section -> the dataclasses that declare its keys (a key belongs to the first that has it)
+SECTIONS_OF: dict[str, dict[str, tuple]] = {
+    "static": {**_COMMON, "mesh": (MeshSection,), "model": (ModelSection,), "support": (SupportSection,),
+               "load": (LoadSection,), "solver": (SolverSection,)},
+    "dynamic": {**_COMMON, "mesh": (MeshSection,), "model": (ModelSection,), "support": (SupportSection,),
+                "load": (LoadSection,), "dynamics": (DynamicsSection,), "dynamics.obstacles": (ObstacleSection,),
+                "dynamics.monitors": (MonitorSection,)},
+    "wear": {**_COMMON, "fabric": (FabricSection, WearFabricSection), "garment": (GarmentSection,),
+             "body": (WearBodySection, ArmDimensions, LowerBodyDimensions),
+             "motion": (WearMotionSection, FlexionSpec), "donning": (WearDonningSection,), "contact": (ContactSpec,),
+             "route": (RouteSpec, WearRouteSection), "torque": (TorqueSection,)},
+}
+LIST_SECTIONS = {"support", "load", "torque"}           # arrays of tables ([[load]])
+REQUIRED_OF = {"static": ("scene", "mesh", "fabric", "solver"), "dynamic": ("scene", "mesh", "fabric", "dynamics"),
+               "wear": ("scene", "garment", "fabric", "body", "motion")}
+
+
+def _own(cls, table: Mapping) -> dict:
+    """The keys of `table` that are fields of dataclass `cls`."""
+    return {k: v for k, v in table.items() if k in cls.__dataclass_fields__}
+
+
+def _part(cls, table: Mapping | None, where: str):
+    """`cls` from its own keys of `table` (SceneError naming the section when the dataclass refuses a value)."""
+    try:
+        return from_table(cls, _own(cls, table or {}))
+    except (TypeError, ValueError) as exc:
+        raise SceneError(f"{where}: {exc}") from None
+
+
+@dataclass(frozen=True)
+class StaticScene:
+    """A static scene: a shell meshed from [mesh], supported and loaded, solved by load stepping to [solver]."""
+
+    scene: SceneSection
+    mesh: MeshSection
+    fabric: Mapping                 # the [fabric] table (fabricfem.scenes.build.build_fabric)
+    model: ModelSection
+    supports: tuple[SupportSection, ...]
+    loads: tuple[LoadSection, ...]
+    solver: SolverSection
+    output: OutputSection
+    accuracy: AccuracySection
+
+
+@dataclass(frozen=True)
+class DynamicScene:
+    """A dynamic scene: the same shell integrated in time from rest ([dynamics], obstacles, monitors)."""
+
+    scene: SceneSection
+    mesh: MeshSection
+    fabric: Mapping
+    model: ModelSection
+    supports: tuple[SupportSection, ...]
+    loads: tuple[LoadSection, ...]
+    dynamics: DynamicsSection
+    output: OutputSection
+    accuracy: AccuracySection
+
+
+@dataclass(frozen=True)
+class WearScene:
+    """A wear scene: a garment on a moving wearer. `arm` / `lower_body`: the body's dimensions when it is that
+    preset; `flexion`: the elbow flexion's parameters when the motion is one; `end_time` [s]: where the explicit
+    engine stops (None: the whole scene)."""
+
+    scene: SceneSection
+    garment: GarmentSection
+    fabric: Mapping
+    catalogue: str | None
+    body: WearBodySection
+    arm: ArmDimensions | None
+    lower_body: LowerBodyDimensions | None
+    motion: WearMotionSection
+    flexion: FlexionSpec | None
+    settle_time: float              # s, rest of the body in its start pose before the motion
+    donning: WearDonningSection
+    contact: ContactSpec
+    route: RouteSpec
+    end_time: float | None
+    torques: tuple[TorqueSection, ...]
+    output: OutputSection
+    accuracy: AccuracySection
+
+    @property
+    def is_tube_flexion(self) -> bool:
+        """An arm in a tube sleeve flexing at the elbow (the sleeve of [Man2006, sec. 5.3])."""
+        return self.garment.builder == "tube" and self.arm is not None and self.flexion is not None
+
+
+def _frozen(table: Mapping | None) -> Mapping:
+    return MappingProxyType(dict(table or {}))
+
+
+def _shell_parts(data: Mapping) -> dict:
+    return {"scene": _part(SceneSection, data.get("scene"), "scene"),
+            "mesh": _part(MeshSection, data["mesh"], "mesh"), "fabric": _frozen(data["fabric"]),
+            "model": _part(ModelSection, data.get("model"), "model"),
+            "supports": tuple(_part(SupportSection, t, f"support[{i}]") for i, t in enumerate(data.get("support", []))),
+            "loads": tuple(_part(LoadSection, t, f"load[{i}]") for i, t in enumerate(data.get("load", []))),
+            "output": _part(OutputSection, data.get("output"), "output"),
+            "accuracy": _part(AccuracySection, data.get("accuracy"), "accuracy")}
+
+
+def _wear(data: Mapping) -> WearScene:
+    body, motion = data["body"], data["motion"]
+    body_type, route = body["type"], data.get("route", {})
+    return WearScene(
+        scene=_part(SceneSection, data.get("scene"), "scene"),
+        garment=_part(GarmentSection, data["garment"], "garment"), fabric=_frozen(data["fabric"]),
+        catalogue=data["fabric"].get("catalogue"), body=_part(WearBodySection, body, "body"),
+        arm=_part(ArmDimensions, body, "body") if body_type in ("arm", "default_arm") else None,
+        lower_body=_part(LowerBodyDimensions, body, "body") if body_type == "lower_body" else None,
+        motion=_part(WearMotionSection, motion, "motion"),
+        flexion=_part(FlexionSpec, motion, "motion") if motion["type"] == "elbow_flexion" else None,
+        settle_time=float(motion.get("settle_time", FlexionSpec.settle_time if motion["type"] == "elbow_flexion"
+                                     else 0.0)),
+        donning=_part(WearDonningSection, data.get("donning"), "donning"),
+        contact=_part(ContactSpec, data.get("contact"), "contact"), route=_part(RouteSpec, route, "route"),
+        end_time=route.get("end_time"),
+        torques=tuple(_part(TorqueSection, t, f"torque[{i}]") for i, t in enumerate(data.get("torque", []))),
+        output=_part(OutputSection, data.get("output"), "output"),
+        accuracy=_part(AccuracySection, data.get("accuracy"), "accuracy"))
+
+
+def parse(data: Mapping, kind: str) -> StaticScene | DynamicScene | WearScene:
+    """The frozen scene of validated `data` of `kind` (SceneError naming the section of a refused value)."""
+    if kind == "wear":
+        return _wear(data)
+    parts = _shell_parts(data)
+    if kind == "dynamic":
+        return DynamicScene(**parts, dynamics=_part(DynamicsSection, data["dynamics"], "dynamics"))
+    return StaticScene(**parts, solver=_part(SolverSection, data["solver"], "solver"))
