@@ -50,7 +50,6 @@ def test_scene_limb_fits_compression_run():
     assert data["donning"]["start"] * max(limb.radii[1:]) < data["garment"]["radius"]
 
 
-@pytest.mark.xfail(reason="scene runner being rewired", strict=False)
 def test_run_coarse_compression_scene(tmp_path, capsys):
     """`fabricfem run` of the scene on a 16 x 8 tube writes the compression report and prints the summary."""
     text = (SCENE.read_text().replace("n_around = 32", "n_around = 16").replace("n_along = 16", "n_along = 8")

@@ -218,13 +218,30 @@ class ExplicitBodyContact:
             return self.normal_force / self.area
         return self._normal_impulse / self._elapsed / self.area
 
+    def state(self) -> dict:
+        """What a checkpoint keeps of the contact: the friction's stick points (local coordinates and segments)."""
+        return {"stick_local": self._stick_local.copy(), "stick_segment": self._stick_segment.copy()}
+
+    def restore(self, state: dict) -> None:
+        """Continue from a checkpoint's `state` (ValueError if it belongs to another mesh or partition)."""
+        if state["stick_local"].shape != self._stick_local.shape:
+            raise ValueError(f"resume: the checkpoint's contact has {len(state['stick_local'])} nodes on this rank, "
+                             f"this run {len(self._stick_local)}")
+        self._stick_local[:] = state["stick_local"]
+        self._stick_segment[:] = state["stick_segment"]
+
+    def current_areas(self) -> np.ndarray:
+        """(M,) lumped area [m^2] of the owned moving nodes on the current (deformed) cloth, for the state in
+        model.w."""
+        if self._current_areas is None:
+            self._current_areas = CurrentAreas(self.model, self.nodes)
+        return self._current_areas()[self.moving]
+
     def pressure_field(self, mean: bool = True, per: str = "current"):
         """Contact pressure [Pa] as a Q2 scalar Function (held nodes: 0), time-averaged or the last step's,
         per unit current cloth area for the state in model.w (the pressure on the body) or per unit
         reference area (`per="reference"`, as `mean_pressure`)."""
-        if self._current_areas is None and per == "current":
-            self._current_areas = CurrentAreas(self.model, self.nodes)
-        current = None if self._current_areas is None else (lambda: self._current_areas()[self.moving])
+        current = self.current_areas if per == "current" else None
         pressure = pressure_on_body(self.mean_pressure() if mean else self.normal_force / self.area, self.area,
                                     current, per)
         return pressure_function(self.nodes.scalar_space, self.nodes.node_index[self.moving], pressure)

@@ -9,15 +9,19 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 from mpi4py import MPI
 
 from fabricfem import io
+from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.scenes import wear
 from fabricfem.scenes.build import build_fabric, output_dir, scene_name, scene_sha256, sleeve_config, tube_spec  # noqa: F401 (public here)
+from fabricfem.scenes.contract import WearScene
 from fabricfem.scenes.dynamic import CHECKPOINT_EVERY, DynamicCheckpoint, DynamicRun, run_dynamic_scene  # noqa: F401
 from fabricfem.scenes.schema import Scene, SceneError
 from fabricfem.scenes.static import build_model, run_static_scene  # noqa: F401 (public here)
 from fabricfem.wear.checkpoint import Checkpoint
+from fabricfem.wear.compression import compression_report, compression_run
 from fabricfem.wear.config import check_fit
 from fabricfem.wear.contract import WearHistory
 from fabricfem.wear.garment import GarmentRun, build_garment_run
@@ -66,13 +70,17 @@ def run_wear_scene(scene: Scene, out: Path, comm=MPI.COMM_WORLD, resume: bool = 
     """`fabricfem run` of a wear scene: its WearRun (`build_wear_run`) with progress, the recorder's outputs and
     the summary (fabricfem.wear.run.run_wear); the explicit engine checkpoints and resumes."""
     run, headline, render_at, _ = build_wear_run(scene, comm)
+    parsed, report = scene.parsed, None
+    if parsed.body.type == "limb" and parsed.garment.builder == "tube":
+        limb = scene_limb(parsed)
+        report = lambda run, history: _compression_report(run, limb, out, scene_name(scene), parsed.output.render)  # noqa: E731
     checkpoint = None
     if isinstance(run, GarmentRun):
         checkpoint = Checkpoint(out, comm, sha or scene_sha256(scene), CHECKPOINT_EVERY)
         if resume and not checkpoint.exists():
             raise SceneError(f"resume: no checkpoint in {out}/checkpoint (run the scene without --resume first)")
     return run_wear(run, out, headline, render_at, scene.parsed.output.render, scene.parsed.output.body_samples,
-                    checkpoint, resume)
+                    checkpoint, resume, report)
 
 
 def build_wear_run(scene: Scene, comm=MPI.COMM_WORLD):
@@ -80,7 +88,12 @@ def build_wear_run(scene: Scene, comm=MPI.COMM_WORLD):
     the elbow by its [route] solver (fabricfem.wear.sleeve.tube_flexion_run on the explicit engine, the Newton
     routes of fabricfem.wear.run.ROUTES), any other garment on the explicit engine (`build_garment_run`)."""
     parsed = scene.parsed
-    run = tube_scene_run(scene, comm) if parsed.is_tube_flexion else garment_scene_run(scene, comm)
+    if parsed.is_tube_flexion:
+        run = tube_scene_run(scene, comm)
+    elif parsed.body.type == "limb" and parsed.garment.builder == "tube":
+        run = limb_scene_run(scene, comm)
+    else:
+        run = garment_scene_run(scene, comm)
     render_at = parsed.output.render_at
     if render_at is None and isinstance(run, GarmentRun):
         start, end = run.motion_start, run.duration
@@ -106,6 +119,41 @@ def tube_scene_run(scene: Scene, comm):
         raise SceneError(f"garment: {exc}") from None
     return tube_flexion_run(scene_name(scene), wear.wear_fabric(parsed, build_fabric), tube, parsed.arm,
                             parsed.flexion, parsed.contact, parsed.route, comm)
+
+
+def scene_limb(parsed: WearScene) -> Ellipsoid:
+    """The limb of a limb body: one ellipsoid along x with [body] center and radii [m]."""
+    return Ellipsoid(np.array(parsed.body.center, dtype=float), np.eye(3), np.array(parsed.body.radii, dtype=float))
+
+
+def limb_scene_run(scene: Scene, comm) -> GarmentRun:
+    """A tube grown onto a limb (the compression sleeve, fabricfem.wear.compression.compression_run): the limb
+    grows from [donning] start over [donning] time [s], then [motion] duration [s] of rest."""
+    parsed = scene.parsed
+    fabric = wear.wear_fabric(parsed, build_fabric)
+    plan = wear.plan(parsed, fabric, scene.path)
+    if parsed.donning.method != "grow" or parsed.donning.start is None:
+        raise SceneError("donning.method: a tube on a limb is put on by growing the limb: write [donning] method = "
+                         "\"grow\" with start (its starting size) and time [s]")
+    fmesh = wear.garment_mesh(parsed, scene.path, comm)[0]
+    try:
+        return compression_run(fmesh, fabric, scene_limb(parsed), parsed.donning.start, parsed.donning.time,
+                               plan.timeline.motion_length(plan.body.kinematics), plan.timeline.record_time, comm,
+                               scene_name(scene), plan.settings)
+    except ValueError as exc:
+        raise SceneError(f"body: {exc}") from None
+
+
+def _compression_report(run: GarmentRun, limb: Ellipsoid, out: Path, name: str, render: bool) -> dict:
+    """The compression report of the final state (fabricfem.wear.compression.compression_report) and its line."""
+    report = compression_report(run, limb, out, name, render)
+    if report is not None:
+        print(f"{name}: pressure on the skin: peak {report['peak_pressure_kPa']:.3f} kPa = "
+              f"{report['peak_pressure_mmHg']:.1f} mmHg, mean {report['mean_pressure_kPa']:.3f} kPa = "
+              f"{report['mean_pressure_mmHg']:.1f} mmHg; ring nearest the limb's centre: p = T kappa, hoop tension "
+              f"T = {report['hoop_tension_N_per_m']:.1f} N/m, largest deviation {100 * report['laplace_deviation']:.2f}% "
+              f"of its peak", flush=True)
+    return {"compression": report} if report is not None else {}
 
 
 def garment_scene_run(scene: Scene, comm) -> GarmentRun:

@@ -49,7 +49,7 @@ from mpi4py import MPI
 from fabricfem import io as fio
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.body.pose import Body, Segment
-from fabricfem.contact.nodal import CurrentAreas, contact_nodes
+from fabricfem.contact.nodal import contact_nodes
 from fabricfem.materials import Fabric
 from fabricfem.meshes import FabricMesh
 from fabricfem.meshes._validate import choice, positive
@@ -126,6 +126,13 @@ class AxialHold:
 
     def forces(self, integrator, t: float, rhs) -> None:
         """No force before the division: the hold is a forward-increment constraint (`correct`)."""
+
+    def state(self) -> dict:
+        """Nothing to keep across a checkpoint (the hold is stateless; `force` is the last step's)."""
+        return {}
+
+    def restore(self, state: dict) -> None:
+        """Nothing to restore (`state`)."""
 
     def correct(self, integrator, t: float) -> None:
         dt, rows = integrator.dt, self.rows
@@ -306,7 +313,7 @@ def compression_report(run: GarmentRun, limb: Ellipsoid, out: Path, name: str = 
     comm.barrier()
     surface = write_sleeve(run, limb, out, name, render)
     p_pa = run.pressure_field().x.array[contact.nodes.node_index[contact.moving]]
-    areas = CurrentAreas(run.model, contact.nodes)()[contact.moving]
+    areas = contact.current_areas()
     radius = 1.5 * contact.nodes.element_size
     gathered = [comm.gather(a, root=0) for a in (contact.position, contact.reference[:, 0], p_pa, areas)]
     if comm.rank != 0:

@@ -87,6 +87,7 @@ class WearHistory:
     timings: dict = field(default_factory=dict, kw_only=True)
     initial_gap: float = field(default=math.nan, kw_only=True)
     failure: str = field(default="", kw_only=True)
+    report: dict = field(default_factory=dict, kw_only=True)     # a scene's report of its final state (rank 0)
 
     @property
     def completed(self) -> bool:
@@ -173,6 +174,7 @@ class WearHistory:
         out["max_strain"] = max(s.max_strain for s in sewn)
         out["max_penetration_m"] = max(s.max_penetration for s in sewn)
         out["max_seam_gap_after_sewing_m"] = max(s.seam_gap for s in sewn)
+        out.update(self.report)
         return out
 
 

@@ -40,7 +40,8 @@ def run_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
 
 
 def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], render: bool = True,
-             body_samples: int = 24, checkpoint=None, resume: bool = False):
+             body_samples: int = 24, checkpoint=None, resume: bool = False,
+             report: Callable[[WearRun, WearHistory], dict | None] | None = None):
     """Run any WearRun with progress lines (rank 0), write the WearRecorder's outputs under `out`, print the
     closing summary (peak and final torque per monitor, pressures, strain, penetration, seam gap) and return the
     history. The explicit engine's runs also take a `checkpoint` (fabricfem.wear.checkpoint.Checkpoint), `resume`
@@ -68,6 +69,8 @@ def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], ren
             checkpoint.save(run, history, len(history.steps), recorder)   # one record interval per record
     history.wall = time.perf_counter() - t0
     recorder.close(history)
+    if report is not None:          # the scene's own report of the final state (e.g. the compression profile)
+        history.report = report(run, history) or {}
     run.destroy()
     say(f"done: {len(history.steps)} records, {history.work()}, {history.wall:.1f} s; start clearance "
         f"{history.initial_gap * 1e3:.2f} mm")
