@@ -15,7 +15,7 @@ import resource
 import shutil
 import time
 from pathlib import Path
-from typing import Sequence
+from typing import Iterable, Mapping, Sequence
 from xml.etree import ElementTree
 
 import numpy as np
@@ -134,15 +134,29 @@ def xdmf_fields(path: str | Path) -> dict[str, list[float]]:
     return fields
 
 
-def write_csv(path: str | Path, header: Sequence[str], rows: Sequence[Sequence[float]], comm=MPI.COMM_WORLD):
-    """CSV table written by rank 0."""
+def write_csv(path: str | Path, header: Sequence[str], rows: Iterable[Sequence | Mapping], comm=MPI.COMM_WORLD):
+    """CSV table written by rank 0 (its folder made): the header line, then one line per row.
+
+    A row is a sequence of values in the header's order, or a mapping from header names to values (written in
+    the header's order, a missing name as an empty field, as csv.DictWriter; a name not in the header raises
+    ValueError)."""
     if comm.rank != 0:
         return
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     with open(path, "w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(header)
-        writer.writerows(rows)
+        writer.writerows(_in_header_order(row, header) for row in rows)
+
+
+def _in_header_order(row: Sequence | Mapping, header: Sequence[str]) -> Sequence:
+    """The row's values in the header's order ("" for a missing name) if it is a mapping, else the row."""
+    if not isinstance(row, Mapping):
+        return row
+    unknown = [key for key in row if key not in header]
+    if unknown:
+        raise ValueError(f"write_csv: row names {unknown} are not in the header {list(header)}")
+    return [row.get(key, "") for key in header]
 
 
 def gather_surface(mesh, displacement: fem.Function | None = None) -> tuple[np.ndarray, np.ndarray] | None:

@@ -17,7 +17,6 @@ torque difference) under `out`. SI units; times in seconds.
 """
 from __future__ import annotations
 
-import csv
 import json
 import os
 import statistics
@@ -28,7 +27,9 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
+from mpi4py import MPI
 
+from fabricfem import io as fio
 from fabricfem.scenes.sweep import parse_value, set_key
 
 # run in the checked-out commit: build, time run.run(), print one JSON line (rank 0)
@@ -124,10 +125,8 @@ def compare_commits(scene: str | Path, old: str, new: str = "HEAD", settings: tu
               "old_steps": runs["old"][-1]["steps"], "new_steps": runs["new"][-1]["steps"],
               "records": n, "torque_difference": difference}
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / "commits.csv", "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["commit", "sha", "run", "ranks", "wall_s", "steps", "ms_per_step"])
-        w.writerows(rows)
+    fio.write_csv(out / "commits.csv", ["commit", "sha", "run", "ranks", "wall_s", "steps", "ms_per_step"], rows,
+                  MPI.COMM_SELF)
     (out / "commits.json").write_text(json.dumps(result, indent=1))
     say(f"{scene.name} {' '.join(settings)} on {ranks} rank(s): old {medians['old']:.1f} s, new {medians['new']:.1f} s "
         f"(medians of {repeats}), speed-up {result['speedup']:.2f}; torque histories differ by {difference:.2e} of "

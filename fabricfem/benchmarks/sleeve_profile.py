@@ -19,7 +19,6 @@ Target: contact search and corrections below 20 % of the total. SI units; times 
 """
 from __future__ import annotations
 
-import csv
 import statistics
 import time
 from dataclasses import dataclass
@@ -28,6 +27,7 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from fabricfem import io as fio
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.engine import TIMING_PARTS
 from fabricfem.wear.run import build_run
@@ -127,10 +127,7 @@ def sleeve_profile(out: str | Path = "results/bench", quick: bool = False, comm:
     if comm.rank == 0:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
-        with open(out / "sleeve_profile.csv", "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(COLUMNS)
-            w.writerows(r.row() for r in rows)
+        fio.write_csv(out / "sleeve_profile.csv", COLUMNS, [r.row() for r in rows], comm)
         plot_shares(out / "sleeve_profile.png", rows)
     for r in rows:
         shares = ", ".join(f"{p.replace('_', ' ')} {r.shares[p]:.1%}" for p in TIMING_PARTS)

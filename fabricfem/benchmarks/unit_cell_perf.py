@@ -12,7 +12,6 @@ every shell quadrature point) from the measured figures.
 """
 from __future__ import annotations
 
-import csv
 import os
 import resource
 import time
@@ -20,6 +19,7 @@ import time
 import numpy as np
 from mpi4py import MPI
 
+from fabricfem import io as fio
 from fabricfem.materials.yarn import THESIS_TRANSVERSELY_ISOTROPIC
 from fabricfem.meshes.unit_cell import unit_cell
 from fabricfem.meshes.yarn_geometry import PlainWeave
@@ -101,10 +101,7 @@ def unit_cell_perf(out: str = "results/unit_cell_perf", quick: bool = False, rep
                   flush=True)
     if comm.rank == 0:
         os.makedirs(out, exist_ok=True)
-        with open(os.path.join(out, "unit_cell_perf.csv"), "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=list(rows[0]))
-            w.writeheader()
-            w.writerows(rows)
+        fio.write_csv(os.path.join(out, "unit_cell_perf.csv"), list(rows[0]), rows, comm)
         import matplotlib  # optional heavy package, loaded only when a plot is drawn
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn

@@ -23,7 +23,6 @@ torques N m, lengths m):
 """
 from __future__ import annotations
 
-import csv
 import math
 import time
 from dataclasses import dataclass
@@ -195,13 +194,10 @@ def run_grid(material: str = "ti", steps: int = 3, max_stretch: float = 1.06, sh
 
 
 def save_samples(samples: MembraneSamples, path: str | Path) -> Path:
+    """The samples as CSV at `path` (its folder made): E11, E22, gamma12 [-] and N11, N22, N12 [N/m], 10 digits."""
     p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    with open(p, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["E11", "E22", "gamma12", "N11_N_per_m", "N22_N_per_m", "N12_N_per_m"])
-        for e, n in zip(samples.strains, samples.resultants):
-            w.writerow([f"{v:.10g}" for v in (*e, *n)])
+    fio.write_csv(p, ["E11", "E22", "gamma12", "N11_N_per_m", "N22_N_per_m", "N12_N_per_m"],
+                  [[f"{v:.10g}" for v in (*e, *n)] for e, n in zip(samples.strains, samples.resultants)], MPI.COMM_SELF)
     return p
 
 

@@ -38,7 +38,6 @@ fit_sensitivity.png; runs/<hash>.json checkpoints (a rerun resumes). The flexion
 """
 from __future__ import annotations
 
-import csv
 import hashlib
 import json
 import math
@@ -58,8 +57,8 @@ from fabricfem.materials import positive_number
 from fabricfem.scenes.batch import Job, check, run_batch
 from fabricfem.studies.sleeve import CURVE_HEADER, curve_history, curve_rows, relative_cost
 from fabricfem.wear.config import SleeveConfig, check_fit
-from fabricfem.wear.run import build_run
 from fabricfem.wear.contract import WearHistory, WearStep
+from fabricfem.wear.run import build_run
 
 FIT_SCALES = (1.0, 1.04, 1.0771)
 DEFAULT_LONG_AXIS_FACTOR = 0.5      # r1 = L / 2: the arm of fabricfem.body.arm (no girth at the elbow)
@@ -300,20 +299,14 @@ def run_fit_study(out: str | Path = "results/sleeve_fit", mesh: str = "II", scal
     return comm.bcast(rows, root=0)
 
 
-def _write_csv(path: Path, header, rows) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(header)
-        w.writerows(rows)
-
-
 def _write(out: Path, rows, run_rows, curve_rows, mesh: str, prefix: str | None = None) -> None:
+    """The summary, runs and curves CSVs and the figure under `out` (named after `prefix` when given)."""
     name = (lambda s: f"{prefix}.{s}" if s != "summary" else prefix) if prefix else (lambda s: s)
-    _write_csv(out / f"{name('summary')}.csv", list(rows[0]), [list(r.values()) for r in rows])
-    _write_csv(out / f"{name('runs')}.csv", RUN_COLUMNS, [[r[c] for c in RUN_COLUMNS] for r in run_rows])
-    _write_csv(out / f"{name('curves')}.csv", ("scale", "long_axis_factor", "case", "angle_deg", "torque_Nm"),
-               curve_rows)
+    fio.write_csv(out / f"{name('summary')}.csv", list(rows[0]), [list(r.values()) for r in rows], MPI.COMM_SELF)
+    fio.write_csv(out / f"{name('runs')}.csv", RUN_COLUMNS, [[r[c] for c in RUN_COLUMNS] for r in run_rows],
+                  MPI.COMM_SELF)
+    fio.write_csv(out / f"{name('curves')}.csv", ("scale", "long_axis_factor", "case", "angle_deg", "torque_Nm"),
+                  curve_rows, MPI.COMM_SELF)
     plot_fit(out / (f"{prefix}.png" if prefix else "fit_sensitivity.png"), curve_rows, rows, mesh)
 
 

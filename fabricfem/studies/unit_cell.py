@@ -283,18 +283,17 @@ RENDERS: dict[str, tuple[str, RunKey]] = {
 
 
 def _write_csv(path: str, runs: list[Run]) -> None:
+    """One line per load step of every run (the figure's curves): the run's key, E, S [Pa] and its counters."""
     fields = ["curve", "material", "load", "contact", "option", "refinement", "end_faces", "E11", "E22", "E12", "S11", "S22",
               "S12", "newton", "augmentations", "penetration", "normal_force", "tangential_force", "active", "wall_s",
               "contact_s", "pin_reaction", "min_det_F", "sub_increments", "stopped"]
-    with open(path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=fields)
-        w.writeheader()
-        for run in runs:
-            k = run.key
-            base = dict(curve=k.label, material=k.material, load=k.load, contact=int(k.contact), option=k.option,
-                        refinement=k.refinement, end_faces=k.end_faces, stopped=run.stopped)
-            for row in run.rows:
-                w.writerow({**base, **{q: f"{v:.10g}" for q, v in row.items()}})
+    rows = []
+    for run in runs:
+        k = run.key
+        base = dict(curve=k.label, material=k.material, load=k.load, contact=int(k.contact), option=k.option,
+                    refinement=k.refinement, end_faces=k.end_faces, stopped=run.stopped)
+        rows += [{**base, **{q: f"{v:.10g}" for q, v in row.items()}} for row in run.rows]
+    fio.write_csv(path, fields, rows, MPI.COMM_SELF)
 
 
 def _plot(path: str, title: str, x: str, ys: list[str], runs: list[Run]) -> None:
@@ -513,11 +512,8 @@ def geometry_sensitivity(out: str = "docs/figures/unit_cell", crimps: tuple[floa
                           f"{r['wall_s']:.0f} s {r['stopped'][:80]}", flush=True)
     if comm.rank == 0:
         os.makedirs(out, exist_ok=True)
-        with open(os.path.join(out, "geometry_sensitivity.csv"), "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=list(rows[0]))
-            w.writeheader()
-            for r in rows:
-                w.writerow({k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()})
+        fio.write_csv(os.path.join(out, "geometry_sensitivity.csv"), list(rows[0]),
+                      [{k: (f"{v:.6g}" if isinstance(v, float) else v) for k, v in r.items()} for r in rows], comm)
         _plot_sensitivity(os.path.join(out, "geometry_sensitivity.png"), rows)
     return rows
 
