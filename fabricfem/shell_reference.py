@@ -5,12 +5,10 @@ Gram-Schmidt, the director base and its gradients, the reference curvature) from
 quadrature point of every evaluation. In a dynamic run those are fixed (the director base is not re-based), so
 `ReferenceAtQuadrature` evaluates them once into Quadrature-element Functions at the points of the full and the
 reduced PSRI rules (the same points FFCx integrates with) and `naghdi_energy_on_reference` reads them from there.
-The two energies are the same function of the state up to round-off (tests/test_shell_reference.py).
+The two energies are the same function of the state up to round-off (tests/test_shell_reference.py). Which of
+them (or the hand-written kernel) a model's internal force uses is its choice (ShellModel.use_internal_force).
 """
 from __future__ import annotations
-
-from contextlib import contextmanager
-from typing import Iterator
 
 import numpy as np
 import ufl
@@ -22,38 +20,6 @@ from ffcx.element_interface import create_quadrature
 
 from fabricfem.forms import naghdi_kernel
 from fabricfem.forms import shell as shell_forms
-
-
-# Whether ShellModels created now evaluate the reference geometry once (True) or at every evaluation of the
-# internal force (False: the code before this lever, for a benchmark's baseline); read by ShellModel.__init__.
-REFERENCE_AT_QUADRATURE = {"enabled": True}
-# Whether their internal force (with the reference at the quadrature points) is the hand-written C kernel
-# (fabricfem.forms.naghdi_kernel; True) or FFCx's derivative of `naghdi_energy_on_reference` (False).
-HAND_KERNEL = {"enabled": True}
-
-
-@contextmanager
-def ffcx_internal_force() -> Iterator[None]:
-    """ShellModels created inside the block compute their internal force with FFCx's kernels (the reference geometry
-    still at the quadrature points), as before the hand-written kernel: a benchmark's baseline."""
-    old = HAND_KERNEL["enabled"]
-    HAND_KERNEL["enabled"] = False
-    try:
-        yield
-    finally:
-        HAND_KERNEL["enabled"] = old
-
-
-@contextmanager
-def reference_geometry_per_evaluation() -> Iterator[None]:
-    """ShellModels created inside the block compute their internal force with the reference geometry recomputed at
-    every evaluation (`naghdi_energy`), as before this module existed: a benchmark's baseline."""
-    old = REFERENCE_AT_QUADRATURE["enabled"]
-    REFERENCE_AT_QUADRATURE["enabled"] = False
-    try:
-        yield
-    finally:
-        REFERENCE_AT_QUADRATURE["enabled"] = old
 
 
 class ReferenceAtQuadrature:
@@ -97,7 +63,7 @@ def naghdi_kernel_form(model, reference: ReferenceAtQuadrature, flags: tuple[str
     """dolfinx Form (cpp) of the Naghdi shell's internal force by the hand-written kernel
     (fabricfem.forms.naghdi_kernel) on the state space of `model`, with `reference` in the kernel's layout;
     compiled with the C flags `flags`. The model's A, D, shear stiffness Constants are read at every assembly."""
-    args = model._energy_args
+    args = model.energy_options
     law, parameters = naghdi_kernel.law_parameters(args["law"], args["law_eps"])
     law_constant = fem.Constant(model.mesh, np.asarray(parameters, dtype=float))
     u_element = model.W.ufl_element().sub_elements()[0].sub_elements()[0]

@@ -1,7 +1,7 @@
 """The internal force with the reference geometry evaluated once at the quadrature points (fabricfem.shell_reference),
-by the hand-written C kernel (fabricfem.forms.naghdi_kernel, the default) and by FFCx's derivative of
-`naghdi_energy_on_reference`, against the shell's energy written on the P2 fields
-(fabricfem.forms.shell.naghdi_energy, differentiated by UFL).
+by the hand-written C kernel (fabricfem.forms.naghdi_kernel, ShellModel(internal_force="kernel"), the default) and by
+FFCx's derivative of `naghdi_energy_on_reference` ("ffcx-quadrature"), against the shell's energy written on the P2
+fields (fabricfem.forms.shell.naghdi_energy, differentiated by UFL: "ffcx").
 
 They are the same function of the state written in different ways (the strains expanded in the material frame, the
 director's gradient by the chain rule), so they must agree to round-off: the bound 1e-11 relative (in the
@@ -24,7 +24,7 @@ from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
 from fabricfem.materials.fitted import FittedMembraneLaw
 from fabricfem.meshes import plate, tube
 from fabricfem.shell import ShellModel
-from fabricfem.shell_reference import PrepackedForms, ffcx_internal_force, reference_geometry_per_evaluation
+from fabricfem.shell_reference import PrepackedForms
 
 COMM = MPI.COMM_WORLD
 ROUND_OFF = 1e-11
@@ -60,24 +60,17 @@ def perturbed_state(model: ShellModel, seed: int = 1) -> PETSc.Vec:
     return x
 
 
-KERNELS = ("hand", "ffcx")
+KERNELS = ("kernel", "ffcx-quadrature")
 
 
 def force_difference(fabric_mesh_factory, law=None, symmetric: bool = False, rebase: bool = False,
-                     kernel: str = "hand") -> float:
+                     kernel: str = "kernel") -> float:
     """Max-norm relative difference of the internal forces at a perturbed state: the reference geometry at the
-    quadrature points with the `kernel` (KERNELS) against `naghdi_energy`."""
+    quadrature points with the `kernel` (KERNELS) against `naghdi_energy` ("ffcx")."""
     forces = []
-    for per_evaluation in (False, True):
-        if per_evaluation:
-            with reference_geometry_per_evaluation():
-                model = ShellModel(fabric_mesh_factory(), fabric(law))
-        elif kernel == "ffcx":
-            with ffcx_internal_force():
-                model = ShellModel(fabric_mesh_factory(), fabric(law))
-        else:
-            model = ShellModel(fabric_mesh_factory(), fabric(law))
-        assert model.hand_kernel is (kernel == "hand" and not per_evaluation)
+    for internal_force in (kernel, "ffcx"):
+        model = ShellModel(fabric_mesh_factory(), fabric(law), internal_force=internal_force)
+        assert model.hand_kernel is (internal_force == "kernel")
         if symmetric:
             model.symmetry("left", (1.0, 0.0, 0.0), penalty=1.0)   # a small penalty: its force does not dominate
         model.compile()
@@ -89,7 +82,7 @@ def force_difference(fabric_mesh_factory, law=None, symmetric: bool = False, reb
             model.rebase_director()
         x = perturbed_state(model)
         model.internal_force(x, b)
-        assert model.reference_at_quadrature is not per_evaluation
+        assert model.reference_at_quadrature is (internal_force != "ffcx")
         forces.append(b)
     diff = forces[0].copy()
     diff.axpy(-1.0, forces[1])
@@ -189,10 +182,10 @@ def test_prepacked_coefficients_follow_the_state():
     for seed in (1, 2, 3):
         x = perturbed_state(model, seed)
         model.internal_force(x, b)
-        assert model._internal_form.prepacked
+        assert model.internal_force_forms.prepacked
         with plain.localForm() as local:
             local.set(0.0)
-        for form in model._internal_form.forms:
+        for form in model.internal_force_forms.forms:
             fem_petsc.assemble_vector(plain, form)
         plain.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         plain.axpy(-1.0, b)

@@ -19,7 +19,6 @@ from __future__ import annotations
 import csv
 import statistics
 import time
-from contextlib import nullcontext
 from pathlib import Path
 
 import numpy as np
@@ -29,17 +28,12 @@ from petsc4py import PETSc
 from fabricfem.benchmarks.wear_speed import MESHES
 from fabricfem.forms import naghdi_kernel
 from fabricfem.forms.jit import KERNEL_FLAGS
-from fabricfem.shell_reference import (
-    PrepackedForms,
-    cell_kernel_form,
-    ffcx_internal_force,
-    reference_geometry_per_evaluation,
-)
+from fabricfem.shell_reference import PrepackedForms, cell_kernel_form
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.sleeve import sleeve_shell
 
-IMPLEMENTATIONS = {"per evaluation": reference_geometry_per_evaluation, "quadrature, FFCx": ffcx_internal_force,
-                   "hand kernel": nullcontext}
+# name -> ShellModel.use_internal_force's choice
+IMPLEMENTATIONS = {"per evaluation": "ffcx", "quadrature, FFCx": "ffcx-quadrature", "hand kernel": "kernel"}
 FLOOR = "assembly floor"
 EMPTY_KERNEL = ("#include <stdint.h>\nvoid naghdi_force(double* restrict A, const double* restrict w, "
                 "const double* restrict c, const double* restrict x, const int* e, const uint8_t* p) { }\n")
@@ -50,7 +44,7 @@ def _floor_evaluation(model):
     """An evaluation of the empty kernel on the hand kernel's space and coefficients (model: its internal force
     already built)."""
     address = naghdi_kernel.compile_kernel(EMPTY_KERNEL, model.comm, KERNEL_FLAGS)
-    packed = PrepackedForms([cell_kernel_form(model, model._reference, address, [])], model.w)
+    packed = PrepackedForms([cell_kernel_form(model, model.quadrature_reference, address, [])], model.w)
     b = model.create_vector()
 
     def evaluate():
@@ -80,9 +74,9 @@ def _mesh_rows(mesh: str, evaluations: int, repeats: int, comm: MPI.Comm) -> lis
     n_around, n_along = MESHES[mesh]
     config = SleeveConfig().with_(n_around=n_around, n_along=n_along)
     evaluate, forces, cells, dofs = {}, {}, 0, 0
-    for name, switch in IMPLEMENTATIONS.items():
-        with switch():
-            model = sleeve_shell(config, comm)
+    for name, choice in IMPLEMENTATIONS.items():
+        model = sleeve_shell(config, comm)
+        model.use_internal_force(choice)
         model.compile()
         x = model.create_vector()
         x.getArray()[:] = np.where(np.arange(x.getLocalSize()) % 5 < 3, 1e-3, 1e-2) * np.sin(

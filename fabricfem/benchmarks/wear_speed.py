@@ -55,7 +55,6 @@ from fabricfem.contact.explicit import numpy_contact
 from fabricfem.forms.jit import DOLFINX_DEFAULT_FLAGS, KERNEL_FLAGS, kernel_flags
 from fabricfem.scenes.run import build_wear_run
 from fabricfem.scenes.schema import Scene
-from fabricfem.shell_reference import ffcx_internal_force, reference_geometry_per_evaluation
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.engine import TIMING_PARTS, kinetic_ratio
 from fabricfem.wear.outputs import torque_rms_error
@@ -68,10 +67,10 @@ PANTS_SCENE = Path(__file__).resolve().parents[2] / "scenes" / "pants_walk.toml"
 ESTIMATED_STEP = {"critical_step": "estimate"}
 EIGENVALUE_STEP = {"critical_step": "eigenvalue", "time_step_safety": 0.8}
 SAFETY_09 = {"critical_step": "eigenvalue", "time_step_safety": 0.9}
-# how the shell's internal force is evaluated: the reference geometry recomputed at every evaluation (FFCx), at the
-# quadrature points with FFCx's kernel, or with the hand-written kernel (the default)
+# how the shell's internal force is evaluated (ShellModel.use_internal_force): the reference geometry recomputed at
+# every evaluation (FFCx), at the quadrature points with FFCx's kernel, or with the hand-written kernel (the default)
 PER_EVALUATION, QUADRATURE_FFCX, HAND = "per evaluation", "quadrature, FFCx", "hand kernel"
-FORCES = {PER_EVALUATION: reference_geometry_per_evaluation, QUADRATURE_FFCX: ffcx_internal_force, HAND: nullcontext}
+FORCES = {PER_EVALUATION: "ffcx", QUADRATURE_FFCX: "ffcx-quadrature", HAND: "kernel"}
 # how the explicit Lagrange contact step runs: numpy, or the compiled loops (the default)
 NUMPY, COMPILED = "numpy", "compiled"
 CONTACTS = {NUMPY: numpy_contact, COMPILED: nullcontext}
@@ -135,16 +134,19 @@ def build_case(case: str, variant: str, final_angle: float, duration: float | No
     """The explicit run of a sleeve mesh (SleeveConfig, flexion to `final_angle` [deg]) or of the pants scene
     (scenes/pants_walk.toml, its walk cut to `duration` [s] if given) with the variant's flags and settings."""
     flags, changes, force, contact = VARIANTS[variant]
-    with kernel_flags(flags), FORCES[force](), CONTACTS[contact]():
+    with kernel_flags(flags), CONTACTS[contact]():
         if case == PANTS:
             data = tomllib.loads(PANTS_SCENE.read_text())
             data.setdefault("route", {}).update(changes)
             if duration is not None:
                 data["motion"]["duration"] = float(duration)
-            return build_wear_run(Scene(data, PANTS_SCENE, "wear"), comm)[0]
-        n_around, n_along = MESHES[case]
-        return build_run(SleeveConfig.of(n_around=n_around, n_along=n_along, final_angle=float(final_angle),
-                                         **changes), comm)
+            run = build_wear_run(Scene(data, PANTS_SCENE, "wear"), comm)[0]
+        else:
+            n_around, n_along = MESHES[case]
+            run = build_run(SleeveConfig.of(n_around=n_around, n_along=n_along, final_angle=float(final_angle),
+                                            **changes), comm)
+    run.model.use_internal_force(FORCES[force])     # before the run's first evaluation of the force
+    return run
 
 
 def run_variant(mesh: str, variant: str, final_angle: float, comm: MPI.Comm,
@@ -177,9 +179,8 @@ def measure_mesh(mesh: str, variants: list[str], repeats: int, final_angle: floa
                 m.angles, m.torques = pants_moment(history)
                 records = [s for s in history.steps if s.phase == "motion"]
             else:
-                m.angles = np.array([s.angle for s in history.steps])
-                m.torques = np.array([s.torque for s in history.steps])
-                records = history.steps
+                m.angles, m.torques = history.motion_curve("elbow")
+                records = [s for s in history.steps if s.phase == "motion"]
             m.kinetic_ratio = kinetic_ratio(np.array([s.kinetic_energy for s in records]),
                                             np.array([s.strain_energy for s in records]))
             say(f"  {mesh}, {v}, run {k + 1}/{repeats}: {wall:.1f} s, {steps} steps, "

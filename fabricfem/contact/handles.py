@@ -48,6 +48,15 @@ class EdgeGrip:
         self._anchor = None          # (k, 3) positions of the owned gripped nodes at the start
         self.force = np.zeros(3)     # N, the grip's force on the garment in the last step (this rank's nodes)
 
+    def state(self) -> dict:
+        """What a checkpoint keeps of the grip: the start positions [m] of its owned nodes (None before the pull)."""
+        return {"anchor": None if self._anchor is None else self._anchor.copy()}
+
+    def restore(self, state: dict) -> None:
+        """Continue from a `state()` of a grip built on the same mesh and ranks."""
+        anchor = state["anchor"]
+        self._anchor = None if anchor is None else np.array(anchor, dtype=float)
+
     def offset(self, t: float) -> np.ndarray:
         """p(t) [m]: the path's offset at time t (held at its ends outside [start, end])."""
         s = min(max((t - self.start) / (self.end - self.start), 0.0), 1.0) * (len(self.path) - 1)
@@ -94,6 +103,13 @@ class Belt:
         self._to = np.concatenate([member[o + 1:o + n] for o, n in zip(offsets[:-1], counts)])
         self.tension, self.start, self.ramp = float(tension), float(start), float(ramp)
         self.length0 = self.length(np.zeros(0), reference=True)
+
+    def state(self) -> dict:
+        """What a checkpoint keeps of the belt: nothing (its force is a function of the time and the state)."""
+        return {}
+
+    def restore(self, state: dict) -> None:
+        """Continue from a `state()`: the belt keeps nothing between steps."""
 
     def tension_at(self, t: float) -> float:
         """T(t) [N]."""

@@ -57,7 +57,8 @@ class SeamSpec:
 
 
 class SeamTies:
-    """The seams of a garment (module docstring) as an explicit contact hook (`correct`; `forces` is a no-op).
+    """The seams of a garment (module docstring) as an explicit contact hook (fabricfem.solvers.system.ExplicitHook:
+    `correct`; `forces` is a no-op) that keeps the masses M + dt/2 C of its nodes (`on_time_step` drops them).
 
     Args:
         model: the garment's ShellModel (its fabric_mesh has the panels' cell tags).
@@ -127,6 +128,12 @@ class SeamTies:
     # ------------------------------------------------------------------ integrator hooks
     def forces(self, integrator, t: float, rhs) -> None:
         """No force before the division: the seams are a forward-increment constraint (`correct`)."""
+
+    def on_time_step(self, dt: float) -> None:
+        """The integrator's step became dt [s]: the masses M + dt/2 C (and the offsets r(0) weighted by them) are
+        taken again from the integrator at the next correction."""
+        self._mass = None
+        self._offset0 = None
 
     def correct(self, integrator, t: float) -> None:
         """a^{n+1} += (y' - y) / dt^2 on the stitched nodes (module docstring), for the predictor at t + dt."""

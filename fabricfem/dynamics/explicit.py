@@ -23,22 +23,48 @@ damping C and the loads (gravity) stay those of the physical mass, so a quasi-st
 while the inertia forces grow by S: the kinetic over the strain energy of the scaled model is the check.
 The critical step to check against (`dt_crit`) must then be given for the scaled mass.
 
-Contact (`contact`, optional): an object with `forces(integrator, t, rhs)` (penalty: adds nodal contact
-forces at d^{n+1} to the right-hand side before the division by the diagonal) and
+Contact (`contact`, optional): an ExplicitHook (fabricfem.solvers.system) with `forces(integrator, t, rhs)`
+(penalty: adds nodal contact forces at d^{n+1} to the right-hand side before the division by the diagonal) and
 `correct(integrator, t)` (forward-increment Lagrange multipliers, [Man2006, Box 5]: modifies a^{n+1} after
 the division so that the next predictor lands on the body), see fabricfem.contact.explicit. A sequence of such
 layers is called in its order (the body contact first, then the seams of fabricfem.contact.seams, so that the
 stitched nodes end the step together).
+
+Changing the step (`set_time_step`, e.g. a run that shortens it as the fabric stiffens): M + dt/2 C is rebuilt at
+the next step and the hooks that keep quantities of the step (TimeStepListener, e.g. the seams' masses) are told.
 """
 from __future__ import annotations
 
+import math
 import time
+from typing import Sequence
 
+import numpy as np
 from dolfinx.fem import petsc as fem_petsc
 
 from fabricfem.dynamics import stability
 from fabricfem.dynamics.mass import InertiaDamping, rotary_scale
 from fabricfem.dynamics.newmark import DynamicsError, LoadFactor, TimeIntegrator
+from fabricfem.solvers.system import ExplicitHook, TimeStepListener
+
+
+def _check_step(dt: float, dt_crit: float, force: bool) -> None:
+    """ValueError naming `dt` when it exceeds the critical step dt_crit [s] and force is False."""
+    if isinstance(dt, (int, float, np.floating)) and dt > dt_crit and not force:
+        raise ValueError(f"dt = {dt:.6g} s exceeds the critical time step dt_crit = {dt_crit:.6g} s of central "
+                         f"differences ([Man2006, eqs. 2.86-2.87], ratio {dt / dt_crit:.3g}); use a smaller dt or "
+                         f"force=True")
+
+
+def _hooks(contact) -> list[ExplicitHook]:
+    """The hooks of the `contact` argument (None, one hook or a sequence), TypeError naming `contact` for an object
+    without `forces` and `correct`."""
+    hooks = [] if contact is None else list(contact) if isinstance(contact, (list, tuple)) else [contact]
+    for hook in hooks:
+        if not isinstance(hook, ExplicitHook):
+            raise TypeError(f"contact: {type(hook).__name__} has no forces(integrator, t, rhs) / "
+                            f"correct(integrator, t) (fabricfem.solvers.system.ExplicitHook)")
+    return hooks
 
 
 class CentralDifference(TimeIntegrator):
@@ -51,14 +77,15 @@ class CentralDifference(TimeIntegrator):
         damping_update_every: re-evaluate K_M(d^n) of the stiffness-proportional damping every this many steps.
         rotary_inertia_scale: s >= 1 multiplying the rotational lumped masses (module docstring).
         mass_scale: S >= 1 multiplying every lumped mass, not the damping nor the loads (module docstring).
-        contact: explicit contact layer or a sequence of them (module docstring), e.g.
+        contact: explicit contact layer (ExplicitHook) or a sequence of them (module docstring), e.g.
             fabricfem.contact.explicit.ExplicitBodyContact, fabricfem.contact.seams.SeamTies.
     """
 
     def __init__(self, model, dt: float, load_factor: LoadFactor = 1.0, rayleigh: tuple[float, float] = (0.0, 0.0),
                  air_drag: float = 0.0, force: bool = False, dt_crit: float | None = None,
                  energy_bound: float | str | None = "auto", damping_update_every: int = 1,
-                 rotary_inertia_scale: float = 1.0, contact=None, mass_scale: float = 1.0):
+                 rotary_inertia_scale: float = 1.0, contact: ExplicitHook | Sequence[ExplicitHook] | None = None,
+                 mass_scale: float = 1.0):
         scale = rotary_scale(rotary_inertia_scale)
         if isinstance(mass_scale, bool) or not (isinstance(mass_scale, (int, float)) and mass_scale >= 1.0):
             raise ValueError(f"mass_scale must be a number >= 1, got {mass_scale!r}")
@@ -67,10 +94,7 @@ class CentralDifference(TimeIntegrator):
                                                    mass_scale=mass_scale)
         if not (dt_crit > 0):
             raise ValueError(f"dt_crit must be positive, got {dt_crit!r}")
-        if isinstance(dt, (int, float)) and dt > dt_crit and not force:
-            raise ValueError(f"dt = {dt:.6g} s exceeds the critical time step dt_crit = {dt_crit:.6g} s of central "
-                             f"differences ([Man2006, eqs. 2.86-2.87], ratio {dt / dt_crit:.3g}); use a smaller dt or "
-                             f"force=True")
+        _check_step(dt, dt_crit, force)
         if int(damping_update_every) < 1:
             raise ValueError(f"damping_update_every must be >= 1, got {damping_update_every!r}")
         super().__init__(model, dt, load_factor, rayleigh, air_drag, lumped=True, energy_bound=energy_bound)
@@ -82,8 +106,9 @@ class CentralDifference(TimeIntegrator):
         if self.mass_scale != 1.0:
             self.ops.mass_diag.scale(self.mass_scale)     # C = a M of the physical mass: damping_diag unchanged
         self.contact = contact
-        self._hooks = [] if contact is None else list(contact) if isinstance(contact, (list, tuple)) else [contact]
+        self._hooks = _hooks(contact)
         self.dt_crit = float(dt_crit)
+        self.force = bool(force)
         self.damping_update_every = int(damping_update_every)
         m = self.ops.mass_diag.getArray(readonly=True)
         free = m.copy()
@@ -113,6 +138,22 @@ class CentralDifference(TimeIntegrator):
         self._denominator = self.ops.mass_diag.copy()
         self._denominator.axpy(0.5 * self.dt, self.ops.damping_diag)
         self._denominator.getArray()[self.bc_rows] = 1.0
+
+    def set_time_step(self, dt: float) -> None:
+        """Take steps of dt [s] from the next step on: M + dt/2 C is rebuilt then, and every hook that keeps
+        quantities of the step (TimeStepListener) is told by its `on_time_step(dt)`. Refused (ValueError naming
+        `dt`) for a non-positive or non-finite dt and, unless the integrator was built with force=True, for dt above
+        the critical step `dt_crit`."""
+        if not (isinstance(dt, (int, float, np.floating)) and math.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be a positive finite time step [s], got {dt!r}")
+        _check_step(dt, self.dt_crit, self.force)
+        self.dt = float(dt)
+        if self._denominator is not None:
+            self._denominator.destroy()
+            self._denominator = None
+        for hook in self._hooks:
+            if isinstance(hook, TimeStepListener):
+                hook.on_time_step(self.dt)
 
     def step(self) -> int:
         dt = self.dt

@@ -115,7 +115,8 @@ def material_stiffness_form(model, w_frozen: fem.Function, psri_degrees: tuple[i
                                             ufl.derivative(gamma, w_frozen, trial))
     bending = bilinear(kappa, model.D)
     dx_full, dx_reduced = shell_forms.psri_measures(model.mesh, *psri_degrees)
-    h = model._cell_size() if hasattr(model, "_cell_size") else ufl.CellDiameter(model.mesh)  # as in the energy
+    h = getattr(model, "cell_size", None)              # the PSRI weight's h of the energy (a ShellModel's)
+    h = ufl.CellDiameter(model.mesh) if h is None else h
     alpha = model.thickness ** 2 / h ** 2
     return bending * dx_full + alpha * (membrane + shear) * dx_full + (1.0 - alpha) * (membrane + shear) * dx_reduced
 

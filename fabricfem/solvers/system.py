@@ -31,6 +31,18 @@ A **ResidualTerm** is a force of the state added to a model's residual:
 Frictional contact with rigid bodies (fabricfem.contact.problem.ContactProblem), the quasi-static drag of
 the sleeve and backward-Euler inertia (fabricfem.dynamics.backward_euler) are terms.
 
+An **ExplicitHook** is a layer of the explicit central-difference step (fabricfem.dynamics.explicit.CentralDifference:
+body contact, seams, grips, belts), called once per step with the integrator and the new time t_{n+1} [s]:
+
+* `forces(integrator, t, rhs)`: add nodal forces at d^{n+1} [N, N m] to the right-hand side `rhs` (owned rows)
+  before the division by the diagonal M + dt/2 C (a penalty force; a no-op for a pure constraint).
+* `correct(integrator, t)`: after the division, modify a^{n+1} (`integrator.a`) so that the next predictor
+  d^{n+1} + dt v~ + dt^2 a^{n+1} meets a constraint ([Man2006, Box 5]; a no-op for a pure force).
+* optionally (**TimeStepListener**) `on_time_step(dt)`: the integrator's step became dt [s]
+  (CentralDifference.set_time_step); a hook drops what it derived from the former step (e.g. M + dt/2 C).
+
+Hooks read the integrator's public state: `d`, `a`, `velocity_predictor` (v~), `denominator` (M + dt/2 C), `dt`.
+
 `CompositeSystem(model, terms)` is a model plus its terms: residual = model.residual then each term's
 add_residual in order, Jacobian likewise; `after_converged_step` runs the model's hook first, then commits the
 terms in order (the model may re-base the director and zero the angles: the history a term commits, e.g. the
@@ -56,6 +68,22 @@ class ResidualTerm(Protocol):
     def add_jacobian(self, x: PETSc.Vec, A: PETSc.Mat) -> None: ...
 
     def commit(self) -> None: ...
+
+
+@runtime_checkable
+class ExplicitHook(Protocol):
+    """A layer of the explicit step (module docstring): forces before the division, a correction after it."""
+
+    def forces(self, integrator: Any, t: float, rhs: PETSc.Vec) -> None: ...
+
+    def correct(self, integrator: Any, t: float) -> None: ...
+
+
+@runtime_checkable
+class TimeStepListener(Protocol):
+    """A hook that keeps quantities of the time step: told the new step dt [s] when it changes."""
+
+    def on_time_step(self, dt: float) -> None: ...
 
 
 @runtime_checkable

@@ -1,20 +1,22 @@
 """Checkpoints of a garment run (fabricfem.wear.garment.GarmentRun): kill it, resume it, get the same history.
 
-Every `every` records each rank writes `<folder>/checkpoint/rank<r>.pkl`: the explicit state it owns (the
-integrator's d, v, a and time and step count; the body contact's stick points; the grips' anchors), the run's
-records so far (the same on every rank), the recorder's state (rank 0: the body frames and the kept skin frames)
-and the scene's SHA-256. A file is written to a temporary name and renamed, so a kill leaves the previous
-checkpoint whole. `load` restores a run built from the same scene on the same number of ranks; a checkpoint of
-another scene (another hash) or another rank count is refused with a message naming it. The central-difference
-step from a restored state is the step from the saved one (the same arithmetic on the same numbers), so a
-resumed run gives the records of an uninterrupted run exactly. The files, their atomic writes and the checks
-are those of fabricfem.io.Checkpoint (shared with the dynamic scenes, fabricfem.scenes.run).
+Every `every` records each rank writes `<folder>/checkpoint/rank<r>.pkl`: the `state()` of every stateful part of the
+run, the part it owns (the integrator's: d, v, a, t, the step counts, work and dissipation,
+fabricfem.dynamics.newmark.TimeIntegrator.state; the body contact's: its stick points; each handle's: a grip's
+anchors), the run's records so far (the same on every rank), the recorder's state (rank 0: the body frames and the
+kept skin frames) and the scene's SHA-256. A file is written to a temporary name and renamed, so a kill leaves the
+previous checkpoint whole. `load` gives each part its state back (`restore`) in a run built from the same scene on
+the same number of ranks; a checkpoint of another scene (another hash), another rank count or an older layout is
+refused with a message naming it. The central-difference step from a restored state is the step from the saved one
+(the same arithmetic on the same numbers), so a resumed run gives the records of an uninterrupted run exactly. The
+files, their atomic writes and the checks are those of fabricfem.io.Checkpoint (shared with the dynamic scenes,
+fabricfem.scenes.run).
 """
 from __future__ import annotations
 
-import numpy as np
-
 from fabricfem import io
+
+PARTS = ("integrator", "contact", "handles")   # the run's parts a checkpoint holds besides its records
 
 
 class Checkpoint(io.Checkpoint):
@@ -23,29 +25,24 @@ class Checkpoint(io.Checkpoint):
 
     def save(self, run, history, records: int, recorder=None) -> None:
         """Write the state after `records` record intervals (all ranks)."""
-        integ, contact = run.integrator, run.contact
-        self.write({"records": records, "history": history,
-                    "d": integ.d.getArray(readonly=True).copy(), "v": integ.v.getArray(readonly=True).copy(),
-                    "a": integ.a.getArray(readonly=True).copy(), "t": integ.t, "step_count": integ.step_count,
-                    "stick_local": contact._stick_local.copy(), "stick_segment": contact._stick_segment.copy(),
-                    "anchors": [getattr(h, "_anchor", None) for h in run.handles],
+        self.write({"records": records, "history": history, "integrator": run.integrator.state(),
+                    "contact": run.contact.state(), "handles": [handle.state() for handle in run.handles],
                     "recorder": recorder.state() if recorder is not None else None})
 
     def load(self, run, recorder=None):
         """Restore the saved state into `run` (and `recorder`); returns (history, records done)."""
         state = self.read()
-        integ, contact = run.integrator, run.contact
-        for name in ("d", "v", "a"):
-            target = getattr(integ, name).getArray()
-            if target.shape != state[name].shape:
-                raise ValueError(f"resume: the checkpoint's state does not fit this run's mesh ({name})")
-            target[:] = state[name]
-        integ.t, integ.step_count = state["t"], state["step_count"]
-        contact._stick_local[:] = state["stick_local"]
-        contact._stick_segment[:] = state["stick_segment"]
-        for handle, anchor in zip(run.handles, state["anchors"]):
-            if anchor is not None:
-                handle._anchor = np.asarray(anchor)
+        missing = [part for part in PARTS if part not in state]
+        if missing:
+            raise ValueError(f"resume: the checkpoint in {self.folder} has an older layout (no {', '.join(missing)}); "
+                             f"run the scene without --resume")
+        if len(state["handles"]) != len(run.handles):
+            raise ValueError(f"resume: the checkpoint in {self.folder} holds {len(state['handles'])} handle(s), this "
+                             f"run has {len(run.handles)}")
+        run.integrator.restore(state["integrator"])
+        run.contact.restore(state["contact"])
+        for handle, saved in zip(run.handles, state["handles"]):
+            handle.restore(saved)
         if recorder is not None and state["recorder"] is not None:
             recorder.restore(state["recorder"])
         return state["history"], state["records"]
