@@ -246,10 +246,7 @@ class GarmentRun:
             n = base if record_time / base < 0.95 * limit else max(base, math.ceil(record_time / (self.safety * limit)))
         if n != self._steps_now:
             self._steps_now = n
-            self.integrator.dt = self.timeline.record_time / n
-            self.integrator._denominator = None          # M + dt/2 C of the new step
-            if self.seams is not None:
-                self.seams._mass = None                   # its masses are M + dt/2 C too
+            self.integrator.set_time_step(self.timeline.record_time / n)   # tells the seams and hooks too
         return n
 
     def body_time(self, step: WearStep) -> float:
