@@ -145,6 +145,7 @@ class SpeedRow:
     cells: int = 0  # n of the n x n mesh / particle grid
 
     def as_list(self) -> list:
+        """The CSV row (CSV_COLUMNS); "" for a missing ratio or error."""
         return [self.problem, self.method, self.resolution, self.dt, self.n_steps, self.ndofs, self.wall_s,
                 "" if self.wall_vs_baseline is None else self.wall_vs_baseline,
                 "" if self.error is None else self.error, *map(float, self.u)]
@@ -169,12 +170,14 @@ class Reference:
 
 # ----------------------------------------------------------------------------------------- models
 def _check_cells(n) -> int:
+    """n (cells per side) as an int >= 2, else ValueError."""
     if not (isinstance(n, (int, np.integer)) and n >= 2):
         raise ValueError(f"n (cells per side) must be an integer >= 2, got {n!r}")
     return int(n)
 
 
 def _check_time(name: str, value) -> float:
+    """A positive finite time [s] as float, else ValueError naming `name`."""
     if not (isinstance(value, (int, float, np.floating)) and math.isfinite(value) and value > 0):
         raise ValueError(f"{name} must be a positive finite time [s], got {value!r}")
     return float(value)
@@ -212,6 +215,7 @@ def _steps(t_end: float, dt_max: float) -> tuple[int, float]:
 
 
 def _checked(u: np.ndarray, what: str) -> np.ndarray:
+    """u [m] if finite, else RuntimeError naming `what`."""
     if not np.all(np.isfinite(u)):
         raise RuntimeError(f"{what}: non-finite corner displacement {u!r}")
     return u

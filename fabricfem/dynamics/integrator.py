@@ -102,6 +102,7 @@ def _owned(vec: PETSc.Vec) -> np.ndarray:
 
 
 def _as_load_function(load_factor: LoadFactor) -> Callable[[float], float]:
+    """lambda(t) of a callable or a finite constant load factor; ValueError on a non-finite constant."""
     if callable(load_factor):
         return load_factor
     value = float(load_factor)
@@ -169,6 +170,7 @@ class TimeIntegrator:
         vec.getArray()[self.bc_rows] = 0.0
 
     def _sync_model(self):
+        """model.w = d, ghosts updated."""
         self.d.copy(self.model.w.vector)
         self.model.w.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
 
@@ -400,5 +402,6 @@ class TimeIntegrator:
         self._initialized = True
 
     def destroy(self):
+        """Free the state vectors."""
         for vec in (self.d, self.v, self.a, self._work, self._cv):
             vec.destroy()

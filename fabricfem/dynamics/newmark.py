@@ -75,6 +75,7 @@ class _EffectiveSystem:
         self.model.set_state(x)
 
     def set_coefficients(self, dt: float, beta: float, gamma: float):
+        """The step's factors 1 / (beta dt^2) on M and gamma / (beta dt) on C (dt [s]) and the lumped diagonal."""
         self.c_mass.value = 1.0 / (beta * dt ** 2)
         self.c_damp.value = gamma / (beta * dt)
         self._diag = self.it.ops.jacobian_diagonal(float(self.c_mass.value), float(self.c_damp.value))
@@ -105,6 +106,7 @@ class _EffectiveSystem:
             b.axpy(1.0, self._tmp)
 
     def jacobian(self, x: PETSc.Vec, A: PETSc.Mat):
+        """A = K(x) + M / (beta dt^2) + gamma C / (beta dt) (eq. 2.85 for d) with Dirichlet rows, plus the terms'."""
         x.copy(self.model.w.vector)
         self.model.w.vector.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         A.zeroEntries()
@@ -157,6 +159,7 @@ class NewmarkIntegrator(StepHalving, TimeIntegrator):
     _state_scalars = StepHalving._state_scalars + ("_coefficient_dt",)
 
     def restore(self, state: dict):
+        """TimeIntegrator.restore, then the step's coefficients for the restored sub-step size."""
         super().restore(state)
         self.effective.set_coefficients(self._coefficient_dt, self.beta, self.gamma)
 
@@ -196,6 +199,7 @@ class NewmarkIntegrator(StepHalving, TimeIntegrator):
         return SubStep(True, h, result.iterations, result.reason)
 
     def destroy(self):
+        """Free the Newton solver, the predictors and the state vectors."""
         self.solver.destroy()
         for vec in (self.d_pred, self.v_pred):
             vec.destroy()

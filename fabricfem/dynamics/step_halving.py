@@ -37,6 +37,7 @@ class StepHalving:
     """
 
     def _init_step_halving(self, min_dt: float | None, grow_after: int):
+        """Checked min_dt [s] (default dt / 64) and grow_after, zero counters, the sub-step's saved state vectors."""
         min_dt = self.dt / 64.0 if min_dt is None else min_dt
         if not (isinstance(min_dt, (int, float, np.floating)) and math.isfinite(min_dt) and 0 < min_dt <= self.dt):
             raise ValueError(f"min_dt must be a time step [s] in (0, dt = {self.dt:.6g}], got {min_dt!r}")
@@ -54,10 +55,12 @@ class StepHalving:
         self._sub_cv_old = self.model.create_vector()
 
     def _restore_last_converged(self):
+        """model.w and the load factor back to the last converged state (t, d)."""
         self.model.set_load_factor(self.load(self.t))
         self._sync_model()
 
     def _fail(self, name: str, t_fail: float, h: float, reason: str, iterations: int):
+        """Restore the last converged state and raise DynamicsError naming the step, time [s], dt [s] and reason."""
         self._restore_last_converged()
         raise DynamicsError(
             f"{name} step {self.step_count + 1}: Newton {reason} after {iterations} iterations at t = {t_fail:.6g} s "
@@ -100,11 +103,13 @@ class StepHalving:
         return iterations
 
     def _substep(self, h: float) -> SubStep:
+        """Advance (t, d, v, a) by h [s] on success; leave them (and model.w) untouched otherwise."""
         raise NotImplementedError
 
     _state_scalars = TimeIntegrator._state_scalars + ("current_dt", "substeps", "halvings", "doublings",
                                                       "_successes")
 
     def _destroy_step_halving(self):
+        """Free the sub-step's saved state vectors."""
         self._sub_d_old.destroy()
         self._sub_cv_old.destroy()

@@ -70,6 +70,8 @@ class UnitCellStep:
 
 @dataclass
 class UnitCellResult:
+    """The steps of one solve with the cell's phi, |Y_s| and |Y| [m^3], the dofs and the fluctuation u* [m]."""
+
     steps: list[UnitCellStep]
     volume_fraction: float
     solid_volume: float  # |Y_s| [m^3]
@@ -79,10 +81,12 @@ class UnitCellResult:
 
     @property
     def S(self) -> np.ndarray:
+        """The last step's homogenized S [Pa]."""
         return self.steps[-1].S
 
     @property
     def E(self) -> np.ndarray:
+        """The last step's Green-Lagrange strain E."""
         return self.steps[-1].E
 
 
@@ -93,6 +97,7 @@ def green_lagrange(Phi: np.ndarray) -> np.ndarray:
 
 
 def _check_Phi(Phi) -> np.ndarray:
+    """Phi as a finite 3 x 3 array with det > 0, else ValueError."""
     Phi = np.asarray(Phi, dtype=float)
     if Phi.shape != (3, 3) or not np.all(np.isfinite(Phi)):
         raise ValueError(f"Phi must be a finite 3 x 3 deformation gradient, got {Phi!r}")
@@ -280,10 +285,12 @@ class UnitCellProblem:
         return bcs
 
     def _dx(self, tag: int | None) -> ufl.Measure:
+        """The cell measure, restricted to the cell tag when given."""
         return self.dx if tag is None else self.dx(tag)
 
     @staticmethod
     def _materials(psi, cell_tags) -> list[tuple[int | None, StrainEnergy]]:
+        """[(cell tag or None, psi)]: ValueError unless psi is a callable, or a mapping covering every owned cell."""
         if callable(psi):
             return [(None, psi)]
         if not isinstance(psi, Mapping) or not psi:
@@ -309,6 +316,7 @@ class UnitCellProblem:
 
     @property
     def ndofs(self) -> int:
+        """Global number of scalar dofs of u* (MPC slaves included)."""
         return self.newton.ndofs
 
     def homogenized_stress(self) -> tuple[np.ndarray, np.ndarray]:
