@@ -274,6 +274,11 @@ class ShellModel(ShellLoads, ShellSymmetry):
         """All displacements and rotations zero."""
         return self.constrain(where, u=(0.0, 0.0, 0.0), theta=(0.0, 0.0) if self.model == "naghdi" else None)
 
+    @property
+    def has_prescribed_values(self) -> bool:
+        """Whether a constraint prescribes a non-zero displacement or rotation (scaled by the load factor)."""
+        return bool(self._scaled_bcs)
+
     def set_load_factor(self, lam: float):
         self.load_factor.value = lam
         for g, values in self._scaled_bcs:

@@ -303,20 +303,18 @@ def project_step(projection: FastProjection, integrator) -> ProjectionResult:
     integrator.v.axpy(1.0 / integrator.dt, dq)
     if not isinstance(integrator, CentralDifference):
         return result
-    rhs = integrator._work.duplicate()
+    rhs = integrator.d.duplicate()
     integrator.system.internal_force(integrator.d, rhs)   # the shell + its terms (e.g. obstacle contact)
     rhs.scale(-1.0)
     rhs.axpy(float(model.load_factor.value), model.F_ref)
-    cv = integrator._cv.duplicate()
+    cv = integrator.d.duplicate()
     v_pred = integrator.v.copy()
     v_pred.axpy(-0.5 * integrator.dt, integrator.a)
     if integrator.ops.has_damping:
         integrator.ops.damping_action(v_pred, cv)
         rhs.axpy(-1.0, cv)
     integrator.zero_bc_rows(rhs)
-    if integrator._denominator is None:
-        integrator._set_denominator()
-    integrator.a.pointwiseDivide(rhs, integrator._denominator)
+    integrator.a.pointwiseDivide(rhs, integrator.denominator)
     bc_v = integrator.v.getArray(readonly=True)[integrator.bc_rows].copy()
     v_pred.copy(integrator.v)
     integrator.v.axpy(0.5 * integrator.dt, integrator.a)

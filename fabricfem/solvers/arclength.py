@@ -143,7 +143,7 @@ def arc_length(model, ds: float, max_steps: int, lambda_max: float | None = None
     converged load factor. A step has converged when |F_ext - P| < rtol |F_ref| max(1, |lambda|) and
     the constraint holds, or when the Newton correction is below stol relative to the state.
     """
-    if model._scaled_bcs:
+    if model.has_prescribed_values:
         raise ValueError("arc_length: prescribed non-zero displacements/rotations are not supported; "
                          "use loads (F_ext = lambda F_ref)")
     if ds <= 0:

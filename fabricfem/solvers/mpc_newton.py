@@ -171,7 +171,7 @@ class MPCNewtonSolver:
             elif self.line_search:
                 self._backtrack(rnorm)
             else:
-                self._update(1.0)
+                self.update(1.0)
             dnorm = self.du.norm()
             if not np.isfinite(dnorm):
                 return NewtonResult(False, it + 1, "NAN_IN_SOLUTION", norms)
@@ -180,7 +180,7 @@ class MPCNewtonSolver:
                 return NewtonResult(True, it + 1, "CONVERGED_SNORM", norms)
         return NewtonResult(False, self.max_it, "DIVERGED_MAX_IT", norms)
 
-    def _update(self, step: float) -> None:
+    def update(self, step: float) -> None:
         """u <- u - step J^{-1} R, then the MPC slaves refilled from their masters."""
         x = self.u.vector
         x.axpy(-step, self.du)
@@ -252,18 +252,18 @@ def backtrack(solver, rnorm: float, admissible_step: Callable[[], Callable[[], b
     if admissible_step is not None:
         admissible = admissible_step()
         for _ in range(ADMISSIBLE_HALVINGS):
-            solver._update(step)
+            solver.update(step)
             ok = admissible()
             restore()
             if ok:
                 break
             step *= 0.5
     for _ in range(RESIDUAL_HALVINGS):
-        solver._update(step)
+        solver.update(step)
         if solver.assemble_residual().norm() < rnorm:
             break
         restore()
         step *= 0.5
     else:
-        solver._update(step)
+        solver.update(step)
     x0.destroy()

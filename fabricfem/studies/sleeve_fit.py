@@ -113,7 +113,7 @@ def energy_split_forms(model, degrees: tuple[int, int] = (4, 2)) -> dict:
     psi_b = sf.bending_energy(kappa, model.D)
     psi_s = 0.5 * model.shear_stiffness * ufl.dot(gamma, gamma)
     dx_full, dx_reduced = sf.psri_measures(model.mesh, *degrees)
-    alpha = model.thickness ** 2 / model._cell_size() ** 2
+    alpha = model.thickness ** 2 / model.cell_size ** 2
     return {"membrane": fem.form(alpha * psi_m * dx_full + (1.0 - alpha) * psi_m * dx_reduced),
             "bending": fem.form(psi_b * dx_full),
             "shear": fem.form(alpha * psi_s * dx_full + (1.0 - alpha) * psi_s * dx_reduced)}

@@ -334,7 +334,7 @@ def _predict(problem: SleeveProblem, angle_from: float, angle_to: float, touchin
     contact = problem.contact
     s = contact.evaluate()
     names = list(problem.body.segments)
-    moving = (s.segment == names.index("forearm")) & (s.gap < touching) & contact._free.all(axis=1)
+    moving = (s.segment == names.index("forearm")) & (s.gap < touching) & ~contact.nodes.constrained.any(axis=1)
     if not moving.any():
         return
     elbow = problem.body.joint_position("elbow", contact.time)

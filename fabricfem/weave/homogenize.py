@@ -330,7 +330,7 @@ class UnitCellProblem:
         scale = self.volume_fraction / self.solid_volume  # eq. 4.64
         return scale * total[:9].reshape(3, 3), scale * total[9:].reshape(3, 3)
 
-    def _force_scale(self) -> float:
+    def force_scale(self) -> float:
         """Norm of the nodal forces of the current state without the periodic condensation [N]:
         the boundary forces the periodicity has to balance (zero only for a stress-free state)."""
         b = fem_petsc.assemble_vector(self._plain_residual)
@@ -346,7 +346,7 @@ class UnitCellProblem:
         out = []
         for n, Phi_n in enumerate(path, start=1):
             self.Phi.value[:] = Phi_n
-            result = self.newton.solve(self._force_scale(), self.length_scale)
+            result = self.newton.solve(self.force_scale(), self.length_scale)
             if not result.converged:
                 raise SolverError(f"unit cell: Newton {result.reason} after {result.iterations} iterations at load "
                                   f"step {n}/{steps} (Phi = {Phi_n.tolist()}); residual norms "

@@ -404,7 +404,7 @@ class ContactUnitCell:
         restored (u*, multipliers and contact references), or if an element ends inverted."""
         problem, newton = self.problem, self.problem.newton
         problem.Phi.value[:] = Phi_b
-        force_scale = problem._force_scale()
+        force_scale = problem.force_scale()
         self.last_force_scale = force_scale
         saved_u = problem.u.x.array.copy()
         c = self.contact
