@@ -41,6 +41,7 @@ from fabricfem.scenes.wear_sections import (
     WearRouteSection,
 )
 from fabricfem.wear.config import ContactSpec, FlexionSpec, RouteSpec
+from fabricfem.wear.verdict import Bounds
 
 _COMMON = {"scene": (SceneSection,), "fabric": (FabricSection,), "output": (OutputSection,),
            "accuracy": (AccuracySection,)}
@@ -54,7 +55,7 @@ SECTIONS_OF: dict[str, dict[str, tuple]] = {
     "wear": {**_COMMON, "fabric": (FabricSection, WearFabricSection), "garment": (GarmentSection,),
              "body": (WearBodySection, ArmDimensions, LowerBodyDimensions),
              "motion": (WearMotionSection, FlexionSpec), "donning": (WearDonningSection,), "contact": (ContactSpec,),
-             "route": (RouteSpec, WearRouteSection), "torque": (TorqueSection,)},
+             "route": (RouteSpec, WearRouteSection), "torque": (TorqueSection,), "checks": (Bounds,)},
 }
 LIST_SECTIONS = {"support", "load", "torque"}           # arrays of tables ([[load]])
 REQUIRED_OF = {"static": ("scene", "mesh", "fabric", "solver"), "dynamic": ("scene", "mesh", "fabric", "dynamics"),
@@ -127,6 +128,8 @@ class WearScene:
     torques: tuple[TorqueSection, ...]
     output: OutputSection
     accuracy: AccuracySection
+    checks: Bounds                  # the bounds of the run's plausibility checks (fabricfem.wear.verdict)
+    failure_strain: float           # [fabric] failure_strain: the strain check's bound [-]
 
     @property
     def is_tube_flexion(self) -> bool:
@@ -166,7 +169,9 @@ def _wear(data: Mapping) -> WearScene:
         end_time=route.get("end_time"),
         torques=tuple(_part(TorqueSection, t, f"torque[{i}]") for i, t in enumerate(data.get("torque", []))),
         output=_part(OutputSection, data.get("output"), "output"),
-        accuracy=_part(AccuracySection, data.get("accuracy"), "accuracy"))
+        accuracy=_part(AccuracySection, data.get("accuracy"), "accuracy"),
+        checks=_part(Bounds, data.get("checks"), "checks"),
+        failure_strain=float(data["fabric"].get("failure_strain", FabricSection.failure_strain)))
 
 
 def parse(data: Mapping, kind: str) -> StaticScene | DynamicScene | WearScene:

@@ -33,6 +33,7 @@ from fabricfem.scenes.static import build_model
 from fabricfem.shell import ShellModel
 from fabricfem.solvers.system import base_model
 from fabricfem.wear.run import interrupt_flag
+from fabricfem.wear.verdict import DEFAULT_FAILURE_STRAIN, Check, verdict
 
 CHECKPOINT_EVERY = 25       # records between the checkpoints of a dynamic scene or a wear run (explicit engine)
 
@@ -66,6 +67,30 @@ class DynamicRun:
     summary: dict = field(default_factory=dict)
     outputs: dict[str, Path] = field(default_factory=dict)
     failure: str = ""           # why the run stopped before end_time (an interrupt), "" when it completed
+
+    @property
+    def warnings(self) -> list[str]:
+        """The names of the failed plausibility checks (`dynamic_checks`)."""
+        return list(self.summary.get("verdict", {}).get("failed", []))
+
+
+# |KE + SE + D - W| / max(W, KE + SE + D) at the end of a dynamic run: the shipped scenes close it to 2e-4 (the
+# strain-limited corner-pinned cloth) and below; 1 % flags a step that drifts (an unstable or too long step)
+ENERGY_BALANCE_TOLERANCE = 0.01
+
+
+def dynamic_checks(summary: dict, failure_strain: float) -> list[Check]:
+    """The plausibility checks of a dynamic run's summary: the energy balance at the end (kinetic + strain +
+    dissipated = external work, relative, ENERGY_BALANCE_TOLERANCE) and the largest recorded Green strain against
+    the fabric's failure_strain."""
+    stored = summary["kinetic_J"] + summary["strain_J"] + summary["dissipated_J"]
+    scale = max(abs(summary["external_work_J"]), abs(stored), 1e-300)
+    balance = abs(stored - summary["external_work_J"]) / scale
+    return [Check("energy balance", "relative energy imbalance |KE + SE + D - W| / W at the end", balance,
+                  ENERGY_BALANCE_TOLERANCE, "", bool(balance <= ENERGY_BALANCE_TOLERANCE)),
+            Check("fabric strain", "largest recorded Green strain (fabric failure_strain)",
+                  summary["max_strain_recorded"], failure_strain,
+                  "", bool(summary["max_strain_recorded"] <= failure_strain))]
 
 
 def _load_function(ramp_time: float):
@@ -262,7 +287,12 @@ def _write_outputs(scene: Scene, history, model, n_steps: int, dt: float, dt_cri
                **{f"final_{m}": float(history.monitors[m][-1]) for m in user}}
     outputs = {"xdmf": xdmf, "csv": out / f"{name}.csv", "png": out / f"{name}.png",
                "summary": out / "summary.json"}
+    checks = dynamic_checks(summary, scene.parsed.fabric.get("failure_strain", DEFAULT_FAILURE_STRAIN))
+    summary["verdict"] = verdict(checks)
     io.write_json(outputs["summary"], summary, comm)
+    for check in checks:
+        if not check.passed:
+            say(check.line())
     say(f"done: {n_steps} steps in {run_wall:.1f} s (total {wall:.1f} s); final kinetic {summary['kinetic_J']:.4g} J, "
         f"strain {summary['strain_J']:.4g} J, external work {summary['external_work_J']:.4g} J, dissipated "
         f"{summary['dissipated_J']:.4g} J; max strain {summary['max_strain_final']:.4g}"

@@ -27,12 +27,14 @@ from fabricfem.wear.contract import WearHistory
 from fabricfem.wear.garment import GarmentRun, build_garment_run
 from fabricfem.wear.run import ROUTES, run_wear
 from fabricfem.wear.sleeve import tube_flexion_run
+from fabricfem.wear.verdict import EXIT_WARNINGS
 
 
 @dataclass
 class SceneOutcome:
-    """What `fabricfem run` did: the runner's result, its status ("completed" or "stopped early: <why>") and the
-    output folder; `exit_code` is 0 only for a completed run."""
+    """What `fabricfem run` did: the runner's result, its status ("completed", "completed with warnings: <failed
+    checks>" or "stopped early: <why>") and the output folder; `exit_code` is 0 only for a completed run whose
+    plausibility checks passed."""
 
     result: object
     status: str
@@ -40,7 +42,10 @@ class SceneOutcome:
 
     @property
     def exit_code(self) -> int:
-        return 0 if self.status == "completed" else 1
+        """0 completed, EXIT_WARNINGS (3) completed with failed plausibility checks, 1 stopped early."""
+        if self.status == "completed":
+            return 0
+        return EXIT_WARNINGS if self.status.startswith("completed with warnings") else 1
 
 
 def run_scene(scene: Scene, comm=MPI.COMM_WORLD, out: Path | None = None, resume: bool = False) -> SceneOutcome:
@@ -61,7 +66,9 @@ def run_scene(scene: Scene, comm=MPI.COMM_WORLD, out: Path | None = None, resume
         folder.finish(f"failed: {' '.join(str(exc).split())}")
         raise
     failure = result.failure if isinstance(result, (WearHistory, DynamicRun)) else ""
-    status = f"stopped early: {failure}" if failure else "completed"
+    warnings = result.warnings if isinstance(result, (WearHistory, DynamicRun)) else []
+    status = (f"stopped early: {failure}" if failure else
+              f"completed with warnings: {', '.join(warnings)}" if warnings else "completed")
     folder.finish(status, result.summary() if isinstance(result, WearHistory) else None)
     return SceneOutcome(result, status, out)
 
@@ -80,7 +87,7 @@ def run_wear_scene(scene: Scene, out: Path, comm=MPI.COMM_WORLD, resume: bool = 
         if resume and not checkpoint.exists():
             raise SceneError(f"resume: no checkpoint in {out}/checkpoint (run the scene without --resume first)")
     return run_wear(run, out, headline, render_at, scene.parsed.output.render, scene.parsed.output.body_samples,
-                    checkpoint, resume, report)
+                    checkpoint, resume, report, parsed.checks, parsed.failure_strain)
 
 
 def build_wear_run(scene: Scene, comm=MPI.COMM_WORLD):

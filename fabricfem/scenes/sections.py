@@ -98,6 +98,9 @@ class FabricSection:
     kawabata_coefficients: list | None = doc("coefficients of the Kawabata law", None)
     B0: float | None = doc("square-root law: B0 [N m]", None)
     kappa0: float | None = doc("square-root law: kappa0 [1/m]", None)
+    failure_strain: float = doc("Green strain above which a run's fabric strain is implausible (the fabric would "
+                                "fail; woven fabrics break at 10-35 % engineering strain): the strain check of the "
+                                "run's verdict", 0.3)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -88,10 +88,16 @@ class WearHistory:
     initial_gap: float = field(default=math.nan, kw_only=True)
     failure: str = field(default="", kw_only=True)
     report: dict = field(default_factory=dict, kw_only=True)     # a scene's report of its final state (rank 0)
+    verdict: dict = field(default_factory=dict, kw_only=True)    # the plausibility checks (fabricfem.wear.verdict)
 
     @property
     def completed(self) -> bool:
         return not self.failure
+
+    @property
+    def warnings(self) -> list[str]:
+        """The names of the failed plausibility checks ([] when none failed or none ran)."""
+        return list(self.verdict.get("failed", []))
 
     @property
     def times(self) -> np.ndarray:
@@ -175,6 +181,8 @@ class WearHistory:
         out["max_penetration_m"] = max(s.max_penetration for s in sewn)
         out["max_seam_gap_after_sewing_m"] = max(s.seam_gap for s in sewn)
         out.update(self.report)
+        if self.verdict:
+            out["verdict"] = self.verdict
         return out
 
 

@@ -17,6 +17,7 @@ from fabricfem.wear.quasistatic import build_sleeve
 from fabricfem.wear.recorder import WearRecorder
 from fabricfem.wear.sleeve import build_explicit
 from fabricfem.wear.sleeve_implicit import build_implicit
+from fabricfem.wear.verdict import DEFAULT_FAILURE_STRAIN, Bounds, verdict, wear_checks
 
 # route name ([route] solver) -> builder of the sleeve's WearRun from its configuration
 ROUTES: dict[str, Callable[[SleeveConfig, MPI.Comm], WearRun]] = {
@@ -41,7 +42,8 @@ def run_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
 
 def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], render: bool = True,
              body_samples: int = 24, checkpoint=None, resume: bool = False,
-             report: Callable[[WearRun, WearHistory], dict | None] | None = None):
+             report: Callable[[WearRun, WearHistory], dict | None] | None = None, bounds: Bounds = Bounds(),
+             failure_strain: float = DEFAULT_FAILURE_STRAIN):
     """Run any WearRun with progress lines (rank 0), write the WearRecorder's outputs under `out`, print the
     closing summary (peak and final torque per monitor, pressures, strain, penetration, seam gap) and return the
     history. The explicit engine's runs also take a `checkpoint` (fabricfem.wear.checkpoint.Checkpoint), `resume`
@@ -68,6 +70,8 @@ def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], ren
         if history.failure.startswith("interrupted"):
             checkpoint.save(run, history, len(history.steps), recorder)   # one record interval per record
     history.wall = time.perf_counter() - t0
+    checks = wear_checks(history, bounds, failure_strain)
+    history.verdict = verdict(checks)
     recorder.close(history)
     if report is not None:          # the scene's own report of the final state (e.g. the compression profile)
         history.report = report(run, history) or {}
@@ -78,6 +82,9 @@ def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], ren
         say(line)
     if "ms_per_step" in history.timings:
         say(f"time per part: {format_breakdown(history.timings)}")
+    for check in checks:
+        if not check.passed:
+            say(check.line())
     if history.failure:
         say(f"STOPPED EARLY: {history.failure}")
     say(f"wrote {out}/cloth.xdmf, body.pvd (+ body_*.vtp), torque.csv, torque.sto, torque.png"

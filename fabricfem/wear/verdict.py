@@ -1,0 +1,108 @@
+"""The verdict of a wear run: plausibility checks of its records, each with its value and its bound.
+
+A run that reaches its end can still be implausible: skin pressures of MPa where real garments press with a few kPa,
+Green strains of 3 in a woven fabric, a seam left 0.14 m open, a body that never touches the garment. Each check
+compares one measured quantity of the history (fabricfem.wear.contract.WearHistory) with a bound (`Bounds`, the
+wear scene's [checks] section; the strain bound is the fabric's `failure_strain`):
+
+    penetration        largest penetration of the cloth into the body after the sewing [m]  <= max_penetration
+    seam gap           largest distance of stitched nodes after the sewing [m]              <= max_seam_gap
+    fabric strain      largest warp/weft Green strain after the sewing [-]                 <= failure_strain
+    skin pressure      largest contact pressure on the body during the motion [Pa]         <= max_skin_pressure
+    kinetic energy     largest kinetic / strain energy ratio during the motion [-]         <= max_kinetic_ratio
+    start distance     smallest garment-body gap at the start [m]                          <= max_start_gap
+    contact            the body touches the garment during the motion (largest contact force > 0 [N])
+
+A failed check is one console line and an entry of summary.json's "verdict"; the run's status becomes
+"completed with warnings" and `fabricfem run` exits with EXIT_WARNINGS (3), distinct from success (0), a run that
+stopped early (1) and an input error (2).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from fabricfem.parameters import param as doc
+from fabricfem.wear.contract import WearHistory
+from fabricfem.wear.engine import kinetic_ratio
+
+EXIT_WARNINGS = 3                  # exit code of a run that completed with failed checks
+DEFAULT_FAILURE_STRAIN = 0.3       # Green strain; woven fabrics break at 10-35 % engineering strain
+
+
+@dataclass(frozen=True)
+class Bounds:
+    """[checks]: the bounds of a wear run's plausibility checks (SI units)."""
+
+    max_penetration: float = doc("largest penetration of the cloth into the body after the sewing [m]", 1e-3)
+    max_seam_gap: float = doc("largest distance of stitched nodes after the sewing [m]", 2e-3)
+    max_skin_pressure: float = doc("largest contact pressure on the body during the motion [Pa] (garments press "
+                                   "with a few kPa; compression classes reach 6-8 kPa)", 100e3)
+    max_kinetic_ratio: float = doc("largest kinetic / strain energy ratio during the motion [-] (a worn garment "
+                                   "moves quasi-statically: the sleeve's start of the flexion, the largest in its "
+                                   "runs, reaches 0.14 on 10 x 13)", 0.5)
+    max_start_gap: float = doc("largest garment-body distance at the start [m] (farther: the motion file or the "
+                               "garment is misplaced)", 0.05)
+    require_contact: bool = doc("warn when the body never touches the garment during the motion", True)
+
+
+@dataclass(frozen=True)
+class Check:
+    """One plausibility check: `value` against `bound` (`passed` when value <= bound), in `unit`."""
+
+    name: str
+    what: str
+    value: float
+    bound: float
+    unit: str
+    passed: bool
+
+    def line(self) -> str:
+        """The console line of a failed check."""
+        unit = f" {self.unit}" if self.unit else ""
+        return (f"CHECK FAILED {self.name}: {self.what} {self.value:.4g}{unit} above its bound {self.bound:.4g}{unit}"
+                if self.name != "contact" else f"CHECK FAILED contact: {self.what}")
+
+
+def _check(name: str, what: str, value: float, bound: float, unit: str) -> Check:
+    return Check(name, what, float(value), float(bound), unit, bool(math.isfinite(value) and value <= bound))
+
+
+def wear_checks(history: WearHistory, bounds: Bounds = Bounds(),
+                failure_strain: float = DEFAULT_FAILURE_STRAIN) -> list[Check]:
+    """The checks of a history (module docstring); none when it has no records."""
+    steps = history.steps
+    if not steps:
+        return []
+    sewn = [s for s in steps if s.phase != "sew"] or steps
+    motion = [s for s in steps if s.phase == "motion"] or steps
+    checks = [
+        _check("penetration", "largest penetration after the sewing", max(s.max_penetration for s in sewn),
+               bounds.max_penetration, "m"),
+        _check("seam gap", "largest seam gap after the sewing", max(s.seam_gap for s in sewn), bounds.max_seam_gap,
+               "m"),
+        _check("fabric strain", "largest Green strain after the sewing (fabric failure_strain)",
+               max(s.max_strain for s in sewn), failure_strain, ""),
+        _check("skin pressure", "largest contact pressure on the body during the motion",
+               max(s.peak_pressure for s in motion), bounds.max_skin_pressure, "Pa"),
+    ]
+    if any(s.time_steps for s in motion):
+        ratio = kinetic_ratio(np.array([s.kinetic_energy for s in motion]), np.array([s.strain_energy for s in motion]))
+        checks.append(_check("kinetic energy", "largest kinetic / strain energy ratio during the motion", ratio,
+                             bounds.max_kinetic_ratio, ""))
+    if math.isfinite(history.initial_gap):
+        checks.append(_check("start distance", "smallest garment-body gap at the start", history.initial_gap,
+                             bounds.max_start_gap, "m"))
+    if bounds.require_contact:
+        force = max(s.contact_force for s in motion)
+        checks.append(Check("contact", "the body never touches the garment during the motion (largest contact "
+                            "force 0 N)", force, 0.0, "N", force > 0.0))
+    return checks
+
+
+def verdict(checks: list[Check]) -> dict:
+    """summary.json's "verdict": "plausible" or "warnings", the failed checks' names and every check."""
+    failed = [c.name for c in checks if not c.passed]
+    return {"status": "warnings" if failed else "plausible", "failed": failed, "checks": [asdict(c) for c in checks]}

@@ -1,0 +1,97 @@
+"""The verdict of a run: plausibility checks with their values and bounds in summary.json, one line per failed
+check, status "completed with warnings" and exit code 3 (fabricfem.wear.verdict, fabricfem.scenes.dynamic)."""
+import json
+import tomllib
+from pathlib import Path
+
+import pytest
+from toml_text import dumps
+
+from fabricfem import cli
+from fabricfem.scenes.dynamic import dynamic_checks
+from fabricfem.wear.contract import WearHistory, WearStep
+from fabricfem.wear.verdict import EXIT_WARNINGS, Bounds, wear_checks
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _sleeve(tmp_path: Path, **changes) -> Path:
+    """scenes/sleeve.toml to 3 degrees in records of 1.5 degrees after 0.1 s of rest, no renders, with `changes`
+    ({section: {key: value}})."""
+    data = tomllib.loads((ROOT / "scenes" / "sleeve.toml").read_text())
+    data["motion"].update(final_angle=3.0, output_angle_step=1.5, settle_time=0.1)
+    data["output"] = {"dir": str(tmp_path / "out"), "render": False}
+    for section, values in changes.items():
+        data.setdefault(section, {}).update(values)
+    path = tmp_path / "scene.toml"
+    path.write_text(dumps(data))
+    return path
+
+
+def _summary(tmp_path: Path) -> dict:
+    return json.loads((tmp_path / "out" / "summary.json").read_text())
+
+
+def test_a_plausible_sleeve_completes_with_every_check_passed(tmp_path, capsys):
+    assert cli.main(["run", str(_sleeve(tmp_path))]) == 0
+    summary = _summary(tmp_path)
+    assert summary["status"] == "completed" and summary["verdict"]["status"] == "plausible"
+    names = {c["name"] for c in summary["verdict"]["checks"]}
+    assert names == {"penetration", "seam gap", "fabric strain", "skin pressure", "kinetic energy", "start distance",
+                     "contact"}
+    assert "CHECK FAILED" not in capsys.readouterr().out
+
+
+def test_the_strain_check_flags_a_run_and_exits_3(tmp_path, capsys):
+    """The sleeve strains its cotton to about 8e-3 (Green): a failure strain of 1e-3 makes the run implausible."""
+    assert cli.main(["run", str(_sleeve(tmp_path, fabric={"failure_strain": 1e-3}))]) == EXIT_WARNINGS
+    out, err = capsys.readouterr()
+    assert "CHECK FAILED fabric strain" in out
+    assert "completed with warnings: fabric strain" in err
+    summary = _summary(tmp_path)
+    assert summary["status"] == "completed with warnings: fabric strain"
+    strain = next(c for c in summary["verdict"]["checks"] if c["name"] == "fabric strain")
+    assert strain["bound"] == 1e-3 and strain["value"] > 1e-3 and not strain["passed"]
+
+
+def test_a_body_that_never_touches_the_garment_is_flagged(tmp_path, capsys):
+    """Without gravity a 0.12 m tube floats around the arm (64 mm away): no contact, start distance too large."""
+    path = _sleeve(tmp_path, garment={"radius": 0.12}, route={"gravity": False})
+    assert cli.main(["run", str(path)]) == EXIT_WARNINGS
+    out = capsys.readouterr().out
+    assert "CHECK FAILED contact" in out and "CHECK FAILED start distance" in out
+    assert {"contact", "start distance"} <= set(_summary(tmp_path)["verdict"]["failed"])   # (and KE/SE: no strain)
+
+
+def _step(**values) -> WearStep:
+    base = dict(phase="motion", time=1.0, torques={"knee": 0.1}, peak_pressure=2e3, peak_segment="shank",
+                peak_position=(0.0, 0.0, 0.0), mean_pressure=1e3, max_penetration=1e-5, contact_force=1.0,
+                seam_gap=1e-4, seam_forces={}, max_strain=0.05, time_steps=10, kinetic_energy=1e-4,
+                strain_energy=1e-2, wall=0.0)
+    return WearStep(**{**base, **values})
+
+
+@pytest.mark.parametrize("values, failed", [
+    ({}, set()),
+    ({"peak_pressure": 2.9e6}, {"skin pressure"}),        # the two-stride pants' 2943 kPa record
+    ({"max_strain": 4.47}, {"fabric strain"}),            # and its Green strain
+    ({"seam_gap": 0.14}, {"seam gap"}),                   # seam corners held 0.14 m apart
+    ({"max_penetration": 5e-3}, {"penetration"}),
+    ({"kinetic_energy": 1e-2}, {"kinetic energy"}),
+    ({"contact_force": 0.0}, {"contact"}),
+])
+def test_each_check_compares_its_record_values_with_its_bound(values, failed):
+    history = WearHistory("pants", steps=[_step(phase="settle"), _step(**values)], initial_gap=0.01)
+    checks = wear_checks(history, Bounds(), failure_strain=0.3)
+    assert {c.name for c in checks if not c.passed} == failed
+    assert all(c.line().startswith(f"CHECK FAILED {c.name}") for c in checks if not c.passed)
+
+
+def test_the_energy_balance_of_a_dynamic_run():
+    """The strain-limited corner-pinned cloth closes its balance to 2e-4 (scenes/corner_pinned.toml); a run that
+    gains 5 % of its work from nowhere fails."""
+    good = {"kinetic_J": 0.041388, "strain_J": 0.000446, "dissipated_J": 0.008979, "external_work_J": 0.050821,
+            "max_strain_recorded": 0.01}
+    assert all(c.passed for c in dynamic_checks(good, 0.3))
+    bad = {**good, "kinetic_J": good["kinetic_J"] + 0.05 * good["external_work_J"]}
+    assert [c.name for c in dynamic_checks(bad, 0.3) if not c.passed] == ["energy balance"]
