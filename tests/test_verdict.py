@@ -95,3 +95,13 @@ def test_the_energy_balance_of_a_dynamic_run():
     assert all(c.passed for c in dynamic_checks(good, 0.3))
     bad = {**good, "kinetic_J": good["kinetic_J"] + 0.05 * good["external_work_J"]}
     assert [c.name for c in dynamic_checks(bad, 0.3) if not c.passed] == ["energy balance"]
+
+
+def test_the_renders_colour_range_ends_at_a_high_percentile():
+    """One 2.9 MPa outlier among 1-3 kPa pressures: the colour range ends near 3 kPa, the true maximum is kept."""
+    import numpy as np
+
+    from fabricfem.wear.recorder import colour_top
+    frames = [np.linspace(1e3, 3e3, 500), np.concatenate([np.zeros(100), np.linspace(1e3, 3e3, 499), [2.9e6]])]
+    top, largest = colour_top(frames)
+    assert 2.9e3 < top < 3.1e3 and largest == 2.9e6

@@ -20,6 +20,19 @@ from fabricfem import io as fio
 from fabricfem.wear.outputs import body_surface, plot_torque, render_skin_pressure, skin_pressure, write_sto
 
 
+COLOUR_PERCENTILE = 99.0   # the renders' colour range ends at this percentile of the pressures in contact
+
+
+def colour_top(frames: list[np.ndarray]) -> tuple[float, float]:
+    """(the COLOUR_PERCENTILE-th percentile of the positive skin pressures over `frames`, their largest) [Pa]: one
+    outlier record does not darken every frame; the true maximum is stated beside the colour bar."""
+    values = np.concatenate([np.asarray(f, dtype=float).ravel() for f in frames]) if frames else np.zeros(0)
+    positive = values[values > 0.0]
+    if not len(positive):
+        return 0.0, 0.0
+    return float(np.percentile(positive, COLOUR_PERCENTILE)), float(positive.max())
+
+
 class WearRecorder:
     """Writes the records of one WearRun into `out` (all ranks construct it and call `record` and `close`);
     `render_at`: record coordinates of the pressure renders."""
@@ -119,10 +132,12 @@ class WearRecorder:
                   {f"{name}_moment": [s.torques[name] for s in history.steps] for name in history.monitors}
                   if history.steps else {}, comm, note)
         if comm.rank == 0 and self.skin_frames:
-            top = max(float(np.max(skin[2], initial=0.0)) for _, _, skin, _ in self.skin_frames) / 1e3
+            top, true_max = colour_top([skin[2] for _, _, skin, _ in self.skin_frames])
+            note = (f" (colours to the {COLOUR_PERCENTILE:g}th percentile {top / 1e3:.3g} kPa; "
+                    f"largest {true_max / 1e3:.3g} kPa)")
             for name, title, (points, triangles, values), garment in self.skin_frames:
-                render_skin_pressure(self.out / name, points, triangles, values / 1e3, title, (0.0, max(top, 1e-9)),
-                                     garment)
+                render_skin_pressure(self.out / name, points, triangles, values / 1e3, title + note,
+                                     (0.0, max(top / 1e3, 1e-9)), garment)
                 self.renders.append(name)
         plot_torque(self.out / "torque.png", history.torque_curves(), f"{history.name} resisting torque",
                     xlabel=self.label)
