@@ -87,7 +87,8 @@ def run_wear_scene(scene: Scene, out: Path, comm=MPI.COMM_WORLD, resume: bool = 
         if resume and not checkpoint.exists():
             raise SceneError(f"resume: no checkpoint in {out}/checkpoint (run the scene without --resume first)")
     return run_wear(run, out, headline, render_at, scene.parsed.output.render, scene.parsed.output.body_samples,
-                    checkpoint, resume, report, parsed.checks, parsed.failure_strain)
+                    checkpoint, resume, report, parsed.checks, parsed.failure_strain,
+                    parsed.output.windows)
 
 
 def build_wear_run(scene: Scene, comm=MPI.COMM_WORLD):

@@ -151,6 +151,9 @@ class OutputSection:
     probe: list | None = doc("[x, y, z] [m] of a node whose displacement is reported", None)
     render: bool = doc("write PNG renders", True)
     body_samples: int = doc("wear: points per ellipsoid ring of the body surfaces", 24)
+    windows: list | None = doc("wear: windows [[a, b], ...] of the motion on the run's axis (elbow or knee angle "
+                               "[deg], else body time [s]) for the windowed means of the monitors (default: an angle "
+                               "axis 20 deg to the end, else the whole motion)", None)
     render_at: list | None = doc("wear: record coordinates (angle [deg] or time [s]) of the pressure renders "
                                  "(default: the thirds of the motion)", None)
 

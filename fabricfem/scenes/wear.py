@@ -149,6 +149,7 @@ def wear_quantities(data: dict) -> dict[str, str]:
     out = {}
     for name in monitors + [spec["name"] for spec in data.get("torque", [])]:
         out.update({f"torque_{name}_{which}_Nm": f"torque_{name}.{which}_Nm" for which in ("peak", "final")})
+        out[f"torque_{name}_window_mean_Nm"] = f"torque_{name}.window_mean_Nm"
     return {**out, "pressure_peak_Pa": "pressure.peak_Pa", "pressure_mean_Pa": "pressure.mean_Pa",
             "max_strain": "max_strain"}
 

@@ -89,6 +89,7 @@ class WearHistory:
     failure: str = field(default="", kw_only=True)
     report: dict = field(default_factory=dict, kw_only=True)     # a scene's report of its final state (rank 0)
     verdict: dict = field(default_factory=dict, kw_only=True)    # the plausibility checks (fabricfem.wear.verdict)
+    statistics: dict = field(default_factory=dict, kw_only=True)  # windowed means, percentile peaks (wear.statistics)
 
     @property
     def completed(self) -> bool:
@@ -183,6 +184,11 @@ class WearHistory:
         out.update(self.report)
         if self.verdict:
             out["verdict"] = self.verdict
+        if self.statistics:
+            out["statistics"] = self.statistics
+            for name in self.monitors:   # the first window's mean, a plain key for plans and sweeps
+                out[f"torque_{name}"]["window_mean_Nm"] = self.statistics[f"torque_{name}"]["mean_Nm"][0] \
+                    if self.statistics["windows"] else None
         return out
 
 

@@ -204,7 +204,9 @@ class GarmentRun:
         """The axis value at body time t [s] (its value at the motion's start before the motion), or None."""
         if self.axis is None:
             return None
-        return self.axis[1](max(t - self.motion_start, 0.0) if phase is None or phase.name == "motion" else 0.0)
+        # rounded to 1e-9 of the axis unit: t = n dt carries round-off the record's nominal coordinate does not
+        return round(self.axis[1](max(t - self.motion_start, 0.0) if phase is None or phase.name == "motion" else 0.0),
+                     9)
 
     def time_at(self, coordinate: float) -> float:
         """Body time [s] of a record coordinate (the inverse of the axis on the motion phase, by bisection of

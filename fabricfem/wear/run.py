@@ -17,6 +17,7 @@ from fabricfem.wear.quasistatic import build_sleeve
 from fabricfem.wear.recorder import WearRecorder
 from fabricfem.wear.sleeve import build_explicit
 from fabricfem.wear.sleeve_implicit import build_implicit
+from fabricfem.wear.statistics import PEAK_PERCENTILE, default_windows, motion_statistics, statistics_rows
 from fabricfem.wear.verdict import DEFAULT_FAILURE_STRAIN, Bounds, verdict, wear_checks
 
 # route name ([route] solver) -> builder of the sleeve's WearRun from its configuration
@@ -43,7 +44,7 @@ def run_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
 def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], render: bool = True,
              body_samples: int = 24, checkpoint=None, resume: bool = False,
              report: Callable[[WearRun, WearHistory], dict | None] | None = None, bounds: Bounds = Bounds(),
-             failure_strain: float = DEFAULT_FAILURE_STRAIN):
+             failure_strain: float = DEFAULT_FAILURE_STRAIN, windows: list | None = None):
     """Run any WearRun with progress lines (rank 0), write the WearRecorder's outputs under `out`, print the
     closing summary (peak and final torque per monitor, pressures, strain, penetration, seam gap) and return the
     history. The explicit engine's runs also take a `checkpoint` (fabricfem.wear.checkpoint.Checkpoint), `resume`
@@ -72,6 +73,12 @@ def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], ren
     history.wall = time.perf_counter() - t0
     checks = wear_checks(history, bounds, failure_strain)
     history.verdict = verdict(checks)
+    windows = default_windows(history, "[deg]" in run.axis_label) if windows is None else windows
+    history.statistics = motion_statistics(history, [tuple(w) for w in windows])
+    if history.statistics:
+        fio.write_csv(out / "statistics.csv", ("quantity", "window_start", "window_end", "window_mean",
+                                               f"p{PEAK_PERCENTILE:g}_abs", "max_abs"),
+                      statistics_rows(history.statistics), comm)
     recorder.close(history)
     if report is not None:          # the scene's own report of the final state (e.g. the compression profile)
         history.report = report(run, history) or {}
@@ -82,6 +89,8 @@ def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], ren
         say(line)
     if "ms_per_step" in history.timings:
         say(f"time per part: {format_breakdown(history.timings)}")
+    for line in format_statistics(history.statistics, run.axis_label):
+        say(line)
     for check in checks:
         if not check.passed:
             say(check.line())
@@ -106,6 +115,21 @@ def interrupt_flag(comm: MPI.Comm):
         yield lambda: "interrupted (SIGINT)" if comm.allreduce(got[0], op=MPI.MAX) else ""
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+def format_statistics(stats: dict, axis_label: str) -> list[str]:
+    """The printed lines of the windowed means and percentile peaks (fabricfem.wear.statistics)."""
+    if not stats:
+        return []
+    unit = axis_label.split("[")[-1].rstrip("]") if "[" in axis_label else ""
+    windows = ", ".join(f"{a:g}-{b:g} {unit}" for a, b in stats["windows"])
+    lines = []
+    for key, entry in stats.items():
+        if key.startswith("torque_"):
+            means = ", ".join(f"{m:.4e}" for m in entry["mean_Nm"])
+            lines.append(f"torque {key[7:]}: mean over {windows}: {means} N m; p{PEAK_PERCENTILE:g} |torque| "
+                         f"{entry['p95_abs_Nm']:.4e} N m (largest {entry['max_abs_Nm']:.4e})")
+    return lines
 
 
 def format_summary(summary: dict) -> list[str]:
