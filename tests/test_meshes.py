@@ -194,6 +194,33 @@ def test_cylindrical_panel_geometry_and_tags(n_around):
     assert n_cells(fm) == n_around * 4
 
 
+@pytest.mark.parametrize("start", [0.0, math.pi])
+def test_quarter_cylinder_panel_from_a_start_angle(start):
+    """cylindrical_panel(angle=pi/2, start=a0): the quarter of the cylinder between the angles a0 and a0 + pi/2
+    about +x from +y towards +z (for a0 = 0 the quarter y, z >= 0, side0 on +y and side1 on +z; for a0 = pi the
+    quarter y, z <= 0): every node on the cylinder and inside the quarter, the straight edges where the angles
+    say, the normal outward."""
+    length, radius = 0.4, 0.1
+    fm = cylindrical_panel(length, radius, math.pi / 2, 4, 2, order=2, start=start)
+    x = fm.mesh.geometry.x
+    assert np.allclose(np.hypot(x[:, 1], x[:, 2]), radius)
+    sign = 1.0 if start == 0.0 else -1.0
+    assert np.all(sign * x[:, 1] >= -1e-12) and np.all(sign * x[:, 2] >= -1e-12)
+    for side, a in (("side0", start), ("side1", start + math.pi / 2)):
+        mid = facet_midpoints(fm, side)
+        assert np.allclose(mid[:, 1:], radius * np.array([math.cos(a), math.sin(a)]), atol=1e-12), side
+        assert tag_length(fm, side) == pytest.approx(length, rel=1e-12)
+    xt = x.T
+    assert np.allclose(np.sum(fm.normal(xt)[1:] * xt[1:], axis=0), radius)
+    assert area(fm) == pytest.approx(math.pi / 2 * radius * length, rel=1e-4)
+
+
+def test_default_cylindrical_panel_is_centred_on_z():
+    """Without `start` the panel stays the roof centred on +z (the former layout)."""
+    fm = cylindrical_panel(1.0, 0.5, 1.0, 4, 2)
+    assert np.allclose(facet_midpoints(fm, "side0")[:, 1:], 0.5 * np.array([math.sin(0.5), math.cos(0.5)]))
+
+
 @pytest.mark.parametrize("angle", [0.0, -1.0, 2 * math.pi, float("nan")])
 def test_cylindrical_panel_bad_angle(angle):
     with pytest.raises(ValueError, match="^angle:"):

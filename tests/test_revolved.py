@@ -1,5 +1,6 @@
 """annulus and spherical_cap: areas against the exact ones, tagged edges of the exact length, the same mesh
 on 1 and 2 ranks; the exported mesh_from_gmsh on a slit plate, whose two sides are read separately."""
+import dolfinx.mesh
 import numpy as np
 import pytest
 import ufl
@@ -70,7 +71,9 @@ def test_same_mesh_on_one_and_two_ranks(name):
 @pytest.mark.parametrize("name, call", [
     ("r_out", lambda: annulus(0.3, 0.1)), ("angle", lambda: annulus(0.1, 0.3, angle=7.0)),
     ("hole_angle", lambda: spherical_cap(1.0, 1.0, 0.0)),
-    ("opening_angle", lambda: spherical_cap(1.0, 0.2, 0.3)), ("warp", lambda: annulus(0.1, 0.3, warp=(0, 0, 1)))])
+    ("opening_angle", lambda: spherical_cap(1.0, 0.2, 0.3)), ("warp", lambda: annulus(0.1, 0.3, warp=(0, 0, 1))),
+    ("angle", lambda: spherical_cap(1.0, 1.0, 0.2, angle=7.0)),
+    ("start", lambda: spherical_cap(1.0, 1.0, 0.2, angle=1.0, start=float("nan")))])
 def test_bad_arguments_name_the_parameter(name, call):
     with pytest.raises(ValueError, match=name):
         call()
@@ -113,3 +116,44 @@ def test_slit_sides_are_read_separately():
     with pytest.raises(ValueError, match="side"):
         model.node_value(point)
     assert np.all(np.isfinite(model.node_value((1.0, 0.5, 0.0))))
+
+
+@pytest.mark.parametrize("gap", [5e-5, 1e-8])
+def test_annulus_keeps_a_narrow_slit(gap):
+    """An angle short of 2 pi by a gap below np.isclose's 6e-5 rad is a slit ring, not a closed one: the edges
+    side0 and side1 (each r_out - r_in long) exist, the area is angle / (2 pi) of the closed ring's at the same
+    resolution (to 1e-6: its segments are shorter by gap / n_around), and the slit's nodes are doubled (n_radial order + 1 more nodes than the closed ring)."""
+    angle = 2.0 * np.pi - gap
+    fm = annulus(R_IN, R_OUT, angle, n_radial=2, n_around=12, comm=MPI.COMM_SELF)
+    ring = annulus(R_IN, R_OUT, n_radial=2, n_around=12, comm=MPI.COMM_SELF)
+    got = measures(fm)
+    assert set(fm.tags) == {"inner", "outer", "side0", "side1"}
+    assert got["side0"] == pytest.approx(R_OUT - R_IN, rel=1e-12)
+    assert got["side1"] == pytest.approx(R_OUT - R_IN, rel=1e-12)
+    assert got["area"] == pytest.approx(angle / (2.0 * np.pi) * measures(ring)["area"], rel=1e-6)
+    assert len(fm.mesh.geometry.x) == len(ring.mesh.geometry.x) + 2 * 2 + 1
+
+
+@pytest.mark.parametrize("start", [0.0, np.pi / 2])
+def test_quarter_of_a_hemisphere_from_an_azimuth_range(start):
+    """spherical_cap(angle=pi/2, start=a0): the quarter of the hemisphere with a hole between the azimuths a0 and
+    a0 + pi/2 (the octant x, y, z >= 0 for a0 = 0; x <= 0 <= y for a0 = pi/2): every node on the sphere and
+    inside the quarter, side0 in the meridian plane of a0 and side1 in that of a0 + pi/2 (each a meridian arc
+    R (opening - hole) long), a quarter of the area; the normal outward and the warp along the meridian."""
+    fm = spherical_cap(R, OPENING, HOLE, n_polar=4, n_around=6, angle=np.pi / 2, start=start, comm=MPI.COMM_SELF)
+    x = fm.mesh.geometry.x
+    assert np.allclose(np.linalg.norm(x, axis=1), R, rtol=0, atol=1e-12)
+    azimuth = np.mod(np.arctan2(x[:, 1], x[:, 0]) - start + 1e-9, 2.0 * np.pi) - 1e-9
+    assert azimuth.min() >= -1e-9 and azimuth.max() <= np.pi / 2 + 1e-9
+    assert x[:, 2].min() >= -1e-12
+    got = measures(fm)
+    assert got["area"] == pytest.approx(np.pi / 2 * R ** 2 * (np.cos(HOLE) - np.cos(OPENING)), rel=1e-4)
+    assert set(fm.tags) == {"hole", "rim", "side0", "side1"}
+    for tag, a in (("side0", start), ("side1", start + np.pi / 2)):
+        assert got[tag] == pytest.approx(R * (OPENING - HOLE), rel=1e-4)
+        mid = dolfinx.mesh.compute_midpoints(fm.mesh, 1, fm.facets(tag))
+        assert np.allclose(mid[:, 0] * np.sin(a) - mid[:, 1] * np.cos(a), 0.0, atol=1e-12)     # in the plane
+        assert np.all(mid[:, 0] * np.cos(a) + mid[:, 1] * np.sin(a) > 0.0)                     # on its half
+    xt = x.T
+    assert np.allclose(np.sum(fm.normal(xt) * xt, axis=0), R)
+    assert np.allclose(fm.warp(xt)[2], -np.sin(np.arccos(x[:, 2] / R)))

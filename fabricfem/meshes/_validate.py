@@ -31,6 +31,17 @@ def non_negative(name: str, value: float, kind: str = "number") -> float:
     return v
 
 
+def finite(name: str, value: float, kind: str = "angle in radians") -> float:
+    """``value`` as a float; it must be a finite real number (not a bool), else ValueError naming ``name``."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: must be a finite {kind}, got {value!r}") from None
+    if isinstance(value, bool) or not math.isfinite(v):
+        raise ValueError(f"{name}: must be a finite {kind}, got {value!r}")
+    return v
+
+
 def positive_length(name: str, value: float) -> float:
     """``value`` as a float; it must be finite and > 0 (metres)."""
     return positive(name, value, "length in metres")

@@ -93,17 +93,20 @@ def tube(length: float, radius: float, n_around: int, n_along: int, cell: str = 
 
 def cylindrical_panel(length: float, radius: float, angle: float, n_around: int, n_along: int,
                       cell: str = "quadrilateral", comm: MPI.Comm = MPI.COMM_WORLD, order: int = 2, *,
-                      ghost_mode: GhostMode = GhostMode.shared_facet) -> FabricMesh:
+                      start: float | None = None, ghost_mode: GhostMode = GhostMode.shared_facet) -> FabricMesh:
     """Mesh of the open cylindrical panel ``0 <= x <= length``, ``y^2 + z^2 = radius^2``, spanning ``angle``
-    [rad] (< 2 pi) symmetrically about the +z axis (a roof: its crown at (x, 0, radius)).
+    [rad] (< 2 pi) about +x from the angle ``start`` [rad] (measured about +x from +y towards +z) to
+    start + angle; by default (``start`` None) symmetrically about the +z axis, start = pi/2 - angle/2 (a
+    roof: its crown at (x, 0, radius)). A quarter of the cylinder y, z >= 0: angle = pi/2, start = 0.
 
     Same construction, material frame and arguments as :func:`tube` (``n_around`` elements across the
     panel, at least 3); edge tags ``end0`` (x = 0), ``end1`` (x = length), ``side0`` (the straight edge
-    at the angle pi/2 - angle/2 from +y, i.e. y > 0) and ``side1`` (y < 0).
+    at the angle ``start``; by default y > 0) and ``side1`` (at start + angle; by default y < 0).
     """
     if not (isinstance(angle, (int, float)) and 0.0 < angle < 2.0 * np.pi):
         raise ValueError(f"angle: must lie in (0, 2 pi) radians, got {angle!r}")
-    sector = (0.5 * np.pi - 0.5 * angle, 0.5 * np.pi + 0.5 * angle)
+    a0 = 0.5 * np.pi - 0.5 * angle if start is None else _validate.finite("start", start)
+    sector = (a0, a0 + angle)
     return _cylinder(length, radius, n_around, n_along, cell, comm, order, ghost_mode, sector, "cylindrical_panel")
 
 
