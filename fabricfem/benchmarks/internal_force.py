@@ -16,7 +16,6 @@ Writes internal_force.csv and internal_force.png under `out` (rank 0). Milliseco
 """
 from __future__ import annotations
 
-import csv
 import statistics
 import time
 from pathlib import Path
@@ -25,6 +24,7 @@ import numpy as np
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from fabricfem import io as fio
 from fabricfem.benchmarks.wear_speed import MESHES
 from fabricfem.forms import naghdi_kernel
 from fabricfem.forms.jit import KERNEL_FLAGS
@@ -119,10 +119,7 @@ def _write(out: Path, rows: list[dict]) -> None:
     import matplotlib.pyplot as plt   # noqa: PLC0415 (optional plotting package)
 
     out.mkdir(parents=True, exist_ok=True)
-    with open(out / "internal_force.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=COLUMNS)
-        writer.writeheader()
-        writer.writerows(rows)
+    fio.write_csv(out / "internal_force.csv", COLUMNS, rows, MPI.COMM_SELF)
     meshes = list(dict.fromkeys(r["mesh"] for r in rows))
     fig, axes = plt.subplots(len(meshes), 1, figsize=(6.4, 2.2 * len(meshes) + 0.4), squeeze=False)
     for ax, mesh in zip(axes[:, 0], meshes):

@@ -51,6 +51,7 @@ from pathlib import Path
 import numpy as np
 from mpi4py import MPI
 
+from fabricfem import io as fio
 from fabricfem.contact.explicit import numpy_contact
 from fabricfem.forms.jit import DOLFINX_DEFAULT_FLAGS, KERNEL_FLAGS, kernel_flags
 from fabricfem.scenes.run import build_wear_run
@@ -257,10 +258,7 @@ def wear_bench(out: str | Path = "results/bench", meshes: tuple[str, ...] = ("I"
     if comm.rank == 0:
         out = Path(out)
         out.mkdir(parents=True, exist_ok=True)
-        with open(out / "wear_speed.csv", "w", newline="") as f:
-            w = csv.writer(f)
-            w.writerow(COLUMNS)
-            w.writerows(rows)
+        fio.write_csv(out / "wear_speed.csv", COLUMNS, rows, comm)
         plot(out / "wear_speed.png", rows)
     for r in rows:
         say(f"{r[0]} {r[1]:>15s}: {r[6]:7.1f} s, {r[4]} steps, {r[5]:.2f} ms/step, speed-up {r[7]:.2f} "
