@@ -7,6 +7,7 @@ options, default output folder and handler:
     study unit-cell       [Man2006, sec. 4.3.5], Figs. 21-28, 32-33: the woven unit cell
     study fabric-link     a membrane law fitted to the unit cell with contact, used on the sleeve
     study pants           [Man2006, sec. 5.4]: 1 and 2 mm pants, mu 0.1 and 0.5, on a walk
+    study convergence     a wear scene on a ladder of garment meshes: differences to the finest, extrapolation
 
 The studies with --ranks-per-variant run their variants as one batch (as `fabricfem sweep`; a rerun resumes);
 option values are checked before any run (ValueError naming the option: exit 2).
@@ -20,9 +21,12 @@ from pathlib import Path
 
 from mpi4py import MPI
 
+from fabricfem import scenes as scene_module
 from fabricfem.cli.common import Subparsers, add_command, float_list, say, split_list
 from fabricfem.scenes.batch import groups_of
+from fabricfem.scenes.build import scene_name
 from fabricfem.studies import unit_cell as unit_cell_study
+from fabricfem.studies.convergence import run_convergence
 from fabricfem.studies.fabric_link import OUT_DIR, run_fabric_link
 from fabricfem.studies.pants import run_pants_study
 from fabricfem.studies.sleeve import compare_figures, run_methods, run_study, variants
@@ -160,6 +164,19 @@ def _add_sleeve_studies(names: Subparsers) -> dict[str, argparse.ArgumentParser]
     return {"sleeve": sleeve, "sleeve-fit": fit, "sleeve-methods": methods}
 
 
+def _convergence(args: argparse.Namespace) -> int:
+    """study convergence: fabricfem.studies.convergence.run_convergence of a wear scene."""
+    _check_groups(args)
+    scene = scene_module.load(args.scene)
+    out = args.out or f"results/{scene_name(scene)}_convergence"
+    rows = run_convergence(scene, out, args.levels, args.ratio, args.quick, ranks_per_variant=args.ranks_per_variant)
+    for row in rows:
+        say(f"  level {row['level']} ({row['mesh']}) {row['monitor']}: curve {100 * row['curve_rms_difference']:.2f} % "
+            f"RMS from the finest, window mean {row['window_mean_Nm']:.4e} N m ({row['note']})")
+    say(f"wrote {out}/convergence.csv and convergence.png")
+    return 0
+
+
 def _add_other_studies(names: Subparsers) -> dict[str, argparse.ArgumentParser]:
     """unit-cell, fabric-link and pants with their own options; returns them by name."""
     cell = add_command(names, "study unit-cell", _unit_cell,
@@ -177,7 +194,14 @@ def _add_other_studies(names: Subparsers) -> dict[str, argparse.ArgumentParser]:
     link = add_command(names, "study fabric-link", _fabric_link,
                        help="a membrane law fitted to the unit cell with contact, used on the sleeve")
     pants = add_command(names, "study pants", _pants, help="[Man2006, sec. 5.4]: pants on a walk")
-    return {"unit-cell": cell, "fabric-link": link, "pants": pants}
+    convergence = add_command(names, "study convergence", _convergence,
+                              help="a wear scene on a ladder of garment meshes: differences to the finest, "
+                                   "extrapolation (error bars)")
+    convergence.add_argument("scene", help="the wear scene file (TOML); its mesh is the coarsest level")
+    convergence.add_argument("--levels", type=int, default=3, help="mesh levels (default %(default)s)")
+    convergence.add_argument("--ratio", type=float, default=1.5,
+                             help="refinement ratio between levels (default %(default)s)")
+    return {"unit-cell": cell, "fabric-link": link, "pants": pants, "convergence": convergence}
 
 
 # study -> (default --out, takes --quick, takes --ranks-per-variant)
@@ -186,7 +210,8 @@ COMMON = {"sleeve": ("results/sleeve_study", True, True),
           "sleeve-methods": ("results/sleeve_methods_gravity.csv", False, True),
           "unit-cell": ("results/unit_cell", True, True),
           "fabric-link": (OUT_DIR, True, False),
-          "pants": ("results/pants_study", True, True)}
+          "pants": ("results/pants_study", True, True),
+          "convergence": (None, True, True)}
 
 
 def add_study_command(sub: Subparsers) -> None:

@@ -116,9 +116,10 @@ def read_summary(folder: Path) -> dict:
 
 
 def completed(folder: Path, sha256: str) -> bool:
-    """True when the folder holds a completed run (summary.json: status and scene hash) of the scene `sha256`."""
+    """True when the folder holds a completed run (summary.json: status "completed", with or without warnings, and
+    scene hash) of the scene `sha256`."""
     summary = read_summary(folder)
-    return summary.get("status") == "completed" and summary.get("scene_sha256") == sha256
+    return str(summary.get("status", "")).startswith("completed") and summary.get("scene_sha256") == sha256
 
 
 def cell(value) -> str:
