@@ -134,19 +134,26 @@ def xdmf_fields(path: str | Path) -> dict[str, list[float]]:
     return fields
 
 
-def write_csv(path: str | Path, header: Sequence[str], rows: Iterable[Sequence | Mapping], comm=MPI.COMM_WORLD):
-    """CSV table written by rank 0 (its folder made): the header line, then one line per row.
+def write_csv(path: str | Path, header: Sequence[str], rows: Iterable[Sequence | Mapping], comm=MPI.COMM_WORLD,
+              comment: str | None = None):
+    """CSV table written by rank 0 (its folder made): an optional "# comment" line, the header line, then one line
+    per row; written to a temporary file and renamed, so an interrupted write leaves the previous file whole.
 
     A row is a sequence of values in the header's order, or a mapping from header names to values (written in
     the header's order, a missing name as an empty field, as csv.DictWriter; a name not in the header raises
     ValueError)."""
     if comm.rank != 0:
         return
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    with open(path, "w", newline="") as f:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    partial = path.with_name(path.name + ".partial")
+    with open(partial, "w", newline="") as f:
+        if comment is not None:
+            f.write(f"# {comment}\n")
         writer = csv.writer(f)
         writer.writerow(header)
         writer.writerows(_in_header_order(row, header) for row in rows)
+    os.replace(partial, path)
 
 
 def _in_header_order(row: Sequence | Mapping, header: Sequence[str]) -> Sequence:

@@ -71,20 +71,27 @@ class WearMotionSection:
     trail_clearance: float = doc("obstacle_walk: trail foot's clearance over the obstacle [m]", 0.05)
     crossing_speed: float = doc("obstacle_walk: pelvis speed during the crossing stride [m/s]", 0.6)
     path: str | None = doc("file: the motion file (.c3d, .trc, .bvh, .csv), relative to the scene file", None)
-    units: str | None = doc("file: length unit of the file (mm, cm, m, in; default the file's metadata; BVH: "
-                            "required)", None)
+    units: str | float | None = doc("file: length unit of the file: mm, cm, m, in, or a number of metres per file "
+                                    "unit (CMU BVH: 0.0254 / 0.45 = 0.0564444); default the file's metadata; BVH: "
+                                    "required", None)
     up: str | None = doc("file: the file's up axis (y: mapped to z; default the reader's)", None)
     fill_gaps: bool = doc("file: fill marker gaps by interpolation instead of refusing them", False)
     blend_time: float = doc("walking, file (lower body): the body stands during the donning and enters the motion "
                             "over this time [s] (fabricfem.body.blend; 0: it starts in the motion's first pose)", 0.0)
-    mapping: dict | None = doc("file: body joint/marker name -> file marker or joint name (default: the same "
-                               "names)", None)
+    mapping: dict | None = doc("file: body joint/marker name -> the file's marker or joint name, or a table "
+                               "{marker = \"M\"} or {mean = [\"A\", \"B\"]} (their mean) with an optional offset = "
+                               "[dx, dy, dz] [m] (body frame: x forward, y left, z up); unmapped points: the same "
+                               "names", None)
+    place: str | None = doc("explicit engine: \"garment\" moves the whole motion so that the centre of volume of the "
+                            "body's first pose is at the centre of the garment's reference bounding box (the lower "
+                            "body keeps its height: horizontally only); default: where the file or preset puts "
+                            "it (docs/bodies.md)", None)
 
 
 @dataclasses.dataclass(frozen=True)
 class WearDonningSection:
     """[donning]: putting the garment on. grow: the body starts at `start` x its transverse radii and grows to full
-    size over `time` [s] (explicit) or in `steps` quasi-static increments (the compression route)."""
+    size over `time` [s] (the compression sleeve: fabricfem.wear.compression)."""
 
     method: str = doc("none | grow", "none")
     remove: list | None = doc("segments switched off while the garment goes on (the thesis removes the feet)", None)
@@ -100,8 +107,6 @@ class WearDonningSection:
     belt_time: float = doc("the belt's tension ramps from 0 over this time [s]", 0.0)
     start: float | None = doc("grow: starting size of the body's transverse radii (0, 1]", None)
     time: float = doc("grow, explicit: growth time [s]", 0.1)
-    steps: int = doc("grow, quasistatic: growth increments", 10)
-    tolerance: float = doc("grow, quasistatic: penetration tolerance of the augmented Lagrangian [m]", 1e-7)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -23,7 +23,6 @@ from __future__ import annotations
 
 import csv
 import hashlib
-import io
 import json
 import math
 import time
@@ -36,8 +35,8 @@ from fabricfem import io as fio
 from fabricfem.materials import positive_number
 from fabricfem.scenes.batch import Job, check, run_batch
 from fabricfem.wear.config import SleeveConfig
-from fabricfem.wear.outputs import plot_torque, torque_rms_error
 from fabricfem.wear.contract import WearHistory, WearStep
+from fabricfem.wear.outputs import plot_torque, torque_rms_error
 from fabricfem.wear.run import build_run, run_sleeve
 from fabricfem.wear.sleeve_implicit import run_implicit
 
@@ -238,12 +237,8 @@ def _variant_path(out: Path, cfg: SleeveConfig) -> Path:
 def _save_variant(out: Path, cfg: SleeveConfig, h: WearHistory):
     """Write a finished variant (its configuration on the first line, then its curve rows) so that an
     interrupted study resumes without rerunning it (`_load_variant`)."""
-    text = io.StringIO()
-    text.write(f"# {repr(sorted(cfg.flat().items()))} | wall {h.wall:.1f} | failure {h.failure}\n")
-    w = csv.writer(text)
-    w.writerow(CURVE_HEADER)
-    w.writerows(curve_rows(h))
-    fio.write_text_whole(_variant_path(out, cfg), text.getvalue())
+    fio.write_csv(_variant_path(out, cfg), CURVE_HEADER, curve_rows(h), MPI.COMM_SELF,
+                  comment=f"{repr(sorted(cfg.flat().items()))} | wall {h.wall:.1f} | failure {h.failure}")
 
 
 def _load_variant(out: Path, cfg: SleeveConfig) -> WearHistory | None:
@@ -397,11 +392,7 @@ def run_methods(out: str | Path = "results/sleeve_methods.csv", mesh: str = "III
     check(run_batch(jobs, comm, ranks_per_variant, "sleeve methods"), "sleeve methods", str(folder))
     rows = [saved(method) for method in methods]
     if comm.rank == 0:
-        out.parent.mkdir(parents=True, exist_ok=True)
-        with open(out, "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=METHOD_COLUMNS)
-            w.writeheader()
-            w.writerows(rows)
+        fio.write_csv(out, METHOD_COLUMNS, rows, MPI.COMM_SELF)
         print(methods_markdown(rows), flush=True)
     return rows
 
