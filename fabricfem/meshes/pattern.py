@@ -11,10 +11,12 @@ The data model (SI units, metres) and its readers; meshing and placement live in
   and ``rotation`` (extrinsic XYZ Euler angles [deg]: ``R = Rz Ry Rx``, as ``scipy Rotation.from_euler('xyz',
   degrees=True)``); the ``grain`` (warp) direction, a unit 2-vector in the panel plane.
 * :class:`Stitch`: two (panel, edge index) sewn together end to end in opposite directions (the start of
-  one edge meets the end of the other).
+  one edge meets the end of the other); ``twisted`` marks a stitch whose edges are meant to be placed running
+  the same way (a twisted seam), which :func:`check_pattern` refuses otherwise.
 * :class:`Pattern`: panels by name and stitches. Constructing one checks its structure (ValueError naming
   the item); :func:`check_pattern` adds the geometric checks (self-intersecting outlines, stitched edges of
-  different lengths) that the mesher runs before meshing.
+  different lengths, twisted stitches) that the mesher runs before meshing; :func:`check_held_stitches` refuses
+  held edges that a stitch would have to pull together.
 
 Readers: :func:`read_garmentcode` (JSON of [Korosteleva2021]), :func:`pattern_from_dict` and
 :func:`read_pattern_toml` (a declaration in plain SI metres), :func:`pattern_to_toml` (its inverse).
@@ -27,7 +29,7 @@ from __future__ import annotations
 import json
 import math
 import tomllib
-from collections.abc import Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -41,6 +43,7 @@ __all__ = [
     "Pattern",
     "Stitch",
     "bezier_length",
+    "check_held_stitches",
     "check_pattern",
     "edge_control_points",
     "edge_length",
@@ -54,6 +57,8 @@ __all__ = [
 ]
 
 STITCH_LENGTH_TOLERANCE = 0.02   # default relative length difference allowed between stitched edges
+TWIST_COSINE = -0.5   # a stitch whose edges, as it runs them, have a mean direction cosine below this is twisted
+PlaceMap = Callable[[np.ndarray], np.ndarray]   # panel points (n, 2) [m] -> placed points (n, 3) [m]
 _GAUSS_T, _GAUSS_W = np.polynomial.legendre.leggauss(48)
 _GAUSS_T, _GAUSS_W = 0.5 * (_GAUSS_T + 1.0), 0.5 * _GAUSS_W     # on [0, 1]
 
@@ -146,10 +151,12 @@ class Panel:
 
 @dataclass(frozen=True)
 class Stitch:
-    """Edge ``a = (panel, edge index)`` sewn to edge ``b`` end to end in opposite directions."""
+    """Edge ``a = (panel, edge index)`` sewn to edge ``b`` end to end in opposite directions; ``twisted``: the
+    edges are meant to be placed running the same way (else :func:`check_pattern` refuses such a stitch)."""
 
     a: tuple[str, int]
     b: tuple[str, int]
+    twisted: bool = False
 
     @property
     def name(self) -> str:
@@ -299,12 +306,16 @@ def _self_intersection(panel: Panel) -> tuple[int, int] | None:
     return int(owner[a]), int(owner[b])
 
 
-def check_pattern(pattern: Pattern, stitch_length_tolerance: float = STITCH_LENGTH_TOLERANCE) -> None:
+def check_pattern(pattern: Pattern, stitch_length_tolerance: float = STITCH_LENGTH_TOLERANCE,
+                  placements: Mapping[str, PlaceMap] | None = None) -> None:
     """Refuse a pattern that cannot be meshed and sewn (ValueError naming the item).
 
     Checks, beyond those of construction: no panel outline intersects itself (segment-segment tests on a
-    fine polyline of the outline, 64 segments per curved edge), and the two edges of each stitch have exact
-    lengths L_a, L_b with |L_a - L_b| <= ``stitch_length_tolerance`` max(L_a, L_b).
+    fine polyline of the outline, 64 segments per curved edge), the two edges of each stitch have exact
+    lengths L_a, L_b with |L_a - L_b| <= ``stitch_length_tolerance`` max(L_a, L_b), and no stitch is twisted
+    unless marked so (:func:`stitch_alignment` below TWIST_COSINE = -0.5: its edges, placed by ``placements``
+    (panel name -> map of panel points (n, 2) to 3-D (n, 3) [m]; default each panel's rigid placement), run
+    the same way, so joining them in opposite directions would cross the seam over).
     """
     tol = float(stitch_length_tolerance)
     if not (math.isfinite(tol) and tol >= 0.0):
@@ -319,6 +330,76 @@ def check_pattern(pattern: Pattern, stitch_length_tolerance: float = STITCH_LENG
             raise ValueError(f"stitch {s.name}: edge {s.a[1]} of panel {s.a[0]!r} is {la:.6g} m long and edge "
                              f"{s.b[1]} of panel {s.b[0]!r} {lb:.6g} m; they differ by "
                              f"{abs(la - lb) / max(la, lb):.3g} relative, more than stitch_length_tolerance = {tol:g}")
+        cosine = stitch_alignment(pattern, s, placements)
+        if cosine < TWIST_COSINE and not s.twisted:
+            raise ValueError(
+                f"stitch {s.name}: edge {s.a[1]} of panel {s.a[0]!r} and edge {s.b[1]} of panel {s.b[0]!r} run the "
+                f"same way where they are placed (mean direction cosine {-cosine:.2f}), but a stitch joins its "
+                f"edges in opposite directions (the start of one meets the end of the other), so this seam is "
+                f"twisted; stitch the other edge, turn a panel over, or, if the twist is meant, mark the stitch (TOML "
+                f"pattern): "
+                f'["{s.a[0]}", {s.a[1]}, "{s.b[0]}", {s.b[1]}, {{twisted = true}}]')
+
+
+def _placed_edge(pattern: Pattern, side: tuple[str, int], placements: Mapping[str, PlaceMap] | None,
+                 n: int = 17) -> np.ndarray:
+    """Points (n, 3) [m] of edge ``side`` at n equal steps of its Bezier parameter, from its start, placed by
+    ``placements[panel]`` or else by the panel's rigid placement x = R (x, y, 0) + translation."""
+    panel = pattern.panels[side[0]]
+    xy = _bezier_points(edge_control_points(panel, int(side[1])), np.linspace(0.0, 1.0, n))
+    place = (placements or {}).get(side[0])
+    if place is not None:
+        return np.asarray(place(xy), dtype=np.float64)
+    return xy @ panel.rotation_matrix()[:, :2].T + panel.translation
+
+
+def stitch_alignment(pattern: Pattern, stitch: Stitch, placements: Mapping[str, PlaceMap] | None = None) -> float:
+    """How the two edges of ``stitch`` run where they are placed, as the stitch runs them (a from its start, b
+    from its end): sum_i t_a,i . t_b,i / sum_i |t_a,i| |t_b,i| over the chords t of 16 equal parameter steps,
+    in [-1, 1]. +1: the edges run opposite ways and the stitch joins them straight (the start of a at the end of
+    b); -1: they run the same way and the stitch crosses the seam over (twisted); near 0: placed across each
+    other. ``placements`` as in :func:`check_pattern`."""
+    ta = np.diff(_placed_edge(pattern, stitch.a, placements), axis=0)
+    tb = np.diff(_placed_edge(pattern, stitch.b, placements)[::-1], axis=0)
+    weight = float(np.sum(np.linalg.norm(ta, axis=1) * np.linalg.norm(tb, axis=1)))
+    return float(np.sum(ta * tb)) / max(weight, 1e-300)
+
+
+def check_held_stitches(pattern: Pattern, held: Iterable[tuple[str, int]],
+                        stitch_length_tolerance: float = STITCH_LENGTH_TOLERANCE,
+                        placements: Mapping[str, PlaceMap] | None = None) -> None:
+    """Refuse held edges that a stitch would have to pull together (ValueError naming the stitch and the distance).
+
+    A node on a held edge does not move; a stitch ties the nodes of its edges pairwise (the start of a to the end
+    of b, and so on). Where both nodes of a pair are held (their edge is held, or it ends at a vertex of a held
+    edge of its panel) at placed positions farther apart than ``stitch_length_tolerance`` max(L_a, L_b) [m], the
+    seam cannot close. Checked at the edges' ends and, where both stitched edges are held, at 17 points along
+    them. ``held``: (panel, edge index) pairs; ``placements`` as in :func:`check_pattern`.
+    """
+    held = {(p, int(e)) for p, e in held}
+    vertices = {(p, v) for p, e in held for v in (pattern.panels[p].edges[e].start, pattern.panels[p].edges[e].end)}
+    for s in pattern.stitches:
+        sides, masks = [], []
+        for side, first in ((s.a, "start"), (s.b, "end")):
+            edge = pattern.panels[side[0]].edges[int(side[1])]
+            points = _placed_edge(pattern, side, placements)
+            mask = np.full(len(points), (side[0], int(side[1])) in held)
+            mask[[0, -1]] |= [(side[0], edge.start) in vertices, (side[0], edge.end) in vertices]
+            sides.append(points if first == "start" else points[::-1])
+            masks.append(mask if first == "start" else mask[::-1])
+        both = masks[0] & masks[1]
+        if not both.any():
+            continue
+        gap = np.where(both, np.linalg.norm(sides[0] - sides[1], axis=1), 0.0)
+        worst = int(np.argmax(gap))
+        limit = float(stitch_length_tolerance) * max(edge_length(pattern.panels[p], e) for p, e in (s.a, s.b))
+        if gap[worst] > limit:
+            where = {0: f"the start of edge {s.a[1]} of panel {s.a[0]!r}",
+                     len(gap) - 1: f"the end of edge {s.a[1]} of panel {s.a[0]!r}"}.get(worst, "along its edges")
+            raise ValueError(f"stitch {s.name}: held nodes that it sews together are {gap[worst]:.3g} m apart (at "
+                             f"{where}); held nodes do not move, so the seam cannot close (allowed: the stitch "
+                             f"length tolerance x the edge length = {limit:.3g} m); hold one side only, or "
+                             f"place the held edges where they meet")
 
 
 # ---------------------------------------------------------------- readers
@@ -385,7 +466,7 @@ def read_garmentcode(path: str | Path) -> Pattern:
 def pattern_from_dict(d: Mapping[str, Any]) -> Pattern:
     """A pattern from its declaration in plain SI metres (the TOML layout)::
 
-        stitches = [["front", 1, "back", 3]]         # panel a, edge a, panel b, edge b
+        stitches = [["front", 1, "back", 3]]         # panel a, edge a, panel b, edge b[, {twisted = true}]
         [panels.front]
         vertices = [[0.0, 0.0], [0.3, 0.0], [0.3, 0.6], [0.0, 0.6]]        # m
         edges = [[0, 1], [1, 2, {curvature = [0.5, 0.1]}], [2, 3], [3, 0]] # optional: default closed polygon
@@ -418,9 +499,12 @@ def pattern_from_dict(d: Mapping[str, Any]) -> Pattern:
                              raw.get("grain", np.array([0.0, 1.0])))
     stitches = []
     for k, s in enumerate(d.get("stitches", [])):
-        if len(s) != 4:
-            raise ValueError(f"stitch {k}: must be [panel_a, edge_a, panel_b, edge_b], got {s!r}")
-        stitches.append(Stitch((str(s[0]), s[1]), (str(s[2]), s[3])))
+        options = s[4] if len(s) == 5 and isinstance(s[4], Mapping) else {}
+        if len(s) not in (4, 5) or (len(s) == 5 and (set(options) != {"twisted"}
+                                                     or not isinstance(options["twisted"], bool))):
+            raise ValueError(f"stitch {k}: must be [panel_a, edge_a, panel_b, edge_b] or [panel_a, edge_a, panel_b, "
+                             f"edge_b, {{twisted = true}}], got {s!r}")
+        stitches.append(Stitch((str(s[0]), s[1]), (str(s[2]), s[3]), bool(options.get("twisted", False))))
     return Pattern(panels, stitches)
 
 
@@ -441,7 +525,9 @@ def pattern_to_dict(pattern: Pattern) -> dict[str, Any]:
                  for e in p.edges]
         panels[name] = {"vertices": p.vertices.tolist(), "edges": edges, "translation": p.translation.tolist(),
                         "rotation": p.rotation.tolist(), "grain": p.grain.tolist()}
-    return {"stitches": [[s.a[0], int(s.a[1]), s.b[0], int(s.b[1])] for s in pattern.stitches], "panels": panels}
+    stitches = [[s.a[0], int(s.a[1]), s.b[0], int(s.b[1])] + ([{"twisted": True}] if s.twisted else [])
+                for s in pattern.stitches]
+    return {"stitches": stitches, "panels": panels}
 
 
 def _toml_value(v: Any) -> str:
@@ -451,6 +537,8 @@ def _toml_value(v: Any) -> str:
         return "[" + ", ".join(_toml_value(x) for x in v) + "]"
     if isinstance(v, str):
         return json.dumps(v)
+    if isinstance(v, bool):
+        return "true" if v else "false"
     return repr(v)   # ints, and floats with round-trip precision
 
 

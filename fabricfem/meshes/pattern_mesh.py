@@ -275,8 +275,8 @@ def mesh_pattern(pattern: Pattern, h: float, order: int = 2, cell: str = "quadri
                  ghost_mode: GhostMode = GhostMode.shared_facet) -> GarmentMesh:
     """Mesh every panel of ``pattern`` flat, place it in 3-D, and pair the nodes of stitched edges.
 
-    Collective on ``comm`` (gmsh runs on its rank 0). The pattern is checked first (:func:`check_pattern`);
-    nothing is meshed if it is refused.
+    Collective on ``comm`` (gmsh runs on its rank 0). The pattern is checked first (:func:`check_pattern`, a
+    twisted stitch judged where ``placements`` put its edges); nothing is meshed if it is refused.
 
     Args:
         pattern: the panels and stitches (metres).
@@ -298,12 +298,12 @@ def mesh_pattern(pattern: Pattern, h: float, order: int = 2, cell: str = "quadri
     h = _validate.positive_length("h", h)
     order = _validate.choice("order", _validate.count("order", order), (1, 2))
     cell = _validate.choice("cell", cell, _validate.CELLS)
-    check_pattern(pattern, stitch_length_tolerance)
     placements = dict(placements or {})
     unknown = set(placements) - set(pattern.panels)
     if unknown:
         raise ValueError(f"placements: no panel named {sorted(unknown)}; panels: {sorted(pattern.panels)}")
     places = {name: placements.get(name) or RigidPlacement.of(p) for name, p in pattern.panels.items()}
+    check_pattern(pattern, stitch_length_tolerance, {name: place.map for name, place in places.items()})
     counts = _segment_counts(pattern, h, even=cell == "quadrilateral")
     collected: dict = {}
     mesh, cell_tags, facet_tags, names = gmsh_to_dolfinx(

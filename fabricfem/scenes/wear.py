@@ -32,7 +32,7 @@ from fabricfem.contact.seams import SeamSpec
 from fabricfem.dynamics.stability import step_safety
 from fabricfem.fabrics import load_fabric
 from fabricfem.meshes import tube
-from fabricfem.meshes.pattern import Panel, check_pattern, read_garmentcode, read_pattern_toml
+from fabricfem.meshes.pattern import Panel, check_held_stitches, check_pattern, read_garmentcode, read_pattern_toml
 from fabricfem.meshes.pattern_mesh import RigidPlacement, mesh_pattern
 from fabricfem.patterns import pattern_path
 from fabricfem.scenes.contract import WearScene
@@ -364,16 +364,24 @@ def read_pattern(wear: WearScene, scene_path: Path | None):
 
 
 def check_garment(wear: WearScene, scene_path: Path | None) -> None:
-    """The garment's checks before meshing: a pattern is read and checked; a tube's sizes are positive."""
+    """The garment's checks before meshing: a pattern is read and checked (fabricfem.meshes.pattern.check_pattern:
+    outlines, stitched lengths, twisted stitches), its edges named by garment.hold and the donning handles exist,
+    and no stitch must pull together held nodes that are apart (check_held_stitches); a tube's sizes are positive."""
     g, donning = wear.garment, wear.donning
     if g.builder == "pattern":
         pattern = read_pattern(wear, scene_path)
-        for key in ("pull_edges", "belt_edges"):
-            for name in getattr(donning, key) or []:
+        held = []
+        for key in ("garment.hold", "donning.pull_edges", "donning.belt_edges"):
+            for name in getattr(g if key == "garment.hold" else donning, key.partition(".")[2]) or []:
                 panel, _, index = str(name).rpartition(".")
                 if panel not in pattern.panels or not index.isdigit() or int(index) >= len(pattern.panels[panel].edges):
-                    raise SceneError(f"donning.{key}: no pattern edge {name!r} (write \"panel.edge\"; panels "
+                    raise SceneError(f"{key}: no pattern edge {name!r} (write \"panel.edge\"; panels "
                                      f"{sorted(pattern.panels)})")
+                held += [(panel, int(index))] if key == "garment.hold" else []
+        try:
+            check_held_stitches(pattern, held, g.stitch_tolerance)
+        except ValueError as exc:
+            raise SceneError(f"garment.hold: {exc}") from None
     elif donning.pull_edges or donning.belt_edges:
         raise SceneError("donning: pull_edges and belt_edges name pattern edges; this garment is a tube")
     else:
