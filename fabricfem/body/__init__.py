@@ -3,9 +3,10 @@
 Modules: `ellipsoid` (implicit surface eq. 3.61, gap, exact closest point, surface velocity), `pose`
 (segment frames from J1, J2, M, sec. 5.1; `Body`), `schedule` (segments switched off and on in time),
 `motion` (kinematics sources, joint-torque convention), `conventions` (units and axes of motion files),
-`mocap` (C3D, TRC, CSV readers and writers, marker mapping), `bvh` (BVH parse, forward kinematics,
-write), `arm` (the default arm of the sleeve study, sec. 5.3), `lower_body` (the eight-segment lower
-body, standing and two-leg gait), `crossing` (four strides, one over an obstacle, sec. 5.4).
+`mocap` (C3D, TRC, CSV readers and writers, marker mapping and its plain-data form), `bvh` (BVH parse,
+forward kinematics, write), `placement` (a motion moved into a garment, the garment-body distance bound),
+`arm` (the default arm of the sleeve study, sec. 5.3), `lower_body` (the eight-segment lower body, standing
+and two-leg gait), `crossing` (four strides, one over an obstacle, sec. 5.4).
 """
 from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions, default_arm, elbow_flexion
 from fabricfem.body.bvh import BvhSkeleton, forward_kinematics, parse_bvh, read_bvh, write_bvh

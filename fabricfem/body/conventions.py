@@ -27,7 +27,8 @@ def unit_scale(units: str | float) -> float:
     if isinstance(units, str):
         key = units.strip().lower()
         if key not in LENGTH_UNITS:
-            raise ValueError(f"units must be one of {sorted(LENGTH_UNITS)} or metres per unit, got {units!r}")
+            raise ValueError(f"units must be one of {sorted(LENGTH_UNITS)} or a number of metres per unit (a "
+                             f"number, not a string), got {units!r}")
         return LENGTH_UNITS[key]
     if isinstance(units, (int, float)) and math.isfinite(units) and units > 0.0:
         return float(units)

@@ -10,7 +10,9 @@ linearly in time instead). Writers for round trips: `write_c3d`, `write_trc` (`w
 
 Point mapping (`map_points`): body point name -> a file marker name, `Mean(names)` (e.g. the
 midpoint of two markers) or `Offset(base, vector)` (a point or mean shifted by a fixed vector [m],
-body frame). `segment_points` builds it from segment -> (J1, J2, M) sources.
+body frame). `segment_points` builds it from segment -> (J1, J2, M) sources; `point_source` and
+`mapping_sources` read it from plain data (a scene's TOML): "M", {marker = "M"} or {mean = ["A", "B"]},
+each table with an optional offset = [dx, dy, dz] [m].
 """
 from __future__ import annotations
 
@@ -75,6 +77,61 @@ def _evaluate(source: PointSource, samples: Mapping[str, np.ndarray]) -> np.ndar
     if isinstance(source, Mean):
         return np.mean([samples[n] for n in source.names], axis=0)
     return _evaluate(source.base, samples) + np.asarray(source.vector, dtype=float)
+
+
+SOURCE_KEYS = ("marker", "mean", "offset")
+
+
+def _offset_vector(value) -> tuple[float, float, float]:
+    if not (isinstance(value, (list, tuple)) and len(value) == 3 and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)):
+        raise ValueError(f"offset must be [dx, dy, dz]: three finite numbers [m] (body frame), got {value!r}")
+    return tuple(float(v) for v in value)
+
+
+def point_source(value) -> PointSource:
+    """The point source of its plain-data (TOML) form: a marker name "M" (-> "M"), a table {marker = "M"} (-> "M")
+    or {mean = ["A", "B", ...]} (-> Mean), exactly one of the two, with an optional offset = [dx, dy, dz] [m, body
+    frame] (-> Offset(base, offset)).
+
+    Raises:
+        ValueError (one line) for any other form, naming the key at fault.
+    """
+    if isinstance(value, str):
+        return value
+    if not isinstance(value, Mapping):
+        raise ValueError(f"expected a marker name or a table {{marker = \"M\"}} or {{mean = [\"A\", \"B\"]}} "
+                         f"with an optional offset = [dx, dy, dz] [m], got {value!r}")
+    unknown = sorted(set(value) - set(SOURCE_KEYS))
+    if unknown:
+        raise ValueError(f"unknown keys {unknown}; allowed: marker or mean, and offset")
+    if ("marker" in value) == ("mean" in value):
+        raise ValueError(f"give exactly one of marker or mean, got the keys {sorted(value)}")
+    if "marker" in value:
+        base = value["marker"]
+        if not isinstance(base, str) or not base:
+            raise ValueError(f"marker must be a marker name, got {base!r}")
+    else:
+        names = value["mean"]
+        if not (isinstance(names, (list, tuple)) and names and all(isinstance(n, str) and n for n in names)):
+            raise ValueError(f"mean must list one or more marker names, got {names!r}")
+        base = Mean(tuple(names))
+    return Offset(base, _offset_vector(value["offset"])) if "offset" in value else base
+
+
+def mapping_sources(mapping: Mapping[str, object]) -> dict[str, PointSource]:
+    """Body point name -> point source of a plain-data mapping (`point_source` of each value).
+
+    Raises:
+        ValueError "mapping.NAME: ..." for a value that is no point source.
+    """
+    sources = {}
+    for name, value in mapping.items():
+        try:
+            sources[name] = point_source(value)
+        except ValueError as exc:
+            raise ValueError(f"mapping.{name}: {exc}") from None
+    return sources
 
 
 def map_points(trajectory: JointTrajectory, mapping: Mapping[str, PointSource]) -> JointTrajectory:

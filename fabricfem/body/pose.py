@@ -34,32 +34,82 @@ def _point(name: str, value) -> np.ndarray:
     return p
 
 
-def segment_frame(J1, J2, M, center_fraction: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+def _labels(names: tuple[str, str, str] | None, segment: str | None) -> tuple[str, str, str, str]:
+    """(prefix, J1, J2, M) of the messages: the segment's and points' names, or the symbols J1, J2, M."""
+    prefix = f"segment {segment!r}: " if segment is not None else ""
+    if names is None:
+        return prefix, "J1", "J2", "M"
+    return prefix, names[0], names[1], repr(names[2])
+
+
+def _degenerate(length, distance, offset) -> tuple[np.ndarray, np.ndarray]:
+    """(J1 and J2 coincide, the marker is on the long axis) for axis lengths |J2 - J1|, marker distances from the
+    axis and marker distances from the centre [m] (scalars or arrays of frames): the thresholds of
+    `segment_frame`."""
+    length, distance, offset = (np.asarray(v, dtype=float) for v in (length, distance, offset))
+    coincide = length < MIN_SEGMENT_LENGTH
+    collinear = (distance < MIN_MARKER_OFFSET) | (distance < 1e-9 * np.maximum(offset, length))
+    return coincide, collinear & ~coincide
+
+
+def segment_frame(J1, J2, M, center_fraction: float = 0.5, names: tuple[str, str, str] | None = None,
+                  segment: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Centre x^c [m] and rotation R = [e1 e2 e3] of a segment [Man2006, sec. 5.1].
 
     Args:
         J1, J2: proximal and distal joint positions [m].
         M: auxiliary marker [m], not on the line J1-J2.
         center_fraction: x^c = J1 + f (J2 - J1); the thesis uses f = 1/2.
+        names, segment: the names of J1, J2, M and of the segment, for the messages.
+
+    Raises:
+        ValueError when J1 and J2 coincide or M lies on the long axis (naming the segment, marker and joints).
     """
     j1, j2, m = _point("J1", J1), _point("J2", J2), _point("marker", M)
     if not (0.0 <= center_fraction <= 1.0):
         raise ValueError(f"center_fraction must lie in [0, 1], got {center_fraction!r}")
     axis = j2 - j1
     length = float(np.linalg.norm(axis))
-    if length < MIN_SEGMENT_LENGTH:
-        raise ValueError(f"J1 and J2 coincide (|J2 - J1| = {length:.3g} m): the long axis is undefined")
+    prefix, a, b, marker = _labels(names, segment)
+    if _degenerate(length, 1.0, 1.0)[0]:
+        raise ValueError(f"{prefix}the joints {a} and {b} coincide (|J2 - J1| = {length:.3g} m): the long axis is "
+                         "undefined")
     center = j1 + center_fraction * axis
     e1 = axis / length
     offset = m - center
     perpendicular = offset - np.dot(offset, e1) * e1
     distance = float(np.linalg.norm(perpendicular))
-    if distance < MIN_MARKER_OFFSET or distance < 1e-9 * max(float(np.linalg.norm(offset)), length):
-        raise ValueError("marker M is collinear with the long axis J1-J2: it does not fix the rotation "
-                         "about the axis")
+    if _degenerate(length, distance, float(np.linalg.norm(offset)))[1]:
+        raise ValueError(f"{prefix}marker {marker} is collinear with the long axis {a}-{b}: it does not fix the "
+                         "rotation about the axis")
     e2 = perpendicular / distance
     e3 = np.cross(e1, e2)
     return center, np.column_stack([e1, e2, e3])
+
+
+def check_posable(segments: Sequence[Segment], times: np.ndarray, samples: Mapping[str, np.ndarray]) -> None:
+    """Every segment can be posed on every frame of sampled positions (`samples`: name -> (T, 3) [m] at `times`
+    [s]): its joints apart and its marker off its long axis (vectorised over the frames, the thresholds of
+    `segment_frame`).
+
+    Raises:
+        ValueError from `segment_frame` naming the segment, its marker and joints, with the first such frame and
+        its time.
+    """
+    for s in segments:
+        j1, j2, m = (np.asarray(samples[n], dtype=float) for n in (s.proximal, s.distal, s.marker))
+        axis = j2 - j1
+        length = np.linalg.norm(axis, axis=1)
+        e1 = axis / np.maximum(length, MIN_SEGMENT_LENGTH)[:, None]
+        offset = m - (j1 + s.center_fraction * axis)
+        perpendicular = offset - np.sum(offset * e1, axis=1)[:, None] * e1
+        coincide, collinear = _degenerate(length, np.linalg.norm(perpendicular, axis=1),
+                                          np.linalg.norm(offset, axis=1))
+        for k in np.flatnonzero(coincide | collinear):
+            try:
+                segment_frame(j1[k], j2[k], m[k], s.center_fraction, (s.proximal, s.distal, s.marker), s.name)
+            except ValueError as exc:
+                raise ValueError(f"{exc} (frame {k}, t = {times[k]:.6g} s)") from None
 
 
 @dataclass(frozen=True)
@@ -98,7 +148,8 @@ class Segment:
     def pose(self, positions: Mapping[str, np.ndarray]) -> Ellipsoid:
         """The ellipsoid for the given joint/marker positions [m] (a name -> (3,) mapping)."""
         center, rotation = segment_frame(positions[self.proximal], positions[self.distal],
-                                         positions[self.marker], self.center_fraction)
+                                         positions[self.marker], self.center_fraction,
+                                         (self.proximal, self.distal, self.marker), self.name)
         return Ellipsoid(center, rotation, np.array(self.radii))
 
 

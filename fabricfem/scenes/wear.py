@@ -22,17 +22,26 @@ import numpy as np
 
 from fabricfem.body.arm import default_arm
 from fabricfem.body.blend import BlendedStart
+from fabricfem.body.conventions import LENGTH_UNITS
 from fabricfem.body.crossing import obstacle_walk
 from fabricfem.body.lower_body import lower_body, standing, winter_walking
-from fabricfem.body.mocap import load_motion
-from fabricfem.body.pose import Body, Segment
+from fabricfem.body.mocap import load_motion, mapping_sources
+from fabricfem.body.placement import Translated, box_distance, placement_offset
+from fabricfem.body.pose import Body, Segment, check_posable
 from fabricfem.body.schedule import SegmentSchedule
 from fabricfem.contact.handles import Belt, EdgeGrip
 from fabricfem.contact.seams import SeamSpec
 from fabricfem.dynamics.stability import step_safety
 from fabricfem.fabrics import load_fabric
 from fabricfem.meshes import tube
-from fabricfem.meshes.pattern import Panel, check_held_stitches, check_pattern, read_garmentcode, read_pattern_toml
+from fabricfem.meshes.pattern import (
+    Panel,
+    check_held_stitches,
+    check_pattern,
+    outline_polyline,
+    read_garmentcode,
+    read_pattern_toml,
+)
 from fabricfem.meshes.pattern_mesh import RigidPlacement, mesh_pattern
 from fabricfem.patterns import pattern_path
 from fabricfem.scenes.contract import WearScene
@@ -54,6 +63,7 @@ from fabricfem.wear.sleeve import ARM_MONITORS, flexion_settings, flexion_timeli
 GRAVITY = 9.81                     # m/s^2
 BODY_TYPES = ("arm", "default_arm", "limb", "lower_body")
 MOTION_TYPES = ("elbow_flexion", "still", "walking", "obstacle_walk", "file")
+PLACES = ("garment",)
 BUILDERS = ("tube", "pattern")
 
 
@@ -117,6 +127,11 @@ def check_wear(data: dict) -> None:
         if not spec["segments"] or not all(isinstance(s, str) for s in spec["segments"]):
             raise SceneError(f"torque[{i}].segments: a list of segment names, got {spec['segments']!r}")
     route = route_of(data)
+    if "place" in motion:
+        _choice("motion.place", motion["place"], PLACES)
+        if route != "explicit":
+            raise SceneError(f"motion.place: places the body of the explicit engine (route.solver = \"explicit\"), "
+                             f"not of the {route} route")
     end = data.get("route", {}).get("end_time")
     if end is not None and not (math.isfinite(end) and end > 0):
         raise SceneError(f"route.end_time: must be a positive body time [s], got {end!r}")
@@ -227,8 +242,47 @@ class WearPlan:
     handles: list = dataclasses.field(default_factory=list)   # (kind, edge names, options) of the donning handles
 
 
+def _motion_units(units: str | float | None) -> str | float | None:
+    """motion.units checked: a unit name of LENGTH_UNITS or a positive finite number of metres per file unit
+    (SceneError naming motion.units; a number written as a string is refused with the unquoted form)."""
+    if units is None:
+        return None
+    if isinstance(units, str):
+        try:
+            float(units)
+        except ValueError:
+            if units.strip().lower() not in LENGTH_UNITS:
+                raise SceneError(f"motion.units: unknown unit {units!r}{_suggest(units, LENGTH_UNITS)}; a name "
+                                 f"{sorted(LENGTH_UNITS)} or a number of metres per file unit (CMU BVH: "
+                                 f"0.0254 / 0.45 = 0.0564444)") from None
+            return units
+        raise SceneError(f"motion.units: {units!r} is a string; write metres per file unit as a number, without "
+                         f"quotes (units = {units.strip()})")
+    if not (math.isfinite(units) and units > 0.0):
+        raise SceneError(f"motion.units: metres per file unit must be a positive finite number, got {units!r}")
+    return float(units)
+
+
+def _motion_mapping(motion: WearMotionSection, body_names) -> dict:
+    """Body point name -> point source of motion.mapping (fabricfem.body.mocap.point_source), the body's points it
+    leaves out mapped to the file's points of the same name (SceneError naming motion.mapping.NAME)."""
+    try:
+        sources = mapping_sources(dict(motion.mapping or {}))
+    except ValueError as exc:
+        raise SceneError(f"motion.{exc}") from None
+    unknown = [name for name in sources if name not in body_names]
+    if unknown:
+        name = unknown[0]
+        raise SceneError(f"motion.mapping.{name}: not a joint or marker of the body{_suggest(name, body_names)} "
+                         f"(its points: {list(body_names)})")
+    return {**{name: name for name in body_names}, **sources}
+
+
 def _motion_file(motion: WearMotionSection, scene_path: Path | None, body_names) -> object:
-    """The kinematics of [motion] type = "file": the file read, mapped to the body's joint and marker names."""
+    """The kinematics of [motion] type = "file": the file read in motion.units (`_motion_units`), mapped to the
+    body's joint and marker names (`_motion_mapping`)."""
+    units = _motion_units(motion.units)
+    mapping = _motion_mapping(motion, body_names)
     if not motion.path:
         raise SceneError("motion.path: a file motion needs the path of its motion file")
     path = Path(motion.path)
@@ -236,11 +290,60 @@ def _motion_file(motion: WearMotionSection, scene_path: Path | None, body_names)
         path = Path(scene_path).parent / path
     if not path.is_file():
         raise SceneError(f"motion.path: no motion file {str(path)!r}")
-    mapping = dict(motion.mapping) if motion.mapping else {name: name for name in body_names}
     try:
-        return load_motion(path, mapping, units=motion.units, up=motion.up, fill_gaps=motion.fill_gaps)
+        return load_motion(path, mapping, units=units, up=motion.up, fill_gaps=motion.fill_gaps)
     except ValueError as exc:
         raise SceneError(f"motion.path: {exc}") from None
+
+
+def garment_frame(garment: GarmentSection) -> tuple[np.ndarray, np.ndarray]:
+    """(rotation (3, 3), shift (3,) [m]) of garment.rotate and garment.translate, applied to a pattern's placed
+    panels: x = rotation x_panel + shift."""
+    rotation = np.eye(3)
+    if garment.rotate is not None:
+        rotation = Panel("frame", np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), rotation=tuple(garment.rotate)
+                         ).rotation_matrix()
+    return rotation, np.zeros(3) if garment.translate is None else np.asarray(garment.translate, dtype=float)
+
+
+def garment_box(wear: WearScene, scene_path: Path | None) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) [m]: the garment's reference bounding box before meshing: a tube's 0 <= x <= length,
+    |y|, |z| <= radius; the box of a pattern's panel outlines (curved edges as 64-segment polylines) placed as
+    `garment_mesh` places them."""
+    g = wear.garment
+    if g.builder == "tube":
+        return np.array([0.0, -g.radius, -g.radius]), np.array([g.length, g.radius, g.radius])
+    rotation, shift = garment_frame(g)
+    points = np.vstack([RigidPlacement.of(panel).map(outline_polyline(panel)[0]) @ rotation.T + shift
+                        for panel in read_pattern(wear, scene_path).panels.values()])
+    return points.min(axis=0), points.max(axis=0)
+
+
+def _placed(wear: WearScene, kinematics, segments, scene_path: Path | None, keep_height: bool):
+    """The motion moved by motion.place = "garment" (fabricfem.body.placement: the first pose's centre of volume
+    to the centre of `garment_box`, horizontally only when `keep_height`) and checked to meet the garment: the
+    first pose must reach into the garment's box (a motion file always, any motion when placed; SceneError naming
+    motion.place with the distance [m])."""
+    motion = wear.motion
+    if motion.place is None and motion.type != "file":
+        return kinematics
+    check_garment(wear, scene_path)
+    lower, upper = garment_box(wear, scene_path)
+    t0 = kinematics.time_range[0]
+    if motion.place == "garment":
+        kinematics = Translated(kinematics, placement_offset(Body(segments, kinematics).pose(t0), lower, upper,
+                                                             keep_height))
+    distance = box_distance(Body(segments, kinematics).pose(t0), lower, upper)
+    where = f"the body's first pose (t = {t0:g} s of the motion)"
+    if distance > 0.0 and motion.place is None:
+        raise SceneError(f"motion.place: {where} is {distance:.3f} m from the garment's reference bounding box: the "
+                         f"garment never meets the body; write [motion] place = \"garment\" to move the motion "
+                         f"into the garment")
+    if distance > 0.0:
+        kept = "the height is kept: the feet stay on the floor" if keep_height else "placed in 3D"
+        raise SceneError(f"motion.place: placed, {where} is still {distance:.3f} m from the garment's reference "
+                         f"bounding box ({kept}); move the garment (garment.translate)")
+    return kinematics
 
 
 def _arm_plan(wear: WearScene, fabric) -> tuple:
@@ -259,9 +362,12 @@ def _arm_plan(wear: WearScene, fabric) -> tuple:
 
 
 def _lower_body_kinematics(wear: WearScene, stand, scene_path: Path | None):
-    """The lower body's kinematics of [motion] (walking, obstacle_walk, file, or standing), entered from the
-    standing pose over motion.blend_time; and the motion's duration [s] (None: the kinematics' own)."""
+    """The lower body's kinematics of [motion] (walking, obstacle_walk, file, or standing), every pose of a file
+    posable (`check_posable`), placed in the garment and checked to meet it (`_placed`, its height kept), then
+    entered from the standing pose over motion.blend_time; and the motion's duration [s] (None: the kinematics'
+    own)."""
     motion, dims = wear.motion, wear.lower_body
+    segments = list(lower_body(dims, stand).segments.values())
     try:
         if motion.type == "walking":
             kinematics = winter_walking(dims, strides=motion.strides or 2, cycle_time=motion.cycle_time,
@@ -274,12 +380,17 @@ def _lower_body_kinematics(wear: WearScene, stand, scene_path: Path | None):
                                        crossing_speed=motion.crossing_speed)
         elif motion.type == "file":
             kinematics = _motion_file(motion, scene_path, stand.names)
+            try:
+                check_posable(segments, kinematics.times, kinematics.samples())
+            except ValueError as exc:
+                raise SceneError(f"motion.mapping: {exc}") from None
         else:
-            return stand, float(motion.duration or 0.0)
+            return _placed(wear, stand, segments, scene_path, keep_height=True), float(motion.duration or 0.0)
     except ValueError as exc:
         if isinstance(exc, SceneError):
             raise
         raise SceneError(f"motion: {exc}") from None
+    kinematics = _placed(wear, kinematics, segments, scene_path, keep_height=True)
     if motion.blend_time > 0.0:
         # the garment goes on the standing body; the motion is entered from the standing pose
         kinematics = BlendedStart(kinematics, stand.positions(0.0), motion.blend_time)
@@ -311,6 +422,9 @@ def plan(wear: WearScene, fabric, scene_path: Path | None = None) -> WearPlan:
     donning, route, garment = wear.donning, wear.route, wear.garment
     body, torques, axis, record_time, duration, settle, damping, critical_step, gravity = _body_plan(
         wear, fabric, scene_path)
+    if wear.lower_body is None:       # the arm and the limb stand on no floor: placed in 3D
+        segments = list(body.segments.values())
+        body = Body(segments, _placed(wear, body.kinematics, segments, scene_path, keep_height=False))
     for i, spec in enumerate(wear.torques):
         torques.append(TorqueSpec(spec.name, spec.joint, tuple(spec.axis), tuple(spec.segments)))
         try:
@@ -437,11 +551,7 @@ def garment_mesh(wear: WearScene, scene_path: Path | None, comm):
         return tube(g.length, g.radius, g.n_around, g.n_along, cell="quadrilateral", order=g.order, comm=comm), [], \
             list(g.hold), None
     pattern = read_pattern(wear, scene_path)
-    rotation = np.eye(3)
-    if g.rotate is not None:
-        rotation = Panel("frame", np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), rotation=tuple(g.rotate)
-                         ).rotation_matrix()
-    shift = np.zeros(3) if g.translate is None else np.asarray(g.translate, dtype=float)
+    rotation, shift = garment_frame(g)
     placements = {}
     for name, panel in pattern.panels.items():
         own = RigidPlacement.of(panel)
