@@ -76,8 +76,8 @@ def _part(cls, table: Mapping | None, where: str):
 
 
 @dataclass(frozen=True)
-class StaticScene:
-    """A static scene: a shell meshed from [mesh], supported and loaded, solved by load stepping to [solver]."""
+class ShellScene:
+    """What static and dynamic scenes share: a shell meshed from [mesh], of [fabric], supported and loaded."""
 
     scene: SceneSection
     mesh: MeshSection
@@ -85,24 +85,22 @@ class StaticScene:
     model: ModelSection
     supports: tuple[SupportSection, ...]
     loads: tuple[LoadSection, ...]
-    solver: SolverSection
     output: OutputSection
     accuracy: AccuracySection
 
 
 @dataclass(frozen=True)
-class DynamicScene:
-    """A dynamic scene: the same shell integrated in time from rest ([dynamics], obstacles, monitors)."""
+class StaticScene(ShellScene):
+    """A static scene: the shell solved by load stepping to [solver]'s targets."""
 
-    scene: SceneSection
-    mesh: MeshSection
-    fabric: Mapping
-    model: ModelSection
-    supports: tuple[SupportSection, ...]
-    loads: tuple[LoadSection, ...]
+    solver: SolverSection
+
+
+@dataclass(frozen=True)
+class DynamicScene(ShellScene):
+    """A dynamic scene: the shell integrated in time from rest ([dynamics], obstacles, monitors)."""
+
     dynamics: DynamicsSection
-    output: OutputSection
-    accuracy: AccuracySection
 
 
 @dataclass(frozen=True)

@@ -27,7 +27,7 @@ from fabricfem.body.crossing import obstacle_walk
 from fabricfem.body.lower_body import lower_body, standing, winter_walking
 from fabricfem.body.mocap import load_motion, mapping_sources
 from fabricfem.body.placement import Translated, box_distance, placement_offset
-from fabricfem.body.pose import Body, Segment, check_posable
+from fabricfem.body.pose import Body, check_posable
 from fabricfem.body.schedule import SegmentSchedule
 from fabricfem.contact.handles import Belt, EdgeGrip
 from fabricfem.contact.seams import SeamSpec
@@ -56,6 +56,7 @@ from fabricfem.scenes.wear_sections import (  # noqa: F401 (the sections are pub
     WearMotionSection,
     WearRouteSection,
 )
+from fabricfem.wear.compression import StillPose, limb_body
 from fabricfem.wear.config import ContactSpec
 from fabricfem.wear.garment import ExplicitSettings, Timeline, TorqueSpec
 from fabricfem.wear.sleeve import ARM_MONITORS, flexion_settings, flexion_timeline, similarity_factor
@@ -207,26 +208,6 @@ def pattern_file(wear: WearScene, scene_path: Path | None) -> Path:
         return pattern_path(name)
     except ValueError as exc:
         raise SceneError(f"garment.pattern: {name!r} is neither a file nor a shipped pattern ({exc})") from None
-
-
-class StillPose:
-    """A kinematics source that holds the given joint and marker positions [m] for `duration` [s]."""
-
-    def __init__(self, positions: dict[str, np.ndarray], duration: float = 0.0):
-        self._positions = {k: np.asarray(v, dtype=float) for k, v in positions.items()}
-        self.names = tuple(self._positions)
-        self.time_range = (0.0, float(duration))
-
-    def positions(self, t: float) -> dict[str, np.ndarray]:
-        return self._positions
-
-
-def limb_body(center, radii, duration: float = 0.0) -> Body:
-    """One ellipsoid segment "limb" along x (semi-axes r1 along x, r2 along y, r3 along z) held still."""
-    c, r = np.asarray(center, dtype=float), np.asarray(radii, dtype=float)
-    points = {"proximal": c - np.array([r[0], 0.0, 0.0]), "distal": c + np.array([r[0], 0.0, 0.0]),
-              "marker": c + np.array([0.0, 1.0, 0.0])}
-    return Body([Segment("limb", "proximal", "distal", "marker", tuple(r))], StillPose(points, duration))
 
 
 @dataclasses.dataclass

@@ -18,6 +18,7 @@ import numpy as np
 from fabricfem.body.crossing import ObstacleWalk, obstacle_walk
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.body.lower_body import lower_body
+from fabricfem.body.placement import fibonacci_sphere
 from fabricfem.verify import CaseResult, Timer, case, result
 
 NAME = "gait-kinematics"
@@ -27,15 +28,6 @@ DIRECTIONS = 20000        # sampled unit directions of the lower bound
 SURFACE_POINTS = 20000    # sampled surface points of the upper bound
 LENGTHS = {"trunk": "rise", "pelvis": "rise", "thigh": "thigh_length", "shank": "shank_length",
            "foot": "toe_distance"}   # segment kind -> LowerBodyDimensions attribute of |J2 - J1|
-
-
-def fibonacci_sphere(n: int) -> np.ndarray:
-    """(n, 3) nearly uniform unit vectors (golden-angle spiral)."""
-    k = np.arange(n) + 0.5
-    z = 1.0 - 2.0 * k / n
-    phi = np.pi * (1.0 + 5.0 ** 0.5) * k
-    rho = np.sqrt(1.0 - z * z)
-    return np.column_stack([rho * np.cos(phi), rho * np.sin(phi), z])
 
 
 def sagittal_angle(a: np.ndarray, b: np.ndarray) -> np.ndarray:
