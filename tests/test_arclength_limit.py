@@ -71,7 +71,7 @@ def test_arc_length_limit_load_matches_displacement_control():
     arc = arch()
     arc.add_edge_traction("right", (0.0, 0.0, -0.5 * P_ref / WIDTH))
     path = []
-    arc_length(arc, ds=2e-3, max_steps=400, target_iterations=5,
+    arc_length(arc, ds=5e-3, max_steps=400, target_iterations=5, u_ref=RISE,
                on_step=lambda s: path.append((s.load_factor, -arc.node_value(crown)[2])))
     lam = np.array([p[0] for p in path])
     w = np.array([p[1] for p in path])

@@ -1,19 +1,27 @@
 """Arc-length continuation with the adaptive step of Eischen and Bigliani [Eischen2000, eqs. 17-26].
 
 Equilibrium F_ext(lambda) - P(Phi) = 0 with F_ext = lambda F_ref (eq. 17) is augmented by the
-constraint (eq. 19)
+constraint of [Eischen2000, eq. 19] in a scaled norm,
 
-    f = [ (Phi - Phi_n).(Phi - Phi_n) + psi^2 (lambda - lambda_n)^2 ]^(1/2) - gamma_n ds = 0,
+    f = [ w (Phi - Phi_n).(Phi - Phi_n) + psi^2 (lambda - lambda_n)^2 ]^(1/2) - gamma_n ds = 0,
+    w = 1 / (N u_ref^2),
 
-whose arc length is accelerated by gamma_n = N_p / N_{n-1} (eq. 20). Each corrector iteration
-solves K du_I = F_ref and K du_II = F_ext - P with one factorisation (eqs. 23-25) and updates
+whose arc length is accelerated by gamma_n = N_p / N_{n-1} (eq. 20). N is the global length of the state
+vector Phi (displacements [m] and director angles [rad]) and u_ref [m] a characteristic displacement, so that
+w |dPhi|^2 = (RMS of dPhi / u_ref)^2: the step ds is dimensionless and means the same on every mesh (the RMS of
+a discretised field does not grow with the number of nodes, |dPhi| does, like sqrt(N)). By default u_ref is the
+RMS of the tangent response to the reference load, K^-1 F_ref at the start state, so that in the linear range
+an arc length ds is a load-factor step ds / sqrt(1 + psi^2). (w = 1 is eq. 19 itself, the seed's form: there ds
+has the units of the state and must be re-chosen for every mesh.) The scaling is a change of units of the state,
+Phi' = sqrt(w) Phi, under which eqs. 21-22 keep their form with the dot products weighted by w. Each corrector
+iteration solves K du_I = F_ref and K du_II = F_ext - P with one factorisation (eqs. 23-25) and updates
 
-    dlambda = -[ f (f + gamma_n ds) + (Phi - Phi_n).du_II ] / [ psi^2 (lambda - lambda_n) + (Phi - Phi_n).du_I ]   (eq. 21)
-    dPhi    = dlambda du_I + du_II                                                                              (eq. 22)
+    dlambda = -[ f (f + gamma_n ds) + w (Phi - Phi_n).du_II ] / [ psi^2 (lambda - lambda_n) + w (Phi - Phi_n).du_I ]
+                                                                                                          (eq. 21)
+    dPhi    = dlambda du_I + du_II                                                                        (eq. 22)
 
-psi (default 1) scales the load factor against the state, as in Schweizerhof and Wriggers
-(psi = 1 is the seed's form). Only load-controlled problems qualify: prescribed
-displacements must be zero.
+psi (default 1) weighs the load factor against the scaled state, as in Schweizerhof and Wriggers. Only
+load-controlled problems qualify: prescribed displacements must be zero.
 """
 from __future__ import annotations
 
@@ -28,13 +36,15 @@ from fabricfem.solvers.newton import SolverError, prefixed_options
 
 @dataclass
 class ArcLengthStep:
-    """One converged step: load factor lambda, corrector iterations, arc length used (m and rad of the state) and
-    the residual norms |P - lambda F_ref| [N] of its iterations."""
+    """One converged step: load factor lambda, corrector iterations, arc length used (dimensionless, in the scaled
+    norm of the module docstring), the residual norms |P - lambda F_ref| [N] of its iterations and the
+    characteristic displacement u_ref [m] of the norm."""
 
     load_factor: float
     iterations: int
     arc_length: float
     residual_norms: list[float] = field(default_factory=list)
+    u_ref: float = 1.0
 
 
 def acceleration_factor(step_index: int, target_iterations: int, last_iterations: int) -> float:
@@ -47,17 +57,20 @@ def acceleration_factor(step_index: int, target_iterations: int, last_iterations
 class _ArcLengthSolver:
     """The linear algebra of one arc-length step of a model ([Eischen2000, eqs. 21-25]): the tangent K, factorised
     once per iteration (MUMPS LU unless petsc_options say otherwise) for both K du_I = F_ref and K du_II = F_ext - P,
-    the predictor along du_I and the corrector iterations. psi scales the load factor against the state (eq. 19);
-    convergence as documented in arc_length (rtol, stol, max_iterations)."""
+    the predictor along du_I and the corrector iterations. psi scales the load factor against the state (eq. 19),
+    u_ref [m] the state (the weight w = 1 / (N u_ref^2) of the module docstring; None: the RMS of the first
+    predictor's K^-1 F_ref); convergence as documented in arc_length (rtol, stol, max_iterations)."""
 
     PREFIX = "fabricfem_arclength_"
 
-    def __init__(self, model, psi: float, rtol: float, stol: float, max_iterations: int,
+    def __init__(self, model, psi: float, u_ref: float | None, rtol: float, stol: float, max_iterations: int,
                  petsc_options: dict | None):
         model.compile()
         self.model, self.psi, self.rtol, self.stol, self.max_iterations = model, psi, rtol, stol, max_iterations
         self.K = model.create_matrix()
         self.residual, self.du_I, self.du_II = model.create_vector(), model.create_vector(), model.create_vector()
+        self.size = self.du_I.getSize()      # N, the global length of the state vector
+        self.u_ref = u_ref
         self.ksp = PETSc.KSP().create(model.comm)
         self.ksp.setOperators(self.K)
         self.ksp.setOptionsPrefix(self.PREFIX)
@@ -86,24 +99,34 @@ class _ArcLengthSolver:
         psi = self.psi
         self.assemble_and_factor(x, lam_n)
         self.linear_solve(self.model.F_ref, self.du_I)
-        dlam = length / np.sqrt(self.du_I.dot(self.du_I) + psi ** 2)
-        if direction is not None and (self.du_I.dot(direction[0]) + psi ** 2 * direction[1]) < 0:
+        if self.u_ref is None:
+            self.u_ref = float(np.sqrt(self.du_I.dot(self.du_I) / self.size))
+            if not (np.isfinite(self.u_ref) and self.u_ref > 0.0):
+                raise ValueError(f"u_ref: the tangent response K^-1 F_ref has RMS {self.u_ref!r}; give u_ref [m]")
+        w = self.weight
+        dlam = length / np.sqrt(w * self.du_I.dot(self.du_I) + psi ** 2)
+        if direction is not None and (w * self.du_I.dot(direction[0]) + psi ** 2 * direction[1]) < 0:
             dlam = -dlam
         x.axpy(dlam, self.du_I)
         return lam_n + dlam
+
+    @property
+    def weight(self) -> float:
+        """w = 1 / (N u_ref^2) [1/m^2] of the scaled constraint (module docstring)."""
+        return 1.0 / (self.size * self.u_ref ** 2)
 
     def correct(self, x: PETSc.Vec, x_n: PETSc.Vec, lam_n: float, lam: float, length: float
                 ) -> tuple[bool, int, list[float], float]:
         """Corrector iterations (eqs. 21-22) on x (in place) and lam with the constraint of eq. 19 about (x_n,
         lam_n). Returns (converged, iterations, residual norms |P - lambda F_ref|, lam)."""
-        psi, du_I, du_II, residual = self.psi, self.du_I, self.du_II, self.residual
+        psi, du_I, du_II, residual, w = self.psi, self.du_I, self.du_II, self.residual, self.weight
         norms, converged, it = [], False, 0
         for it in range(1, self.max_iterations + 1):
             self.assemble_and_factor(x, lam)
             rnorm = residual.norm()
             norms.append(rnorm)
             delta = x - x_n
-            ell = np.sqrt(delta.dot(delta) + psi ** 2 * (lam - lam_n) ** 2)
+            ell = np.sqrt(w * delta.dot(delta) + psi ** 2 * (lam - lam_n) ** 2)
             f = ell - length
             if not np.isfinite(rnorm):
                 break
@@ -113,7 +136,7 @@ class _ArcLengthSolver:
             self.linear_solve(self.model.F_ref, du_I)
             residual.scale(-1.0)  # F_ext - P
             self.linear_solve(residual, du_II)
-            dl = -(f * (f + length) + delta.dot(du_II)) / (psi ** 2 * (lam - lam_n) + delta.dot(du_I))   # eq. 21
+            dl = -(f * (f + length) + w * delta.dot(du_II)) / (psi ** 2 * (lam - lam_n) + w * delta.dot(du_I))  # eq. 21
             du_II.axpy(dl, du_I)  # the correction of eq. 22
             x.axpy(1.0, du_II)
             lam += dl
@@ -134,21 +157,26 @@ def arc_length(model, ds: float, max_steps: int, lambda_max: float | None = None
                target_iterations: int = 5, psi: float = 1.0, max_iterations: int = 20,
                rtol: float = 1e-9, stol: float = 1e-10, gamma_bounds: tuple[float, float] = (0.25, 2.0),
                on_step: Callable[[ArcLengthStep], None] | None = None,
-               petsc_options: dict | None = None) -> list[ArcLengthStep]:
+               petsc_options: dict | None = None, u_ref: float | None = None) -> list[ArcLengthStep]:
     """Trace the equilibrium path from the model's current state in `max_steps` arc-length steps
     (or until lambda_max is passed; the last step then ends beyond it).
 
-    ds: initial arc length (units of the state vector, i.e. m and rad). Divergence of a step
-    halves ds and retries; below 1e-6 of the initial ds a SolverError is raised with the last
-    converged load factor. A step has converged when |F_ext - P| < rtol |F_ref| max(1, |lambda|) and
-    the constraint holds, or when the Newton correction is below stol relative to the state.
+    ds: initial arc length, dimensionless, in the scaled norm [w |dPhi|^2 + psi^2 dlambda^2]^(1/2) with
+    w = 1 / (N u_ref^2) (module docstring): with the default u_ref a step of ds is a load-factor step of
+    ds / sqrt(1 + psi^2) in the linear range, on any mesh. u_ref: characteristic displacement [m] > 0 of
+    the norm (the state's RMS change is measured in it); None: the RMS of K^-1 F_ref at the start state.
+    Divergence of a step halves ds and retries; below 1e-6 of the initial ds a SolverError is raised with
+    the last converged load factor. A step has converged when |F_ext - P| < rtol |F_ref| max(1, |lambda|)
+    and the constraint holds, or when the Newton correction is below stol relative to the state.
     """
     if model.has_prescribed_values:
         raise ValueError("arc_length: prescribed non-zero displacements/rotations are not supported; "
                          "use loads (F_ext = lambda F_ref)")
-    if ds <= 0:
-        raise ValueError(f"ds must be positive, got {ds}")
-    solver = _ArcLengthSolver(model, psi, rtol, stol, max_iterations, petsc_options)
+    if not ds > 0:
+        raise ValueError(f"ds: must be positive, got {ds}")
+    if u_ref is not None and not (np.isfinite(u_ref) and u_ref > 0):
+        raise ValueError(f"u_ref: must be a positive displacement [m] or None, got {u_ref!r}")
+    solver = _ArcLengthSolver(model, psi, u_ref, rtol, stol, max_iterations, petsc_options)
     x = model.create_vector()
     model.w.vector.copy(x)
     lam_n = float(model.load_factor.value)
@@ -181,7 +209,7 @@ def arc_length(model, ds: float, max_steps: int, lambda_max: float | None = None
         model.set_state(x)
         model.set_load_factor(lam)
         last_iterations = it
-        record = ArcLengthStep(lam, it, length, norms)
+        record = ArcLengthStep(lam, it, length, norms, solver.u_ref)
         history.append(record)
         if on_step:
             on_step(record)
