@@ -52,13 +52,7 @@ class SurfaceSeries:
         may leave a broken HDF5 file: the copy is the series up to now (`restore`)."""
         comm = self.mesh.comm
         self.file.close()
-        names = [f"{tag}{suffix}" for suffix in (".xdmf", ".h5")]
-        if comm.rank == 0:
-            for suffix, name in zip((".xdmf", ".h5"), names):
-                tmp = folder / f"{name}.tmp"
-                shutil.copyfile(self.path.with_suffix(suffix), tmp)
-                os.replace(tmp, folder / name)
-        comm.barrier()
+        names = copy_xdmf(self.path, folder, tag, comm)
         self.file = io.XDMFFile(comm, str(self.path), "a")
         return names
 
@@ -73,6 +67,21 @@ class SurfaceSeries:
 
     def close(self):
         self.file.close()
+
+
+def copy_xdmf(path: str | Path, folder: Path, tag: str, comm=MPI.COMM_WORLD) -> list[str]:
+    """Copy a closed XDMF file `path` and its .h5 into `folder` as <tag>.xdmf and <tag>.h5 (rank 0, each through a
+    temporary name and a rename; all ranks return when the copies exist); returns the copies' names. The copy's
+    XML still names the original's .h5: put it back with SurfaceSeries.restore before reading it."""
+    path = Path(path)
+    names = [f"{tag}{suffix}" for suffix in (".xdmf", ".h5")]
+    if comm.rank == 0:
+        for suffix, name in zip((".xdmf", ".h5"), names):
+            tmp = folder / f"{name}.tmp"
+            shutil.copyfile(path.with_suffix(suffix), tmp)
+            os.replace(tmp, folder / name)
+    comm.barrier()
+    return names
 
 
 class Checkpoint:

@@ -6,7 +6,8 @@
 #      files) comes with it: should pip ever want another numpy for it, install it with --no-deps instead;
 #   4. optional test data: Debian assimp-testmodels (CMU motion-capture BVH files in
 #      /usr/share/assimp/models/BVH/, used by the mocap-roundtrip verify case), only as root with apt-get;
-#      its absence never fails the bootstrap (the case and test skip the CMU rows).
+#      its absence never fails the bootstrap (the case and test skip the CMU rows);
+#   5. optional test package: opensim (OpenSim's readers of torque.sto), pip --no-deps; its absence fails nothing.
 set -euo pipefail
 here="$(cd "$(dirname "$0")/.." && pwd)"
 cd "$here"
@@ -47,6 +48,13 @@ if [ ! -d /usr/share/assimp/models/BVH ] && [ "$(id -u)" -eq 0 ] && command -v a
   echo "[bootstrap] installing optional test data: assimp-testmodels (CMU BVH files)"
   DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends assimp-testmodels \
     || echo "[bootstrap] assimp-testmodels not installed (optional: the CMU rows of mocap-roundtrip are skipped)"
+fi
+
+if ! "$VENV/bin/python" -c "import opensim" 2>/dev/null; then
+  echo "[bootstrap] installing optional test package: opensim (reads torque.sto in tests/test_wear_run_files.py)"
+  # --no-deps: its wheel declares numpy>=2.1, the Debian numpy pinned above is 1.24 (enough for reading .sto files)
+  "$VENV/bin/python" -m pip install -q --disable-pip-version-check --no-deps opensim \
+    || echo "[bootstrap] opensim not installed (optional: the OpenSim reader test is skipped)"
 fi
 
 # h5py through --system-site-packages (Debian's; see DEBS), importable next to dolfinx

@@ -320,8 +320,8 @@ def test_newmark_scene_resumes_and_bad_resumes_are_refused(tmp_path, monkeypatch
     """scenes/cantilever_vibration.toml (implicit Newmark, consistent mass, Rayleigh damping b > 0: the frozen
     damping state is part of the checkpoint) to 16 steps, stopped inside the run after record 12 (checkpoint
     at 10), resumed: the history equals the uninterrupted one within 1e-12 (measured: identical). Refused with a
-    message naming it: --resume without a checkpoint, of a changed scene (hash), of another rank count (a
-    checkpoint file written by 2 ranks), and of the generalized-alpha integrator (PETSc TS)."""
+    message naming it: --resume without a checkpoint, of a changed scene (hash), of another rank count (the
+    killed run's checkpoint file as written by 2 ranks), and of the generalized-alpha integrator (PETSc TS)."""
     data = tomllib.loads((ROOT / "scenes" / "cantilever_vibration.toml").read_text())
     data["dynamics"].update(end_time=16 * data["dynamics"]["dt"], checkpoint_every=5, rayleigh=[0.0, 1e-3])
     comm = MPI.COMM_SELF
@@ -339,15 +339,17 @@ def test_newmark_scene_resumes_and_bad_resumes_are_refused(tmp_path, monkeypatch
     monkeypatch.undo()
     with pytest.raises(SceneError, match="another scene"):
         run_scene(scene(tmp_path / "part", air_drag=0.01), comm, resume=True)
+    files = fio.Checkpoint(tmp_path / "part", comm, "")       # the checkpoint file of the killed run, as 2 ranks'
+    saved = files.path.read_bytes()
+    files.path.write_bytes(pickle.dumps({**pickle.loads(saved), "ranks": 2}))
+    with pytest.raises(SceneError, match=r"written by 2 rank\(s\)"):
+        run_scene(scene(tmp_path / "part"), comm, resume=True)
+    files.path.write_bytes(saved)
     resumed = run_scene(scene(tmp_path / "part"), comm, resume=True).result.history
     assert len(resumed.time) == len(whole.time) == 17
     assert _relative_difference(np.array(resumed.columns()[1]), np.array(whole.columns()[1])) <= 1e-12
     assert resumed.newton_iterations == whole.newton_iterations
-    files = fio.Checkpoint(tmp_path / "part", comm, "")       # the checkpoint file of the resumed run, as 2 ranks'
-    saved = pickle.loads(files.path.read_bytes())
-    saved["ranks"] = 2
-    files.path.write_bytes(pickle.dumps(saved))
-    with pytest.raises(SceneError, match=r"written by 2 rank\(s\)"):
-        run_scene(scene(tmp_path / "part"), comm, resume=True)
+    again = run_scene(scene(tmp_path / "part"), comm, resume=True)     # complete: nothing to resume, nothing run
+    assert again.result is None and again.status.startswith("completed")
     with pytest.raises(SceneError, match="GeneralizedAlphaIntegrator integrator cannot resume"):
         run_scene(scene(tmp_path / "part", integrator="generalized-alpha"), comm, resume=True)

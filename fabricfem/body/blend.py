@@ -44,6 +44,10 @@ class BlendedStart:
         self._first = motion.positions(t0)
         self.time_range = (0.0, self.blend_time + t1 - t0)
 
+    def inner_time(self, t: float) -> float:
+        """The motion's own time [s] at time t [s] of the blend: t0 + t - blend_time (before t0 during the blend)."""
+        return self._t0 + float(t) - self.blend_time
+
     def positions(self, t: float) -> dict[str, np.ndarray]:
         if t >= self.blend_time:
             return self.motion.positions(self._t0 + t - self.blend_time)

@@ -15,6 +15,7 @@ from mpi4py import MPI
 from fabricfem import io
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.scenes import wear
+from fabricfem.scenes.batch import completed, read_summary
 from fabricfem.scenes.build import build_fabric, output_dir, scene_name, scene_sha256, sleeve_config, tube_spec  # noqa: F401 (public here)
 from fabricfem.scenes.contract import WearScene
 from fabricfem.scenes.dynamic import CHECKPOINT_EVERY, DynamicCheckpoint, DynamicRun, run_dynamic_scene  # noqa: F401
@@ -53,11 +54,16 @@ def run_scene(scene: Scene, comm=MPI.COMM_WORLD, out: Path | None = None, resume
     default [output] dir; io.OutputFolder: the previous run's outputs are removed first, summary.json records the
     status). A wear scene on the explicit engine and a dynamic scene write checkpoints (every CHECKPOINT_EVERY
     records, [dynamics] checkpoint_every) and, with `resume`, continue from the folder's checkpoint
-    (fabricfem.wear.checkpoint, `run_dynamic_scene`)."""
+    (fabricfem.wear.checkpoint, `run_dynamic_scene`); `resume` of a folder whose summary.json holds a completed run
+    of this scene says so and returns its recorded status (result None), rewriting nothing."""
     if out is not None:
         scene = Scene({**scene.data, "output": {**scene.data.get("output", {}), "dir": str(out)}}, scene.path,
                       scene.kind)
     out = output_dir(scene)
+    if resume and (done := _completed_status(out, scene_sha256(scene), comm)):
+        if comm.rank == 0:
+            print(f"{scene_name(scene)}: the run in {out} is complete ({done}); nothing to resume", flush=True)
+        return SceneOutcome(None, done, out)
     sha = scene_sha256(Scene({k: v for k, v in scene.data.items() if k != "output"}, None, scene.kind))
     folder = io.OutputFolder(out, scene_sha256(scene), comm, keep=resume)
     try:
@@ -71,6 +77,15 @@ def run_scene(scene: Scene, comm=MPI.COMM_WORLD, out: Path | None = None, resume
               f"completed with warnings: {', '.join(warnings)}" if warnings else "completed")
     folder.finish(status, result.summary() if isinstance(result, WearHistory) else None)
     return SceneOutcome(result, status, out)
+
+
+def _completed_status(out: Path, sha256: str, comm) -> str:
+    """The status recorded in `out`/summary.json when it holds a completed run of the scene `sha256` ("completed",
+    also with warnings), else "" (rank 0 reads, every rank gets it)."""
+    status = ""
+    if comm.rank == 0 and completed(out, sha256):
+        status = str(read_summary(out)["status"])
+    return comm.bcast(status, root=0)
 
 
 def run_wear_scene(scene: Scene, out: Path, comm=MPI.COMM_WORLD, resume: bool = False, sha: str = ""):

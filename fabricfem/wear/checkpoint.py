@@ -4,8 +4,9 @@ Every `every` records each rank writes `<folder>/checkpoint/rank<r>.pkl`: the `s
 run, the part it owns (the integrator's: d, v, a, t, the step counts, work and dissipation,
 fabricfem.dynamics.newmark.TimeIntegrator.state; the body contact's: its stick points; each handle's: a grip's
 anchors), the run's records so far (the same on every rank), the recorder's state (rank 0: the body frames and the
-kept skin frames) and the scene's SHA-256. A file is written to a temporary name and renamed, so a kill leaves the
-previous checkpoint whole. `load` gives each part its state back (`restore`) in a run built from the same scene on
+kept skin frames; beside them copies of the XDMF files as they were, xdmf_<records>_cloth.xdmf/.h5 and
+xdmf_<records>_cloth_pressure.xdmf/.h5, put back on resume and appended to) and the scene's SHA-256. A file is
+written to a temporary name and renamed, so a kill leaves the previous checkpoint whole. `load` gives each part its state back (`restore`) in a run built from the same scene on
 the same number of ranks; a checkpoint of another scene (another hash), another rank count or an older layout is
 refused with a message naming it. The central-difference step from a restored state is the step from the saved one
 (the same arithmetic on the same numbers), so a resumed run gives the records of an uninterrupted run exactly. The
@@ -24,10 +25,16 @@ class Checkpoint(io.Checkpoint):
     writes."""
 
     def save(self, run, history, records: int, recorder=None) -> None:
-        """Write the state after `records` record intervals (all ranks)."""
+        """Write the state after `records` record intervals (all ranks); the recorder's copies of its XDMF files
+        (xdmf_<records>_*) replace those of the previous checkpoint once the state is written."""
+        tag = f"xdmf_{records}"
         self.write({"records": records, "history": history, "integrator": run.integrator.state(),
                     "contact": run.contact.state(), "handles": [handle.state() for handle in run.handles],
-                    "recorder": recorder.state() if recorder is not None else None})
+                    "recorder": recorder.state(self.folder, tag) if recorder is not None else None})
+        if self.comm.rank == 0:
+            for old in self.folder.glob("xdmf_*"):
+                if not old.name.startswith(f"{tag}_"):
+                    old.unlink()
 
     def load(self, run, recorder=None):
         """Restore the saved state into `run` (and `recorder`); returns (history, records done)."""
@@ -44,5 +51,8 @@ class Checkpoint(io.Checkpoint):
         for handle, saved in zip(run.handles, state["handles"]):
             handle.restore(saved)
         if recorder is not None and state["recorder"] is not None:
-            recorder.restore(state["recorder"])
+            if "series" not in state["recorder"]:
+                raise ValueError(f"resume: the checkpoint in {self.folder} has an older layout (no copies of the XDMF "
+                                 f"files); run the scene without --resume")
+            recorder.restore(state["recorder"], self.folder)
         return state["history"], state["records"]

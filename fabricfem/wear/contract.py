@@ -218,11 +218,13 @@ class WearRun(Protocol):
     """A garment on a moving wearer, ready to run (SI units; angles in degrees).
 
     Attributes: `name` (the run's name), `model` (the garment's ShellModel), `body` (the posed wearer),
+    `torques` (the torque monitors, fabricfem.wear.garment.TorqueSpec: name, joint, axis, segments),
     `axis_label` (the records' coordinate: "time [s]" or e.g. "elbow angle [deg]")."""
 
     name: str
     model: ShellModel
     body: Body
+    torques: tuple
 
     @property
     def comm(self) -> MPI.Comm: ...
@@ -246,6 +248,9 @@ class WearRun(Protocol):
 
     def body_time(self, step: WearStep) -> float:
         """The body time [s] of record `step`."""
+
+    def motion_time(self, t: float) -> float:
+        """The motion's own time [s] (a motion file's) at body time t [s]."""
 
     def fraction(self, step: WearStep) -> float:
         """The done fraction in [0, 1] of the run at record `step` (progress and time left)."""

@@ -34,7 +34,7 @@ from typing import Callable, Sequence
 import numpy as np
 from mpi4py import MPI
 
-from fabricfem.body.blend import smoothstep
+from fabricfem.body.blend import BlendedStart, smoothstep
 from fabricfem.body.pose import Body
 from fabricfem.contact.explicit import ExplicitBodyContact
 from fabricfem.contact.seams import SeamSpec, SeamTies
@@ -151,6 +151,10 @@ class DelayedKinematics:
         after it (the explicit contact poses the body one step ahead of the last record)."""
         return self.source.positions(min(self._start + max(float(t) - self.t0, 0.0), self._end))
 
+    def inner_time(self, t: float) -> float:
+        """The source's own time [s] at time t [s]: start + (t - t0), not held (before its start before t0)."""
+        return self._start + float(t) - self.t0
+
 
 @dataclass
 class GarmentRun:
@@ -207,6 +211,17 @@ class GarmentRun:
         # rounded to 1e-9 of the axis unit: t = n dt carries round-off the record's nominal coordinate does not
         return round(self.axis[1](max(t - self.motion_start, 0.0) if phase is None or phase.name == "motion" else 0.0),
                      9)
+
+    def motion_time(self, t: float) -> float:
+        """The motion's own time [s] at body time t [s]: the time of the kinematics source the run was given (a
+        motion file's time) through the delay of the phases before the motion (DelayedKinematics) and a blend
+        from the standing pose (fabricfem.body.blend.BlendedStart); before the motion's first frame (negative
+        from a file's start at 0) in the phases before it."""
+        source, time_s = self.body.kinematics, float(t)
+        while isinstance(source, (DelayedKinematics, BlendedStart)):
+            time_s = source.inner_time(time_s)
+            source = source.source if isinstance(source, DelayedKinematics) else source.motion
+        return time_s
 
     def time_at(self, coordinate: float) -> float:
         """Body time [s] of a record coordinate (the inverse of the axis on the motion phase, by bisection of

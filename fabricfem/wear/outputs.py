@@ -8,6 +8,7 @@ a fixed colour range, so that frames share one scale (1 kPa = 7.50 mmHg, the uni
 """
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -51,6 +52,52 @@ def body_surface(ellipsoids, samples: int = 24) -> tuple[np.ndarray, np.ndarray]
         cells.append(tri + offset)
         offset += len(points[-1])
     return np.concatenate(points), np.concatenate(cells)
+
+
+def plot_wear_history(path, history, axis_label: str = "time [s]", title: str = ""):
+    """PNG (rank 0) of a wear run's resisting torques [N m] per monitor against the body time [s] of every
+    record (sewing, donning and settling included), each phase named at its start, the motion's records shaded
+    (the records whose peaks and means the summary reports, fabricfem.wear.contract.WearHistory.summary) with the
+    summary's peaks marked, and the records' axis value (e.g. the elbow angle [deg], `axis_label`) on a second
+    axis where the run has one. Returns the matplotlib Figure (closed; None on the other ranks)."""
+    if MPI.COMM_WORLD.rank != 0:
+        return None
+    import matplotlib  # optional heavy package: only when a plot is written
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
+    fig, ax = plt.subplots(figsize=(8, 5))
+    steps, times = history.steps, history.times
+    for name in history.monitors:
+        ax.plot(times, history.torque(name), marker="o", ms=3, label=name)
+    ax.set(xlabel="body time [s]", ylabel="resisting torque [N m]", title=title)
+    ax.grid(True, alpha=0.3)
+    starts = [k for k, s in enumerate(steps) if k == 0 or s.phase != steps[k - 1].phase]
+    for k in starts:   # a record closes its interval: a phase starts one record interval before its first record
+        start = times[k - 1] if k else 0.0
+        ax.axvline(start, color="gray", lw=0.8, ls=":")
+        ax.text(start, 0.98, f" {steps[k].phase}", transform=ax.get_xaxis_transform(), va="top", fontsize=8)
+    motion = [k for k, s in enumerate(steps) if s.phase == "motion"]
+    if motion:
+        ax.axvspan(times[motion[0] - 1] if motion[0] else 0.0, times[motion[-1]], color="tab:orange", alpha=0.1,
+                   label="motion: the records of the summary's peaks")
+        summary = history.summary()
+        peaks = [summary[f"torque_{name}"] for name in history.monitors]
+        ax.plot([p["peak_time_s"] for p in peaks], [p["peak_Nm"] for p in peaks], "k*", ms=10, ls="none",
+                label="peak (summary)")
+    handles = ax.get_legend_handles_labels()[0]
+    axis_values = [s.axis_value for s in steps]
+    if steps and all(v is not None for v in axis_values):
+        twin = ax.twinx()
+        handles += twin.plot(times, axis_values, color="gray", lw=1, ls="--", alpha=0.7,
+                             label=f"{axis_label.split(' [')[0]} (right axis)")
+        twin.set_ylabel(axis_label)
+    if handles:
+        ax.legend(handles=handles, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=3)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return fig
 
 
 def plot_torque(path, curves: dict[str, tuple[np.ndarray, np.ndarray]], title: str = "",
@@ -177,6 +224,50 @@ def render_skin_pressure(path: str | Path, points: np.ndarray, triangles: np.nda
 
 
 # ---------------------------------------------------------------------------------------- OpenSim storage
+# joint -> (OpenSim coordinate of its flexion, the flexion axis in the body's frame): the names of OpenSim's full-body
+# models (e.g. Rajagopal 2015); the arm of fabricfem.body.arm (flexion about +z) taken as a right arm; the lower
+# body of fabricfem.body.lower_body (x forward, y left, z up): the knees flex about +y (the shank swings backwards),
+# the ankles dorsiflex about -y (the toes rise)
+OPENSIM_COORDINATES: dict[str, tuple[str, tuple[float, float, float]]] = {
+    "elbow": ("elbow_flex_r", (0.0, 0.0, 1.0)),
+    "knee_r": ("knee_angle_r", (0.0, 1.0, 0.0)), "knee_l": ("knee_angle_l", (0.0, 1.0, 0.0)),
+    "ankle_r": ("ankle_angle_r", (0.0, -1.0, 0.0)), "ankle_l": ("ankle_angle_l", (0.0, -1.0, 0.0))}
+STO_NOTE = ("<monitor>_moment: resisting torque of the garment about the monitor's axis [N m], positive when the "
+            "garment opposes a right-handed rotation about the axis (flexion)\n"
+            "<coordinate>_moment (OpenSim coordinate names, e.g. knee_angle_r_moment): the garment's moment on the "
+            "body about the joint's flexion axis [N m], positive in flexion (minus the resisting torque); flip it "
+            "for a model whose coordinate is negative in flexion (the knee of gait2392)\n"
+            "time: body time [s] (sewing, donning and settling included); motion_time: the motion's own time [s] "
+            "(a motion file's time; before its first frame in the phases before the motion)")
+
+
+def opensim_coordinates(monitors) -> dict[str, tuple[str, float]]:
+    """{monitor name: (OpenSim coordinate, sign)} of the torque monitors (fabricfem.wear.garment.TorqueSpec: name,
+    joint, axis) whose axis is their joint's flexion axis (OPENSIM_COORDINATES; sign +1) or its opposite (-1); the
+    first monitor of a coordinate takes it, the others and those about other axes or joints get none."""
+    out: dict[str, tuple[str, float]] = {}
+    for spec in monitors:
+        if spec.joint not in OPENSIM_COORDINATES:
+            continue
+        coordinate, flexion = OPENSIM_COORDINATES[spec.joint]
+        axis = np.asarray(spec.axis, dtype=float)
+        cosine = float(np.dot(axis, flexion) / np.linalg.norm(axis))
+        if abs(abs(cosine) - 1.0) < 1e-9 and coordinate not in (c for c, _ in out.values()):
+            out[spec.name] = (coordinate, math.copysign(1.0, cosine))
+    return out
+
+
+def wear_sto_columns(steps, monitors, motion_times: Sequence[float]) -> dict[str, list[float]]:
+    """The data columns of a wear run's torque.sto (STO_NOTE): motion_time [s] (`motion_times`, one per record),
+    <monitor>_moment per monitor [N m] and <coordinate>_moment per monitor with an OpenSim coordinate
+    (`opensim_coordinates`; left out when a monitor's column already has the name)."""
+    columns = {"motion_time": [float(t) for t in motion_times]}
+    columns.update({f"{spec.name}_moment": [s.torques[spec.name] for s in steps] for spec in monitors})
+    for name, (coordinate, sign) in opensim_coordinates(monitors).items():
+        columns.setdefault(f"{coordinate}_moment", [-sign * s.torques[name] for s in steps])
+    return columns
+
+
 def _sto_note_lines(header_note: str) -> list[str]:
     """The comment lines of a .sto header (ValueError naming header_note if a line could be read as a header
     key: OpenSim reads "key=value" lines before endheader as metadata)."""

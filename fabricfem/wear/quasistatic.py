@@ -40,7 +40,7 @@ from fabricfem.solvers.newton import NewtonSolver, SolverError
 from fabricfem.solvers.system import CompositeSystem
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.contract import WearHistory, WearStep
-from fabricfem.wear.sleeve import ELBOW_AXIS, sleeve_shell, track_elbow_torques
+from fabricfem.wear.sleeve import ARM_MONITORS, ELBOW_AXIS, sleeve_shell, track_elbow_torques
 
 
 class Stabilized:
@@ -153,6 +153,7 @@ class ArmOutputs:
     needs `config`, `contact`, `body` and `flexion`."""
 
     axis_label = "elbow angle [deg]"
+    torques = ARM_MONITORS
 
     @property
     def name(self) -> str:
@@ -174,6 +175,10 @@ class ArmOutputs:
     def body_time(self, step) -> float:
         """The body time [s] of record `step` (the flexion's time at its angle)."""
         return self.flexion.time_at(math.radians(step.coordinate))
+
+    def motion_time(self, t: float) -> float:
+        """The motion's own time [s] at body time t [s]: the flexion runs on the body clock."""
+        return float(t)
 
 
 @dataclass

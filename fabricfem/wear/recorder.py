@@ -2,9 +2,12 @@
 
 Under the output folder: cloth.xdmf (garment displacement [m]) and cloth_pressure.xdmf (contact pressure on the
 body [Pa] per unit deformed cloth area) per record, for ParaView and meshio (the XDMF time is the body time [s],
-or the angle [deg] of a quasi-static sleeve), body_NNNN.vtp + body.pvd
-(the posed body surfaces per record), torque.csv (the history's header), torque.png, torque.sto (OpenSim storage
-of the resisting torques against the body time), renders of the pressure on the skin at the requested
+or the angle [deg] of a quasi-static sleeve; a resumed run appends to the files of its checkpoint, so that each
+holds every record once), body_NNNN.vtp + body.pvd
+(the posed body surfaces per record), torque.csv (the history's header), torque.png (the torques against the body
+time with the phases and the summary's records marked, fabricfem.wear.outputs.plot_wear_history), torque.sto (OpenSim
+storage of the torques against the body time, with the motion's own time and OpenSim coordinate names,
+fabricfem.wear.outputs.STO_NOTE), renders of the pressure on the skin at the requested
 coordinates and at the record of the largest pressure of the motion (pressure_peak.png). It reads the
 run only through the wearer contract (fabricfem.wear.contract.WearRun).
 """
@@ -17,7 +20,15 @@ from dolfinx import fem
 from dolfinx import io as dio
 
 from fabricfem import io as fio
-from fabricfem.wear.outputs import body_surface, plot_torque, render_skin_pressure, skin_pressure, write_sto
+from fabricfem.wear.outputs import (
+    STO_NOTE,
+    body_surface,
+    plot_wear_history,
+    render_skin_pressure,
+    skin_pressure,
+    wear_sto_columns,
+    write_sto,
+)
 
 
 COLOUR_PERCENTILE = 99.0   # the renders' colour range ends at this percentile of the pressures in contact
@@ -37,8 +48,7 @@ class WearRecorder:
     """Writes the records of one WearRun into `out` (all ranks construct it and call `record` and `close`);
     `render_at`: record coordinates of the pressure renders."""
 
-    def __init__(self, run, out: Path, render_at: list[float], render: bool = True, body_samples: int = 24,
-                 part: str = ""):
+    def __init__(self, run, out: Path, render_at: list[float], render: bool = True, body_samples: int = 24):
         self.run, self.out = run, Path(out)
         self.render, self.samples = render, body_samples
         self.pending = sorted(render_at)
@@ -49,13 +59,10 @@ class WearRecorder:
         model = run.model
         self.u_out = fem.Function(model.V2, name="displacement")
         self.p_out = fem.Function(fem.FunctionSpace(model.mesh, ("Lagrange", 2)), name="contact_pressure")
-        # one field per file: meshio's XDMF reader keeps one function per time step
-        # a resumed run (fabricfem.wear.checkpoint) writes its records into new files (`part`, e.g. "_from_2.4s"):
-        # the records after the last checkpoint of the killed run are written again, at the same times
-        self.xdmf = dio.XDMFFile(comm, str(self.out / f"cloth{part}.xdmf"), "w")
-        self.xdmf.write_mesh(model.mesh)
-        self.xdmf_pressure = dio.XDMFFile(comm, str(self.out / f"cloth_pressure{part}.xdmf"), "w")
-        self.xdmf_pressure.write_mesh(model.mesh)
+        # one field per file (meshio's XDMF reader keeps one function per time step): file stem -> its function;
+        # a resumed run puts back the files' copies of its checkpoint and appends to them (`restore`)
+        self.fields = {"cloth": self.u_out, "cloth_pressure": self.p_out}
+        self.files = {name: self._open(name, "w") for name in self.fields}
         self.frames: list[tuple[float, str]] = []
         self.renders: list[str] = []     # names of the pressure renders written
         self.skin_frames: list = []      # (name, title, (points, triangles, values [Pa]), garment surface), rank 0
@@ -68,8 +75,8 @@ class WearRecorder:
         run, x, stamp = self.run, step.coordinate, step.output_time
         self.u_out.interpolate(run.model.displacement())
         self.p_out.interpolate(run.pressure_field())
-        self.xdmf.write_function(self.u_out, stamp)
-        self.xdmf_pressure.write_function(self.p_out, stamp)
+        for name, field in self.fields.items():
+            self.files[name].write_function(field, stamp)
         if run.comm.rank == 0:
             import pyvista as pv  # optional heavy package, loaded only when a render is made
             points, triangles = body_surface(run.posed_bodies(x), self.samples)
@@ -87,15 +94,33 @@ class WearRecorder:
             self.skin_frames = [f for f in self.skin_frames if f[0] != "pressure_peak.png"]
             self._keep_skin_frame(step, "pressure_peak.png")
 
-    def state(self) -> dict:
-        """What a checkpoint keeps of the recorder: the body frames and the skin frames kept for the renders."""
-        return {"frames": list(self.frames), "skin_frames": list(self.skin_frames), "pending": list(self.pending),
-                "peak": self.peak}
+    def _open(self, name: str, mode: str):
+        """The XDMF file <out>/<name>.xdmf opened in `mode` ("w": new, with the mesh; "a": appended to)."""
+        handle = dio.XDMFFile(self.run.comm, str(self.out / f"{name}.xdmf"), mode)
+        if mode == "w":
+            handle.write_mesh(self.run.model.mesh)
+        return handle
 
-    def restore(self, state: dict) -> None:
-        """Continue from a checkpoint's `state`."""
+    def state(self, folder: Path, tag: str) -> dict:
+        """What a checkpoint keeps of the recorder (all ranks call it): the body frames, the skin frames kept for
+        the renders, and copies of the XDMF files as they are now, <folder>/<tag>_<file stem>.xdmf/.h5 (each file
+        closed, copied, reopened for appending: a kill later may leave the open HDF5 file unreadable)."""
+        for name in self.fields:
+            self.files[name].close()
+            fio.copy_xdmf(self.out / f"{name}.xdmf", folder, f"{tag}_{name}", self.run.comm)
+            self.files[name] = self._open(name, "a")
+        return {"frames": list(self.frames), "skin_frames": list(self.skin_frames), "pending": list(self.pending),
+                "peak": self.peak, "series": tag}
+
+    def restore(self, state: dict, folder: Path) -> None:
+        """Continue from a checkpoint's `state` in `folder`: its copies of the XDMF files put back in place (the
+        records up to the checkpoint; those after it are written again, once) and appended to from here on."""
         self.frames, self.skin_frames, self.pending = state["frames"], state["skin_frames"], state["pending"]
         self.peak = state["peak"]
+        for name in self.fields:
+            self.files[name].close()
+            fio.SurfaceSeries.restore(self.out / f"{name}.xdmf", folder, f"{state['series']}_{name}", self.run.comm)
+            self.files[name] = self._open(name, "a")
 
     def _keep_skin_frame(self, step, name: str) -> None:
         """The pressure on the body's skin at this record (rank 0 keeps it; rendered at `close` with one colour
@@ -115,9 +140,9 @@ class WearRecorder:
         self.skin_frames.append((name, title, skin, (points, cells)))
 
     def close(self, history) -> None:
-        """Close the XDMF file and write torque.csv, body.pvd and torque.png."""
-        self.xdmf.close()
-        self.xdmf_pressure.close()
+        """Close the XDMF files and write torque.csv, body.pvd, torque.sto, torque.png and the renders."""
+        for handle in self.files.values():
+            handle.close()
         comm = self.run.comm
         fio.write_csv(self.out / "torque.csv", history.header, history.rows(), comm)
         if comm.rank == 0:
@@ -126,11 +151,9 @@ class WearRecorder:
                 f.writelines(f'  <DataSet timestep="{x}" file="{name}"/>\n' for x, name in self.frames)
                 f.write("</Collection>\n</VTKFile>\n")
         times = [self.run.body_time(s) for s in history.steps]
-        note = ("resisting torque of the garment about each joint axis [N m]: positive when the garment opposes a "
-                "right-handed rotation about the axis (flexion); time: body time [s]")
         write_sto(self.out / "torque.sto", times,
-                  {f"{name}_moment": [s.torques[name] for s in history.steps] for name in history.monitors}
-                  if history.steps else {}, comm, note)
+                  wear_sto_columns(history.steps, self.run.torques, [self.run.motion_time(t) for t in times]),
+                  comm, STO_NOTE)
         if comm.rank == 0 and self.skin_frames:
             top, true_max = colour_top([skin[2] for _, _, skin, _ in self.skin_frames])
             note = (f" (colours to the {COLOUR_PERCENTILE:g}th percentile {top / 1e3:.3g} kPa; "
@@ -139,5 +162,4 @@ class WearRecorder:
                 render_skin_pressure(self.out / name, points, triangles, values / 1e3, title + note,
                                      (0.0, max(top / 1e3, 1e-9)), garment)
                 self.renders.append(name)
-        plot_torque(self.out / "torque.png", history.torque_curves(), f"{history.name} resisting torque",
-                    xlabel=self.label)
+        plot_wear_history(self.out / "torque.png", history, self.label, f"{history.name}: resisting torque")

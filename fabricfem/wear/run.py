@@ -54,8 +54,7 @@ def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], ren
     t0 = time.perf_counter()
     say(headline)
     resuming = bool(resume and checkpoint is not None and checkpoint.exists())
-    recorder = WearRecorder(run, out, [float(a) for a in render_at], render, body_samples,
-                            part="_resumed" if resuming else "")
+    recorder = WearRecorder(run, out, [float(a) for a in render_at], render, body_samples)
     clock = fio.Progress()
 
     def on_step(step):
