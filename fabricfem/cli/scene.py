@@ -12,7 +12,7 @@ from fabricfem.demo import rollup_demo
 from fabricfem.dynamics.newmark import DynamicsError
 from fabricfem.scenes.accuracy import parse_target, plan, run_accurate, with_window
 from fabricfem.scenes.batch import read_summary
-from fabricfem.scenes.run import run_scene, scene_name
+from fabricfem.scenes.run import run_scene, scene_name, with_output_dir
 from fabricfem.scenes.sweep import parse_vary, run_sweep
 from fabricfem.solvers.newton import SolverError
 
@@ -22,7 +22,9 @@ def _add_scene_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scene", help="path of the scene file (TOML)")
     parser.add_argument("--accuracy", default=None, metavar="TARGET",
                         help="relative error target (2%% or 0.02): run the cheapest mesh level that meets it")
-    parser.add_argument("--quantity", default=None, help="the monitored quantity of the target (default [accuracy])")
+    parser.add_argument("--quantity", default=None,
+                        help="the monitored quantity of the target (default [accuracy]; without one the message lists "
+                             "the scene's quantities)")
     parser.add_argument("--window", type=float, default=None, metavar="SECONDS",
                         help="wear scenes: the pilots run the first SECONDS of body time (default [accuracy] window)")
 
@@ -39,12 +41,13 @@ def _run(args: argparse.Namespace) -> int:
     scene, target = _scene_and_target(args)
     accurate = (target is not None or args.quantity is not None or args.window is not None
                 or scene.get("accuracy", {}).get("target"))
+    out = None if args.out is None else Path(args.out)
     try:
         with json_stdout(args.json):
             if accurate:
-                _, outcome = run_accurate(scene, target, args.quantity)
+                _, outcome = run_accurate(scene if out is None else with_output_dir(scene, out), target, args.quantity)
             else:
-                outcome = run_scene(scene, out=None if args.out is None else Path(args.out), resume=args.resume)
+                outcome = run_scene(scene, out=out, resume=args.resume)
     except (SolverError, DynamicsError) as exc:   # the run stopped: summary.json says "failed: ..."
         say(f"fabricfem run: stopped: {' '.join(str(exc).split())}", file=sys.stderr)
         return 1
@@ -101,7 +104,8 @@ def add_scene_commands(sub: Subparsers) -> None:
     """run, plan, sweep, scenes and demo."""
     run = add_command(sub, "run", _run, help="run a scene file (TOML), e.g. scenes/rollup.toml")
     _add_scene_options(run)
-    run.add_argument("--out", default=None, help="output folder (default: the scene's [output] dir)")
+    run.add_argument("--out", default=None, help="output folder (default: the scene's [output] dir); with --accuracy "
+                     "the chosen level's outputs, its pilots under OUT/accuracy/")
     run.add_argument("--resume", action="store_true",
                      help="wear and dynamic scenes: continue from the output folder's checkpoint after a kill or "
                           "Ctrl-C")

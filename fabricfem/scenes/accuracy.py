@@ -64,7 +64,14 @@ from fabricfem.scenes.batch import read_summary
 from fabricfem.scenes.build import build_fabric, critical_time_step_estimate, estimated_dofs, validate
 from fabricfem.scenes.richardson import ORDERS, richardson
 from fabricfem.scenes.run import SceneOutcome, output_dir, run_scene, scene_name, scene_sha256
-from fabricfem.scenes.schema import ACCURACY_KINDS, Scene, SceneError, accuracy_summary_key, check_target
+from fabricfem.scenes.schema import (
+    ACCURACY_KINDS,
+    Scene,
+    SceneError,
+    accuracy_quantities,
+    accuracy_summary_key,
+    check_target,
+)
 from fabricfem.scenes.sections import AccuracySection, DynamicsSection, ModelSection, section
 from fabricfem.solvers.newton import SolverError
 
@@ -221,7 +228,8 @@ def with_window(scene: Scene, window: float | None) -> Scene:
 
 
 def target_of(scene: Scene, target: float | None = None, quantity: str | None = None) -> tuple[str, float]:
-    """(quantity, target) from the arguments, else the scene's [accuracy]; SceneError naming what is missing."""
+    """(quantity, target) from the arguments, else the scene's [accuracy]; SceneError naming what is missing (a
+    missing quantity: with the quantities the scene accepts, accuracy_quantities)."""
     spec = section(AccuracySection, scene.get("accuracy"))
     quantity = quantity if quantity is not None else spec.quantity
     target = target if target is not None else spec.target
@@ -231,10 +239,12 @@ def target_of(scene: Scene, target: float | None = None, quantity: str | None = 
     if scene.kind == "wear" and wear.route_of(scene.data) != "explicit":
         raise SceneError("route.solver: an accuracy target runs a wear scene on the explicit engine (route.solver = "
                          "\"explicit\"), not the sleeve's quasistatic or implicit route")
+    if quantity is None:
+        accepted = ", ".join(accuracy_quantities(scene.data)) or "none"
+        raise SceneError(f"accuracy.quantity: name the monitored quantity (--quantity NAME or [accuracy] quantity); "
+                         f"this scene accepts: {accepted}")
     if target is None:
         raise SceneError("accuracy.target: give a relative error target (--accuracy 2% or [accuracy] target)")
-    if quantity is None:
-        raise SceneError("accuracy.quantity: name the monitored quantity (--quantity NAME or [accuracy] quantity)")
     accuracy_summary_key(scene.data, quantity)
     return quantity, check_target("accuracy.target", target)
 

@@ -57,8 +57,7 @@ def run_scene(scene: Scene, comm=MPI.COMM_WORLD, out: Path | None = None, resume
     (fabricfem.wear.checkpoint, `run_dynamic_scene`); `resume` of a folder whose summary.json holds a completed run
     of this scene says so and returns its recorded status (result None), rewriting nothing."""
     if out is not None:
-        scene = Scene({**scene.data, "output": {**scene.data.get("output", {}), "dir": str(out)}}, scene.path,
-                      scene.kind)
+        scene = with_output_dir(scene, out)
     out = output_dir(scene)
     if resume and (done := _completed_status(out, scene_sha256(scene), comm)):
         if comm.rank == 0:
@@ -77,6 +76,12 @@ def run_scene(scene: Scene, comm=MPI.COMM_WORLD, out: Path | None = None, resume
               f"completed with warnings: {', '.join(warnings)}" if warnings else "completed")
     folder.finish(status, result.summary() if isinstance(result, WearHistory) else None)
     return SceneOutcome(result, status, out)
+
+
+def with_output_dir(scene: Scene, out: Path) -> Scene:
+    """The scene with [output] dir = `out` (`fabricfem run --out DIR`, also with --accuracy: its pilots go under
+    DIR/accuracy/)."""
+    return Scene({**scene.data, "output": {**scene.data.get("output", {}), "dir": str(out)}}, scene.path, scene.kind)
 
 
 def _completed_status(out: Path, sha256: str, comm) -> str:
