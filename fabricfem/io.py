@@ -364,9 +364,10 @@ def update_json(path: str | Path, data: dict, comm=MPI.COMM_WORLD):
 
 def plot_time_series(path: str | Path, time: Sequence[float], panels: dict[str, dict[str, Sequence[float]]],
                      title: str = "", comm=MPI.COMM_WORLD):
-    """PNG of curves over time (rank 0): one panel per key of `panels` ({panel label: {curve: values}})."""
+    """PNG of curves over time [s] (rank 0): one panel per key of `panels` ({panel label with its unit, e.g.
+    "energy [J]": {curve: values}}); returns the matplotlib Figure (closed; None on the other ranks)."""
     if comm.rank != 0:
-        return
+        return None
     import matplotlib  # optional heavy package, loaded only when a plot is drawn
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
@@ -386,6 +387,7 @@ def plot_time_series(path: str | Path, time: Sequence[float], panels: dict[str, 
     Path(path).parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100)
     plt.close(fig)
+    return fig
 
 
 class OutputFolder:

@@ -156,6 +156,15 @@ def _max_displacement(model: ShellModel) -> float:
     return model.comm.allreduce(local, op=MPI.MAX)
 
 
+def monitor_unit(table: dict) -> str:
+    """The unit of a [[dynamics.monitors]] table's values: a strain's "-", a displacement's (u, max_displacement)
+    "m", a rotation's (theta) "rad"."""
+    m = section(MonitorSection, table)
+    if m.quantity is not None:
+        return "m" if m.quantity == "max_displacement" else "-"
+    return "m" if m.field == "u" else "rad"
+
+
 def build_monitors(spec: list[dict], model: ShellModel, meter: _StrainMeter) -> dict:
     """{name: callable} of [[dynamics.monitors]] (point values on all ranks, global quantities)."""
     quantities = {"max_warp_strain": lambda: meter.summary()["max_warp"],
@@ -266,7 +275,7 @@ def _write_outputs(scene: Scene, history, model, n_steps: int, dt: float, dt_cri
     rows = [row + [its] for row, its in zip(rows, history.newton_iterations)]
     io.write_csv(out / f"{name}.csv", header, rows, comm)
     user = [m["name"] for m in d.monitors]
-    panels = {m: {m: history.monitors[m]} for m in user}
+    panels = {f"{m['name']} [{monitor_unit(m)}]": {m["name"]: history.monitors[m["name"]]} for m in d.monitors}
     panels["energy [J]"] = {"kinetic": history.kinetic, "strain": history.strain, "total": list(history.total)}
     panels["max strain [-]"] = {"max vertex Green strain": history.monitors["max_strain"]}
     io.plot_time_series(out / f"{name}.png", history.time, panels, title=name, comm=comm)

@@ -1,7 +1,9 @@
 """Static scenes: the shell a scene describes (mesh, fabric, supports, loads) solved by load stepping.
 
 Outputs of a static scene: <dir>/solution.xdmf (ParaView), <dir>/history.csv (load factor, Newton iterations,
-probe displacement [m]), <dir>/final.png and <dir>/summary.json; progress on rank 0 with an estimated time left.
+probe displacement [m]), <dir>/final.png (the deformed shell coloured by the displacement magnitude |u| [m] with its
+colour bar, the undeformed shell translucent behind it) and <dir>/summary.json; progress on rank 0 with an estimated
+time left.
 """
 from __future__ import annotations
 
@@ -126,10 +128,13 @@ def run_static_scene(scene: Scene, comm=MPI.COMM_WORLD) -> list[LoadStep]:
     series.close()
     io.write_csv(out / "history.csv", ["load_factor", "newton_iterations", "probe_ux_m", "probe_uy_m", "probe_uz_m"],
                  rows, comm)
-    if output.render:
-        surfaces = [io.gather_surface(model.mesh), io.gather_surface(model.mesh, model.displacement())]
-        io.render_surfaces(out / "final.png", surfaces, title=scene_name(scene),
-                           colors=["lightgray", "steelblue"], camera="iso")
+    if output.render:   # the deformed shell coloured by |u| with its colour bar, the undeformed one translucent
+        reference = io.gather_surface(model.mesh)
+        deformed = io.gather_surface(model.mesh, model.displacement())
+        if comm.rank == 0:
+            io.render_field(out / "final.png", deformed, np.linalg.norm(deformed[0] - reference[0], axis=1),
+                            f"{scene_name(scene)}: deformed, coloured by |u| (translucent: undeformed)",
+                            bodies=[reference], camera="iso", scalar_bar_title="displacement |u| [m]")
     wall = time.perf_counter() - t0
     memory = io.peak_memory_mib(comm)
     say(f"done: {len(history)} load steps, {sum(h.iterations for h in history)} Newton iterations, {wall:.1f} s, "

@@ -10,11 +10,14 @@ folder `<out>/<name>/` (name from its key=value pairs) with fabricfem.scenes.run
 `estimated_cost` to the least loaded group). Resumable: a variant whose folder holds a summary.json with status
 "completed" and the variant's scene hash (run.scene_sha256) is read back, not rerun. Rank 0 writes `<out>/sweep.csv` (the variant's
 keys, its status and the scalar entries of its summary.json; numeric lists flattened as `<key>_<i>`) and
-`<out>/sweep.png` (one summary quantity against the first varied key, one curve per combination of the others).
+`<out>/sweep.png` (one summary quantity against the first varied key, one curve per combination of the others; by
+default the scene's [accuracy] quantity or the largest of the quantities it monitors, e.g. a drape's probe_uz_m;
+axes with units, a title naming the scene). The probe's displacement is in the table once, as probe_u{x,y,z}_m.
 """
 from __future__ import annotations
 
 import copy
+import dataclasses
 import itertools
 import math
 import re
@@ -24,14 +27,22 @@ from pathlib import Path
 
 from mpi4py import MPI
 
+from fabricfem.parameters import param_doc
 from fabricfem.scenes.batch import Job, completed, groups_of, read_summary, run_batch, write_table
-from fabricfem.scenes.build import estimated_cost, validate
+from fabricfem.scenes.build import estimated_cost, scene_name, validate
+from fabricfem.scenes.contract import SECTIONS_OF
+from fabricfem.scenes.dynamic import monitor_unit
 from fabricfem.scenes.run import run_scene, scene_sha256
-from fabricfem.scenes.schema import Scene, SceneError
+from fabricfem.scenes.schema import Scene, SceneError, accuracy_quantities
 
 # summary.json entries that describe the run, not its result (left out of the default plot quantity)
 BOOKKEEPING = {"ranks", "ndofs", "wall_s", "time_integration_wall_s", "peak_memory_mib", "peak_memory_total_mib",
                "steps", "load_steps", "dt_s", "dt_crit_s", "end_time_s", "newton_iterations"}
+# summary.json lists whose values the summary also gives one by one under these names (left out of sweep.csv)
+DUPLICATES = {"probe_displacement_m": ("probe_ux_m", "probe_uy_m", "probe_uz_m")}
+# the unit of a summary entry from its name's suffix, the longer suffixes first
+UNIT_SUFFIXES = (("_N_per_m", "N/m"), ("_Nm", "N m"), ("_mmHg", "mmHg"), ("_kPa", "kPa"), ("_Pa", "Pa"),
+                 ("_mib", "MiB"), ("_J", "J"), ("_N", "N"), ("_m", "m"), ("_s", "s"))
 
 
 @dataclass
@@ -139,12 +150,14 @@ def finished(variant: Variant) -> bool:
 
 
 def scalar_entries(summary: dict) -> dict:
-    """The scalar entries of a summary (numbers, strings, booleans), numeric lists flattened as <key>_<i>."""
+    """The scalar entries of a summary (numbers, strings, booleans), numeric lists flattened as <key>_<i> (not those
+    also given one by one, DUPLICATES: the probe's displacement is its probe_u{x,y,z}_m)."""
     row = {}
     for key, value in summary.items():
         if isinstance(value, (int, float, str, bool)) or value is None:
             row[key] = value
-        elif isinstance(value, list) and value and all(isinstance(v, (int, float)) for v in value):
+        elif isinstance(value, list) and value and all(isinstance(v, (int, float)) for v in value) and \
+                not all(name in summary for name in DUPLICATES.get(key, ("",))):
             row.update({f"{key}_{i}": v for i, v in enumerate(value)})
     return row
 
@@ -172,21 +185,37 @@ def run_sweep(base: Scene, varies: list[tuple[str, list]], out: str | Path, rank
                      **{k: val for k, val in scalar_entries(summary).items() if k not in v.values and k != "status"}})
     if comm.rank == 0:
         write_table(out / "sweep.csv", rows)
-        quantity = plot or default_quantity(rows, {"variant", *todo[0].values})
+        quantity = plot or default_quantity(rows, {"variant", *todo[0].values}, preferred_quantities(base))
         numeric = sorted({k for row in rows for k, v in row.items() if isinstance(v, (int, float))})
         if quantity is not None and quantity not in numeric:
             print(f"sweep: --plot {quantity!r} is not a numeric entry of the variants' summary.json (no plot); "
                   f"entries: {numeric}", flush=True)
             quantity = None
         if quantity is not None:
-            plot_sweep(out / "sweep.png", rows, [k for k, _ in varies], quantity)
+            plot_sweep(out / "sweep.png", rows, [k for k, _ in varies], quantity, base)
         print(f"sweep: wrote {out}/sweep.csv" + (f", sweep.png ({quantity})" if quantity else ""), flush=True)
     return rows
 
 
-def default_quantity(rows: list[dict], exclude: set[str]) -> str | None:
-    """The first numeric summary entry that is not bookkeeping (BOOKKEEPING, memory) nor in `exclude` (the
-    varied keys), or None."""
+def preferred_quantities(base: Scene) -> list[str]:
+    """The summary entries a sweep of `base` plots by default: its [accuracy] quantity, else the quantities it
+    monitors (fabricfem.scenes.schema.accuracy_quantities: a static probe's components, a dynamic scene's
+    monitors, a wear scene's torques and pressures), as summary.json keys."""
+    accepted = accuracy_quantities(base.data)
+    chosen = base.get("accuracy", {}).get("quantity")
+    return [accepted[chosen]] if chosen in accepted else list(accepted.values())
+
+
+def default_quantity(rows: list[dict], exclude: set[str], preferred: list[str] = ()) -> str | None:
+    """The plot's quantity without --plot: of the `preferred` entries numeric in every row, the one of the largest
+    magnitude when they share one unit (a probe's components: the direction it moves most), else the first; without
+    such entries the first numeric summary entry that is not bookkeeping (BOOKKEEPING, memory) nor in `exclude` (the
+    varied keys); None when there is none."""
+    numeric = [k for k in preferred if all(_number(row.get(k)) for row in rows)]
+    if numeric:
+        if len({_unit(k) for k in numeric}) > 1:
+            return numeric[0]
+        return max(numeric, key=lambda k: max(abs(row[k]) for row in rows))
     for key in dict.fromkeys(k for row in rows for k in row if k not in exclude):
         values = [row.get(key) for row in rows]
         if (key not in BOOKKEEPING and not key.startswith("peak_memory") and
@@ -196,8 +225,40 @@ def default_quantity(rows: list[dict], exclude: set[str]) -> str | None:
     return None
 
 
-def plot_sweep(path: Path, rows: list[dict], keys: list[str], quantity: str) -> None:
-    """PNG of `quantity` against the first varied key, one curve per combination of the other keys."""
+def _number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _unit(quantity: str) -> str | None:
+    """The unit of a summary entry from its name (UNIT_SUFFIXES; a strain's "-"), None when it has none."""
+    if "strain" in quantity:
+        return "-"
+    return next((unit for suffix, unit in UNIT_SUFFIXES if quantity.endswith(suffix)), None)
+
+
+def quantity_label(base: Scene, quantity: str) -> str:
+    """`quantity` (a summary.json entry of the sweep of `base`) with its unit: a dynamic monitor's final value
+    (final_<name>) with the monitor's (fabricfem.scenes.dynamic.monitor_unit), else from its name (`_unit`)."""
+    monitors = {m["name"]: m for m in base.get("dynamics", {}).get("monitors", [])}
+    name = quantity.removeprefix("final_")
+    unit = monitor_unit(monitors[name]) if quantity.startswith("final_") and name in monitors else _unit(quantity)
+    return f"{quantity} [{unit}]" if unit else quantity
+
+
+def key_label(base: Scene, key: str) -> str:
+    """A varied dotted scene key with its unit as the scene reference gives it (the last bracket without a comma
+    in the key's documentation, e.g. "fabric.E1 [Pa]"; the key alone when it has none)."""
+    parts = key.split(".")
+    classes = SECTIONS_OF.get(base.kind, {}).get(parts[0], ())
+    docs = [param_doc(f) for cls in classes for f in dataclasses.fields(cls) if f.name == parts[-1]]
+    units = re.findall(r"\[([^\[\],]+)\]", docs[0]) if docs else []
+    return f"{key} [{units[-1]}]" if units else key
+
+
+def plot_sweep(path: Path, rows: list[dict], keys: list[str], quantity: str, base: Scene):
+    """PNG of `quantity` against the first varied key, one curve per combination of the other keys, the axes
+    labelled with their units (`key_label`, `quantity_label`) under a title naming the scene; returns the
+    matplotlib Figure (closed)."""
     import matplotlib  # optional heavy package, loaded only when a plot is drawn
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
@@ -213,11 +274,13 @@ def plot_sweep(path: Path, rows: list[dict], keys: list[str], quantity: str) -> 
     for label, points in curves.items():
         xs, ys = zip(*(sorted(points) if numeric else points))
         ax.plot(xs if numeric else [str(x) for x in xs], ys, "o-", label=label)
-    ax.set_xlabel(first)
-    ax.set_ylabel(quantity)
+    ax.set_xlabel(key_label(base, first))
+    ax.set_ylabel(quantity_label(base, quantity))
+    ax.set_title(f"{scene_name(base)}: {quantity} against {first} ({len(rows)} variants)")
     ax.grid(True, alpha=0.3)
     if len(curves) > 1:
         ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
+    return fig
