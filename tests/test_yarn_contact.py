@@ -144,7 +144,7 @@ class _ScalarNewton:
         self.u.vector = PETSc.Vec().createSeq(1)
         self.u.vector.set(0.0)
 
-    def _update(self, step):
+    def update(self, step):
         self.u.vector.array[0] += step
 
     def assemble_residual(self):

@@ -9,8 +9,6 @@ import math
 import os
 from pathlib import Path
 
-import numpy as np
-
 from fabricfem.body.arm import ArmDimensions
 from fabricfem.dynamics import stability
 from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
@@ -27,7 +25,7 @@ from fabricfem.scenes.sections import (
     SceneSection,
     section,
 )
-from fabricfem.wear.config import SECTIONS, FabricSpec, SleeveConfig, TubeSpec
+from fabricfem.wear.config import SECTIONS, FabricSpec, SleeveConfig, TubeSpec, check_fit
 
 
 def build_fabric(spec: dict) -> Fabric:
@@ -83,13 +81,8 @@ def critical_time_step_estimate(data: dict) -> float | None:
     h_min = mesh_spacing(data["mesh"])
     if h_min is None:
         return None
-    fabric = build_fabric(data["fabric"])
-    cell = mesh_section(data["mesh"]).cell
-    omega = stability.MEMBRANE_KAPPA[cell] * stability.plane_stress_wave_speed(fabric) / h_min  # eq. 2.87
-    if section(ModelSection, data.get("model")).kind == "naghdi":
-        omega_s = (stability.THICKNESS_SHEAR_CHI[cell] * np.sqrt(12.0 * fabric.shear_correction *
-                   fabric.transverse_shear_modulus / fabric.density) / fabric.thickness)
-        omega = float(np.hypot(omega, omega_s))
+    omega = stability.element_frequency(build_fabric(data["fabric"]), mesh_section(data["mesh"]).cell, h_min,
+                                        section(ModelSection, data.get("model")).kind)
     rayleigh = section(DynamicsSection, data["dynamics"]).rayleigh
     return stability.critical_time_step(None, tuple(rayleigh), omega_max=omega)  # eq. 2.86
 
@@ -219,6 +212,11 @@ def check_wear_objects(wear_scene: WearScene, path: Path | None) -> None:
     if wear_scene.route.solver != "explicit":
         sleeve_config(wear_scene)                     # the Newton routes' configuration and its checks
         return
+    if wear_scene.is_tube_flexion:
+        try:
+            check_fit(tube_spec(wear_scene).radius, wear_scene.arm)   # the arm starts inside the tube
+        except ValueError as exc:
+            raise SceneError(f"garment.{exc}") from None
     fabric = wear.wear_fabric(wear_scene, build_fabric)
     if not fabric.density > 0.0:
         raise SceneError(f"fabric.density: the explicit engine needs a positive density [kg/m^3], got {fabric.density}")

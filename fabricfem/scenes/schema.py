@@ -194,7 +194,9 @@ def check_table(kind: str, section: str, table, where: str) -> None:
             raise SceneError(f"{where}: unknown key {key!r}{_suggest(key, schema)}; allowed: {sorted(schema)}")
         types, _ = schema[key]
         accepted = types if isinstance(types, tuple) else (types,)
-        if (isinstance(value, bool) and bool not in accepted) or not isinstance(value, types):
+        if isinstance(value, bool) and bool not in accepted:
+            raise SceneError(f"{where}.{key}: expected {getattr(types, '__name__', types)}, got a boolean")
+        if not isinstance(value, types):
             raise SceneError(f"{where}.{key}: expected {getattr(types, '__name__', types)}, got {value!r}")
     for key, (_, required) in schema.items():
         if required and key not in table and not (section == "fabric" and "catalogue" in table):
@@ -262,12 +264,13 @@ def validate(data: dict, source: str = "scene") -> Scene:
     """Check sections, keys, types and cross-references of a scene by its kind; raise SceneError naming the
     problem."""
     kind = scene_kind(data, source)
+    if kind != "wear":
+        _check_kind_sections(data, kind, source)
     check_sections(data, kind, source)
     if kind == "wear":
         check_wear(data)
         check_accuracy(data, "wear")
         return _parsed(Scene(data, kind="wear"))
-    _check_kind_sections(data, kind, source)
     _check_mesh(data["mesh"])
     _check_loads_and_supports(data)
     if data.get("output", {}).get("probe") is not None:
@@ -289,6 +292,9 @@ def _parsed(scene: Scene) -> Scene:
 
 def _check_kind_sections(data: dict, kind: str, source: str) -> None:
     """A static scene has no [dynamics] and a dynamic one no [solver]: the sections must match the kind."""
+    if "dynamics" in data and "solver" in data:
+        raise SceneError(f"{source}: [dynamics] and [solver] given: a scene is either dynamic (time integration "
+                         f"from rest) or static, not both")
     other = {"static": "dynamics", "dynamic": "solver"}[kind]
     if other in data:
         raise SceneError(f"scene.kind: {kind!r} does not match the sections given: [{other}] belongs to a "

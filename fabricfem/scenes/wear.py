@@ -57,7 +57,7 @@ from fabricfem.scenes.wear_sections import (  # noqa: F401 (the sections are pub
     WearRouteSection,
 )
 from fabricfem.wear.compression import StillPose, limb_body
-from fabricfem.wear.config import ContactSpec
+from fabricfem.wear.config import ROUTE_METHODS, ContactSpec
 from fabricfem.wear.garment import ExplicitSettings, Timeline, TorqueSpec
 from fabricfem.wear.sleeve import ARM_MONITORS, flexion_settings, flexion_timeline, similarity_factor
 
@@ -121,6 +121,11 @@ def check_wear(data: dict) -> None:
     _choice("motion.type", motion["type"], MOTION_TYPES)
     if motion["type"] == "elbow_flexion" and body["type"] not in ("arm", "default_arm"):
         raise SceneError(f"motion.type: elbow_flexion drives the arm, not a {body['type']!r}")
+    solver = data.get("route", {}).get("solver", "explicit")
+    method = data.get("contact", {}).get("method")
+    if method is not None and solver in ROUTE_METHODS and method not in ROUTE_METHODS[solver]:
+        raise SceneError(f"contact.method: method must be one of {ROUTE_METHODS[solver]} for solver {solver!r}, "
+                         f"got {method!r}")
     donning = data.get("donning", {})
     _choice("donning.method", donning.get("method", "none"), ("none", "grow"))
     for i, spec in enumerate(data.get("torque", [])):
@@ -128,6 +133,8 @@ def check_wear(data: dict) -> None:
         if not spec["segments"] or not all(isinstance(s, str) for s in spec["segments"]):
             raise SceneError(f"torque[{i}].segments: a list of segment names, got {spec['segments']!r}")
     route = route_of(data)
+    if motion["type"] in ("walking", "obstacle_walk") and body["type"] != "lower_body":
+        raise SceneError(f"motion.type: {motion['type']!r} drives the lower body, not a {body['type']!r}")
     if "place" in motion:
         _choice("motion.place", motion["place"], PLACES)
         if route != "explicit":
