@@ -80,6 +80,7 @@ def plot_wear_history(path, history, axis_label: str = "time [s]", title: str = 
     if motion:
         ax.axvspan(times[motion[0] - 1] if motion[0] else 0.0, times[motion[-1]], color="tab:orange", alpha=0.1,
                    label="motion: the records of the summary's peaks")
+    if motion and history.monitors:
         summary = history.summary()
         peaks = [summary[f"torque_{name}"] for name in history.monitors]
         ax.plot([p["peak_time_s"] for p in peaks], [p["peak_Nm"] for p in peaks], "k*", ms=10, ls="none",
