@@ -1,5 +1,6 @@
 """The pants study's outputs (fabricfem.studies.pants) from synthetic variant histories, and its crossing window."""
 import csv
+import dataclasses
 import json
 import tomllib
 from pathlib import Path
@@ -62,8 +63,7 @@ def test_pants_knee_torque_same_on_one_and_two_ranks():
     data["garment"]["h"] = 0.15
 
     def history(comm) -> np.ndarray:
-        scene = validate(data, "pants")
-        scene.path = Path(SCENE)
+        scene = dataclasses.replace(validate(data, "pants"), path=Path(SCENE))
         run = build_wear_run(scene, comm)[0]
         records: list = []
         h = run.run(on_step=records.append, should_stop=lambda: "window" if len(records) >= 35 else "")
