@@ -78,9 +78,10 @@ def test_sto_has_the_motion_time_and_opensim_names(sleeve_run):
 
 @pytest.mark.skipif(not HAS_OPENSIM, reason="needs the optional opensim package (pip install --no-deps opensim; "
                                             "scripts/bootstrap.sh tries it)")
-def test_opensim_reads_the_sto(sleeve_run):
+def test_opensim_reads_the_sto(sleeve_run, tmp_path, monkeypatch):
     """OpenSim's own readers: Storage gets every row and column (time first), TimeSeriesTable the body times as
     its independent column and the same values under the OpenSim coordinate's name."""
+    monkeypatch.chdir(tmp_path)      # OpenSim writes opensim.log into the working folder
     import opensim
     out, _, history, _ = sleeve_run
     _, labels, data = _plain_sto(out / "torque.sto")
