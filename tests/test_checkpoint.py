@@ -153,6 +153,8 @@ duration = 0.4
 record_time = 0.01
 [contact]
 friction = 0.3
+[checks]
+max_kinetic_ratio = 1e4     # two squares dropped onto a ball (KE / SE 964): a falling cloth, not a worn garment
 [output]
 render = false
 """

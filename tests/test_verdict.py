@@ -89,11 +89,11 @@ def test_each_check_compares_its_record_values_with_its_bound(values, failed):
 
 def test_the_energy_balance_of_a_dynamic_run():
     """The strain-limited corner-pinned cloth closes its balance to 2e-4 (scenes/corner_pinned.toml); a run that
-    gains 5 % of its work from nowhere fails."""
+    gains 6 % of its work from nowhere fails (tolerance 5 %)."""
     good = {"kinetic_J": 0.041388, "strain_J": 0.000446, "dissipated_J": 0.008979, "external_work_J": 0.050821,
             "max_strain_recorded": 0.01}
     assert all(c.passed for c in dynamic_checks(good, 0.3))
-    bad = {**good, "kinetic_J": good["kinetic_J"] + 0.05 * good["external_work_J"]}
+    bad = {**good, "kinetic_J": good["kinetic_J"] + 0.06 * good["external_work_J"]}
     assert [c.name for c in dynamic_checks(bad, 0.3) if not c.passed] == ["energy balance"]
 
 

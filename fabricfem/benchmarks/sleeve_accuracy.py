@@ -37,12 +37,12 @@ def read_series(path: Path) -> dict[str, dict]:
     with path.open(newline="") as f:
         for row in csv.DictReader(f):
             match = re.fullmatch(r"mesh (\w+) \((\d+)x(\d+)\)", row["variant"])
-            if match is None or float(row["angle_deg"]) > ANGLE:
+            if match is None or float(row["angle_deg"]) > ANGLE + 1e-6:
                 continue
             name, around, along = match.group(1), int(match.group(2)), int(match.group(3))
             entry = series.setdefault(name, {"cells": (around, along), "steps": 0, "torque": None})
             entry["steps"] += int(row["time_steps"])
-            if float(row["angle_deg"]) == ANGLE:
+            if abs(float(row["angle_deg"]) - ANGLE) <= 1e-6:      # records carry the axis to 1e-9
                 entry["torque"], entry["wall_s"] = float(row["torque_Nm"]), float(row["wall_s"])
     for name in (*PILOT_MESHES, REFERENCE_MESH):
         if series.get(name, {}).get("torque") is None:

@@ -128,6 +128,13 @@ def check_wear(data: dict) -> None:
                          f"got {method!r}")
     donning = data.get("donning", {})
     _choice("donning.method", donning.get("method", "none"), ("none", "grow"))
+    if donning.get("method") == "grow":
+        start, time = donning.get("start"), donning.get("time", 0.1)
+        if start is None or not (0.0 < start < 1.0):
+            raise SceneError(f"donning.start: growing the body starts from a size in (0, 1) of its transverse radii, "
+                             f"got {start!r}")
+        if not (math.isfinite(time) and time > 0.0):
+            raise SceneError(f"donning.time: growing the body needs a growth time > 0 [s], got {time!r}")
     for i, spec in enumerate(data.get("torque", [])):
         _vector(f"torque[{i}].axis", spec["axis"])
         if not spec["segments"] or not all(isinstance(s, str) for s in spec["segments"]):

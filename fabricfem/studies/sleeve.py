@@ -56,11 +56,17 @@ CURVE_HEADER = ("angle_deg", "torque_Nm", "torque_both_segments_Nm", "newton_ite
 
 
 def curve_rows(h: WearHistory) -> list[list]:
-    """CURVE_HEADER rows of a sleeve history: the start state (the last record before the motion) and the motion."""
-    first = next((k for k, s in enumerate(h.steps) if s.phase == "motion"), len(h.steps))
-    return [[s.coordinate, s.torques["elbow"], s.torques["elbow_both_segments"], s.newton_iterations,
+    """CURVE_HEADER rows of a sleeve history: the start state (the last record before the motion, with the time steps
+    and Newton iterations of every record before the motion) and the motion."""
+    first = max(next((k for k, s in enumerate(h.steps) if s.phase == "motion"), len(h.steps)) - 1, 0)
+    before = h.steps[:first + 1]
+    rows = [[s.coordinate, s.torques["elbow"], s.torques["elbow_both_segments"], s.newton_iterations,
              s.max_penetration, s.contact_force, s.wall, s.drag_ratio, s.time_steps, s.kinetic_energy,
-             s.strain_energy] for s in h.steps[max(first - 1, 0):]]
+             s.strain_energy] for s in h.steps[first:]]
+    if rows:
+        rows[0][3] = sum(s.newton_iterations for s in before)
+        rows[0][8] = sum(s.time_steps for s in before)
+    return rows
 
 
 def curve_history(name: str, rows: list[dict]) -> WearHistory:
