@@ -145,3 +145,14 @@ def test_sweep_on_all_ranks_gives_the_serial_table():
             for key in b:
                 assert abs(b[key] - s[key]) <= 1e-12 * max(abs(s[key]), 1e-30), key
     comm.barrier()
+
+
+def test_a_wear_summary_gives_its_monitors_as_sweep_columns():
+    """A wear run's per-monitor tables become dotted columns (the names accuracy targets use); lists of windows
+    and the verdict's table of checks do not."""
+    from fabricfem.scenes.sweep import scalar_entries
+    row = scalar_entries({"records": 3, "torque_elbow": {"peak_Nm": 0.05, "window_mean_Nm": 0.04, "peak_at": 6.0},
+                          "pressure": {"peak_Pa": 150.0, "peak_position_m": [0.0, 0.1, 0.0]},
+                          "verdict": {"status": "plausible", "checks": []}, "statistics": {"windows": [[3.0, 6.0]]}})
+    assert row == {"records": 3, "torque_elbow.peak_Nm": 0.05, "torque_elbow.window_mean_Nm": 0.04,
+                   "torque_elbow.peak_at": 6.0, "pressure.peak_Pa": 150.0}

@@ -151,11 +151,15 @@ def finished(variant: Variant) -> bool:
 
 def scalar_entries(summary: dict) -> dict:
     """The scalar entries of a summary (numbers, strings, booleans), numeric lists flattened as <key>_<i> (not those
-    also given one by one, DUPLICATES: the probe's displacement is its probe_u{x,y,z}_m)."""
+    also given one by one, DUPLICATES: the probe's displacement is its probe_u{x,y,z}_m), and the scalar entries of
+    a wear run's per-monitor tables as <table>.<key> (torque_elbow.peak_Nm, torque_elbow.window_mean_Nm,
+    pressure.peak_Pa: the names `--accuracy` takes)."""
     row = {}
     for key, value in summary.items():
         if isinstance(value, (int, float, str, bool)) or value is None:
             row[key] = value
+        elif isinstance(value, dict) and (key.startswith("torque_") or key == "pressure"):
+            row.update({f"{key}.{k}": v for k, v in value.items() if isinstance(v, (int, float, str, bool))})
         elif isinstance(value, list) and value and all(isinstance(v, (int, float)) for v in value) and \
                 not all(name in summary for name in DUPLICATES.get(key, ("",))):
             row.update({f"{key}_{i}": v for i, v in enumerate(value)})
