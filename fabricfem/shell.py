@@ -64,7 +64,9 @@ class ShellModel(ShellLoads, ShellSymmetry):
         model: "naghdi" (membrane + bending + transverse shear, rotations) or "membrane".
         degree: polynomial degree of the fields (2; the displacement of the Naghdi
             shell on triangles is enriched with a cubic bubble).
-        psri_degrees: (full, reduced) quadrature degrees of the PSRI split.
+        psri_degrees: (full, reduced) quadrature degrees of the PSRI split (equal degrees: full integration, no
+            split); its weight alpha = min(1, t_eq^2 / h^2) follows the bending and membrane stiffnesses
+            (`psri_thickness`, fabricfem.forms.shell.equivalent_thickness).
         bending_eps: regularisation [1/m] of |K| for the square-root bending law
             (default 1e-3 kappa0).
         rebase: after each converged load step, rotate the director base onto the current
@@ -149,12 +151,17 @@ class ShellModel(ShellLoads, ShellSymmetry):
         self.a2 = self._vector_field(t2, "director_base_2")
 
     def _stiffness_constants(self) -> None:
-        """A = t Q [N/m], D [N m], k_s G13 t [N/m], t [m], the load factor and the fitted membrane law's
-        parameters as Constants: another material or thickness compiles no new form."""
+        """A = t Q [N/m], D [N m], k_s G13 t [N/m], t [m], the PSRI weight's thickness t_eq [m] (t itself
+        unless the bending rigidity is given apart from t: fabricfem.forms.shell.equivalent_thickness), the load
+        factor and the fitted membrane law's parameters as Constants: another material or thickness compiles no
+        new form."""
         fabric, mesh = self.fabric, self.mesh
         t = fabric.thickness
         self.A = fem.Constant(mesh, PETSc.ScalarType(t * fabric.plane_stress_matrix))
         self.D = fem.Constant(mesh, PETSc.ScalarType(fabric.bending_matrix))
+        t_eq = t if fabric.bending_rigidity is None else shell_forms.equivalent_thickness(
+            t * fabric.plane_stress_matrix, fabric.bending_matrix)
+        self.psri_thickness = fem.Constant(mesh, PETSc.ScalarType(t_eq))
         self.shear_stiffness = fem.Constant(
             mesh, PETSc.ScalarType(fabric.shear_correction * fabric.transverse_shear_modulus * t))
         self.thickness = fem.Constant(mesh, PETSc.ScalarType(t))
@@ -184,7 +191,7 @@ class ShellModel(ShellLoads, ShellSymmetry):
                                    membrane_density=self.membrane_density)
         self.energy = shell_forms.naghdi_energy(
             self.u, self.theta, self.phi0, self.n0, (self.a3, self.a1, self.a2), (self.t1, self.t2),
-            self.A, self.D, self.shear_stiffness, self.thickness, **self.energy_options)
+            self.A, self.D, self.shear_stiffness, self.psri_thickness, **self.energy_options)
         self.d = shell_forms.director(self.theta, self.a3, self.a1, self.a2)
 
     def use_internal_force(self, internal_force: str) -> None:
@@ -405,7 +412,7 @@ class ShellModel(ShellLoads, ShellSymmetry):
             self.quadrature_reference = reference = ReferenceAtQuadrature(self, self.energy_options["degrees"])
             full, reduced = shell_forms.naghdi_energy_on_reference(
                 self.u, self.theta, reference.full, reference.reduced, self.A, self.D,
-                self.shear_stiffness, self.thickness, **self.energy_options)
+                self.shear_stiffness, self.psri_thickness, **self.energy_options)
             energies = [sum(self._extra_energy, full), reduced]
         elif self._director_loads:      # the residual holds the moments' work: the internal force on its own
             energies = [self.energy]

@@ -39,7 +39,7 @@ class ReferenceAtQuadrature:
         for degree, bending in zip(degrees, (True, False)):
             if for_kernel:
                 quantities = naghdi_kernel.kernel_reference_quantities(model.phi0, model.n0, base, frame,
-                                                                       model.thickness, model.cell_size, bending)
+                                                                       model.psri_thickness, model.cell_size, bending)
             else:
                 quantities = shell_forms.reference_quantities(model.phi0, model.n0, base, frame, bending)
             size = quantities.ufl_shape[0]

@@ -117,7 +117,7 @@ def material_stiffness_form(model, w_frozen: fem.Function, psri_degrees: tuple[i
     dx_full, dx_reduced = shell_forms.psri_measures(model.mesh, *psri_degrees)
     h = getattr(model, "cell_size", None)              # the PSRI weight's h of the energy (a ShellModel's)
     h = ufl.CellDiameter(model.mesh) if h is None else h
-    alpha = model.thickness ** 2 / h ** 2
+    alpha = shell_forms.psri_weight(model.psri_thickness, h)
     return bending * dx_full + alpha * (membrane + shear) * dx_full + (1.0 - alpha) * (membrane + shear) * dx_reduced
 
 

@@ -22,7 +22,19 @@ code with dense eigenvalue solves of K vs M_L, see tests/test_dynamics.py and th
   ([Peng2022] cloth: 7x above the shear-and-membrane estimate).
 
 omega_max = sqrt(omega_m^2 + omega_s^2 + omega_b^2) (Naghdi; shear and bending stiffness act on the same
-rotational inertia) or omega_m (membrane).
+rotational inertia) or omega_m (membrane). D0 is the fabric's own bending stiffness: with a bending rigidity
+given apart from the thickness (Fabric.bending_rigidity B1, B2) it is B, not E t^3 / 12 (the cloth of
+scenes/corner_pinned.toml with B = 0.02 N m: omega_b = 1.2e4 rad/s on 2x2 cells, 4.8e4 on 8x8; the discrete
+omega_max at rest is 0.90-0.98 of the estimate on 2x2 ... 8x8). The estimate before meshing
+(fabricfem.scenes.build.critical_time_step_estimate) is `element_frequency` with the mesh spec's h_min.
+
+Deformed states: the estimate is that of the reference state. Where a point support carries the sheet (a pinned
+corner: displacements held, rotations free) the tangent's rotational stiffness at that node grows with the load it
+carries (stress resultants times the second variation of the strains), and so does omega_max: measured (SLEPc, the
+corner-pinned cloth with B = 0.02 N m, strain limit 0.01) from 0.90 to 1.26 of the estimate on 4x4 cells and from
+0.98 to 1.48 on 8x8 by t = 0.6 s, the top mode being the pinned corner's rotations; the same cloth held along an
+edge stays at 0.90-0.91. dt_fraction = 0.9 then blows up (4x4 at 0.27 s, 8x8 at 0.17 s); 0.6 runs to 0.6 s
+(corner drop -1.026 / -1.005 m on 4x4 / 8x8). Such scenes need dt_fraction <= 0.6, or Newmark.
 
 Rotary-inertia scaling (fabricfem.dynamics.mass, factor s >= 1 on the rotational lumped masses): the
 thickness-shear frequency is rotational inertia against shear stiffness, so omega_s -> omega_s / sqrt(s),
@@ -67,30 +79,42 @@ def min_edge_length(mesh) -> float:
 
 def max_frequency_estimate(model, rotary_inertia_scale: float = 1.0) -> float:
     """omega_max^h [rad/s] from mesh size and material (eq. 2.87 extended, see the module docstring), for
-    rotational lumped masses scaled by `rotary_inertia_scale` (>= 1)."""
+    rotational lumped masses scaled by `rotary_inertia_scale` (>= 1): `element_frequency` of the model's fabric,
+    cells and smallest edge."""
+    return element_frequency(model.fabric, model.mesh.ufl_cell().cellname(), min_edge_length(model.mesh),
+                             model.model, getattr(model, "bending_eps", None), rotary_inertia_scale)
+
+
+def element_frequency(fabric, cell: str, h_min: float, model: str = "naghdi", bending_eps: float | None = None,
+                      rotary_inertia_scale: float = 1.0) -> float:
+    """omega_max^h [rad/s] of a `model` ("naghdi" or "membrane") of `fabric` on `cell`s (quadrilateral,
+    triangle) whose smallest edge is h_min [m] (module docstring): membrane waves [Man2006, eq. 2.87] with the
+    element's kappa and, for the shell, thickness shear and bending with the bending tangent D0 of
+    `initial_bending_stiffness` (a bending rigidity B given apart from the thickness: B itself), the rotational
+    masses scaled by `rotary_inertia_scale` (>= 1)."""
     scale = rotary_scale(rotary_inertia_scale)
-    cell = model.mesh.ufl_cell().cellname()
-    c = plane_stress_wave_speed(model.fabric)
-    omega_m = MEMBRANE_KAPPA[cell] * c / min_edge_length(model.mesh)  # eq. 2.87 with the element's kappa
-    if model.model != "naghdi":
-        return omega_m
-    fabric = model.fabric
+    omega_m = MEMBRANE_KAPPA[cell] * plane_stress_wave_speed(fabric) / h_min  # eq. 2.87 with the element's kappa
+    if model != "naghdi":
+        return float(omega_m)
     omega_s = (THICKNESS_SHEAR_CHI[cell] * np.sqrt(12.0 * fabric.shear_correction * fabric.transverse_shear_modulus
                                                    / fabric.density) / fabric.thickness) / np.sqrt(scale)
-    omega_b = (BENDING_CHI[cell] * np.sqrt(12.0 * initial_bending_stiffness(model) / fabric.density)
-               / fabric.thickness ** 1.5 / min_edge_length(model.mesh)) / np.sqrt(scale)
+    omega_b = (BENDING_CHI[cell] * np.sqrt(12.0 * initial_bending_stiffness(fabric, bending_eps) / fabric.density)
+               / fabric.thickness ** 1.5 / h_min) / np.sqrt(scale)
     return float(np.sqrt(omega_m ** 2 + omega_s ** 2 + omega_b ** 2))
 
 
-def initial_bending_stiffness(model) -> float:
-    """Bending tangent dm/dK at K = 0 [N m] of the model's law (module docstring): D0."""
-    law = model.fabric.bending_law
+def initial_bending_stiffness(fabric, bending_eps: float | None = None) -> float:
+    """Bending tangent dm/dK at K = 0 [N m] of the fabric's law (module docstring): D0, the larger of D11, D22 of
+    Fabric.bending_matrix for the linear law (B1, B2 when the bending rigidity is given apart from E t^3 / 12);
+    bending_eps [1/m]: the square-root law's regularisation (None: ShellModel's default 1e-3 kappa0)."""
+    law = fabric.bending_law
     if law is None:
-        D = model.fabric.bending_matrix
+        D = fabric.bending_matrix
         return float(max(D[0, 0], D[1, 1]))
     if hasattr(law, "coefficients"):
         return float(law.coefficients[0])
-    return float(2.0 * law.B0 * np.sqrt(law.kappa0 / model.bending_eps))
+    eps = 1e-3 * law.kappa0 if bending_eps is None else bending_eps
+    return float(2.0 * law.B0 * np.sqrt(law.kappa0 / eps))
 
 
 def critical_time_step(model, rayleigh: tuple[float, float] = (0.0, 0.0), omega_max: float | None = None,
@@ -191,6 +215,7 @@ def measured_critical_time_step(run_is_stable: Callable[[float], bool], dt_low: 
     return dt_low
 
 
-__all__ = ["plane_stress_wave_speed", "min_edge_length", "max_frequency_estimate", "critical_time_step",
+__all__ = ["plane_stress_wave_speed", "min_edge_length", "max_frequency_estimate", "element_frequency",
+           "initial_bending_stiffness", "critical_time_step",
            "discrete_max_frequency", "max_frequency", "CRITICAL_STEP_METHODS", "STEP_SAFETY", "step_safety",
            "measured_critical_time_step"]

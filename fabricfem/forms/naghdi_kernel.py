@@ -13,7 +13,7 @@ force from the strains and their variations written out once ([Eischen2000, eqs.
 
 and the residual R = int (N . d eps + Q . d gam + M . d kap) dA with N = dW/d eps, Q = dW/d gam, M = dW/d kap
 (PSRI: bending on the full rule; membrane and shear weighted alpha on the full and 1 - alpha on the reduced
-rule, alpha = t^2 / h^2 per cell). Collected per basis function:
+rule, alpha = min(1, t_eq^2 / h^2) per cell, fabricfem.forms.shell.psri_weight). Collected per basis function:
 
     R_u[a]  = sum_q w |J| (P1 D1N_a + P2 D2N_a),  P1 = N1 f1 + N3 f2 + Q1 d - M1 D1d - M3 D2d
                                                  P2 = N2 f2 + N3 f1 + Q2 d - M2 D2d - M3 D1d
@@ -39,21 +39,23 @@ from fabricfem.forms.jit import compile_c
 
 # Packed reference quantities per quadrature point (name, length): those of fabricfem.forms.shell.reference_layout
 # with the material directions e_i replaced by c_i = J^+ e_i, the directions in reference-cell coordinates (so that
-# (grad u) e_i = grad_xi u c_i), and |J| the surface's area factor and alpha the PSRI weight t^2 / h^2 of the cell
-# appended.
+# (grad u) e_i = grad_xi u c_i), and |J| the surface's area factor and alpha the PSRI weight of the cell
+# (fabricfem.forms.shell.psri_weight) appended.
 _EXTRA = (("detJ", 1), ("alpha", 1))
 KERNEL_FULL = (("c1", 2), ("c2", 2)) + shell_forms.reference_layout(True)[2:] + _EXTRA
 KERNEL_REDUCED = (("c1", 2), ("c2", 2)) + shell_forms.reference_layout(False)[2:] + _EXTRA
 LAWS = {"linear": 0, "kawabata": 1, "square_root": 2}
 
 
-def kernel_reference_quantities(phi0, n0, director_base, warp_weft, thickness, cell_size, bending: bool):
-    """The quantities of KERNEL_FULL (bending) or KERNEL_REDUCED as one UFL vector, to evaluate at quadrature points."""
+def kernel_reference_quantities(phi0, n0, director_base, warp_weft, psri_thickness, cell_size, bending: bool):
+    """The quantities of KERNEL_FULL (bending) or KERNEL_REDUCED as one UFL vector, to evaluate at quadrature points
+    (psri_thickness, cell_size [m]: the PSRI weight's t_eq and h, fabricfem.forms.shell.psri_weight)."""
     mesh = phi0.ufl_domain()
     parts = shell_forms.reference_parts(phi0, n0, director_base, warp_weft, bending)
     K = ufl.JacobianInverse(mesh)
     parts[0], parts[1] = K * parts[0], K * parts[1]
-    parts += [ufl.as_vector([abs(ufl.JacobianDeterminant(mesh))]), ufl.as_vector([thickness ** 2 / cell_size ** 2])]
+    parts += [ufl.as_vector([abs(ufl.JacobianDeterminant(mesh))]),
+              ufl.as_vector([shell_forms.psri_weight(psri_thickness, cell_size)])]
     return shell_forms.stacked(parts)
 
 

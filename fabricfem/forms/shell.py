@@ -21,12 +21,16 @@ local frame (not a global axis) there is no singularity on closed surfaces; the
 frame can be re-based on the current director between load steps so that only
 increments are parametrised (fabricfem.shell.ShellModel.rebase_director).
 
-Locking is avoided by partial selective reduced integration (PSRI, as in FEniCSx-Shells):
-membrane and shear energies are split into alpha (full) and 1 - alpha (reduced
-quadrature) with alpha = t^2 / h^2.
+Locking is avoided by partial selective reduced integration (PSRI [ArnoldBrezzi1997], as in FEniCSx-Shells):
+membrane and shear energies are split into alpha (full) and 1 - alpha (reduced quadrature) with
+alpha = min(1, t_eq^2 / h^2), t_eq the thickness equivalent to the actual bending and membrane stiffnesses
+(`equivalent_thickness`: t itself when D = t^3 / 12 Q).
 """
 from __future__ import annotations
 
+import math
+
+import numpy as np
 import ufl
 
 
@@ -113,6 +117,28 @@ def bending_energy(kappa_voigt, D, law=None, eps=None):
             + square_root_energy(k22, law.B0, law.kappa0, eps) + coupling)
 
 
+def equivalent_thickness(A: np.ndarray, D: np.ndarray) -> float:
+    """Thickness t_eq [m] of the PSRI weight for a membrane stiffness A [N/m] and a bending stiffness D [N m]
+    (Voigt 3x3 each): t_eq = sqrt(12 max(D11 / A11, D22 / A22)).
+
+    [ArnoldBrezzi1997] split the membrane-shear energy of a shell whose bending energy carries t^3 / 12 and
+    whose membrane-shear energy t, so that the fully integrated part alpha t (psi_m + psi_s) has the stiffness
+    of the bending energy at the mesh scale: alpha t = t^3 / h^2, alpha = t^2 / h^2. With stiffnesses given
+    independently (a fabric's bending rigidity B measured apart from its tensile modulus) the same balance
+    reads alpha A = 12 D / h^2, i.e. alpha = t_eq^2 / h^2 with t_eq^2 = 12 D / A: for D = t^3 / 12 Q and
+    A = t Q it is t^2 whatever Q, for D11 = B1 it is 12 B1 (1 - nu12 nu21) / (E1 t). Of the two material
+    directions the stiffer in bending (the larger ratio) sets the weight: its hourglass modes are the ones the
+    reduced rule would leave least restrained (docs/shell.md, "Locking")."""
+    return math.sqrt(12.0 * max(D[0, 0] / A[0, 0], D[1, 1] / A[1, 1]))
+
+
+def psri_weight(psri_thickness, cell_size) -> ufl.core.expr.Expr:
+    """PSRI weight alpha = min(1, t_eq^2 / h^2) of the fully integrated membrane and shear energy [ArnoldBrezzi1997]
+    (t_eq [m]: `equivalent_thickness`, h [m] the cell size); at most 1, so that the reduced rule's weight
+    1 - alpha is never negative (a cell smaller than t_eq is integrated fully: it does not lock)."""
+    return ufl.min_value(psri_thickness ** 2 / cell_size ** 2, 1.0)
+
+
 def psri_measures(mesh, full_degree: int = 4, reduced_degree: int = 2):
     """Full and reduced quadrature measures for partial selective reduced integration."""
     dx_full = ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": full_degree})
@@ -120,7 +146,7 @@ def psri_measures(mesh, full_degree: int = 4, reduced_degree: int = 2):
     return dx_full, dx_reduced
 
 
-def naghdi_energy(u, theta, phi0, n0, director_base, warp_weft, A, D, shear_stiffness, thickness,
+def naghdi_energy(u, theta, phi0, n0, director_base, warp_weft, A, D, shear_stiffness, psri_thickness,
                   law=None, law_eps=None, degrees=(4, 2), cell_size=None, membrane_density=None):
     """Total strain energy of the shell with PSRI (UFL form of rank 0).
 
@@ -128,7 +154,8 @@ def naghdi_energy(u, theta, phi0, n0, director_base, warp_weft, A, D, shear_stif
     n0: reference unit normal; director_base = (a3, a1, a2): the frame the rotations are
     measured from (a3 = n0 initially); warp_weft = (t1, t2): reference material directions;
     A = t Q [N/m] membrane stiffness; D [N m] bending stiffness (Voigt 3x3);
-    shear_stiffness = k_s G13 t [N/m]; cell_size: h of the PSRI weight [m] (default ufl.CellDiameter,
+    shear_stiffness = k_s G13 t [N/m]; psri_thickness: t_eq of the PSRI weight [m] (`equivalent_thickness`,
+    `psri_weight`); cell_size: h of the PSRI weight [m] (default ufl.CellDiameter,
     which FFCx supports on affine cells only: pass a DG0 field on curved meshes);
     membrane_density: optional callable W(eps) [J/m^2] of the Voigt membrane strain (E11, E22, 2 E12)
     replacing 1/2 eps.A eps (a fitted law, forms.fitted); it is PSRI-split like the quadratic one.
@@ -149,7 +176,7 @@ def naghdi_energy(u, theta, phi0, n0, director_base, warp_weft, A, D, shear_stif
 
     dx_full, dx_reduced = psri_measures(mesh, *degrees)
     h = ufl.CellDiameter(mesh) if cell_size is None else cell_size
-    alpha = thickness ** 2 / h ** 2
+    alpha = psri_weight(psri_thickness, h)
     return (psi_b * dx_full + alpha * (psi_m + psi_s) * dx_full
             + (1.0 - alpha) * (psi_m + psi_s) * dx_reduced)
 
@@ -238,7 +265,7 @@ def strains_on_reference(u, theta, packed, bending: bool):
     return eps_m, gamma, kappa
 
 
-def naghdi_energy_on_reference(u, theta, reference_full, reference_reduced, A, D, shear_stiffness, thickness,
+def naghdi_energy_on_reference(u, theta, reference_full, reference_reduced, A, D, shear_stiffness, psri_thickness,
                                law=None, law_eps=None, degrees=(4, 2), cell_size=None, membrane_density=None):
     """`naghdi_energy` with the reference geometry read from packed quadrature data (reference_quantities at the
     points of the full and the reduced PSRI rule: Quadrature-element coefficients of those degrees) instead of
@@ -256,7 +283,7 @@ def naghdi_energy_on_reference(u, theta, reference_full, reference_reduced, A, D
 
     dx_full, dx_reduced = psri_measures(mesh, *degrees)
     h = ufl.CellDiameter(mesh) if cell_size is None else cell_size
-    alpha = thickness ** 2 / h ** 2
+    alpha = psri_weight(psri_thickness, h)
     return ((bending_energy(kappa, D, law, law_eps) + alpha * membrane_shear(eps_full, gamma_full)) * dx_full,
             (1.0 - alpha) * membrane_shear(eps_red, gamma_red) * dx_reduced)
 

@@ -1,15 +1,18 @@
 """An accuracy target chooses the mesh and the model: `fabricfem plan SCENE --accuracy 2%`, `fabricfem run SCENE
 --accuracy 2%`.
 
-Levels: level k is the scene with every cell count of its [mesh] (nx, ny or n_around, n_along) times 2^k and, for
-a dynamic scene with a numeric dt, dt / 2^k (dt = "auto" follows the mesh by itself; output_every x 2^k keeps the
-record times). The pilots k = -2, -1, 0 are solved (each into `<out>/accuracy/level<k>/`, read back when that
-folder holds a completed run of the same level scene); the quantity q (a monitored output, `AccuracySection`)
-of the three gives the observed order, the extrapolated value q* and the estimated relative error of every level
-(fabricfem.scenes.richardson: a pilot's |q_k - q*| / |q*|, a finer level's e_0 2^(-p k); plausible orders
-ORDERS by scene kind). When the sequence is
-not asymptotic only pilots can be chosen, with the conservative estimates of fabricfem.scenes.richardson, and a
-target that no pilot meets is refused.
+Levels: level k is the scene with every cell count of its [mesh] (nx, ny or n_around, n_along) times 2^k, rounded
+(at least one cell, three around a tube), so that any mesh has levels: a count not divisible by 4 gives
+non-uniform ratios (nx = 10: 2, 5, 10 cells at the pilots), and Richardson uses the levels' relative cell sizes
+sqrt(prod n_0 / prod n_k) (2^-k where the counts divide). For a dynamic scene with a numeric dt, dt is scaled by
+that size (dt = "auto" follows the mesh by itself; output_every / size keeps the record times). The pilots
+k = -2, -1, 0 are solved (each into `<out>/accuracy/level<k>/`, read back when that folder holds a completed run,
+with or without warnings of its plausibility checks, of the same level scene); the quantity q (a monitored
+output, `AccuracySection`) of the three gives the observed order, the extrapolated value q* and the estimated
+relative error of every level (fabricfem.scenes.richardson: a pilot's |q_k - q*| / |q*|, a finer level's
+e_0 2^(-p k); plausible orders ORDERS by scene kind). When the sequence is not asymptotic only pilots can be
+chosen, with the conservative estimates of fabricfem.scenes.richardson, and a target that no pilot meets is
+refused.
 
 Model levels ([accuracy] membrane = true, the default): a shell scene whose loads, supports and monitors a
 membrane can carry (no edge moments, no rotation monitors; rotation supports are dropped) is also solved with the
@@ -77,6 +80,7 @@ from fabricfem.solvers.newton import SolverError
 
 PILOTS = (-2, -1, 0)             # levels solved to estimate the error
 MESH_COUNTS = {"plate": ("nx", "ny"), "tube": ("n_around", "n_along")}
+LEAST_CELLS = {"plate": (1, 1), "tube": (3, 1)}   # the fewest cells per count of a level's mesh
 LEAST_AROUND = 6   # cells around a tube at the coarsest wear pilot (default ratio)
 
 
@@ -308,33 +312,32 @@ def wear_level(scene: Scene, k: int, out: Path, window: bool) -> Level:
 
 def level_scene(scene: Scene, k: int, out: Path, data: dict | None = None, window: bool = True) -> Level:
     """Level k of `scene` (or of its variant `data`, e.g. the membrane's; module docstring) writing into `out`,
-    validated; SceneError naming the mesh key when a cell count cannot be divided by 2^-k. A wear scene's level
-    (`wear_level`) runs the pilots' window when `window`, the whole scene otherwise."""
+    validated: every cell count x 2^k rounded (at least LEAST_CELLS), its relative cell size
+    sqrt(prod counts_0 / prod counts_k) (2^-k where the counts divide), a numeric dt times that size. A wear
+    scene's level (`wear_level`) runs the pilots' window when `window`, the whole scene otherwise."""
     if scene.kind == "wear":
         return wear_level(scene, k, out, window)
     data = copy.deepcopy(scene.data if data is None else data)
     data.pop("accuracy", None)
     mesh = data["mesh"]
-    for key in MESH_COUNTS[mesh["type"]]:
-        scaled = mesh[key] * 2.0 ** k
-        if scaled != int(scaled) or scaled < 1:
-            raise SceneError(f"mesh.{key}: {mesh[key]} cells cannot be halved {-k} times for the accuracy levels; "
-                             f"give counts divisible by {2 ** -min(PILOTS)}")
-        mesh[key] = int(scaled)
+    counts = [mesh[key] for key in MESH_COUNTS[mesh["type"]]]
+    for key, least in zip(MESH_COUNTS[mesh["type"]], LEAST_CELLS[mesh["type"]]):
+        mesh[key] = max(least, round(mesh[key] * 2.0 ** k))
+    size = math.sqrt(math.prod(counts) / math.prod(mesh[key] for key in MESH_COUNTS[mesh["type"]]))
     steps, step = 1, None
     if "dynamics" in data:
         dyn = data["dynamics"]
         if dyn["dt"] != "auto":
-            dyn["dt"] = dyn["dt"] / 2.0 ** k
+            dyn["dt"] = dyn["dt"] * size
         if dyn.get("output_every") is not None:
-            dyn["output_every"] = max(1, round(dyn["output_every"] * 2.0 ** k))
+            dyn["output_every"] = max(1, round(dyn["output_every"] / size))
         d = section(DynamicsSection, dyn)
         step = d.dt if d.dt != "auto" else (d.dt_fraction * (critical_time_step_estimate(data) or math.nan))
         steps = max(1, math.ceil(d.end_time / step * (1.0 - 1e-12))) if math.isfinite(step) else 1
     data.setdefault("output", {}).update(dir=str(out), render=False)
     level = validate(data, source=f"accuracy level {k:+d}", path=scene.path)
     return Level(k, level, estimated_dofs(data["mesh"], section(ModelSection, data.get("model")).kind), step, steps,
-                 2.0 ** -k)
+                 size)
 
 
 def solve(level: Level, key: str, comm=MPI.COMM_WORLD) -> bool:
@@ -342,10 +345,10 @@ def solve(level: Level, key: str, comm=MPI.COMM_WORLD) -> bool:
     True when it was solved now."""
     folder = Path(level.scene["output"]["dir"])
     summary = comm.bcast(read_summary(folder) if comm.rank == 0 else None, root=0)
-    solved = not (summary.get("status") == "completed" and summary.get("scene_sha256") == scene_sha256(level.scene))
+    solved = not (_completed(summary.get("status")) and summary.get("scene_sha256") == scene_sha256(level.scene))
     if solved:
         outcome = run_scene(level.scene, comm)
-        if outcome.status != "completed":
+        if not _completed(outcome.status):
             raise SceneError(f"accuracy level {level.k:+d} ({level.model}): the run {outcome.status}")
         summary = comm.bcast(read_summary(folder) if comm.rank == 0 else None, root=0)
     value = summary_value(summary, key)
@@ -357,6 +360,12 @@ def solve(level: Level, key: str, comm=MPI.COMM_WORLD) -> bool:
     if level.scene.kind == "wear" and summary.get("ndofs"):   # the engine's own count, step and steps
         level.dofs, level.step, level.steps = int(summary["ndofs"]), summary["dt_s"], int(summary["time_steps"])
     return solved
+
+
+def _completed(status) -> bool:
+    """Whether a run's status is "completed", with or without warnings of its plausibility checks (the quantity
+    is there; the warnings are in the level's summary.json)."""
+    return isinstance(status, str) and status.startswith("completed")
 
 
 def _membrane_pilots(scene: Scene, key: str, root: Path, comm, say) -> tuple[list[Level], str]:
@@ -416,8 +425,10 @@ def plan(scene: Scene, target: float | None = None, quantity: str | None = None,
     clock = io.Progress("accuracy pilots")
     pilots = levels[:len(PILOTS)]
     if len({lv.size for lv in pilots}) < len(pilots):
-        raise SceneError(f"accuracy.ratio: the pilot levels {[cells_of(lv.scene) for lv in pilots]} coincide after "
-                         f"rounding; give a larger ratio or a finer scene mesh")
+        where, mend = (("accuracy.ratio", "a larger ratio or a finer scene mesh") if scene.kind == "wear" else
+                       ("mesh", "a finer scene mesh"))
+        raise SceneError(f"{where}: the pilot levels {[cells_of(lv.scene) for lv in pilots]} coincide after "
+                         f"rounding; give {mend}")
     for i, lv in enumerate(pilots):
         solved = solve(lv, key, comm)
         say(f"accuracy: level {lv.k:+d} ({_mesh_label(lv.scene)}, {lv.dofs} dofs) "

@@ -109,6 +109,24 @@ class ModelSection:
 
     kind: str = doc("naghdi (shell) | membrane", "naghdi")
     rebase: bool = doc("re-base the director after converged steps", True)
+    quadrature: tuple | str = doc("naghdi: [full, reduced] quadrature degrees of the membrane and shear energy's "
+                                  "partial selective reduced integration, weight min(1, t_eq^2 / h^2) on the full "
+                                  "rule (docs/shell.md, \"Locking\"), or \"full\": no reduced integration "
+                                  "([4, 4])", (4, 2))
+
+    def __post_init__(self) -> None:
+        """ValueError naming `quadrature` for anything but "full" or two positive integer degrees, full >= reduced."""
+        q = self.quadrature
+        if q == "full":
+            return
+        if not (isinstance(q, tuple) and len(q) == 2 and all(type(n) is int and n > 0 for n in q) and q[0] >= q[1]):
+            raise ValueError(f"quadrature: [full, reduced] positive integer degrees with full >= reduced, or "
+                             f"\"full\", got {list(q) if isinstance(q, tuple) else q!r}")
+
+    @property
+    def psri_degrees(self) -> tuple[int, int]:
+        """(full, reduced) quadrature degrees of the shell's PSRI split (fabricfem.shell.ShellModel)."""
+        return (4, 4) if self.quadrature == "full" else self.quadrature
 
 
 @dataclasses.dataclass(frozen=True)

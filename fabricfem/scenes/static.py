@@ -57,7 +57,7 @@ def build_model(scene: Scene, comm=MPI.COMM_WORLD) -> ShellModel:
     model_spec = section(ModelSection, scene.get("model"))
     kind = model_spec.kind
     fmesh = build_mesh(scene["mesh"], comm)
-    model = ShellModel(fmesh, fabric, model=kind, rebase=model_spec.rebase)
+    model = ShellModel(fmesh, fabric, model=kind, rebase=model_spec.rebase, psri_degrees=model_spec.psri_degrees)
     for i, support in enumerate(scene.get("support", [])):
         if "point" in support:
             where = _node_locator(model, support["point"], f"support[{i}].point")

@@ -98,7 +98,8 @@ def fit_configs(scales=FIT_SCALES, mesh: str = "II", final_angle: float = 57.0,
 def energy_split_forms(model, degrees: tuple[int, int] = (4, 2)) -> dict:
     """Compiled rank-0 forms of the membrane, bending and transverse-shear energies [J] of a Naghdi
     ShellModel with a linear bending law, PSRI-weighted exactly as forms.shell.naghdi_energy ([Eischen2000]
-    eqs. 3-5): bending on the full quadrature, membrane and shear split alpha / (1 - alpha), alpha = t^2 / h^2."""
+    eqs. 3-5): bending on the full quadrature, membrane and shear split alpha / (1 - alpha),
+    alpha = min(1, t_eq^2 / h^2) (forms.shell.psri_weight)."""
     if model.model != "naghdi" or model.fabric.bending_law is not None or model.fabric.membrane_law is not None:
         raise ValueError("model: the energy split needs a Naghdi shell with linear membrane and bending laws")
     F0 = ufl.grad(model.phi0)
@@ -113,7 +114,7 @@ def energy_split_forms(model, degrees: tuple[int, int] = (4, 2)) -> dict:
     psi_b = sf.bending_energy(kappa, model.D)
     psi_s = 0.5 * model.shear_stiffness * ufl.dot(gamma, gamma)
     dx_full, dx_reduced = sf.psri_measures(model.mesh, *degrees)
-    alpha = model.thickness ** 2 / model.cell_size ** 2
+    alpha = sf.psri_weight(model.psri_thickness, model.cell_size)
     return {"membrane": fem.form(alpha * psi_m * dx_full + (1.0 - alpha) * psi_m * dx_reduced),
             "bending": fem.form(psi_b * dx_full),
             "shear": fem.form(alpha * psi_s * dx_full + (1.0 - alpha) * psi_s * dx_reduced)}
