@@ -168,11 +168,14 @@ def check_wear(data: dict) -> None:
 
 
 
+COMPRESSION_QUANTITIES = ("peak_pressure_Pa", "mean_pressure_Pa", "hoop_tension_N_per_m")
+
+
 def wear_quantities(data: dict) -> dict[str, str]:
     """{accuracy quantity: its summary.json key} of a wear scene (a dotted key names a nested entry): on the
     explicit engine the peak and final torque [N m] of each monitor over the motion (the arm's presets and the
     [[torque]] monitors), the peak and mean contact pressure [Pa] over the motion and the largest fabric strain
-    [-]; none on the sleeve's Newton routes."""
+    [-], and a tube on a limb its compression report (compression_<quantity>); none on the Newton routes."""
     if route_of(data) != "explicit":
         return {}
     monitors = [m.name for m in ARM_MONITORS] if data["body"]["type"] in ("arm", "default_arm") else []
@@ -180,6 +183,9 @@ def wear_quantities(data: dict) -> dict[str, str]:
     for name in monitors + [spec["name"] for spec in data.get("torque", [])]:
         out.update({f"torque_{name}_{which}_Nm": f"torque_{name}.{which}_Nm" for which in ("peak", "final")})
         out[f"torque_{name}_window_mean_Nm"] = f"torque_{name}.window_mean_Nm"
+    if data["body"]["type"] == "limb" and data["garment"].get("builder", "pattern") == "tube":
+        # the compression report of the final state (fabricfem.wear.compression.compression_report)
+        out.update({f"compression_{k}": f"compression.{k}" for k in COMPRESSION_QUANTITIES})
     return {**out, "pressure_peak_Pa": "pressure.peak_Pa", "pressure_mean_Pa": "pressure.mean_Pa",
             "max_strain": "max_strain"}
 

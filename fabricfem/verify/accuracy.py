@@ -135,11 +135,12 @@ COMPRESSION = {
     "garment": {"builder": "tube", "length": 0.24, "radius": 0.034, "n_around": 16, "n_along": 8, "order": 2},
     "fabric": COMPRESSION_FABRIC,
     "body": {"type": "limb", "center": [0.12, 0.0, 0.0], "radii": [20.0, 0.04, 0.04]},
-    "motion": {"type": "still"},
-    "donning": {"method": "grow", "start": 0.7, "steps": 12, "tolerance": 1e-7},
-    "route": {"solver": "quasistatic"},
+    "motion": {"type": "still", "duration": 0.1, "record_time": 0.01},
+    "donning": {"method": "grow", "start": 0.7, "time": 0.2},
+    "contact": {"friction": 0.0},
+    "route": {"solver": "explicit", "mass_damping": 100.0},
     "output": {"render": False},
-    "accuracy": {"quantity": "mean_pressure_Pa", "finer_levels": 0},
+    "accuracy": {"quantity": "compression_mean_pressure_Pa", "finer_levels": 0},
 }
 
 
