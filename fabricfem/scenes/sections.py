@@ -240,8 +240,8 @@ class AccuracySection:
     quantity: str | None = doc("static: probe_ux_m | probe_uy_m | probe_uz_m (needs output.probe); dynamic: a "
                                "[[dynamics.monitors]] name (its value at end_time) or kinetic_J | strain_J | "
                                "max_strain_final; wear: torque_<monitor>_peak_Nm | torque_<monitor>_final_Nm | "
-                               "pressure_peak_Pa | pressure_mean_Pa | max_strain (explicit engine), peak_pressure_Pa "
-                               "| mean_pressure_Pa | hoop_tension_N_per_m (compression route)", None)
+                               "torque_<monitor>_window_mean_Nm (its windowed mean) | pressure_peak_Pa | pressure_mean_Pa | "
+                               "max_strain", None)
     target: float | None = doc("relative error target, in (0, 1) (e.g. 0.02)", None)
     finer_levels: int = doc("levels finer than the scene's mesh that may be chosen (cell counts x 2, x 4, ...; "
                             "wear: x ratio, x ratio^2, ...)", 2)
@@ -258,8 +258,7 @@ class AccuracySection:
                                "(default: the whole scene)", None)
     ratio: float | None = doc("wear: refinement ratio between levels, in (1, 4]: tube cell counts x ratio^k "
                               "(rounded), pattern element size h / ratio^k (default: 2 where the coarsest pilot "
-                              "keeps 6 cells around a tube (compression route: 8, multiples of 4), else the largest "
-                              "ratio that does; 2 for a pattern)", None)
+                              "keeps 6 cells around a tube, else the largest ratio that does; 2 for a pattern)", None)
 
 
 def section(cls, table: dict | None):
