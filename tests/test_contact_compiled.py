@@ -74,7 +74,9 @@ def test_sleeve_history_matches_numpy(friction):
                 runs[name] = run_sleeve(config)
         else:
             runs[name] = run_sleeve(config)
-    torques = {name: np.array([s.torque for s in h.steps]) for name, h in runs.items()}
-    assert len(torques["compiled"]) == len(torques["numpy"]) == 9
+    # every record: the settling's and the motion's (the start state and 1..8 degrees)
+    torques = {name: h.torque("elbow") for name, h in runs.items()}
+    assert len(torques["compiled"]) == len(torques["numpy"])
+    assert all(len(h.motion_curve("elbow")[0]) == 9 for h in runs.values())
     peak = np.abs(torques["numpy"]).max()
     assert np.abs(torques["compiled"] - torques["numpy"]).max() <= 1e-12 * peak

@@ -1,7 +1,6 @@
 """The garment engine (fabricfem.wear.garment, fabricfem.contact.seams) and wear scenes (fabricfem.scenes.wear):
-sewing closes the seams and conserves momentum; the sleeve as a wear scene gives the torque history of the
-sleeve before the engine existed (stored from commit 3bc87d0); wear scenes refuse bad input before meshing."""
-import csv
+sewing closes the seams and conserves momentum; the shipped wear scenes are valid; wear scenes refuse bad input
+before meshing."""
 import math
 import tomllib
 from pathlib import Path
@@ -18,7 +17,6 @@ from fabricfem.materials import Fabric
 from fabricfem.meshes.pattern import Panel, Pattern, Stitch
 from fabricfem.meshes.pattern_mesh import mesh_pattern
 from fabricfem.scenes import build as scene_build
-from fabricfem.scenes.run import run_scene
 from fabricfem.wear.garment import ExplicitSettings, Timeline, build_garment_run
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -63,37 +61,6 @@ def test_sewing_closes_the_seam_and_conserves_momentum():
     assert history.steps[-1].seam_gap < 1e-12                   # ... closed after it
     np.testing.assert_allclose(centre, centre0, atol=1e-12)
     run.destroy()
-
-
-def _stored_sleeve() -> np.ndarray:
-    """(angle [deg], resisting torque [N m]) of scenes/sleeve.toml (mesh I) by the code of commit 3bc87d0."""
-    rows = list(csv.reader(open(ROOT / "tests" / "data" / "sleeve_mesh1_torque_3bc87d0.csv")))
-    return np.array([[float(r[0]), float(r[1])] for r in rows[1:]])
-
-
-def test_sleeve_wear_scene_gives_the_stored_history_over_the_first_ten_degrees(tmp_path):
-    """scenes/sleeve.toml (a wear scene on the explicit engine) flexed to 11 degrees: the elbow torque of every
-    record up to 10 degrees (the settled start and 1..10 deg) equals the history stored before the engine existed
-    within 1e-8 relative to its largest value (the acceptance bound; measured 0, bit for bit). The 11-degree
-    record is left out: the flexion stops there, the stored one went on to 57 degrees."""
-    data = tomllib.loads((ROOT / "scenes" / "sleeve.toml").read_text())
-    data["motion"]["final_angle"] = 11.0
-    data.setdefault("route", {})["critical_step"] = "estimate"     # the stored run's step: the element formula
-    data["output"] = {"dir": str(tmp_path), "render": False}
-    path = tmp_path / "sleeve10.toml"
-    path.write_text(dumps(data))
-    outcome = run_scene(scene_build.load(path), MPI.COMM_SELF)
-    steps = outcome.result.steps
-    settled = [s for s in steps if s.phase == "settle"][-1]
-    motion = [s for s in steps if s.phase == "motion" and s.axis_value <= 10.0 + 1e-9]
-    angles = np.array([0.0] + [s.axis_value for s in motion])
-    torques = np.array([settled.torques["elbow"]] + [s.torques["elbow"] for s in motion])
-    stored = _stored_sleeve()
-    stored = stored[stored[:, 0] <= 10.0 + 1e-9]
-    np.testing.assert_allclose(angles, stored[:, 0], atol=1e-9)
-    assert np.max(np.abs(torques - stored[:, 1])) <= 1e-8 * np.max(np.abs(stored[:, 1]))
-    for name in ("cloth.xdmf", "cloth_pressure.xdmf", "torque.csv", "torque.sto", "torque.png", "summary.json"):
-        assert (tmp_path / name).is_file(), name
 
 
 # ------------------------------------------------------------------------------ refusals before meshing
@@ -180,26 +147,6 @@ def test_shipped_wear_scenes_are_valid():
     for name in ("sleeve.toml", "trousers_standing.toml", "compression_sleeve.toml"):
         scene = scene_build.load(ROOT / "scenes" / name)
         assert scene.kind == "wear", name
-
-
-def _small_compression(path: Path, out: Path) -> dict:
-    text = (path.read_text().replace("n_around = 32", "n_around = 16").replace("n_along = 16", "n_along = 8")
-            .replace("steps = 12", "steps = 4"))
-    data = tomllib.loads(text)
-    data["output"] = {"dir": str(out), "render": False}
-    scene_path = out.parent / f"{out.name}.toml"
-    scene_path.write_text(dumps(data))
-    return run_scene(scene_build.load(scene_path), MPI.COMM_SELF).result
-
-
-def test_compression_wear_scene_gives_the_compression_scene_pressures(tmp_path):
-    """scenes/compression_sleeve.toml (a wear scene, quasi-static donning route) and the same scene in the
-    compression-kind layout (tests/data/compression_kind.toml), both coarsened to 16 x 8 cells and 4 growth steps:
-    the same pressures within 1e-8 relative (the acceptance bound; both run fabricfem.wear.compression)."""
-    wear = _small_compression(ROOT / "scenes" / "compression_sleeve.toml", tmp_path / "wear")
-    kind = _small_compression(ROOT / "tests" / "data" / "compression_kind.toml", tmp_path / "kind")
-    for key in ("min_mmHg", "max_mmHg", "ring_min_mmHg", "ring_max_mmHg", "hoop_tension"):
-        assert wear[key] == pytest.approx(kind[key], rel=1e-8), key
 
 
 @pytest.mark.mpi
@@ -307,6 +254,7 @@ def test_a_motion_file_drives_the_scene_body(tmp_path):
     from fabricfem.body.lower_body import standing
     from fabricfem.body.mocap import write_trc
     from fabricfem.scenes import wear
+    from fabricfem.scenes.contract import parse
     base = standing(duration=0.2)
     times = np.linspace(0.0, 0.2, 21)
     lift = np.where(times >= 0.1, 0.02, 0.0)
@@ -314,7 +262,7 @@ def test_a_motion_file_drives_the_scene_body(tmp_path):
     write_trc(tmp_path / "lift.trc", JointTrajectory(times, points), units="mm")
     data = _trousers()
     data["motion"] = {"type": "file", "path": "lift.trc", "record_time": 0.02}
-    plan = wear.plan(data, COTTON, tmp_path / "scene.toml")
+    plan = wear.plan(parse(data, "wear"), COTTON, tmp_path / "scene.toml")     # the parsed scene (scenes.contract)
     analytic = Body(list(plan.body.segments.values()), JointTrajectory(times, points))
     for t in (0.05, 0.15):
         got, want = plan.body.pose(t)["pelvis"], analytic.pose(t)["pelvis"]

@@ -23,7 +23,7 @@ def rollup_data() -> dict:
 @pytest.mark.parametrize("mutate, message", [
     (lambda d: d["fabric"].update(E_1=1.0), r"unknown key 'E_1' \(did you mean 'E1'\?\)"),
     (lambda d: d.pop("fabric"), r"missing section \[fabric\]"),
-    (lambda d: d.update(meshh={}), r"unknown section \[meshh\] \(did you mean 'mesh'\?\)"),
+    (lambda d: d.update(meshh={}), r"unknown section \[meshh\] .*\(did you mean 'mesh'\?\)"),
     (lambda d: d["mesh"].update(nx="sixty"), r"mesh.nx: expected int"),
     (lambda d: d["mesh"].pop("lx"), r"a plate needs \['lx'\]"),
     (lambda d: d["load"][0].update(type="moment"), r"unknown load 'moment'"),
@@ -103,9 +103,10 @@ def test_scene_reference_is_generated_from_the_section_dataclasses():
     every key of every section's schema appears in it."""
     text = scene_module.schema.reference_markdown()
     assert (ROOT / "docs" / "scenes.md").read_text() == text + "\n"
-    for section, keys in {**scene_module.schema.SCHEMA, **scene_module.schema.SUB_SCHEMA}.items():
-        for key in keys:
-            assert f"| {key} |" in text, (section, key)
+    for kind, sections in scene_module.schema.SCHEMA.items():        # kind -> section -> key -> (types, required)
+        for section, keys in sections.items():
+            for key in keys:
+                assert f"| {key} |" in text, (kind, section, key)
 
 
 def test_rerun_into_the_same_folder_leaves_no_stale_output(tmp_path):

@@ -1,9 +1,12 @@
 """Sleeve scene [Man2006, sec. 5.3]: scene validation, start clearance, moment balance of the elbow torque,
 outputs, and the same torque history on 1 and 2 MPI ranks. Quick variants (mesh I, <= 6 degrees). The moment
-balance and the active-set / step-limiter tests use the quasi-static route (solver="quasistatic"); the scene
-run and the MPI test the default explicit route."""
+balance and the active-set / step-limiter tests use the quasi-static route (solver="quasistatic",
+fabricfem.wear.quasistatic); the scene run and the MPI test the default explicit route (the garment engine). The
+sleeve scene is a wear scene: scenes/sleeve.toml (the explicit engine) and tests/data/sleeve_quasistatic.toml (the
+same sleeve with [route] solver = "quasistatic")."""
 import csv
 import math
+import re
 import tomllib
 from pathlib import Path
 
@@ -13,52 +16,90 @@ from mpi4py import MPI
 
 from fabricfem import scenes as scene_module
 from fabricfem.body.arm import DEFAULT_ARM
+from fabricfem.scenes.build import sleeve_config
 from fabricfem.scenes.schema import SceneError
 from fabricfem.wear.config import SleeveConfig
+from fabricfem.wear.quasistatic import build_sleeve, run_quasistatic
 from fabricfem.wear.run import run_sleeve
-from fabricfem.wear.sleeve import ELBOW_AXIS, build_sleeve, run_quasistatic
+from fabricfem.wear.sleeve import ELBOW_AXIS
 
 ROOT = Path(__file__).resolve().parents[1]
 QUICK = SleeveConfig.of(n_around=10, n_along=13, final_angle=6.0, angle_steps=2, solver="quasistatic")
 QUICK_EXPLICIT = SleeveConfig.of(n_around=10, n_along=13, final_angle=6.0, output_angle_step=1.0)
 
 
-def sleeve_data() -> dict:
-    return tomllib.loads((ROOT / "tests" / "data" / "sleeve_kind.toml").read_text())
+SLEEVE_SCENES = {"explicit": ROOT / "scenes" / "sleeve.toml",                       # the shipped scene: the engine
+                 "quasistatic": ROOT / "tests" / "data" / "sleeve_quasistatic.toml"}   # its Newton route
 
 
-def test_sleeve_scene_is_valid():
-    scene = scene_module.validate(sleeve_data())
-    assert scene["contact"]["friction"] == 0.1
+def sleeve_data(route: str = "explicit") -> dict:
+    """The sleeve as a wear scene (mesh I, mu = 0.1) on `route`: SLEEVE_SCENES."""
+    return tomllib.loads(SLEEVE_SCENES[route].read_text())
 
 
-@pytest.mark.parametrize("mutate, message", [
+@pytest.mark.parametrize("route", SLEEVE_SCENES)
+def test_sleeve_scene_is_valid(route):
+    scene = scene_module.validate(sleeve_data(route))
+    assert scene.kind == "wear" and scene["contact"]["friction"] == 0.1
+    if route != "explicit":          # the Newton routes' configuration (fabricfem.scenes.build.sleeve_config)
+        assert sleeve_config(scene.parsed).route.solver == route
+
+
+def _named(section: str, key: str, text: str) -> str:
+    """The refusal of [section] key: "section.key: key <text>" or the scene contract's "section: key <text>"
+    (fabricfem.scenes.contract: a section's dataclass refusing a value names the section, its message the key)."""
+    return rf"{section}(\.{key})?: {key} {re.escape(text)}"
+
+
+# the sleeve scene's bad values: (mutation, the refusal naming the key), on both routes' scenes
+BAD_SLEEVE = [
     (lambda d: d["contact"].update(frictoin=0.2), r"contact: unknown key 'frictoin' \(did you mean 'friction'\?\)"),
     (lambda d: d["body"].update(radius=0.05), r"body: unknown key 'radius'"),
     (lambda d: d.pop("fabric"), r"missing section \[fabric\]"),
     (lambda d: d["fabric"].pop("E1"), r"fabric: missing required key 'E1'"),
-    (lambda d: d["mesh"].update(radius=0.05), r"mesh.radius: .*must exceed the arm's largest radius .*upper_arm_girth"),
-    (lambda d: d["body"].update(forearm_girth=0.40), r"mesh.radius: .*must exceed .*arm.forearm_girth"),
-    (lambda d: d["contact"].update(friction=-0.1), r"contact.friction: friction must be a number >= 0"),
-    (lambda d: d["motion"].update(type="walking"), r"motion.type: unknown motion 'walking'"),
+    (lambda d: d["garment"].update(radius=0.05),
+     r"garment.radius: .*must exceed the arm's largest radius .*upper_arm_girth"),
+    (lambda d: d["body"].update(forearm_girth=0.40), r"garment.radius: .*must exceed .*arm.forearm_girth"),
+    (lambda d: d["contact"].update(friction=-0.1), _named("contact", "friction", "must be a number >= 0")),
+    (lambda d: d["motion"].update(type="flexion"), r"motion.type: unknown 'flexion'"),
     (lambda d: d["contact"].update(method="mortar"), r"contact.method: method must be one of .* got 'mortar'"),
-    (lambda d: d["motion"].update(solver="implicit"), r"motion.solver: this key has moved; write it as solver = "
-                                                      r"'implicit' in \[route\]"),
-    (lambda d: d["contact"].update(gravity=False), r"contact.gravity: this key has moved; .* in \[route\]"),
-    (lambda d: d["route"].update(solver="walking"), r"route.solver: solver must be one of"),
-    (lambda d: d["contact"].update(method="augmented"), r"contact.method: .* for solver 'explicit', got 'augmented'"),
-    (lambda d: d["route"].update(rotary_inertia_scale=0.5), r"route.rotary_inertia_scale: .* must be a number >= 1"),
-    (lambda d: d["motion"].update(settle_time=-0.1), r"motion.settle_time: settle_time must be a number >= 0"),
-    (lambda d: d["motion"].update(angle_steps=0), r"motion.angle_steps: angle_steps must be a positive integer"),
-    (lambda d: d["scene"].update(kind="static"), r"scene.kind: 'static' does not match the sections"),
-    (lambda d: d["scene"].update(kind="sleve"), r"scene.kind: unknown kind 'sleve' \(did you mean 'sleeve'\?\)"),
+    (lambda d: d["motion"].update(solver="implicit"), r"motion: unknown key 'solver'"),   # a [route] key
+    (lambda d: d["contact"].update(gravity=False), r"contact: unknown key 'gravity'"),    # a [route] key
+    (lambda d: d["route"].update(solver="walking"), _named("route", "solver", "must be one of")),
+    (lambda d: d["route"].update(rotary_inertia_scale=0.5),
+     _named("route", "rotary_inertia_scale", "must be a number >= 1")),
+    (lambda d: d["motion"].update(settle_time=-0.1), _named("motion", "settle_time", "must be a number >= 0")),
+    (lambda d: d["motion"].update(angle_steps=0), _named("motion", "angle_steps", "must be a positive integer")),
+    (lambda d: d["scene"].update(kind="static"), r"unknown section \[garment\]"),
+    (lambda d: d["scene"].update(kind="weer"), r"scene.kind: unknown kind 'weer' \(did you mean 'wear'\?\)"),
+    (lambda d: d["scene"].update(kind="sleeve"), r"the older sleeve layout is no longer read"),
     (lambda d: d.pop("motion"), r"missing section \[motion\]"),
-])
-def test_bad_sleeve_scene_fails_before_meshing(mutate, message, monkeypatch):
-    data = sleeve_data()
+]
+# the route's own: the contact method of the route; a motion other than the flexion
+BAD_SLEEVE_ROUTE = {
+    "explicit": [
+        (lambda d: d["contact"].update(method="augmented"),
+         r"contact.method: .* for solver 'explicit', got 'augmented'"),
+        (lambda d: d["motion"].update(type="walking"), r"motion.type: .*'walking'"),
+    ],
+    "quasistatic": [
+        (lambda d: d["contact"].update(method="lagrange"),
+         r"contact.method: .* for solver 'quasistatic', got 'lagrange'"),
+        (lambda d: d["motion"].update(type="walking"), r"route.solver: 'quasistatic' runs the arm in a tube sleeve "
+                                                       r"flexing at the elbow"),
+    ],
+}
+
+
+@pytest.mark.parametrize("route, mutate, message",
+                         [(r, m, t) for r in SLEEVE_SCENES for m, t in BAD_SLEEVE + BAD_SLEEVE_ROUTE[r]],
+                         ids=[f"{r}-{k}-{re.sub(r'[^A-Za-z0-9_.]+', '_', t)[:40].strip('_')}" for r in SLEEVE_SCENES
+                              for k, (_, t) in enumerate(BAD_SLEEVE + BAD_SLEEVE_ROUTE[r])])
+def test_bad_sleeve_scene_fails_before_meshing(route, mutate, message, monkeypatch):
+    data = sleeve_data(route)
     mutate(data)
-    import fabricfem.meshes as meshes
-    monkeypatch.setattr(meshes, "tube", lambda *a, **k: pytest.fail("meshed before validation"))
+    for where in ("fabricfem.meshes.tube", "fabricfem.wear.sleeve.tube", "fabricfem.scenes.wear.tube"):
+        monkeypatch.setattr(where, lambda *a, **k: pytest.fail("meshed before validation"))
     with pytest.raises(SceneError, match=message):
         scene_module.validate(data)
 
@@ -91,9 +132,11 @@ def test_start_clearance_and_first_contact():
     reference = 0.06 - r_u * math.sqrt(1 - ((x_k - a) / a) ** 2)
     assert abs(problem.min_gap() - reference) < 1e-6
     history = run_quasistatic(problem)
-    assert history.torques[0] == 0.0          # no contact at the start pose: no force at all
+    torques = history.torque("elbow")          # the start pose (0 deg), 3 and 6 deg
+    assert [s.coordinate for s in history.steps] == [0.0, 3.0, 6.0]
+    assert torques[0] == 0.0          # no contact at the start pose: no force at all
     # the forearm (clearance 12.3 mm at its widest) first touches the sleeve between 3 and 6 degrees
-    assert history.torques[1] == 0.0 and history.torques[2] > 0.0
+    assert torques[1] == 0.0 and torques[2] > 0.0
     assert all(s.drag_ratio == 0.0 for s in history.steps)   # plain Newton equilibria, no regularisation
 
 
@@ -129,7 +172,7 @@ def test_elbow_torque_balances_the_shoulder_reactions():
 def test_sleeve_scene_run_writes_outputs(tmp_path):
     data = sleeve_data()
     data["motion"].update(final_angle=6.0, output_angle_step=3.0)
-    data["output"] = {"dir": str(tmp_path), "render_angles": [6.0]}
+    data["output"] = {"dir": str(tmp_path), "render_at": [6.0]}
     from fabricfem.scenes.run import run_scene
     outcome = run_scene(scene_module.validate(data))
     history = outcome.result
@@ -137,22 +180,25 @@ def test_sleeve_scene_run_writes_outputs(tmp_path):
     for name in ("cloth.xdmf", "cloth.h5", "cloth_pressure.xdmf", "body.pvd", "body_0002.vtp", "torque.csv",
                  "torque.png", "torque.sto", "pressure_06.00deg.png"):
         assert (tmp_path / name).exists(), name
-    rows = list(csv.DictReader(open(tmp_path / "torque.csv")))
-    assert [float(r["angle_deg"]) for r in rows] == [0.0, 3.0, 6.0]
-    assert float(rows[-1]["torque_Nm"]) == pytest.approx(history.torques[-1])
-    assert history.torques[-1] > 0.0              # the forearm touches the sleeve between 3 and 6 degrees
+    rows = list(csv.DictReader(open(tmp_path / "torque.csv")))     # every record: the settling's, the flexion's
+    assert [r["phase"] for r in rows] == [s.phase for s in history.steps]
+    first = next(k for k, r in enumerate(rows) if r["phase"] == "motion")
+    assert [float(r["axis"]) for r in rows[first - 1:]] == pytest.approx([0.0, 3.0, 6.0], abs=1e-9)
+    final = history.steps[-1].torques["elbow"]
+    assert float(rows[-1]["elbow_torque_Nm"]) == pytest.approx(final)
+    assert final > 0.0              # the forearm touches the sleeve between 3 and 6 degrees
 
 
 @pytest.mark.mpi
 def test_torque_history_same_on_one_and_two_ranks():
     """Explicit route: the torque history on COMM_WORLD equals the serial one (COMM_SELF) within 1e-6
-    relative. Each rank treats its owned nodes (contact, friction history) and the torque is an allreduce; the
-    assembly differs only in the summation order (round-off 1e-16), which 800 damped steps to 6 degrees
-    amplify by far less than 1e10."""
+    relative, at every record (the settling's and the flexion's). Each rank treats its owned nodes (contact,
+    friction history) and the torque is an allreduce; the assembly differs only in the summation order (round-off
+    1e-16), which the damped steps of the rest and of the flexion to 6 degrees amplify by far less than 1e10."""
     parallel = run_sleeve(QUICK_EXPLICIT, MPI.COMM_WORLD)
     serial = run_sleeve(QUICK_EXPLICIT, MPI.COMM_SELF)
-    assert np.max(np.abs(parallel.torques)) > 0
-    np.testing.assert_allclose(parallel.torques, serial.torques, rtol=1e-6, atol=1e-12)
+    assert np.max(np.abs(parallel.torque("elbow"))) > 0 and len(parallel.steps) == len(serial.steps)
+    np.testing.assert_allclose(parallel.torque("elbow"), serial.torque("elbow"), rtol=1e-6, atol=1e-12)
 
 
 def test_explicit_run_reports_a_timing_breakdown():
@@ -166,8 +212,8 @@ def test_explicit_run_reports_a_timing_breakdown():
     assert all(v >= 0.0 for v in parts[:-1]) and parts[-1] > -0.01 * t["loop_s"]
     assert sum(parts) == pytest.approx(t["loop_s"], rel=1e-12)
     assert sum(t[f"{p}_share"] for p in TIMING_PARTS) == pytest.approx(1.0, rel=1e-12)
-    assert t["steps"] == sum(s.time_steps for s in h.steps[1:]) > 0     # the flexion's steps (the start record
-    #                                                                     holds the settling's, not timed)
+    # the flexion's steps (the settling's records are not timed)
+    assert t["steps"] == sum(s.time_steps for s in h.steps if s.phase == "motion") > 0
     assert t["ms_per_step"] == pytest.approx(1e3 * t["loop_s"] / t["steps"])
     assert "ms/step" in format_breakdown(t)
 
@@ -305,7 +351,7 @@ def test_frozen_segment_gap_is_that_segments_gap():
 
 def test_step_limiter_scales_by_the_largest_increment():
     """s = min(1, max_rotation / |dtheta|_inf, max_displacement / |du|_inf) (closed form)."""
-    from fabricfem.wear.sleeve import StepLimiter
+    from fabricfem.wear.quasistatic import StepLimiter
     problem = build_sleeve(QUICK, MPI.COMM_SELF)
     limiter = StepLimiter(problem.model, max_rotation=0.1, max_displacement=5e-3)
     step = np.zeros(problem.model.w.vector.getLocalSize())
@@ -403,8 +449,8 @@ def test_fabric_name_uses_the_stored_fabric_everywhere(tmp_path):
         # the largest eigenvalue is converged to SLEPc's rtol 1e-6)
         assert p_named.dt_estimate == pytest.approx(0.5 * p_base.dt_estimate, rel=1e-5)
     finally:
-        p_base.integrator.destroy()
-        p_named.integrator.destroy()
+        p_base.destroy()
+        p_named.destroy()
 
 
 @pytest.mark.parametrize("key, value", [("E", 2.0e6), ("G", 2.0e5), ("nu12", 0.3), ("thickness", 2e-3),
@@ -436,8 +482,8 @@ def test_fitted_fabric_sleeve_flexes_a_few_degrees():
     fitted-law sleeve; the law itself is verified in tests/test_fitted_law.py)."""
     cfg = SleeveConfig.of(n_around=10, n_along=13, final_angle=2.0, fabric_name="two-layer-laminate")
     history = run_sleeve(cfg)
-    assert history.completed and len(history.steps) == 3
-    assert np.all(np.isfinite(history.torques))
+    assert history.completed and len(history.motion_curve("elbow")[0]) == 3     # the start state, 1 and 2 deg
+    assert np.all(np.isfinite(history.torque("elbow")))                         # every record
 
 
 @pytest.mark.parametrize("name", ["no-such-fabric", "", 3])
@@ -453,16 +499,19 @@ def test_sleeve_settles_on_the_resting_arm_before_the_flexion():
     those after 0.8 s: with mass damping alpha = 10 1/s every mode's amplitude decays at least like
     exp(-alpha t / 2), by exp(-2) = 14 % between 0.4 and 0.8 s, and the transient left at 0.4 s is itself a
     small part of the state (kinetic / strain energy 0.016 measured on mesh I), so the difference is a few
-    per cent at most (measured: 1.4 % torque, 0.2 % strain energy)."""
+    per cent at most (measured: 1.6 % torque, 0.2 % strain energy)."""
     cfg = SleeveConfig.of(n_around=10, n_along=13, friction=0.5, final_angle=1.0)
     assert cfg.route.gravity and cfg.motion.settle_time == 0.4
     short = run_sleeve(cfg, MPI.COMM_SELF)
     long = run_sleeve(cfg.with_(settle_time=0.8), MPI.COMM_SELF)
-    assert short.timings["settle_s"] == pytest.approx(0.4, rel=1e-12)
-    assert short.torques[0] > 0.0          # the forearm carries part of the sleeve's weight at rest
-    assert short.torques[0] == pytest.approx(long.torques[0], rel=0.05)
-    assert short.timings["settle_strain_energy"] == pytest.approx(long.timings["settle_strain_energy"], rel=0.05)
-    assert short.timings["settle_kinetic_energy"] < 0.05 * short.timings["settle_strain_energy"]
+    # the end of the rest: the last record of the settling (torque averaged over its interval, energies at its end)
+    rest, long_rest = ([s for s in h.steps if s.phase == "settle"][-1] for h in (short, long))
+    assert rest.time == pytest.approx(0.4, rel=1e-12) and long_rest.time == pytest.approx(0.8, rel=1e-12)
+    assert short.motion_curve("elbow")[1][0] == rest.torques["elbow"]     # the flexion's start record
+    assert rest.torques["elbow"] > 0.0          # the forearm carries part of the sleeve's weight at rest
+    assert rest.torques["elbow"] == pytest.approx(long_rest.torques["elbow"], rel=0.05)
+    assert rest.strain_energy == pytest.approx(long_rest.strain_energy, rel=0.05)
+    assert rest.kinetic_energy < 0.05 * rest.strain_energy
 
 
 def test_gravity_default_depends_on_the_route():

@@ -25,14 +25,15 @@ from fabricfem.studies.sleeve_fit import (
     thickness_ratio,
 )
 from fabricfem.wear.config import SleeveConfig, check_fit
-from fabricfem.wear.sleeve import build_sleeve
+from fabricfem.wear.quasistatic import build_sleeve
 
 ROOT = Path(__file__).resolve().parents[1]
 THICK_ARM = ArmDimensions(upper_arm_girth=0.36, forearm_girth=0.31)   # radii 0.0573 m, 0.0493 m: fits R = 0.06 m
 
 
 def sleeve_data() -> dict:
-    return tomllib.loads((ROOT / "tests" / "data" / "sleeve_kind.toml").read_text())
+    """The sleeve as a wear scene on its quasi-static route (the scene that sleeve_config reads)."""
+    return tomllib.loads((ROOT / "tests" / "data" / "sleeve_quasistatic.toml").read_text())
 
 
 def test_arm_field_reaches_the_ellipsoids():
@@ -62,13 +63,13 @@ def test_arm_field_is_validated_and_checked_for_fit():
 def test_scene_girths_reach_the_config():
     data = sleeve_data()
     data["body"].update(upper_arm_girth=0.36, forearm_girth=0.31, forearm_length=0.25)
-    cfg = sleeve_config(scene_module.validate(data).data)
+    cfg = sleeve_config(scene_module.validate(data).parsed)
     assert cfg.arm == ArmDimensions(upper_arm_length=DEFAULT_ARM.upper_arm_length, forearm_length=0.25,
                                     upper_arm_girth=0.36, forearm_girth=0.31)
-    assert sleeve_config(scene_module.validate(sleeve_data()).data).arm == DEFAULT_ARM
+    assert sleeve_config(scene_module.validate(sleeve_data()).parsed).arm == DEFAULT_ARM
     data = sleeve_data()
     data["body"].update(upper_arm_girth=0.40)
-    with pytest.raises(SceneError, match=r"mesh.radius: .*must exceed .*arm.upper_arm_girth"):
+    with pytest.raises(SceneError, match=r"garment.radius: .*must exceed .*arm.upper_arm_girth"):
         scene_module.validate(data)
 
 
@@ -209,11 +210,15 @@ def test_bad_angular_velocity_on_the_command_line(speed, capsys):
 
 def test_default_factor_gives_the_old_segments_and_checkpoints():
     """f = 0.5 is the arm as it was: the segments of the former formula (0.5 L, r, r), compared exactly, and
-    the study's checkpoint keys unchanged (`_key` leaves the default factor out). The hash below is the file
+    the study's configuration items unchanged (`_key` leaves the default factor out). The hash below is the file
     name of the committed mesh II run (results/sleeve_fit/runs) of the ANSUR arm, R = 0.06 m, t = 1 mm, written
     before the factor existed, with the element-formula critical step: the same configuration asking for that step
-    (`critical_step = "estimate"`, left out of the key like every parameter added at its former value) keeps the
-    name; the route's default now (the eigenvalue step, other answers) gets another one, so old runs are rerun."""
+    (`critical_step = "estimate"`, left out of the key like every parameter added at its former value) still has
+    those items (the sha1 of their repr is that name); its checkpoint key now names the engine (the garment engine
+    replaced the sleeve's own explicit program, other answers), so that run and every run of the removed program
+    are rerun, not read back; the route's default (the eigenvalue step) gets yet another name."""
+    import hashlib
+
     from fabricfem.body.pose import Segment
     from fabricfem.studies.sleeve_fit import _checkpoint, _key
     r_u, r_f = 0.35 / (2 * math.pi), 0.30 / (2 * math.pi)
@@ -223,8 +228,15 @@ def test_default_factor_gives_the_old_segments_and_checkpoints():
     assert ArmDimensions(long_axis_factor=0.5) == DEFAULT_ARM
     cfg = fit_configs((1.0,), mesh="II")[1.0]["R=0.06 t=1mm"]
     assert "long_axis_factor" not in _key(cfg)
-    assert _checkpoint(Path("out"), cfg.with_(critical_step="estimate")).name == "c3df774b0f2f3969.json"
-    assert _checkpoint(Path("out"), cfg).name != "c3df774b0f2f3969.json"
+    estimate = cfg.with_(critical_step="estimate")
+    items = sorted(estimate.key_items().items())
+    items = [(k, {a: v for a, v in value.items() if a != "long_axis_factor"} if k == "arm" else value)
+             for k, value in items]
+    assert hashlib.sha1(repr(items).encode()).hexdigest()[:16] == "c3df774b0f2f3969"    # the items of that run
+    assert _key(estimate) == repr(("engine", items))
+    assert _checkpoint(Path("out"), estimate).name != "c3df774b0f2f3969.json"          # rerun on the engine
+    assert _checkpoint(Path("out"), cfg) not in (_checkpoint(Path("out"), estimate),
+                                                 Path("out") / "runs" / "c3df774b0f2f3969.json")
     tapered = fit_configs((1.0,), mesh="II", long_axis_factor=0.6)[1.0]["R=0.06 t=1mm"]
     assert summary_row(1.0, tapered.arm, {c: (np.array([0.0, 57.0]), np.ones(2)) for c in FIT_CASES})[
         "elbow_radius_m"] == tapered.arm.elbow_radius > 0.0

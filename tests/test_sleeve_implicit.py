@@ -96,7 +96,7 @@ def test_implicit_route_keeps_the_penetration_below_the_augmentation_tolerance(s
     trace = problem.trace_array()
     tol = problem.config.contact.augmentation_tolerance
     print(f"{len(trace)} steps, largest penetration {trace[:, 3].max():.3e} m (tolerance {tol:g} m)")
-    assert implicit.completed and implicit.angles[-1] == pytest.approx(2.0)
+    assert implicit.completed and implicit.steps[-1].coordinate == pytest.approx(2.0)
     assert len(trace) >= problem.settle_steps + 1
     assert np.all(trace[:, 3] < tol)
 
@@ -115,9 +115,13 @@ def test_settled_torque_matches_the_explicit_route(settled_pair):
     friction the sleeve keeps sliding slowly around the arm after 0.4 s (measured on mesh I: torque at rest
     0.0280 / 0.0258 N m explicit and 0.0263 / 0.0215 N m implicit after 0.4 / 1.0 s)."""
     _, implicit, explicit = settled_pair
-    print(f"torque at rest: implicit {implicit.torques[0]:.5e} N m, explicit {explicit.torques[0]:.5e} N m")
-    assert explicit.torques[0] > 0.0
-    assert implicit.torques[0] == pytest.approx(explicit.torques[0], rel=2 * 0.1)
+    # the start record of each route's motion curve: the torque at rest (angle 0, after the rest)
+    a_implicit, implicit_torque = implicit.motion_curve("elbow")
+    a_explicit, explicit_torque = explicit.motion_curve("elbow")
+    assert a_implicit[0] == a_explicit[0] == 0.0
+    print(f"torque at rest: implicit {implicit_torque[0]:.5e} N m, explicit {explicit_torque[0]:.5e} N m")
+    assert explicit_torque[0] > 0.0
+    assert implicit_torque[0] == pytest.approx(explicit_torque[0], rel=2 * 0.1)
 
 
 @pytest.mark.parametrize("kwargs, message", [
@@ -177,5 +181,6 @@ def test_implicit_torque_history_same_on_one_and_two_ranks():
     serial_problem = build_implicit(cfg, MPI.COMM_SELF)
     serial = run_implicit(serial_problem)
     serial_problem.solver.destroy()
-    assert parallel.completed and np.max(np.abs(parallel.torques)) > 0
-    np.testing.assert_allclose(parallel.torques, serial.torques, rtol=1e-6, atol=1e-12)
+    assert parallel.completed and np.max(np.abs(parallel.torque("elbow"))) > 0
+    assert len(parallel.steps) == len(serial.steps)
+    np.testing.assert_allclose(parallel.torque("elbow"), serial.torque("elbow"), rtol=1e-6, atol=1e-12)

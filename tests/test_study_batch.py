@@ -11,7 +11,7 @@ from fabricfem import cli
 from fabricfem.scenes import batch
 from fabricfem.studies import pants, sleeve
 from fabricfem.studies import unit_cell as unit_cell_study
-from fabricfem.wear.sleeve import SleeveHistory, SleeveStep
+from fabricfem.wear.contract import WearHistory, WearStep
 
 
 def test_schedule_gives_the_longest_first_to_the_least_loaded_group():
@@ -40,15 +40,24 @@ def test_run_batch_skips_done_jobs_and_goes_on_after_a_failure():
         batch.run_batch(jobs, MPI.COMM_SELF, ranks_per_job=2)
 
 
+def _stub_step(angle: float, tau: float) -> WearStep:
+    """A record at elbow angle `angle` [deg] (the start state at 0): elbow torque tau x angle, both segments' tau
+    [N m], contact force 1 N, 10 time steps, wall 0.1 s."""
+    return WearStep(phase="motion" if angle > 0.0 else "settle", time=0.0,
+                    torques={"elbow": tau * angle, "elbow_both_segments": tau}, peak_pressure=0.0, peak_segment="",
+                    peak_position=(0.0, 0.0, 0.0), mean_pressure=0.0, max_penetration=0.0, contact_force=1.0,
+                    seam_gap=0.0, seam_forces={}, max_strain=0.0, time_steps=10, kinetic_energy=0.0,
+                    strain_energy=0.0, wall=0.1, axis_value=angle)
+
+
 def _stub_sleeve(calls: list, kill: set):
     """run_sleeve without finite elements: a two-record history whose torque encodes the configuration."""
     def run_sleeve(cfg, comm, on_step=None, stop_on_failure=True):
         calls.append(cfg.tube.n_around)
         if len(calls) in kill:
             raise RuntimeError("killed")
-        h = SleeveHistory(cfg)
         tau = 1e-3 * cfg.tube.n_around + cfg.contact.friction
-        h.steps = [SleeveStep(a, tau * a, tau, 0, 0.0, 1.0, 0.1, 0.0, 10, 0.0, 0.0) for a in (0.0, 3.0)]
+        h = WearHistory(cfg.name, steps=[_stub_step(a, tau) for a in (0.0, 3.0)])
         h.wall = 0.1
         return h
     return run_sleeve
@@ -68,7 +77,7 @@ def test_killed_sleeve_study_resumes_longest_first(monkeypatch, tmp_path):
     assert len(list((tmp_path / "variants").glob("*.csv"))) == 3
     results = sleeve.run_study(tmp_path, **options)
     assert calls[4:] == [15]                               # only the killed variant ran again
-    assert results["friction"]["mu = 0.5"].torques[-1] == pytest.approx(3 * (0.015 + 0.5))
+    assert results["friction"]["mu = 0.5"].steps[-1].torques["elbow"] == pytest.approx(3 * (0.015 + 0.5))
     rows = (tmp_path / "mesh_mu0.1.csv").read_text().splitlines()
     assert len(rows) == 1 + 3 * 2 and rows[1].startswith("mesh I (10x13),0.0,")
 

@@ -37,12 +37,13 @@ CYLINDER_RADIUS = 0.04      # m: the limb, 20 m long along x, is a cylinder over
 
 
 def _compression(tmp_path: Path) -> Path:
-    """The compression sleeve (relaxed radius 34 mm) on a cylinder of 40 mm: Laplace's law holds along the tube."""
+    """The compression sleeve (relaxed radius 34 mm; an explicit wear scene: the limb grown into the tube, then held
+    still while the sleeve settles) on a cylinder of 40 mm: Laplace's law holds along the tube."""
     data = tomllib.loads((ROOT / "scenes" / "compression_sleeve.toml").read_text())
     data["garment"].update(n_around=16, n_along=8)
     data["body"]["radii"] = [20.0, CYLINDER_RADIUS, CYLINDER_RADIUS]
     data["output"] = {"dir": str(tmp_path / "compression"), "render": False}
-    data["accuracy"] = {"quantity": "mean_pressure_Pa", "finer_levels": 1}
+    data["accuracy"] = {"quantity": "pressure_mean_Pa", "finer_levels": 1}
     path = tmp_path / "compression.toml"
     path.write_text(dumps(data))
     return path
@@ -76,20 +77,30 @@ def test_sleeve_plan_table_then_run_delivers_the_whole_scene(tmp_path, capsys):
 
 
 def test_compression_mean_pressure_meets_the_target_against_laplace(tmp_path, capsys):
-    """The compression route on a cylinder: the mean pressure converges (static orders), the level chosen for 0.1%
-    is delivered, and its true error against Laplace's law p = T / r (St. Venant-Kirchhoff hoop tension, the
-    axial force free) is below the target, as are the estimates of the pilots."""
+    """The compression sleeve on a cylinder, the mean contact pressure over the still phase: the level chosen for
+    0.1% is delivered, and its true error against Laplace's law p = T / r (St. Venant-Kirchhoff hoop tension, the
+    axial force free) is below the target, as is its estimate; at 1e-4 every pilot's estimate bounds its true
+    error."""
     path = _compression(tmp_path)
     assert cli.main(["run", str(path), "--accuracy", "0.1%"]) == 0
     summary = json.loads((tmp_path / "compression" / "summary.json").read_text())
     fabric = Fabric(E1=0.8e6, E2=0.5e6, G12=0.1e6, nu12=0.3, thickness=7e-4, density=400.0)
     exact = laplace_pressure(fabric, 0.034, CYLINDER_RADIUS, axial="free").pressure
-    true = abs(summary["mean_pressure_Pa"] - exact) / exact
-    assert summary["accuracy_quantity"] == "mean_pressure_Pa" and summary["accuracy_window_s"] is None
+    true = abs(summary["pressure"]["mean_Pa"] - exact) / exact
+    assert summary["accuracy_quantity"] == "pressure_mean_Pa" and summary["accuracy_window_s"] is None
     assert true <= summary["accuracy_target"] == 0.001 and summary["accuracy_estimated_error"] <= 0.001
     assert "<- chosen" in capsys.readouterr().out
-    tight = plan(load_scene(path), 1e-4)          # the pilots read back: a finer pilot is chosen, and it meets it
-    assert tight.asymptotic and tight.chosen.k > -2 and abs(tight.chosen.value - exact) / exact <= 1e-4
+    # 1e-4: the pilots read back. On the explicit engine the pilots' values need not converge monotonically at this
+    # level (measured: -7.7e-2, +5.7e-5, -1.4e-6 relative to Laplace on 6x3, 10x5, 16x8), and the planner then gives
+    # conservative estimates: each pilot's estimate bounds its true error against Laplace, and a level it chooses is
+    # finer than the coarsest pilot and meets 1e-4 against Laplace
+    tight = plan(load_scene(path), 1e-4)
+    pilots = [lv for lv in tight.levels if lv.value is not None]
+    assert len(pilots) == 3
+    for lv in pilots:
+        assert abs(lv.value - exact) / exact <= lv.error, (lv.k, lv.value, lv.error)
+    if tight.chosen is not None:
+        assert tight.chosen.k > -2 and abs(tight.chosen.value - exact) / exact <= 1e-4
 
 
 def _refused(path: Path, capsys, *args) -> str:
@@ -116,15 +127,17 @@ def test_bad_wear_accuracy_refused_before_meshing(change, text, tmp_path, capsys
 
 
 def test_bad_wear_accuracy_requests(tmp_path, capsys, no_meshing):
-    """--quantity unknown on the command line, a window on the quasi-static compression route, --window too long or
-    negative, and a sleeve on a tube too coarse for two coarser pilots: refused naming the key, nothing meshed."""
-    message = _refused(_compression(tmp_path), capsys, "--accuracy", "1%", "--quantity", "peak_torque")
-    assert "accuracy.quantity" in message and "hoop_tension_N_per_m" in message
-    data = tomllib.loads(_compression(tmp_path).read_text())
-    data["accuracy"]["window"] = 0.1
+    """--quantity unknown on the command line, a window on a quasi-static route (the sleeve's Newton route:
+    an accuracy target runs on the explicit engine only), --window too long or negative, and a sleeve on a tube too
+    coarse for two coarser pilots: refused naming the key, nothing meshed."""
+    message = _refused(_sleeve(tmp_path), capsys, "--accuracy", "1%", "--quantity", "peak_torque")
+    assert "accuracy.quantity" in message and "torque_elbow_final_Nm" in message
+    data = tomllib.loads((ROOT / "tests" / "data" / "sleeve_quasistatic.toml").read_text())
+    data["accuracy"] = {"quantity": "torque_elbow_peak_Nm", "window": 0.1}
+    data["output"] = {"dir": str(tmp_path / "window"), "render": False}
     (tmp_path / "window.toml").write_text(dumps(data))
-    assert "accuracy.window: the compression route is quasi-static" in _refused(tmp_path / "window.toml", capsys,
-                                                                                 "--accuracy", "1%")
+    assert "accuracy: an accuracy target runs a wear scene on the explicit engine" in _refused(
+        tmp_path / "window.toml", capsys, "--accuracy", "1%")
     assert "accuracy.window: 9 s is longer" in _refused(_sleeve(tmp_path), capsys, "--accuracy", "1%", "--window", "9")
     assert "accuracy.window: must be a positive body time" in _refused(_sleeve(tmp_path), capsys, "--accuracy", "1%",
                                                                "--window", "-0.1")
@@ -145,5 +158,5 @@ def test_end_time_cuts_the_phases():
         Timeline(end_time=0.0)
     with pytest.raises(SceneError, match="route.end_time: stops a run of the explicit engine"):
         from fabricfem.scenes.schema import validate
-        data = tomllib.loads((ROOT / "scenes" / "compression_sleeve.toml").read_text())
+        data = tomllib.loads((ROOT / "tests" / "data" / "sleeve_quasistatic.toml").read_text())
         validate({**data, "route": {**data["route"], "end_time": 0.1}})
