@@ -31,10 +31,10 @@ from mpi4py import MPI
 
 from fabricfem import io as fio
 from fabricfem.body.blend import BlendedStart
-from fabricfem.scenes.contract import parse
 from fabricfem.scenes import build as scene_build
 from fabricfem.scenes import wear
 from fabricfem.scenes.batch import Job, check, completed, run_batch
+from fabricfem.scenes.contract import parse
 from fabricfem.scenes.run import build_wear_run, scene_sha256
 from fabricfem.scenes.schema import Scene
 from fabricfem.wear.outputs import write_sto
