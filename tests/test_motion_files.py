@@ -140,7 +140,7 @@ def test_place_centres_the_arm_in_the_tube(tmp_path):
 
 @pytest.mark.parametrize("mutate, words", [
     (lambda d: d["motion"].update(place="body"), "'body'"),
-    (lambda d: d["route"].update(solver="quasistatic"), "explicit"),
+    (lambda d: (d["route"].update(solver="quasistatic"), d["contact"].update(method="penalty")), "explicit"),
 ])
 def test_bad_place_refused(tmp_path, capsys, no_meshing, mutate, words):
     data = _scene("sleeve.toml")

@@ -1,4 +1,4 @@
-"""The accuracy commands' options as a user gives them (issue 34, items 7 and 9): `run --accuracy ... --out DIR`
+"""The accuracy commands' options as a user gives them: `run --accuracy ... --out DIR`
 writes into DIR, and `plan` without a quantity lists the quantities the scene accepts."""
 import json
 import tomllib

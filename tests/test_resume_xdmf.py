@@ -1,4 +1,4 @@
-"""After a kill and `--resume`, one XDMF file per field holds every record (issue 34, item 5): cloth.xdmf and
+"""After a kill and `--resume`, one XDMF file per field holds every record: cloth.xdmf and
 cloth_pressure.xdmf open in meshio with a step per row of torque.csv at its times, the killed run's records
 included, and no *_resumed files are left; `--resume` of a static scene says that it solves from the start
 (item 6)."""

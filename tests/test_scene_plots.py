@@ -1,4 +1,4 @@
-"""The plots of the scene commands as a user reads them (issue 34, item 8): a sweep's plot has a title, a user
+"""The plots of the scene commands as a user reads them: a sweep's plot has a title, a user
 quantity with its unit against the varied key with its unit, and sweep.csv holds the probe once; a static scene's
 final.png has a colour bar of the displacement; a dynamic scene's monitor panels carry units. (The wear run's
 torque plot: tests/test_wear_run_files.py.)"""

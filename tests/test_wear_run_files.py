@@ -1,4 +1,4 @@
-"""The files of a wear run as a user reads them (issue 34, items 4, 6 and 8): torque.sto with the motion's own time
+"""The files of a wear run as a user reads them: torque.sto with the motion's own time
 and OpenSim coordinate names (read by a plain reader, and by OpenSim's own Storage and TimeSeriesTable when the
 `opensim` package is installed), torque.png against time with the phases and the summary's records marked, and
 `--resume` of a completed run. One short sleeve run (6 degrees of flexion after 0.4 s of settling) serves them."""
