@@ -30,6 +30,12 @@ the division so that the next predictor lands on the body), see fabricfem.contac
 layers is called in its order (the body contact first, then the seams of fabricfem.contact.seams, so that the
 stitched nodes end the step together).
 
+Safe step (`step_check_every` N, default None: off): every N steps the largest frequency of the current state is
+estimated (fabricfem.dynamics.safe_step.FrequencyTracker, power iteration on M^-1 K(d) of the acting system) and
+the step is shortened to step_safety x dt_crit(omega) ([Man2006, eq. 2.86], Rayleigh damping as in
+stability.critical_time_step) when it is longer; never lengthened. `step_reductions` counts the shortenings,
+`omega_tracked` is the last estimate [rad/s].
+
 Changing the step (`set_time_step`, e.g. a run that shortens it as the fabric stiffens): M + dt/2 C is rebuilt at
 the next step and the hooks that keep quantities of the step (TimeStepListener, e.g. the seams' masses) are told.
 """
@@ -45,6 +51,7 @@ from dolfinx.fem import petsc as fem_petsc
 from fabricfem.dynamics import stability
 from fabricfem.dynamics.mass import InertiaDamping, rotary_scale
 from fabricfem.dynamics.newmark import DynamicsError, LoadFactor, TimeIntegrator
+from fabricfem.dynamics.safe_step import FrequencyTracker
 from fabricfem.solvers.system import ExplicitHook, TimeStepListener
 
 
@@ -79,13 +86,16 @@ class CentralDifference(TimeIntegrator):
         mass_scale: S >= 1 multiplying every lumped mass, not the damping nor the loads (module docstring).
         contact: explicit contact layer (ExplicitHook) or a sequence of them (module docstring), e.g.
             fabricfem.contact.explicit.ExplicitBodyContact, fabricfem.contact.seams.SeamTies.
+        step_check_every: steps between the safe-step estimates (module docstring); None: no estimates.
+        step_safety: the step's fraction of 2 / omega of the tracked frequency (default STEP_SAFETY["eigenvalue"]).
     """
 
     def __init__(self, model, dt: float, load_factor: LoadFactor = 1.0, rayleigh: tuple[float, float] = (0.0, 0.0),
                  air_drag: float = 0.0, force: bool = False, dt_crit: float | None = None,
                  energy_bound: float | str | None = "auto", damping_update_every: int = 1,
                  rotary_inertia_scale: float = 1.0, contact: ExplicitHook | Sequence[ExplicitHook] | None = None,
-                 mass_scale: float = 1.0):
+                 mass_scale: float = 1.0, step_check_every: int | None = None,
+                 step_safety: float = stability.STEP_SAFETY["eigenvalue"]):
         scale = rotary_scale(rotary_inertia_scale)
         if isinstance(mass_scale, bool) or not (isinstance(mass_scale, (int, float)) and mass_scale >= 1.0):
             raise ValueError(f"mass_scale must be a number >= 1, got {mass_scale!r}")
@@ -120,6 +130,15 @@ class CentralDifference(TimeIntegrator):
         self._denominator = None
         # wall time [s] spent in the internal-force assembly and in the contact hooks since construction
         self.timings = {"internal_forces": 0.0, "contact": 0.0}
+        if step_check_every is not None and not (isinstance(step_check_every, int) and step_check_every >= 1):
+            raise ValueError(f"step_check_every must be a positive integer or None, got {step_check_every!r}")
+        if not (isinstance(step_safety, (int, float)) and 0.0 < step_safety <= 1.0):
+            raise ValueError(f"step_safety must lie in (0, 1], got {step_safety!r}")
+        self.step_check_every, self.step_safety = step_check_every, float(step_safety)
+        self._scaled_rayleigh = (rayleigh[0] / self.mass_scale, rayleigh[1])   # (a, b) on the scaled mass
+        self.tracker = FrequencyTracker(self) if step_check_every else None
+        self.step_reductions = 0
+        self.omega_tracked = 0.0
 
     @property
     def velocity_predictor(self):
@@ -155,7 +174,25 @@ class CentralDifference(TimeIntegrator):
             if isinstance(hook, TimeStepListener):
                 hook.on_time_step(self.dt)
 
+    def blowup_advice(self) -> str:
+        ratio = self.dt / self.dt_crit
+        return (f"the explicit step dt = {self.dt:.4g} s is above the stability limit of the current state "
+                f"({ratio:.3g} of dt_crit = {self.dt_crit:.4g} s; try dt_fraction {0.6 * ratio:.2g}, or a step "
+                f"check: step_check_every)")
+
+    def _safe_step(self) -> None:
+        """Shorten dt to step_safety x dt_crit(omega of the current state) when it is longer (module docstring)."""
+        self.omega_tracked = self.tracker.estimate(self.d)
+        if self.omega_tracked <= 0.0:
+            return
+        limit = self.step_safety * stability.critical_time_step(self.model, self._scaled_rayleigh, self.omega_tracked)
+        if self.dt > limit:
+            self.set_time_step(limit)
+            self.step_reductions += 1
+
     def step(self) -> int:
+        if self.tracker is not None and self.step_count % self.step_check_every == 0:
+            self._safe_step()
         dt = self.dt
         if self._denominator is None:
             self._set_denominator()
@@ -202,6 +239,8 @@ class CentralDifference(TimeIntegrator):
         return 0
 
     def destroy(self):
+        if self.tracker is not None:
+            self.tracker.destroy()
         for vec in (self._v_pred, self._rhs):
             vec.destroy()
         if self._denominator is not None:

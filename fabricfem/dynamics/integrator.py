@@ -111,6 +111,10 @@ def _as_load_function(load_factor: LoadFactor) -> Callable[[float], float]:
     return lambda t: value
 
 
+# [J] added to the blow-up check's bound so that a run from rest without work (round-off energies) is not stopped
+ENERGY_FLOOR = 1e-300
+
+
 class TimeIntegrator:
     """State (d, v, a), energy bookkeeping, blow-up check and outputs shared by the time integrators.
 
@@ -249,7 +253,7 @@ class TimeIntegrator:
             xdmf: str | Path | SurfaceSeries | None = None, csv: str | Path | None = None, output_every: int = 1,
             progress: bool | Callable[[int, int, float, float], None] = False, history: History | None = None,
             after_record: Callable[[History], None] | None = None,
-            should_stop: Callable[[], str] | None = None) -> History:
+            should_stop: Callable[[], str] | None = None, stop_on_blowup: bool = False) -> History:
         """Integrate n_steps steps; record energies and monitors every `output_every` steps (and at 0).
 
         xdmf: write the displacement time series (fabricfem.io.SurfaceSeries, or an open one, left open);
@@ -260,6 +264,8 @@ class TimeIntegrator:
         restored by `restore` (a checkpoint's `state()`): step 0 is not recorded again and the steps continue
         after the restored user step. `after_record(history)` is called after every record (a checkpoint);
         `should_stop()` then too: a non-empty reason (an interrupt) ends the run there, in `history.stopped`.
+        stop_on_blowup: a blow-up (`_check`) ends the run with its reason in `history.stopped` (and
+        `self.blew_up` True) instead of raising; the history and the series then end at the last record before it.
         """
         if not (isinstance(n_steps, (int, np.integer)) and n_steps >= 1):
             raise ValueError(f"n_steps must be a positive integer, got {n_steps!r}")
@@ -290,6 +296,10 @@ class TimeIntegrator:
                 after_record(history)
         try:
             self._advance(int(n_steps), output_every, record, report, should_stop, history)
+        except DynamicsError as exc:
+            if not (stop_on_blowup and self.blew_up):
+                raise
+            history.stopped = str(exc)
         finally:
             if series is not None and series is not xdmf:
                 series.close()
@@ -348,22 +358,31 @@ class TimeIntegrator:
             d_old.destroy()
             cv_old.destroy()
 
+    blew_up = False     # set by `_check` when it stops a run
+
+    def blowup_advice(self) -> str:
+        """What to change after a blow-up (appended to the reason of `_check`)."""
+        return "use a smaller dt"
+
     def _check(self, energy0: float, max_work: float):
-        """Stop with DynamicsError on a non-finite state or unbounded energy growth."""
+        """Stop with DynamicsError on a non-finite state or unbounded energy growth: kinetic + strain energy
+        above energy_bound x (|initial energy| + largest |external work| so far) + ENERGY_FLOOR [J]."""
         d_norm, v_norm = self.d.norm(), self.v.norm()
         where = f"step {self.step_count} (t = {self.t:.6g} s, dt = {self.dt:.3g} s)"
         if not (math.isfinite(d_norm) and math.isfinite(v_norm)):
-            raise DynamicsError(f"time integration blew up at {where}: non-finite displacement or velocity",
-                                self.step_count, self.t)
+            self.blew_up = True
+            raise DynamicsError(f"time integration blew up at {where}: non-finite displacement or velocity; "
+                                f"{self.blowup_advice()}", self.step_count, self.t)
         if self.energy_bound is None:
             return
         energy = self.kinetic_energy() + self.strain_energy()
         scale = abs(energy0) + max_work
-        if not math.isfinite(energy) or energy > self.energy_bound * scale + 1e-300:
+        if not math.isfinite(energy) or energy > self.energy_bound * scale + ENERGY_FLOOR:
+            self.blew_up = True
             raise DynamicsError(
-                f"time integration blew up at {where}: kinetic + strain energy {energy:.4g} J exceeds "
-                f"{self.energy_bound:g} x (initial energy + |external work|) = {self.energy_bound * scale:.4g} J",
-                self.step_count, self.t)
+                f"time integration blew up at {where}: energy grows without a load, kinetic + strain energy "
+                f"{energy:.4g} J exceeds {self.energy_bound:g} x (initial energy + |external work|) = "
+                f"{self.energy_bound * scale:.4g} J; {self.blowup_advice()}", self.step_count, self.t)
 
     # ---------------------------------------------------------- checkpoint
     resumable = True    # whether `state` holds everything the next step reads (see GeneralizedAlphaIntegrator)

@@ -34,7 +34,9 @@ carries (stress resultants times the second variation of the strains), and so do
 corner-pinned cloth with B = 0.02 N m, strain limit 0.01) from 0.90 to 1.26 of the estimate on 4x4 cells and from
 0.98 to 1.48 on 8x8 by t = 0.6 s, the top mode being the pinned corner's rotations; the same cloth held along an
 edge stays at 0.90-0.91. dt_fraction = 0.9 then blows up (4x4 at 0.27 s, 8x8 at 0.17 s); 0.6 runs to 0.6 s
-(corner drop -1.026 / -1.005 m on 4x4 / 8x8). Such scenes need dt_fraction <= 0.6, or Newmark.
+(corner drop -1.026 / -1.005 m on 4x4 / 8x8). Such scenes need dt_fraction <= 0.6, Newmark, or the safe step of
+fabricfem.dynamics.safe_step (CentralDifference step_check_every; on by default in dynamic scenes), which tracks
+omega_max of the current state and shortens the step (docs/findings/2026-11-27-safe-step.md).
 
 Rotary-inertia scaling (fabricfem.dynamics.mass, factor s >= 1 on the rotational lumped masses): the
 thickness-shear frequency is rotational inertia against shear stiffness, so omega_s -> omega_s / sqrt(s),

@@ -36,6 +36,11 @@ from fabricfem.wear.run import interrupt_flag
 from fabricfem.wear.verdict import DEFAULT_FAILURE_STRAIN, Check, verdict
 
 CHECKPOINT_EVERY = 25       # records between the checkpoints of a dynamic scene or a wear run (explicit engine)
+# steps between the explicit route's estimates of the current largest frequency (CentralDifference
+# step_check_every): 20 kept the corner-pinned cloth with bending (16 x 16) stable at dt_fraction 0.9, 50 did not
+# (docs/findings/2026-11-27-safe-step.md); off with force = true (a step above the limit asked for, e.g. to study
+# the blow-up check)
+STEP_CHECK_EVERY = 20
 
 
 def build_obstacles(spec: list[dict]) -> list:
@@ -66,7 +71,7 @@ class DynamicRun:
     peak_memory_mib: float
     summary: dict = field(default_factory=dict)
     outputs: dict[str, Path] = field(default_factory=dict)
-    failure: str = ""           # why the run stopped before end_time (an interrupt), "" when it completed
+    failure: str = ""           # why the run stopped before end_time (an interrupt, a blow-up), "" when it completed
 
     @property
     def warnings(self) -> list[str]:
@@ -123,7 +128,8 @@ def build_integrator(spec: dict, model):
         if dt > dt_crit and not force:
             raise SceneError(f"dynamics.dt: {dt:.6g} s exceeds the critical time step {dt_crit:.6g} s of this mesh "
                              f"(ratio {dt / dt_crit:.3g}, [Man2006, eqs. 2.86-2.87]); use a smaller dt or force = true")
-        integrator = CentralDifference(model, dt, force=force, dt_crit=dt_crit, **common)
+        integrator = CentralDifference(model, dt, force=force, dt_crit=dt_crit,
+                                       step_check_every=None if force else STEP_CHECK_EVERY, **common)
     elif kind == "newmark":
         integrator = NewmarkIntegrator(model, dt, beta=float(d.beta), gamma=float(d.gamma), lumped=bool(d.lumped),
                                        **common)
@@ -246,27 +252,43 @@ def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD, resume: bool = False, s
     start = time.perf_counter()
     try:
         with interrupt_flag(comm) as interrupted:
-            history = integrator.run(n_steps, monitors=monitors, xdmf=series, output_every=output_every,
-                                     progress=_progress(comm, n_steps, say), history=history,
-                                     after_record=checkpoint.after_record, should_stop=interrupted)
-        if history.stopped and checkpoint.records != len(history.time) - 1:
+            history = _run_to_end(integrator, float(d.end_time), n_steps, history,
+                                  {"monitors": monitors, "xdmf": series, "output_every": output_every,
+                                   "progress": _progress(comm, n_steps, say), "after_record": checkpoint.after_record,
+                                   "should_stop": interrupted, "stop_on_blowup": True})
+        if history.stopped and not integrator.blew_up and checkpoint.records != len(history.time) - 1:
             checkpoint.save(history)        # the interrupted run resumes from its last record
     finally:
         series.close()
     run_wall = time.perf_counter() - start
-    summary, outputs = _write_outputs(scene, history, model, n_steps, dt, dt_crit, run_wall, t0, log, comm)
+    n_steps = max(n_steps, integrator.run_step)      # the steps a shortened step added
+    summary, outputs = _write_outputs(scene, history, model, integrator, n_steps, dt, dt_crit, run_wall, t0, log,
+                                      comm)
     if history.stopped:
-        say(f"STOPPED EARLY: {history.stopped}; continue with --resume")
+        say(f"STOPPED EARLY: {history.stopped}" + ("" if integrator.blew_up else "; continue with --resume"))
     integrator.destroy()
     projection.destroy()
     return DynamicRun(history, n_steps, dt, dt_crit, summary["wall_s"], summary["peak_memory_mib"], summary, outputs,
                       history.stopped)
 
 
-def _write_outputs(scene: Scene, history, model, n_steps: int, dt: float, dt_crit: float | None, run_wall: float,
-                   t0: float, log: list, comm) -> tuple[dict, dict]:
-    """The CSV, the PNG and summary.json of a finished (or interrupted) dynamic run, and the closing lines;
-    returns (summary, {kind: path})."""
+def _run_to_end(integrator, end_time: float, n_steps: int, history, options: dict):
+    """integrator.run(n_steps, history=history, **options), continued while a shortened step (the explicit safe
+    step, CentralDifference.step_reductions) leaves t short of end_time [s]: the rest in equal steps no longer than
+    the current one. Returns the History."""
+    history = integrator.run(n_steps, history=history, **options)
+    while not history.stopped and integrator.t < end_time * (1.0 - 1e-12):
+        rest = math.ceil((end_time - integrator.t) / integrator.dt * (1.0 - 1e-12))
+        integrator.set_time_step((end_time - integrator.t) / rest)
+        history = integrator.run(integrator.run_step + rest, history=history, **options)
+    return history
+
+
+def _write_outputs(scene: Scene, history, model, integ, n_steps: int, dt: float, dt_crit: float | None,
+                   run_wall: float, t0: float, log: list, comm) -> tuple[dict, dict]:
+    """The CSV, the PNG and summary.json of a finished (or interrupted) dynamic run of the integrator `integ`
+    (its final step dt [s] and, explicit, the safe step's reductions), and the closing lines; returns
+    (summary, {kind: path})."""
     say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
     d = section(DynamicsSection, scene["dynamics"])
     name, out, limit = scene_name(scene), output_dir(scene), d.strain_limit
@@ -285,6 +307,7 @@ def _write_outputs(scene: Scene, history, model, n_steps: int, dt: float, dt_cri
     iterations = [r.iterations for r in log]
     summary = {"scene": name, "kind": "dynamic", "integrator": d.integrator, "ranks": comm.size,
                "ndofs": model.ndofs, "steps": n_steps, "dt_s": dt, "dt_crit_s": dt_crit,
+               "step_reductions": getattr(integ, "step_reductions", 0), "dt_final_s": integ.dt,
                "end_time_s": history.time[-1], "wall_s": wall, "time_integration_wall_s": run_wall,
                "kinetic_J": history.kinetic[-1], "strain_J": history.strain[-1],
                "external_work_J": history.external_work[-1], "dissipated_J": history.dissipated[-1],
@@ -316,7 +339,8 @@ class DynamicCheckpoint:
     """The checkpoints of a dynamic scene's run (fabricfem.io.Checkpoint files under <out>/checkpoint/).
 
     Every `every` records (default CHECKPOINT_EVERY) each rank saves the integrator's `state()` (d, v, a, t, step
-    counts, work and dissipation, the step-halving state of Newmark; fabricfem.dynamics.newmark.TimeIntegrator),
+    counts, work and dissipation, the step-halving state of Newmark; fabricfem.dynamics.newmark.TimeIntegrator)
+    and its current step dt [s] with the explicit safe step's reductions,
     the strain-limit projection's log (its iterations per step; the projection keeps nothing else between steps),
     the obstacle contact's multipliers and stick points, the History so far and the record count; the XDMF series
     is closed and copied beside it (series_<records>.xdmf/.h5, rank 0; io.SurfaceSeries.snapshot) before the
@@ -358,6 +382,7 @@ class DynamicCheckpoint:
         contact = {k: copy.deepcopy(getattr(self.contact, k)) for k in self.CONTACT_STATE
                    if self.contact is not None and hasattr(self.contact, k)}
         self.files.write({"records": records, "history": history, "integrator": self.integrator.state(),
+                          "dt": self.integrator.dt, "step_reductions": getattr(self.integrator, "step_reductions", 0),
                           "projection_log": list(self.log), "contact": contact, "series": tag})
         if self.comm.rank == 0:
             for old in self.files.folder.glob("series_*"):
@@ -385,6 +410,9 @@ class DynamicCheckpoint:
             raise SceneError(f"resume: the {type(integ).__name__} integrator cannot resume from a checkpoint: "
                              f"{integ.not_resumable}")
         integ.restore(state["integrator"])
+        if state.get("dt", integ.dt) != integ.dt:     # the explicit safe step shortened it (older layouts: not saved)
+            integ.set_time_step(state["dt"])
+            integ.step_reductions = state["step_reductions"]
         self.log[:] = state["projection_log"]
         for key, value in state["contact"].items():
             setattr(self.contact, key, copy.deepcopy(value))
