@@ -105,3 +105,11 @@ def test_the_renders_colour_range_ends_at_a_high_percentile():
     frames = [np.linspace(1e3, 3e3, 500), np.concatenate([np.zeros(100), np.linspace(1e3, 3e3, 499), [2.9e6]])]
     top, largest = colour_top(frames)
     assert 2.9e3 < top < 3.1e3 and largest == 2.9e6
+
+
+def test_a_garment_sewn_around_the_body_is_not_judged_by_its_start_distance():
+    """Pattern panels start apart around the body (the pants: 0.11 m) and are sewn on: no start-distance check."""
+    sewn = WearHistory("pants", steps=[_step(phase="sew"), _step()], initial_gap=0.11)
+    assert "start distance" not in {c.name for c in wear_checks(sewn)}
+    worn = WearHistory("sleeve", steps=[_step(phase="settle"), _step()], initial_gap=0.11)
+    assert [c.name for c in wear_checks(worn) if not c.passed] == ["start distance"]

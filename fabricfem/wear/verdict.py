@@ -10,7 +10,8 @@ wear scene's [checks] section; the strain bound is the fabric's `failure_strain`
     fabric strain      largest warp/weft Green strain after the sewing [-]                 <= failure_strain
     skin pressure      largest contact pressure on the body during the motion [Pa]         <= max_skin_pressure
     kinetic energy     largest kinetic / strain energy ratio during the motion [-]         <= max_kinetic_ratio
-    start distance     smallest garment-body gap at the start [m]                          <= max_start_gap
+    start distance     smallest garment-body gap at the start [m], for a garment that is not sewn, pulled or
+                       grown onto the body first                                            <= max_start_gap
     contact            the body touches the garment during the motion (largest contact force > 0 [N])
 
 A failed check is one console line and an entry of summary.json's "verdict"; the run's status becomes
@@ -92,7 +93,8 @@ def wear_checks(history: WearHistory, bounds: Bounds = Bounds(),
         ratio = kinetic_ratio(np.array([s.kinetic_energy for s in motion]), np.array([s.strain_energy for s in motion]))
         checks.append(_check("kinetic energy", "largest kinetic / strain energy ratio during the motion", ratio,
                              bounds.max_kinetic_ratio, ""))
-    if math.isfinite(history.initial_gap):
+    dressed = any(s.phase in ("sew", "pull", "don") for s in steps)   # panels placed apart, a body grown into it
+    if math.isfinite(history.initial_gap) and not dressed:
         checks.append(_check("start distance", "smallest garment-body gap at the start", history.initial_gap,
                              bounds.max_start_gap, "m"))
     if bounds.require_contact:
