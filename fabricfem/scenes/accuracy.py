@@ -76,6 +76,7 @@ from fabricfem.scenes.schema import (
     check_target,
 )
 from fabricfem.scenes.sections import AccuracySection, DynamicsSection, ModelSection, section
+from fabricfem.scenes.wear_sections import GarmentSection
 from fabricfem.solvers.newton import SolverError
 
 PILOTS = (-2, -1, 0)             # levels solved to estimate the error
@@ -190,7 +191,7 @@ def cells_of(scene: Scene) -> str:
     if scene.kind == "wear":
         g = scene["garment"]
         return (f"{g['n_around']}x{g['n_along']}" if g.get("builder", "pattern") == "tube"
-                else f"h={g.get('h', wear.GarmentSection.h):.3g}")
+                else f"h={g.get('h', GarmentSection.h):.3g}")
     mesh = scene["mesh"]
     return "x".join(str(mesh[key]) for key in MESH_COUNTS[mesh["type"]])
 
@@ -301,7 +302,7 @@ def wear_level(scene: Scene, k: int, out: Path, window: bool) -> Level:
         size = 1.0 / math.sqrt(g["n_around"] * g["n_along"])
         dofs = estimated_dofs({"type": "tube", "n_around": g["n_around"], "n_along": g["n_along"]})
     else:
-        g["h"] = size = section(wear.GarmentSection, scene["garment"]).h / scale
+        g["h"] = size = section(GarmentSection, scene["garment"]).h / scale
         dofs = 0                                          # known once meshed (the pilots' summaries)
     if window and spec.window is not None:
         data.setdefault("route", {})["end_time"] = spec.window

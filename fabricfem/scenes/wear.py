@@ -47,15 +47,7 @@ from fabricfem.patterns import pattern_path
 from fabricfem.scenes.contract import WearScene
 from fabricfem.scenes.errors import SceneError
 from fabricfem.scenes.errors import suggest as _suggest
-from fabricfem.scenes.wear_sections import (  # noqa: F401 (the sections are public here)
-    GarmentSection,
-    TorqueSection,
-    WearBodySection,
-    WearDonningSection,
-    WearFabricSection,
-    WearMotionSection,
-    WearRouteSection,
-)
+from fabricfem.scenes.wear_sections import GarmentSection, WearDonningSection, WearMotionSection
 from fabricfem.wear.compression import StillPose, limb_body
 from fabricfem.wear.config import ROUTE_METHODS, ContactSpec
 from fabricfem.wear.garment import ExplicitSettings, Timeline, TorqueSpec

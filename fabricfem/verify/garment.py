@@ -11,9 +11,8 @@ from fabricfem.contact.seams import SeamSpec
 from fabricfem.materials import Fabric
 from fabricfem.meshes.pattern import Panel, Pattern, Stitch
 from fabricfem.meshes.pattern_mesh import mesh_pattern, wrap_on_cylinder
-from fabricfem.scenes.wear import StillPose
 from fabricfem.verify import Timer, case, result
-from fabricfem.wear.compression import laplace_pressure
+from fabricfem.wear.compression import StillPose, laplace_pressure
 from fabricfem.wear.garment import ExplicitSettings, Timeline, build_garment_run
 
 WIDTHS = (0.12, 0.20)     # m, the two panels (unequal: the seams are not at opposite sides)
