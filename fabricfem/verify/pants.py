@@ -11,9 +11,9 @@ from mpi4py import MPI
 
 from fabricfem.body.lower_body import lower_body
 from fabricfem.contact.torque import TorqueMonitor
-from fabricfem.scenes.contract import parse
 from fabricfem.scenes import wear
 from fabricfem.scenes.build import build_fabric
+from fabricfem.scenes.contract import parse
 from fabricfem.verify import Timer, case, reproduction, result
 from fabricfem.wear.garment import build_garment_run
 
