@@ -154,7 +154,9 @@ class RouteSpec:
                         " + Newton)", "explicit")
     gravity: bool | None = param("the sleeve's weight along -y (default: on for explicit and implicit, off for"
                                  " quasistatic)", None)
-    mass_damping: float = param("Rayleigh alpha of C = alpha M [1/s]", 10.0)
+    mass_damping: float = param("Rayleigh alpha of C = alpha M [1/s] (also a drag on rigid motion)", 10.0)
+    stiffness_damping: float = param("explicit: Rayleigh beta of C = beta K_M(d) [s], a damping of the deformation "
+                                     "only (no drag on rigid motion); shortens the critical step", 0.0)
     rotary_inertia_scale: float = param("explicit: factor >= 1 on the rotational lumped masses", 100.0)
     time_step_safety: float | None = param(
         "explicit: dt = safety x critical step, in (0, 1); default 0.9 with the eigenvalue step, 0.8 with the "
@@ -185,6 +187,7 @@ class RouteSpec:
         if self.critical_step is not None and self.critical_step not in CRITICAL_STEP_METHODS:
             raise ValueError(f"critical_step must be one of {CRITICAL_STEP_METHODS}, got {self.critical_step!r}")
         _non_negative(self, " [1/s]", "mass_damping")
+        _non_negative(self, " [s]", "stiffness_damping")
         if isinstance(self.rotary_inertia_scale, bool) or not (isinstance(self.rotary_inertia_scale, (int, float))
                                                               and self.rotary_inertia_scale >= 1.0):
             raise ValueError(f"rotary_inertia_scale must be a number >= 1, got {self.rotary_inertia_scale!r}")
@@ -200,7 +203,7 @@ class RouteSpec:
 
 # parameter -> default, of the parameters added after study runs were checkpointed (SleeveConfig.key_items)
 # (critical_step: the runs stored before it used the element formula)
-ADDED_LATER = {"mass_scale": 1.0, "critical_step": "estimate"}
+ADDED_LATER = {"mass_scale": 1.0, "critical_step": "estimate", "stiffness_damping": 0.0}
 
 SECTIONS = {"tube": TubeSpec, "material": FabricSpec, "motion": FlexionSpec, "contact": ContactSpec,
             "route": RouteSpec}

@@ -126,6 +126,7 @@ class ExplicitSettings:
     """Central-difference settings (the sleeve's defaults, fabricfem.wear.config.RouteSpec)."""
 
     mass_damping: float = 10.0                 # alpha [1/s]
+    stiffness_damping: float = 0.0             # beta [s] of beta K_M(d): damps deformation only
     rotary_inertia_scale: float = 100.0        # s >= 1
     time_step_safety: float = 0.8              # dt = safety x estimated critical step
     # omega_max by fabricfem.dynamics.stability.max_frequency: the element formula, whose margin the pants' obstacle
@@ -403,7 +404,7 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
         contact.segment_active = lambda t: np.isin(names, posed.active(t))
     ties = SeamTies(model, seams, sewing_time=timeline.sewing_time) if seams else None
     handles = [make(model) for make in handles]
-    rayleigh = (settings.mass_damping, 0.0)
+    rayleigh = (settings.mass_damping, settings.stiffness_damping)
     omega = math.hypot(stability.max_frequency(model, settings.rotary_inertia_scale, settings.critical_step),
                        contact.penalty_frequency())
     dt_estimate = stability.critical_time_step(model, rayleigh, omega_max=omega, mass_scale=settings.mass_scale)
