@@ -30,12 +30,10 @@ def no_meshing(monkeypatch):
     """Any attempt to mesh fails the test (the refusal must come before meshing): the scene builders' meshes, the
     sleeve's tube and the wear garments (tube and pattern)."""
     from fabricfem.scenes import build as scene_build
-    from fabricfem.scenes import static as scene_static
 
     def trap(*args, **kwargs):
         raise AssertionError("meshed before refusing the scene")
-    for module in (scene_build, scene_static):
-        monkeypatch.setattr(module, "build_mesh", trap)
+    monkeypatch.setattr(scene_build, "build_mesh", trap)
     monkeypatch.setattr("fabricfem.wear.sleeve.tube", trap)
     monkeypatch.setattr("fabricfem.scenes.wear.tube", trap)
     monkeypatch.setattr("fabricfem.scenes.wear.mesh_pattern", trap)

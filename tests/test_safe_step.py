@@ -17,7 +17,7 @@ from fabricfem.cli import main
 from fabricfem.dynamics import CentralDifference
 from fabricfem.dynamics.stability import STEP_SAFETY, critical_time_step, discrete_max_frequency
 from fabricfem.dynamics.strain_limit import FastProjection, attach
-from fabricfem.scenes.dynamic import STEP_CHECK_EVERY
+from fabricfem.scenes.build import STEP_CHECK_EVERY
 from fabricfem.scenes.static import build_model
 
 ROOT = Path(__file__).resolve().parents[1]

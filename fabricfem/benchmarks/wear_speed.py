@@ -54,7 +54,7 @@ from mpi4py import MPI
 from fabricfem import io as fio
 from fabricfem.contact.explicit import numpy_contact
 from fabricfem.forms.jit import DOLFINX_DEFAULT_FLAGS, KERNEL_FLAGS, kernel_flags
-from fabricfem.scenes.run import build_wear_run
+from fabricfem.scenes.build import build_wear_run
 from fabricfem.scenes.schema import Scene
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.engine import TIMING_PARTS, kinetic_ratio

@@ -1,5 +1,8 @@
-"""From validated scene data to objects: fabric, mesh, and the checks that need them (the explicit
-critical time step before meshing). `load` and `validate` are the entry points of fabricfem.scenes."""
+"""Every object a scene builds, from its validated, parsed data: the fabric, the mesh, the static and dynamic
+scenes' shell model (supports, loads), obstacles, integrator and monitors, the wear scenes' runs (the tube sleeve
+by its route, the compression sleeve, any garment on the engine) and the sleeve's configuration, and the checks
+that need objects before meshing (the explicit critical step, the wear scene's body, motion and pattern). `load`
+and `validate` are the entry points of fabricfem.scenes; scenes.static, scenes.dynamic and scenes.run only run."""
 from __future__ import annotations
 
 import dataclasses
@@ -9,23 +12,36 @@ import math
 import os
 from pathlib import Path
 
+import numpy as np
+from mpi4py import MPI
+
 from fabricfem.body.arm import ArmDimensions
-from fabricfem.dynamics import stability
+from fabricfem.body.ellipsoid import Ellipsoid
+from fabricfem.contact.obstacles import Plane, RoundedBox, table_top
+from fabricfem.dynamics import CentralDifference, NewmarkIntegrator, critical_time_step, node_monitor, stability
+from fabricfem.dynamics.ts import GeneralizedAlphaIntegrator
 from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
 from fabricfem.meshes import plate, tube
 from fabricfem.scenes import schema, wear
 from fabricfem.scenes.contract import WearScene
-from fabricfem.scenes.schema import Scene, SceneError
+from fabricfem.scenes.schema import ALL_NODES, Scene, SceneError
 from fabricfem.scenes.sections import (
     DynamicsSection,
     FabricSection,
     MeshSection,
     ModelSection,
+    MonitorSection,
     OutputSection,
     SceneSection,
     section,
 )
+from fabricfem.shell import ShellModel
+from fabricfem.solvers.system import base_model
+from fabricfem.wear.compression import compression_run
 from fabricfem.wear.config import SECTIONS, FabricSpec, SleeveConfig, TubeSpec, check_fit
+from fabricfem.wear.garment import GarmentRun, build_garment_run
+from fabricfem.wear.run import ROUTES
+from fabricfem.wear.sleeve import tube_flexion_run
 
 
 def build_fabric(spec: dict) -> Fabric:
@@ -240,3 +256,273 @@ def output_dir(scene: Scene) -> Path:
 def scene_sha256(scene: Scene) -> str:
     """SHA-256 of the scene's data (canonical JSON): identifies the scene a summary belongs to."""
     return hashlib.sha256(json.dumps(scene.data, sort_keys=True, default=str).encode()).hexdigest()
+
+
+# steps between the explicit route's estimates of the current largest frequency (CentralDifference
+# step_check_every): 20 kept the corner-pinned cloth with bending (16 x 16) stable at dt_fraction 0.9, 50 did not
+# (docs/findings/2026-11-27-safe-step.md); off with force = true (a step above the limit asked for, e.g. to study
+# the blow-up check)
+STEP_CHECK_EVERY = 20
+
+
+def _components(values, n: int, where: str):
+    if values is None:
+        return None
+    if len(values) != n:
+        raise SceneError(f"{where}: expected {n} components, got {values!r}")
+    out = []
+    for v in values:
+        if v == "free":
+            out.append(None)
+        elif isinstance(v, (int, float)) and not isinstance(v, bool):
+            out.append(float(v))
+        else:
+            raise SceneError(f"{where}: components are numbers or \"free\", got {v!r}")
+    return out
+
+
+def _node_locator(model: ShellModel, point, where: str):
+    """Geometric locator of the mesh node at `point` (SceneError naming `where` if there is none)."""
+    try:
+        model.owned_node_dof(point, "u", 0)
+    except ValueError as exc:
+        raise SceneError(f"{where}: {exc}") from None
+    p = np.asarray(point, dtype=float)
+    return lambda x: np.linalg.norm(x.T - p, axis=1) < 1e-8 * max(1.0, float(np.abs(p).max()))
+
+
+def build_model(scene: Scene, comm=MPI.COMM_WORLD) -> ShellModel:
+    fabric = build_fabric(scene["fabric"])
+    model_spec = section(ModelSection, scene.get("model"))
+    kind = model_spec.kind
+    fmesh = build_mesh(scene["mesh"], comm)
+    model = ShellModel(fmesh, fabric, model=kind, rebase=model_spec.rebase, psri_degrees=model_spec.psri_degrees)
+    for i, support in enumerate(scene.get("support", [])):
+        if "point" in support:
+            where = _node_locator(model, support["point"], f"support[{i}].point")
+        elif support["edge"] == ALL_NODES:
+            where = lambda x: np.full(x.shape[1], True)   # noqa: E731 (every node)
+        elif support["edge"] not in fmesh.tags:
+            raise SceneError(f"support[{i}].edge: unknown edge {support['edge']!r}; available: {sorted(fmesh.tags)}")
+        else:
+            where = support["edge"]
+        try:
+            model.constrain(where, u=_components(support.get("u"), 3, f"support[{i}].u"),
+                            theta=_components(support.get("theta"), 2, f"support[{i}].theta"))
+        except ValueError as exc:
+            if isinstance(exc, SceneError):
+                raise
+            raise SceneError(f"support[{i}]: {exc}") from None
+    if "gravity" in scene.get("dynamics", {}):
+        model.add_gravity(scene["dynamics"]["gravity"])
+    for i, load in enumerate(scene.get("load", [])):
+        where = f"load[{i}]"
+        kind, value = load["type"], load.get("value")
+        edge = load.get("edge")
+        if kind in ("edge_traction", "edge_moment") and edge not in fmesh.tags:
+            raise SceneError(f"{where}.edge: unknown edge {edge!r}; available: {sorted(fmesh.tags)}")
+        if kind == "gravity":
+            model.add_gravity(value if value is not None else (0.0, 0.0, -9.81))
+        elif kind == "body_force":
+            model.add_body_force(value)
+        elif kind == "edge_traction":
+            model.add_edge_traction(edge, value)
+        elif kind == "pressure":
+            model.add_pressure(float(value))
+        elif kind == "edge_moment":
+            model.add_edge_moment(edge, value)
+        elif kind == "point":
+            if "point" not in load:
+                raise SceneError(f"{where}: a point load needs 'point' = [x, y, z]")
+            model.add_point_load(load["point"], value)
+    return model
+
+
+def build_obstacles(spec: list[dict]) -> list:
+    """Plane / RoundedBox obstacles of [[dynamics.obstacles]] (validated by fabricfem.scenes.schema), SI units."""
+    out = []
+    for i, o in enumerate(spec):
+        try:
+            if o["type"] == "plane":
+                out.append(Plane(o["point"], o["normal"]))
+            elif o["type"] == "box":
+                out.append(RoundedBox(o["lower"], o["upper"], float(o["radius"])))
+            else:
+                out.append(table_top(o["center"], float(o["half_x"]), float(o["half_y"]), float(o["height"]),
+                                     float(o["fillet_radius"])))
+        except ValueError as exc:
+            raise SceneError(f"dynamics.obstacles[{i}]: {exc}") from None
+    return out
+
+
+def _load_function(ramp_time: float):
+    """lambda(t) = min(t / ramp_time, 1) (1 at once when ramp_time = 0)."""
+    if ramp_time > 0.0:
+        return lambda t: min(t / ramp_time, 1.0)
+    return 1.0
+
+
+# [dynamics] integrator -> its class (build_integrator)
+INTEGRATORS = {"explicit": CentralDifference, "newmark": NewmarkIntegrator,
+               "generalized-alpha": GeneralizedAlphaIntegrator}
+
+
+def build_integrator(spec: dict, model):
+    """(integrator, n_steps, dt [s], dt_crit [s] or None) for a [dynamics] section; dt is end_time / n_steps.
+    `model`: the ShellModel or a CompositeSystem of it (fabricfem.solvers.system, e.g. with obstacle contact)."""
+    d = section(DynamicsSection, spec)
+    kind = d.integrator
+    end_time = float(d.end_time)
+    rayleigh = tuple(float(c) for c in d.rayleigh)
+    common = dict(load_factor=_load_function(float(d.ramp_time)), rayleigh=rayleigh, air_drag=float(d.air_drag))
+    dt_crit = critical_time_step(base_model(model), rayleigh) if kind == "explicit" else None
+    dt = float(d.dt_fraction) * dt_crit if d.dt == "auto" else float(d.dt)
+    n_steps = max(1, math.ceil(end_time / dt * (1.0 - 1e-12)))
+    dt = end_time / n_steps
+    if kind == "explicit":
+        force = bool(d.force)
+        if dt > dt_crit and not force:
+            raise SceneError(f"dynamics.dt: {dt:.6g} s exceeds the critical time step {dt_crit:.6g} s of this mesh "
+                             f"(ratio {dt / dt_crit:.3g}, [Man2006, eqs. 2.86-2.87]); use a smaller dt or force = true")
+        integrator = CentralDifference(model, dt, force=force, dt_crit=dt_crit,
+                                       step_check_every=None if force else STEP_CHECK_EVERY, **common)
+    elif kind == "newmark":
+        integrator = NewmarkIntegrator(model, dt, beta=float(d.beta), gamma=float(d.gamma), lumped=bool(d.lumped),
+                                       **common)
+    else:
+        integrator = GeneralizedAlphaIntegrator(model, dt, rho_inf=float(d.rho_inf), lumped=bool(d.lumped), **common)
+    return integrator, n_steps, dt, dt_crit
+
+
+class StrainMeter:
+    """Vertex Green strains (patch averages of fabricfem.dynamics.strain_limit) once per recorded step."""
+
+    def __init__(self, projection, integrator):
+        self.projection, self.integrator = projection, integrator
+        self._step, self._summary = None, None
+
+    def summary(self) -> dict[str, float]:
+        if self._step != self.integrator.step_count:
+            self._summary = self.projection.strain_summary()
+            self._step = self.integrator.step_count
+        return self._summary
+
+    def max_strain(self) -> float:
+        s = self.summary()
+        return max(s["max_warp"], s["max_weft"])
+
+
+def _max_displacement(model: ShellModel) -> float:
+    """max over nodes of |u| [m], all ranks."""
+    u = model.displacement().x.array.reshape(-1, 3)
+    local = float(np.linalg.norm(u, axis=1).max(initial=0.0))
+    return model.comm.allreduce(local, op=MPI.MAX)
+
+
+def monitor_unit(table: dict) -> str:
+    """The unit of a [[dynamics.monitors]] table's values: a strain's "-", a displacement's (u, max_displacement)
+    "m", a rotation's (theta) "rad"."""
+    m = section(MonitorSection, table)
+    if m.quantity is not None:
+        return "m" if m.quantity == "max_displacement" else "-"
+    return "m" if m.field == "u" else "rad"
+
+
+def build_monitors(spec: list[dict], model: ShellModel, meter: StrainMeter) -> dict:
+    """{name: callable} of [[dynamics.monitors]] (point values on all ranks, global quantities)."""
+    quantities = {"max_warp_strain": lambda: meter.summary()["max_warp"],
+                  "max_weft_strain": lambda: meter.summary()["max_weft"],
+                  "mean_warp_strain": lambda: meter.summary()["mean_warp"],
+                  "mean_weft_strain": lambda: meter.summary()["mean_weft"],
+                  "max_displacement": lambda: _max_displacement(model)}
+    monitors = {}
+    for i, table in enumerate(spec):
+        m = section(MonitorSection, table)
+        if m.quantity is not None:
+            monitors[m.name] = quantities[m.quantity]
+            continue
+        try:
+            monitors[m.name] = node_monitor(model, m.point, m.field,
+                                            m.component if m.component is not None else 2 if m.field == "u" else 0)
+        except ValueError as exc:
+            raise SceneError(f"dynamics.monitors[{i}].point: {exc}") from None
+    return monitors
+
+
+def build_wear_run(scene: Scene, comm=MPI.COMM_WORLD):
+    """The WearRun of a wear scene, its headline, the render coordinates and [output]: an arm in a tube flexing at
+    the elbow by its [route] solver (fabricfem.wear.sleeve.tube_flexion_run on the explicit engine, the Newton
+    routes of fabricfem.wear.run.ROUTES), any other garment on the explicit engine (`build_garment_run`)."""
+    parsed = scene.parsed
+    if parsed.is_tube_flexion:
+        run = tube_scene_run(scene, comm)
+    elif parsed.body.type == "limb" and parsed.garment.builder == "tube":
+        run = limb_scene_run(scene, comm)
+    else:
+        run = garment_scene_run(scene, comm)
+    render_at = parsed.output.render_at
+    if render_at is None and isinstance(run, GarmentRun):
+        start, end = run.motion_start, run.duration
+        render_at = [run.axis_at(start + f * (end - start)) if run.axis is not None else f * end
+                     for f in (1 / 3, 2 / 3, 1.0)]
+    elif render_at is None:
+        render_at = [f * parsed.flexion.final_angle for f in (1 / 3, 2 / 3, 1.0)]
+    headline = (f"{run.name}: {run.model.ndofs} dofs, body {list(run.body.segments)}, {comm.size} rank(s); "
+                f"mu = {parsed.contact.friction}; {run.describe()}")
+    return run, headline, render_at, parsed.output
+
+
+def tube_scene_run(scene: Scene, comm):
+    """The arm-in-tube sleeve of a wear scene by its [route] solver: the explicit engine's run of the scene's
+    sections (any fabric) or a Newton route of its SleeveConfig (E1 = E2)."""
+    parsed = scene.parsed
+    if parsed.route.solver != "explicit":
+        return ROUTES[parsed.route.solver](sleeve_config(parsed), comm)
+    try:
+        tube = tube_spec(parsed)
+        check_fit(tube.radius, parsed.arm)
+    except ValueError as exc:
+        raise SceneError(f"garment: {exc}") from None
+    return tube_flexion_run(scene_name(scene), wear.wear_fabric(parsed, build_fabric), tube, parsed.arm,
+                            parsed.flexion, parsed.contact, parsed.route, comm)
+
+
+def scene_limb(parsed: WearScene) -> Ellipsoid:
+    """The limb of a limb body: one ellipsoid along x with [body] center and radii [m]."""
+    return Ellipsoid(np.array(parsed.body.center, dtype=float), np.eye(3), np.array(parsed.body.radii, dtype=float))
+
+
+def limb_scene_run(scene: Scene, comm) -> GarmentRun:
+    """A tube grown onto a limb (the compression sleeve, fabricfem.wear.compression.compression_run): the limb
+    grows from [donning] start over [donning] time [s], then [motion] duration [s] of rest."""
+    parsed = scene.parsed
+    fabric = wear.wear_fabric(parsed, build_fabric)
+    plan = wear.plan(parsed, fabric, scene.path)
+    if parsed.donning.method != "grow" or parsed.donning.start is None:
+        raise SceneError("donning.method: a tube on a limb is put on by growing the limb: write [donning] method = "
+                         "\"grow\" with start (its starting size) and time [s]")
+    fmesh = wear.garment_mesh(parsed, scene.path, comm)[0]
+    try:
+        return compression_run(fmesh, fabric, scene_limb(parsed), parsed.donning.start, parsed.donning.time,
+                               plan.timeline.motion_length(plan.body.kinematics), plan.timeline.record_time, comm,
+                               scene_name(scene), plan.settings)
+    except ValueError as exc:
+        raise SceneError(f"body: {exc}") from None
+
+
+def garment_scene_run(scene: Scene, comm) -> GarmentRun:
+    """The explicit engine's GarmentRun of a wear scene (fabricfem.scenes.wear.plan and garment_mesh)."""
+    parsed = scene.parsed
+    fabric = wear.wear_fabric(parsed, build_fabric)
+    plan = wear.plan(parsed, fabric, scene.path)
+    fmesh, seams, holds, pattern_garment = wear.garment_mesh(parsed, scene.path, comm)
+    if plan.handles and pattern_garment is None:
+        raise SceneError("donning: pull_edges and belt_edges name pattern edges; this garment is a tube")
+    handles = wear.edge_handles(plan.handles, pattern_garment) if plan.handles else []
+    garment = parsed.garment
+    return build_garment_run(scene_name(scene), fmesh, fabric, plan.body, seams=seams, holds=holds,
+                             torques=plan.torques, timeline=plan.timeline, settings=plan.settings,
+                             contact_method=plan.contact.method or "lagrange", friction=plan.contact.friction,
+                             penalty=plan.contact.penalty,
+                             psri_degrees=tuple(garment.quadrature) if garment.quadrature else (4, 2),
+                             axis=plan.axis, handles=handles)

@@ -13,51 +13,32 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 from mpi4py import MPI
 
 from fabricfem import io
-from fabricfem.contact.obstacles import Plane, RoundedBox, table_top
 from fabricfem.contact.problem import ContactProblem
-from fabricfem.dynamics import CentralDifference, NewmarkIntegrator, critical_time_step, node_monitor
 from fabricfem.dynamics.strain_limit import FastProjection, attach
-from fabricfem.dynamics.ts import GeneralizedAlphaIntegrator
-from fabricfem.scenes.build import output_dir, scene_name, scene_sha256
+from fabricfem.scenes.build import (
+    INTEGRATORS,
+    StrainMeter,
+    build_integrator,
+    build_model,
+    build_monitors,
+    build_obstacles,
+    monitor_unit,
+    output_dir,
+    scene_name,
+    scene_sha256,
+)
 from fabricfem.scenes.schema import Scene, SceneError
 from fabricfem.scenes.sections import (
     DynamicsSection,
-    MonitorSection,
     section,
 )
-from fabricfem.scenes.static import build_model
-from fabricfem.shell import ShellModel
-from fabricfem.solvers.system import base_model
 from fabricfem.wear.run import interrupt_flag
 from fabricfem.wear.verdict import DEFAULT_FAILURE_STRAIN, Check, verdict
 
 CHECKPOINT_EVERY = 25       # records between the checkpoints of a dynamic scene or a wear run (explicit engine)
-# steps between the explicit route's estimates of the current largest frequency (CentralDifference
-# step_check_every): 20 kept the corner-pinned cloth with bending (16 x 16) stable at dt_fraction 0.9, 50 did not
-# (docs/findings/2026-11-27-safe-step.md); off with force = true (a step above the limit asked for, e.g. to study
-# the blow-up check)
-STEP_CHECK_EVERY = 20
-
-
-def build_obstacles(spec: list[dict]) -> list:
-    """Plane / RoundedBox obstacles of [[dynamics.obstacles]] (validated by fabricfem.scenes.schema), SI units."""
-    out = []
-    for i, o in enumerate(spec):
-        try:
-            if o["type"] == "plane":
-                out.append(Plane(o["point"], o["normal"]))
-            elif o["type"] == "box":
-                out.append(RoundedBox(o["lower"], o["upper"], float(o["radius"])))
-            else:
-                out.append(table_top(o["center"], float(o["half_x"]), float(o["half_y"]), float(o["height"]),
-                                     float(o["fillet_radius"])))
-        except ValueError as exc:
-            raise SceneError(f"dynamics.obstacles[{i}]: {exc}") from None
-    return out
 
 
 @dataclass
@@ -97,100 +78,6 @@ def dynamic_checks(summary: dict, failure_strain: float) -> list[Check]:
             Check("fabric strain", "largest recorded Green strain (fabric failure_strain)",
                   summary["max_strain_recorded"], failure_strain,
                   "", bool(summary["max_strain_recorded"] <= failure_strain))]
-
-
-def _load_function(ramp_time: float):
-    """lambda(t) = min(t / ramp_time, 1) (1 at once when ramp_time = 0)."""
-    if ramp_time > 0.0:
-        return lambda t: min(t / ramp_time, 1.0)
-    return 1.0
-
-
-# [dynamics] integrator -> its class (build_integrator)
-INTEGRATORS = {"explicit": CentralDifference, "newmark": NewmarkIntegrator,
-               "generalized-alpha": GeneralizedAlphaIntegrator}
-
-
-def build_integrator(spec: dict, model):
-    """(integrator, n_steps, dt [s], dt_crit [s] or None) for a [dynamics] section; dt is end_time / n_steps.
-    `model`: the ShellModel or a CompositeSystem of it (fabricfem.solvers.system, e.g. with obstacle contact)."""
-    d = section(DynamicsSection, spec)
-    kind = d.integrator
-    end_time = float(d.end_time)
-    rayleigh = tuple(float(c) for c in d.rayleigh)
-    common = dict(load_factor=_load_function(float(d.ramp_time)), rayleigh=rayleigh, air_drag=float(d.air_drag))
-    dt_crit = critical_time_step(base_model(model), rayleigh) if kind == "explicit" else None
-    dt = float(d.dt_fraction) * dt_crit if d.dt == "auto" else float(d.dt)
-    n_steps = max(1, math.ceil(end_time / dt * (1.0 - 1e-12)))
-    dt = end_time / n_steps
-    if kind == "explicit":
-        force = bool(d.force)
-        if dt > dt_crit and not force:
-            raise SceneError(f"dynamics.dt: {dt:.6g} s exceeds the critical time step {dt_crit:.6g} s of this mesh "
-                             f"(ratio {dt / dt_crit:.3g}, [Man2006, eqs. 2.86-2.87]); use a smaller dt or force = true")
-        integrator = CentralDifference(model, dt, force=force, dt_crit=dt_crit,
-                                       step_check_every=None if force else STEP_CHECK_EVERY, **common)
-    elif kind == "newmark":
-        integrator = NewmarkIntegrator(model, dt, beta=float(d.beta), gamma=float(d.gamma), lumped=bool(d.lumped),
-                                       **common)
-    else:
-        integrator = GeneralizedAlphaIntegrator(model, dt, rho_inf=float(d.rho_inf), lumped=bool(d.lumped), **common)
-    return integrator, n_steps, dt, dt_crit
-
-
-class _StrainMeter:
-    """Vertex Green strains (patch averages of fabricfem.dynamics.strain_limit) once per recorded step."""
-
-    def __init__(self, projection, integrator):
-        self.projection, self.integrator = projection, integrator
-        self._step, self._summary = None, None
-
-    def summary(self) -> dict[str, float]:
-        if self._step != self.integrator.step_count:
-            self._summary = self.projection.strain_summary()
-            self._step = self.integrator.step_count
-        return self._summary
-
-    def max_strain(self) -> float:
-        s = self.summary()
-        return max(s["max_warp"], s["max_weft"])
-
-
-def _max_displacement(model: ShellModel) -> float:
-    """max over nodes of |u| [m], all ranks."""
-    u = model.displacement().x.array.reshape(-1, 3)
-    local = float(np.linalg.norm(u, axis=1).max(initial=0.0))
-    return model.comm.allreduce(local, op=MPI.MAX)
-
-
-def monitor_unit(table: dict) -> str:
-    """The unit of a [[dynamics.monitors]] table's values: a strain's "-", a displacement's (u, max_displacement)
-    "m", a rotation's (theta) "rad"."""
-    m = section(MonitorSection, table)
-    if m.quantity is not None:
-        return "m" if m.quantity == "max_displacement" else "-"
-    return "m" if m.field == "u" else "rad"
-
-
-def build_monitors(spec: list[dict], model: ShellModel, meter: _StrainMeter) -> dict:
-    """{name: callable} of [[dynamics.monitors]] (point values on all ranks, global quantities)."""
-    quantities = {"max_warp_strain": lambda: meter.summary()["max_warp"],
-                  "max_weft_strain": lambda: meter.summary()["max_weft"],
-                  "mean_warp_strain": lambda: meter.summary()["mean_warp"],
-                  "mean_weft_strain": lambda: meter.summary()["mean_weft"],
-                  "max_displacement": lambda: _max_displacement(model)}
-    monitors = {}
-    for i, table in enumerate(spec):
-        m = section(MonitorSection, table)
-        if m.quantity is not None:
-            monitors[m.name] = quantities[m.quantity]
-            continue
-        try:
-            monitors[m.name] = node_monitor(model, m.point, m.field,
-                                            m.component if m.component is not None else 2 if m.field == "u" else 0)
-        except ValueError as exc:
-            raise SceneError(f"dynamics.monitors[{i}].point: {exc}") from None
-    return monitors
 
 
 def _progress(comm, n_steps: int, say):
@@ -235,7 +122,7 @@ def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD, resume: bool = False, s
     # fabricfem.verify.strain_limit)
     projection = FastProjection(model, float(limit) if limit else 1.0, tol=float(d.strain_limit_tol))
     log = attach(projection, integrator) if limit else []
-    meter = _StrainMeter(projection, integrator)
+    meter = StrainMeter(projection, integrator)
     monitors = build_monitors(d.monitors, model, meter)
     monitors["max_strain"] = meter.max_strain
     output_every = int(d.output_every if d.output_every is not None else max(1, n_steps // 100))

@@ -9,25 +9,30 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 from mpi4py import MPI
 
 from fabricfem import io
 from fabricfem.body.ellipsoid import Ellipsoid
-from fabricfem.scenes import wear
 from fabricfem.scenes.batch import completed, read_summary
-from fabricfem.scenes.build import build_fabric, output_dir, scene_name, scene_sha256, sleeve_config, tube_spec  # noqa: F401 (public here)
-from fabricfem.scenes.contract import WearScene
+from fabricfem.scenes.build import (  # noqa: F401 (public here)
+    build_fabric,
+    build_model,
+    build_wear_run,
+    output_dir,
+    scene_limb,
+    scene_name,
+    scene_sha256,
+    sleeve_config,
+    tube_spec,
+)
 from fabricfem.scenes.dynamic import CHECKPOINT_EVERY, DynamicCheckpoint, DynamicRun, run_dynamic_scene  # noqa: F401
 from fabricfem.scenes.schema import Scene, SceneError
-from fabricfem.scenes.static import build_model, run_static_scene  # noqa: F401 (public here)
+from fabricfem.scenes.static import run_static_scene
 from fabricfem.wear.checkpoint import Checkpoint
-from fabricfem.wear.compression import compression_report, compression_run
-from fabricfem.wear.config import check_fit
+from fabricfem.wear.compression import compression_report
 from fabricfem.wear.contract import WearHistory
-from fabricfem.wear.garment import GarmentRun, build_garment_run
-from fabricfem.wear.run import ROUTES, run_wear
-from fabricfem.wear.sleeve import tube_flexion_run
+from fabricfem.wear.garment import GarmentRun
+from fabricfem.wear.run import run_wear
 from fabricfem.wear.verdict import EXIT_WARNINGS
 
 
@@ -111,67 +116,6 @@ def run_wear_scene(scene: Scene, out: Path, comm=MPI.COMM_WORLD, resume: bool = 
                     parsed.output.windows)
 
 
-def build_wear_run(scene: Scene, comm=MPI.COMM_WORLD):
-    """The WearRun of a wear scene, its headline, the render coordinates and [output]: an arm in a tube flexing at
-    the elbow by its [route] solver (fabricfem.wear.sleeve.tube_flexion_run on the explicit engine, the Newton
-    routes of fabricfem.wear.run.ROUTES), any other garment on the explicit engine (`build_garment_run`)."""
-    parsed = scene.parsed
-    if parsed.is_tube_flexion:
-        run = tube_scene_run(scene, comm)
-    elif parsed.body.type == "limb" and parsed.garment.builder == "tube":
-        run = limb_scene_run(scene, comm)
-    else:
-        run = garment_scene_run(scene, comm)
-    render_at = parsed.output.render_at
-    if render_at is None and isinstance(run, GarmentRun):
-        start, end = run.motion_start, run.duration
-        render_at = [run.axis_at(start + f * (end - start)) if run.axis is not None else f * end
-                     for f in (1 / 3, 2 / 3, 1.0)]
-    elif render_at is None:
-        render_at = [f * parsed.flexion.final_angle for f in (1 / 3, 2 / 3, 1.0)]
-    headline = (f"{run.name}: {run.model.ndofs} dofs, body {list(run.body.segments)}, {comm.size} rank(s); "
-                f"mu = {parsed.contact.friction}; {run.describe()}")
-    return run, headline, render_at, parsed.output
-
-
-def tube_scene_run(scene: Scene, comm):
-    """The arm-in-tube sleeve of a wear scene by its [route] solver: the explicit engine's run of the scene's
-    sections (any fabric) or a Newton route of its SleeveConfig (E1 = E2)."""
-    parsed = scene.parsed
-    if parsed.route.solver != "explicit":
-        return ROUTES[parsed.route.solver](sleeve_config(parsed), comm)
-    try:
-        tube = tube_spec(parsed)
-        check_fit(tube.radius, parsed.arm)
-    except ValueError as exc:
-        raise SceneError(f"garment: {exc}") from None
-    return tube_flexion_run(scene_name(scene), wear.wear_fabric(parsed, build_fabric), tube, parsed.arm,
-                            parsed.flexion, parsed.contact, parsed.route, comm)
-
-
-def scene_limb(parsed: WearScene) -> Ellipsoid:
-    """The limb of a limb body: one ellipsoid along x with [body] center and radii [m]."""
-    return Ellipsoid(np.array(parsed.body.center, dtype=float), np.eye(3), np.array(parsed.body.radii, dtype=float))
-
-
-def limb_scene_run(scene: Scene, comm) -> GarmentRun:
-    """A tube grown onto a limb (the compression sleeve, fabricfem.wear.compression.compression_run): the limb
-    grows from [donning] start over [donning] time [s], then [motion] duration [s] of rest."""
-    parsed = scene.parsed
-    fabric = wear.wear_fabric(parsed, build_fabric)
-    plan = wear.plan(parsed, fabric, scene.path)
-    if parsed.donning.method != "grow" or parsed.donning.start is None:
-        raise SceneError("donning.method: a tube on a limb is put on by growing the limb: write [donning] method = "
-                         "\"grow\" with start (its starting size) and time [s]")
-    fmesh = wear.garment_mesh(parsed, scene.path, comm)[0]
-    try:
-        return compression_run(fmesh, fabric, scene_limb(parsed), parsed.donning.start, parsed.donning.time,
-                               plan.timeline.motion_length(plan.body.kinematics), plan.timeline.record_time, comm,
-                               scene_name(scene), plan.settings)
-    except ValueError as exc:
-        raise SceneError(f"body: {exc}") from None
-
-
 def _compression_report(run: GarmentRun, limb: Ellipsoid, out: Path, name: str, render: bool) -> dict:
     """The compression report of the final state (fabricfem.wear.compression.compression_report) and its line."""
     report = compression_report(run, limb, out, name, render)
@@ -182,24 +126,6 @@ def _compression_report(run: GarmentRun, limb: Ellipsoid, out: Path, name: str, 
               f"T = {report['hoop_tension_N_per_m']:.1f} N/m, largest deviation {100 * report['laplace_deviation']:.2f}% "
               f"of its peak", flush=True)
     return {"compression": report} if report is not None else {}
-
-
-def garment_scene_run(scene: Scene, comm) -> GarmentRun:
-    """The explicit engine's GarmentRun of a wear scene (fabricfem.scenes.wear.plan and garment_mesh)."""
-    parsed = scene.parsed
-    fabric = wear.wear_fabric(parsed, build_fabric)
-    plan = wear.plan(parsed, fabric, scene.path)
-    fmesh, seams, holds, pattern_garment = wear.garment_mesh(parsed, scene.path, comm)
-    if plan.handles and pattern_garment is None:
-        raise SceneError("donning: pull_edges and belt_edges name pattern edges; this garment is a tube")
-    handles = wear.edge_handles(plan.handles, pattern_garment) if plan.handles else []
-    garment = parsed.garment
-    return build_garment_run(scene_name(scene), fmesh, fabric, plan.body, seams=seams, holds=holds,
-                             torques=plan.torques, timeline=plan.timeline, settings=plan.settings,
-                             contact_method=plan.contact.method or "lagrange", friction=plan.contact.friction,
-                             penalty=plan.contact.penalty,
-                             psri_degrees=tuple(garment.quadrature) if garment.quadrature else (4, 2),
-                             axis=plan.axis, handles=handles)
 
 
 def _say_static_resume(scene: Scene, comm) -> None:

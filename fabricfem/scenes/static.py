@@ -13,91 +13,15 @@ import numpy as np
 from mpi4py import MPI
 
 from fabricfem import io
-from fabricfem.scenes.build import build_fabric, build_mesh, output_dir, scene_name
-from fabricfem.scenes.schema import ALL_NODES, Scene, SceneError
+from fabricfem.scenes.build import build_model, output_dir, scene_name
+from fabricfem.scenes.schema import Scene
 from fabricfem.scenes.sections import (
-    ModelSection,
     OutputSection,
     SolverSection,
     section,
 )
-from fabricfem.shell import ShellModel
 from fabricfem.solvers.loadstep import LoadStep, solve_load_path
 from fabricfem.solvers.newton import NewtonSolver
-
-
-def _components(values, n: int, where: str):
-    if values is None:
-        return None
-    if len(values) != n:
-        raise SceneError(f"{where}: expected {n} components, got {values!r}")
-    out = []
-    for v in values:
-        if v == "free":
-            out.append(None)
-        elif isinstance(v, (int, float)) and not isinstance(v, bool):
-            out.append(float(v))
-        else:
-            raise SceneError(f"{where}: components are numbers or \"free\", got {v!r}")
-    return out
-
-
-def _node_locator(model: ShellModel, point, where: str):
-    """Geometric locator of the mesh node at `point` (SceneError naming `where` if there is none)."""
-    try:
-        model.owned_node_dof(point, "u", 0)
-    except ValueError as exc:
-        raise SceneError(f"{where}: {exc}") from None
-    p = np.asarray(point, dtype=float)
-    return lambda x: np.linalg.norm(x.T - p, axis=1) < 1e-8 * max(1.0, float(np.abs(p).max()))
-
-
-def build_model(scene: Scene, comm=MPI.COMM_WORLD) -> ShellModel:
-    fabric = build_fabric(scene["fabric"])
-    model_spec = section(ModelSection, scene.get("model"))
-    kind = model_spec.kind
-    fmesh = build_mesh(scene["mesh"], comm)
-    model = ShellModel(fmesh, fabric, model=kind, rebase=model_spec.rebase, psri_degrees=model_spec.psri_degrees)
-    for i, support in enumerate(scene.get("support", [])):
-        if "point" in support:
-            where = _node_locator(model, support["point"], f"support[{i}].point")
-        elif support["edge"] == ALL_NODES:
-            where = lambda x: np.full(x.shape[1], True)   # noqa: E731 (every node)
-        elif support["edge"] not in fmesh.tags:
-            raise SceneError(f"support[{i}].edge: unknown edge {support['edge']!r}; available: {sorted(fmesh.tags)}")
-        else:
-            where = support["edge"]
-        try:
-            model.constrain(where, u=_components(support.get("u"), 3, f"support[{i}].u"),
-                            theta=_components(support.get("theta"), 2, f"support[{i}].theta"))
-        except ValueError as exc:
-            if isinstance(exc, SceneError):
-                raise
-            raise SceneError(f"support[{i}]: {exc}") from None
-    if "gravity" in scene.get("dynamics", {}):
-        model.add_gravity(scene["dynamics"]["gravity"])
-    for i, load in enumerate(scene.get("load", [])):
-        where = f"load[{i}]"
-        kind, value = load["type"], load.get("value")
-        edge = load.get("edge")
-        if kind in ("edge_traction", "edge_moment") and edge not in fmesh.tags:
-            raise SceneError(f"{where}.edge: unknown edge {edge!r}; available: {sorted(fmesh.tags)}")
-        if kind == "gravity":
-            model.add_gravity(value if value is not None else (0.0, 0.0, -9.81))
-        elif kind == "body_force":
-            model.add_body_force(value)
-        elif kind == "edge_traction":
-            model.add_edge_traction(edge, value)
-        elif kind == "pressure":
-            model.add_pressure(float(value))
-        elif kind == "edge_moment":
-            model.add_edge_moment(edge, value)
-        elif kind == "point":
-            if "point" not in load:
-                raise SceneError(f"{where}: a point load needs 'point' = [x, y, z]")
-            model.add_point_load(load["point"], value)
-    return model
-
 
 
 def run_static_scene(scene: Scene, comm=MPI.COMM_WORLD) -> list[LoadStep]:

@@ -34,8 +34,8 @@ from fabricfem.body.blend import BlendedStart
 from fabricfem.scenes import build as scene_build
 from fabricfem.scenes import wear
 from fabricfem.scenes.batch import Job, check, completed, run_batch
+from fabricfem.scenes.build import build_wear_run, scene_sha256
 from fabricfem.scenes.contract import parse
-from fabricfem.scenes.run import build_wear_run, scene_sha256
 from fabricfem.scenes.schema import Scene
 from fabricfem.wear.outputs import write_sto
 from fabricfem.wear.run import run_wear
