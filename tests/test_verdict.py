@@ -113,3 +113,20 @@ def test_a_garment_sewn_around_the_body_is_not_judged_by_its_start_distance():
     assert "start distance" not in {c.name for c in wear_checks(sewn)}
     worn = WearHistory("sleeve", steps=[_step(phase="settle"), _step()], initial_gap=0.11)
     assert [c.name for c in wear_checks(worn) if not c.passed] == ["start distance"]
+
+
+@pytest.mark.parametrize("section, values, words", [
+    ("checks", {"max_skin_pressure": -1.0}, "checks: max_skin_pressure must be a positive finite bound"),
+    ("checks", {"max_penetration": float("inf")}, "checks: max_penetration must be a positive finite bound"),
+    ("fabric", {"failure_strain": 0.0}, "fabric.failure_strain: must be > 0"),
+    ("output", {"windows": [[57.0, 20.0]]}, r"output.windows\[0\]: a window \[a, b\] needs a < b"),
+    ("output", {"windows": [[20.0]]}, r"output.windows\[0\]: expected a list of 2 numbers"),
+])
+def test_bad_verdict_and_window_keys_are_refused_naming_them(tmp_path, section, values, words):
+    import re
+
+    from fabricfem import scenes as scene_module
+    data = tomllib.loads((ROOT / "scenes" / "sleeve.toml").read_text())
+    data.setdefault(section, {}).update(values)
+    with pytest.raises(scene_module.SceneError, match=words if "\\" in words else re.escape(words)):
+        scene_module.validate(data)

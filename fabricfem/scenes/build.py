@@ -117,6 +117,17 @@ def tube_spec(wear: WearScene) -> TubeSpec:
                     hold_rotations=g.hold_rotations)
 
 
+def fitting_tube(wear: WearScene) -> TubeSpec:
+    """The TubeSpec of an arm-in-tube scene whose arm starts inside the tube (SceneError naming garment.radius or
+    the arm's girth otherwise)."""
+    try:
+        tube = tube_spec(wear)
+        check_fit(tube.radius, wear.arm)
+    except ValueError as exc:
+        raise SceneError(f"garment.{exc}") from None
+    return tube
+
+
 def sleeve_config(wear: WearScene) -> SleeveConfig:
     """The SleeveConfig of an arm-in-tube wear scene (WearScene.is_tube_flexion) for the sleeve's Newton routes
     (quasistatic, implicit: E1 = E2); its checks (fabricfem.wear.config) become SceneErrors naming the section and
@@ -229,10 +240,7 @@ def check_wear_objects(wear_scene: WearScene, path: Path | None) -> None:
         sleeve_config(wear_scene)                     # the Newton routes' configuration and its checks
         return
     if wear_scene.is_tube_flexion:
-        try:
-            check_fit(tube_spec(wear_scene).radius, wear_scene.arm)   # the arm starts inside the tube
-        except ValueError as exc:
-            raise SceneError(f"garment.{exc}") from None
+        fitting_tube(wear_scene)
     fabric = wear.wear_fabric(wear_scene, build_fabric)
     if not fabric.density > 0.0:
         raise SceneError(f"fabric.density: the explicit engine needs a positive density [kg/m^3], got {fabric.density}")
@@ -248,9 +256,6 @@ def scene_name(scene: Scene) -> str:
 def output_dir(scene: Scene) -> Path:
     """[output] dir, else results/<scene name>."""
     return Path(section(OutputSection, scene.get("output")).dir or f"results/{scene_name(scene)}")
-
-
-# ---------------------------------------------------------------------------------------- dynamic scenes
 
 
 def scene_sha256(scene: Scene) -> str:
@@ -456,7 +461,7 @@ def build_wear_run(scene: Scene, comm=MPI.COMM_WORLD):
     parsed = scene.parsed
     if parsed.is_tube_flexion:
         run = tube_scene_run(scene, comm)
-    elif parsed.body.type == "limb" and parsed.garment.builder == "tube":
+    elif parsed.is_tube_on_limb:
         run = limb_scene_run(scene, comm)
     else:
         run = garment_scene_run(scene, comm)
@@ -478,12 +483,7 @@ def tube_scene_run(scene: Scene, comm):
     parsed = scene.parsed
     if parsed.route.solver != "explicit":
         return ROUTES[parsed.route.solver](sleeve_config(parsed), comm)
-    try:
-        tube = tube_spec(parsed)
-        check_fit(tube.radius, parsed.arm)
-    except ValueError as exc:
-        raise SceneError(f"garment: {exc}") from None
-    return tube_flexion_run(scene_name(scene), wear.wear_fabric(parsed, build_fabric), tube, parsed.arm,
+    return tube_flexion_run(scene_name(scene), wear.wear_fabric(parsed, build_fabric), fitting_tube(parsed), parsed.arm,
                             parsed.flexion, parsed.contact, parsed.route, comm)
 
 

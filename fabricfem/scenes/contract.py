@@ -134,6 +134,11 @@ class WearScene:
         """An arm in a tube sleeve flexing at the elbow (the sleeve of [Man2006, sec. 5.3])."""
         return self.garment.builder == "tube" and self.arm is not None and self.flexion is not None
 
+    @property
+    def is_tube_on_limb(self) -> bool:
+        """A tube grown onto a limb (the compression sleeve, fabricfem.wear.compression)."""
+        return self.garment.builder == "tube" and self.body.type == "limb"
+
 
 def _frozen(table: Mapping | None) -> Mapping:
     return MappingProxyType(dict(table or {}))

@@ -1,7 +1,8 @@
 """`fabricfem run SCENE`: a scene run by its kind (RUNNERS: static, dynamic, wear) into its output folder.
 
-Wear scenes (a garment on a moving wearer) are built here into a WearRun (fabricfem.wear.contract) and run by
-fabricfem.wear.run.run_wear; static and dynamic scenes by fabricfem.scenes.static and fabricfem.scenes.dynamic.
+Wear scenes (a garment on a moving wearer) are built by fabricfem.scenes.build into a WearRun
+(fabricfem.wear.contract) and run here by fabricfem.wear.run.run_wear; static and dynamic scenes by
+fabricfem.scenes.static and fabricfem.scenes.dynamic.
 Every run ends with its status in summary.json ("completed" or "stopped early: <why>").
 """
 from __future__ import annotations
@@ -64,12 +65,13 @@ def run_scene(scene: Scene, comm=MPI.COMM_WORLD, out: Path | None = None, resume
     if out is not None:
         scene = with_output_dir(scene, out)
     out = output_dir(scene)
-    if resume and (done := _completed_status(out, scene_sha256(scene), comm)):
+    sha_with_output = scene_sha256(scene)
+    if resume and (done := _completed_status(out, sha_with_output, comm)):
         if comm.rank == 0:
             print(f"{scene_name(scene)}: the run in {out} is complete ({done}); nothing to resume", flush=True)
         return SceneOutcome(None, done, out)
     sha = scene_sha256(Scene({k: v for k, v in scene.data.items() if k != "output"}, None, scene.kind))
-    folder = io.OutputFolder(out, scene_sha256(scene), comm, keep=resume)
+    folder = io.OutputFolder(out, sha_with_output, comm, keep=resume)
     try:
         result = RUNNERS[scene.kind](scene, out, comm, resume, sha)
     except Exception as exc:
@@ -103,7 +105,7 @@ def run_wear_scene(scene: Scene, out: Path, comm=MPI.COMM_WORLD, resume: bool = 
     the summary (fabricfem.wear.run.run_wear); the explicit engine checkpoints and resumes."""
     run, headline, render_at, _ = build_wear_run(scene, comm)
     parsed, report = scene.parsed, None
-    if parsed.body.type == "limb" and parsed.garment.builder == "tube":
+    if parsed.is_tube_on_limb:
         limb = scene_limb(parsed)
         report = lambda run, history: _compression_report(run, limb, out, scene_name(scene), parsed.output.render)  # noqa: E731
     checkpoint = None
@@ -123,19 +125,21 @@ def _compression_report(run: GarmentRun, limb: Ellipsoid, out: Path, name: str, 
         print(f"{name}: pressure on the skin: peak {report['peak_pressure_kPa']:.3f} kPa = "
               f"{report['peak_pressure_mmHg']:.1f} mmHg, mean {report['mean_pressure_kPa']:.3f} kPa = "
               f"{report['mean_pressure_mmHg']:.1f} mmHg; ring nearest the limb's centre: p = T kappa, hoop tension "
-              f"T = {report['hoop_tension_N_per_m']:.1f} N/m, largest deviation {100 * report['laplace_deviation']:.2f}% "
-              f"of its peak", flush=True)
+              f"T = {report['hoop_tension_N_per_m']:.1f} N/m, largest deviation "
+              f"{100 * report['laplace_deviation']:.2f}% of its peak", flush=True)
     return {"compression": report} if report is not None else {}
 
 
-def _say_static_resume(scene: Scene, comm) -> None:
-    if comm.rank == 0:
+def _run_static(scene: Scene, out: Path, comm, resume: bool, sha: str):
+    """A static scene (no checkpoint: with `resume` it says so and solves from the start)."""
+    if resume and comm.rank == 0:
         print(f"{scene_name(scene)}: a static scene has no checkpoint; --resume solves it from the start", flush=True)
+    return run_static_scene(scene, comm)
+
+
+def _run_dynamic(scene: Scene, out: Path, comm, resume: bool, sha: str):
+    return run_dynamic_scene(scene, comm, resume, sha)
 
 
 # scene kind -> runner(scene, out, comm, resume, sha)
-RUNNERS = {
-    "static": lambda scene, out, comm, resume, sha: (_say_static_resume(scene, comm) if resume else None,
-                                                     run_static_scene(scene, comm))[1],
-    "dynamic": lambda scene, out, comm, resume, sha: run_dynamic_scene(scene, comm, resume, sha),
-    "wear": run_wear_scene}
+RUNNERS = {"static": _run_static, "dynamic": _run_dynamic, "wear": run_wear_scene}

@@ -267,6 +267,7 @@ def validate(data: dict, source: str = "scene") -> Scene:
     if kind != "wear":
         _check_kind_sections(data, kind, source)
     check_sections(data, kind, source)
+    _check_verdict_keys(data)
     if kind == "wear":
         check_wear(data)
         check_accuracy(data, "wear")
@@ -409,6 +410,17 @@ def _numbers(where: str, values, n: int | None = None, allow_inf: bool = False) 
                 (not allow_inf and not math.isfinite(v)):
             raise SceneError(f"{where}: expected {'' if allow_inf else 'finite '}numbers, got {values!r}")
     return [float(v) for v in values]
+
+
+def _check_verdict_keys(data: dict) -> None:
+    """[fabric] failure_strain (a positive finite Green strain) and [output] windows ([[a, b], ...] with a < b):
+    the bounds and windows of a run's verdict and statistics."""
+    if "failure_strain" in data.get("fabric", {}):
+        _finite("fabric.failure_strain", data["fabric"]["failure_strain"], 0.0)
+    for i, window in enumerate(data.get("output", {}).get("windows") or []):
+        a, b = _numbers(f"output.windows[{i}]", window, 2)
+        if not a < b:
+            raise SceneError(f"output.windows[{i}]: a window [a, b] needs a < b, got {window!r}")
 
 
 def _finite(where: str, value, minimum: float | None = None, strict: bool = True) -> float:

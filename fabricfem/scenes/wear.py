@@ -175,7 +175,7 @@ def wear_quantities(data: dict) -> dict[str, str]:
     for name in monitors + [spec["name"] for spec in data.get("torque", [])]:
         out.update({f"torque_{name}_{which}_Nm": f"torque_{name}.{which}_Nm" for which in ("peak", "final")})
         out[f"torque_{name}_window_mean_Nm"] = f"torque_{name}.window_mean_Nm"
-    if data["body"]["type"] == "limb" and data["garment"].get("builder", "pattern") == "tube":
+    if data["body"]["type"] == "limb" and data["garment"].get("builder", "pattern") == "tube":   # is_tube_on_limb
         # the compression report of the final state (fabricfem.wear.compression.compression_report)
         out.update({f"compression_{k}": f"compression.{k}" for k in COMPRESSION_QUANTITIES})
     return {**out, "pressure_peak_Pa": "pressure.peak_Pa", "pressure_mean_Pa": "pressure.mean_Pa",

@@ -30,7 +30,6 @@ from fabricfem.wear.outputs import (
     write_sto,
 )
 
-
 COLOUR_PERCENTILE = 99.0   # the renders' colour range ends at this percentile of the pressures in contact
 
 

@@ -48,6 +48,12 @@ class Bounds:
                                "garment is misplaced)", 0.05)
     require_contact: bool = doc("warn when the body never touches the garment during the motion", True)
 
+    def __post_init__(self):
+        for key in ("max_penetration", "max_seam_gap", "max_skin_pressure", "max_kinetic_ratio", "max_start_gap"):
+            value = getattr(self, key)
+            if isinstance(value, bool) or not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ValueError(f"{key} must be a positive finite bound, got {value!r}")
+
 
 @dataclass(frozen=True)
 class Check:
@@ -67,7 +73,8 @@ class Check:
                 if self.name != "contact" else f"CHECK FAILED contact: {self.what}")
 
 
-def _check(name: str, what: str, value: float, bound: float, unit: str) -> Check:
+def bounded_check(name: str, what: str, value: float, bound: float, unit: str) -> Check:
+    """The Check of `value` <= `bound` (a non-finite value fails)."""
     return Check(name, what, float(value), float(bound), unit, bool(math.isfinite(value) and value <= bound))
 
 
@@ -80,22 +87,22 @@ def wear_checks(history: WearHistory, bounds: Bounds = Bounds(),
     sewn = [s for s in steps if s.phase != "sew"] or steps
     motion = [s for s in steps if s.phase == "motion"] or steps
     checks = [
-        _check("penetration", "largest penetration after the sewing", max(s.max_penetration for s in sewn),
+        bounded_check("penetration", "largest penetration after the sewing", max(s.max_penetration for s in sewn),
                bounds.max_penetration, "m"),
-        _check("seam gap", "largest seam gap after the sewing", max(s.seam_gap for s in sewn), bounds.max_seam_gap,
+        bounded_check("seam gap", "largest seam gap after the sewing", max(s.seam_gap for s in sewn), bounds.max_seam_gap,
                "m"),
-        _check("fabric strain", "largest Green strain after the sewing (fabric failure_strain)",
+        bounded_check("fabric strain", "largest Green strain after the sewing (fabric failure_strain)",
                max(s.max_strain for s in sewn), failure_strain, ""),
-        _check("skin pressure", "largest contact pressure on the body during the motion",
+        bounded_check("skin pressure", "largest contact pressure on the body during the motion",
                max(s.peak_pressure for s in motion), bounds.max_skin_pressure, "Pa"),
     ]
     if any(s.time_steps for s in motion):
         ratio = kinetic_ratio(np.array([s.kinetic_energy for s in motion]), np.array([s.strain_energy for s in motion]))
-        checks.append(_check("kinetic energy", "largest kinetic / strain energy ratio during the motion", ratio,
+        checks.append(bounded_check("kinetic energy", "largest kinetic / strain energy ratio during the motion", ratio,
                              bounds.max_kinetic_ratio, ""))
     dressed = any(s.phase in ("sew", "pull", "don") for s in steps)   # panels placed apart, a body grown into it
     if math.isfinite(history.initial_gap) and not dressed:
-        checks.append(_check("start distance", "smallest garment-body gap at the start", history.initial_gap,
+        checks.append(bounded_check("start distance", "smallest garment-body gap at the start", history.initial_gap,
                              bounds.max_start_gap, "m"))
     if bounds.require_contact:
         force = max(s.contact_force for s in motion)
