@@ -1,0 +1,190 @@
+"""The body's segments joined by a smooth blend: a skin without creases at the joints (the wearer's surface contract,
+fabricfem.body.skin).
+
+Where two ellipsoidal segments overlap (the elbow, the knees, the hips) their union has a sharp concave crease, into
+which the fabric is pinched ever deeper as the mesh is refined. The blended body replaces the union by the zero set
+of a smooth minimum of the segments' exact signed distances d_k(x) [m] (negative inside; the closest point on
+an ellipsoid by Newton's method on the Lagrange multiplier, [Eberly2013], `Ellipsoid.closest_point`), whose
+gradients are the unit outward normals at the closest points. The segments are folded in their order with the quadratic polynomial smooth
+minimum of width w [m] ([Quilez2013]):
+
+    smin(a, b) = min(a, b) - w h^2 / 4,   h = max(w - |a - b|, 0) / w,
+    grad smin = (1 - h / 2) grad(min) + h / 2 grad(max)
+
+so phi = smin(...smin(smin(d_1, d_2), d_3)..., d_K), grad phi = sum_k W_k grad d_k with weights W_k >= 0 summing
+to 1 (the segment weights of the contract). smin is C1 (phi's gradient, the skin's normal, is continuous) and
+equals min(a, b) wherever |a - b| >= w: the skin is each segment's own ellipsoid away from the creases, and in a
+crease the blend fills the corner, turning the normal over a band of width ~ w instead of at a line. The quadratic
+blend turns the normal more evenly than the cubic one of the same rounding (docs/findings/2026-11-27-blended-skin.md). Rounding bound: each fold lowers the minimum by at
+most w / 4, so where phi = 0, min_k d_k <= m w / 4 with m the number of folds active there (|a - b| < w): the
+blended skin lies outside the segments' union by at most w / 4 where two segments meet (measured in the verify
+case `skin-continuity`), m w / 4 where m + 1 do.
+
+The gap of a point is its distance to the zero set, found by the orthogonal projection iteration ([Hartmann1999]):
+Newton steps onto phi = 0 along grad phi alternated with the projection of x onto the tangent plane at the foot,
+until x - p is parallel to grad phi(p) (`closest_points`). Units: metres throughout.
+
+`blend` evaluates phi, grad phi and the weights; `closest_points` the contract's SkinQuery; `BlendedEllipsoids` is
+the Skin of a Body (posed at any t). The same arithmetic is compiled for the explicit contact (BLEND_C, used by
+fabricfem.contact.compiled).
+"""
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+
+from fabricfem.body.ellipsoid import Ellipsoid
+from fabricfem.body.skin import SkinQuery
+
+BLEND_WIDTH = 0.05            # m: the default width w of the smooth minimum (rounding <= w / 4 = 12.5 mm)
+CLOSEST_ITERATIONS = 200      # orthogonal projection iterations of `closest_points`
+FULL_STEPS = 10               # undamped tangential steps before the iteration halves them (concave blends)
+CLOSEST_TOLERANCE = 1e-9      # m: |phi| and the tangential residual at convergence
+
+
+def check_width(width: float) -> float:
+    """The blend width [m] as a float; ValueError naming `blend_width` unless finite and > 0."""
+    if not (isinstance(width, (int, float)) and math.isfinite(width) and width > 0.0):
+        raise ValueError(f"blend_width must be a positive length [m], got {width!r}")
+    return float(width)
+
+
+def stacked(ellipsoids: Sequence[Ellipsoid]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(centres (K, 3), rotations (K, 3, 3), radii (K, 3)) [m] of the posed segments."""
+    return (np.array([e.center for e in ellipsoids], dtype=float),
+            np.array([e.rotation for e in ellipsoids], dtype=float),
+            np.array([e.radii for e in ellipsoids], dtype=float))
+
+
+def segment_distances(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, radii: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """d_k(x) (K, N) [m], the exact signed distances of the points x (N, 3) to the segments
+    (`Ellipsoid.closest_point`, [Eberly2013]), and their gradients grad d_k (K, N, 3): the unit outward normal at
+    the closest point."""
+    d = np.empty((len(centers), len(x)))
+    grad = np.empty((len(centers), len(x), 3))
+    for k, (c, R, r) in enumerate(zip(centers, rotations, radii)):   # the few segments, vectorised over points
+        _, d[k], grad[k] = Ellipsoid(c, R, r).closest_point(x)
+    return d, grad
+
+
+def blend(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, radii: np.ndarray, width: float
+          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """phi (N,) [m], grad phi (N, 3) and the segment weights W (N, K) of the blended body at the points x (N, 3)
+    (the folded cubic smooth minimum of the module docstring, [Quilez2013])."""
+    d, grad_d = segment_distances(np.asarray(x, dtype=float).reshape(-1, 3), centers, rotations, radii)
+    K, N = d.shape
+    weights = np.zeros((N, K))
+    phi = d[0].copy()
+    weights[:, 0] = 1.0
+    for k in range(1, K):          # a loop over the few segments, vectorised over the points
+        b = d[k]
+        h = np.maximum(width - np.abs(phi - b), 0.0) / width
+        other = 0.5 * h                                        # the weight of the larger of the two
+        first_smaller = phi <= b
+        c_phi = np.where(first_smaller, 1.0 - other, other)
+        weights *= c_phi[:, None]
+        weights[:, k] = 1.0 - c_phi
+        phi = np.minimum(phi, b) - width * h * h / 4.0
+    grad = np.einsum("nk,kni->ni", weights, grad_d)
+    return phi, grad, weights
+
+
+def closest_points(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, radii: np.ndarray, width: float,
+                   strict: bool = True) -> SkinQuery:
+    """The contract's SkinQuery of the points x (N, 3) against the blended body: the foot p on phi = 0 with
+    x - p parallel to grad phi(p) ([Hartmann1999] orthogonal projection), gap = sign(phi(x)) |x - p| [m], the unit
+    normal grad phi(p) / |grad phi(p)| and the weights at p. The iteration converges for points nearer to the skin
+    than its radius of curvature on the concave side of a blend; where it does not, RuntimeError (`strict`) or the
+    foot of the last iterate (not strict: the gap then bounds the distance from above)."""
+    x = np.asarray(x, dtype=float).reshape(-1, 3)
+    phi_x, _, _ = blend(x, centers, rotations, radii, width)
+    p = x.copy()
+    active = np.ones(len(x), dtype=bool)
+    for iteration in range(CLOSEST_ITERATIONS):
+        if not active.any():
+            break
+        step = 1.0 if iteration < FULL_STEPS else 0.5
+        pa = _onto_surface(p[active], centers, rotations, radii, width)
+        _, g, _ = blend(pa, centers, rotations, radii, width)
+        n = g / np.linalg.norm(g, axis=1)[:, None]
+        r = x[active] - pa
+        tangential = r - (r * n).sum(axis=1)[:, None] * n
+        p[active] = pa + step * tangential
+        done = np.linalg.norm(tangential, axis=1) <= CLOSEST_TOLERANCE
+        rows = np.flatnonzero(active)
+        p[rows[done]] = pa[done]
+        active[rows[done]] = False
+    if active.any():
+        if strict:
+            raise RuntimeError(f"blended skin: the closest point of {int(active.sum())} points did not converge "
+                               f"(farther from the skin than its curvature radius?)")
+        p[active] = _onto_surface(p[active], centers, rotations, radii, width)
+    phi, g, w = blend(p, centers, rotations, radii, width)
+    n = g / np.linalg.norm(g, axis=1)[:, None]
+    gap = np.linalg.norm(x - p, axis=1) * np.where(phi_x < 0.0, -1.0, 1.0)
+    return SkinQuery(gap, p, n, w)
+
+
+def _onto_surface(p: np.ndarray, centers, rotations, radii, width: float) -> np.ndarray:
+    """Newton steps p <- p - phi grad phi / |grad phi|^2 until |phi| <= CLOSEST_TOLERANCE."""
+    for _ in range(CLOSEST_ITERATIONS):
+        phi, g, _ = blend(p, centers, rotations, radii, width)
+        if np.all(np.abs(phi) <= CLOSEST_TOLERANCE):
+            return p
+        p = p - (phi / (g * g).sum(axis=1))[:, None] * g
+    return p
+
+
+class BlendedEllipsoids:
+    """The Skin (fabricfem.body.skin) of a `Body`: its segments' ellipsoids posed at t, joined by the smooth
+    minimum of width `width` [m] (module docstring). `segment_names`: the body's segments in order."""
+
+    def __init__(self, body, width: float = BLEND_WIDTH):
+        self.body = body
+        self.width = check_width(width)
+        self.segment_names = tuple(body.segments)
+
+    @property
+    def rounding_bound(self) -> float:
+        """Largest distance [m] (d metric) of the blended skin outside the segments' union: w / 4."""
+        return self.width / 4.0
+
+    def posed(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The stacked posed segments at time t [s] (`stacked`)."""
+        posed = self.body.pose(t)
+        return stacked([posed[name] for name in self.segment_names])
+
+    def implicit(self, x: np.ndarray, t: float) -> np.ndarray:
+        """phi (N,) [m] at the points x (N, 3) at time t [s]: < 0 inside the body."""
+        return blend(x, *self.posed(t), self.width)[0]
+
+    def query(self, x: np.ndarray, t: float) -> SkinQuery:
+        return closest_points(x, *self.posed(t), self.width)
+
+    def surface(self, t: float, spacing: float = 0.005) -> tuple[np.ndarray, np.ndarray]:
+        """Marching-cubes triangulation (scikit-image) of phi = 0 at time t [s] on a grid of `spacing` [m]:
+        vertices (V, 3) [m], triangles (F, 3), outward oriented."""
+        return triangulate(lambda points: self.implicit(points, t), self.bounds(t), spacing)
+
+    def bounds(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Corners [m] of a box holding the posed body and its blend."""
+        centers, rotations, radii = self.posed(t)
+        reach = radii.max(axis=1)[:, None] + self.width
+        return (centers - reach).min(axis=0), (centers + reach).max(axis=0)
+
+
+def triangulate(implicit, bounds: tuple[np.ndarray, np.ndarray], spacing: float) -> tuple[np.ndarray, np.ndarray]:
+    """Triangulation of {implicit(x) = 0} inside `bounds` (lower, upper corners [m]) by marching cubes
+    (skimage.measure.marching_cubes) on a grid of `spacing` [m], outward oriented (the normals along grad phi)."""
+    from skimage.measure import marching_cubes
+
+    lower, upper = (np.asarray(b, dtype=float) for b in bounds)
+    lower, upper = lower - 2.0 * spacing, upper + 2.0 * spacing
+    axes = [np.arange(lo, hi + spacing, spacing) for lo, hi in zip(lower, upper)]
+    grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    values = implicit(grid).reshape(tuple(len(a) for a in axes))
+    vertices, faces, _, _ = marching_cubes(values, level=0.0, spacing=(spacing,) * 3, gradient_direction="descent")
+    return vertices + lower, faces.astype(np.int64)
