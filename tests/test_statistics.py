@@ -79,3 +79,12 @@ def test_statistics_on_two_ranks_equal_serial(tmp_path):
     for key in ("torque_elbow", "torque_elbow_both_segments"):
         np.testing.assert_allclose(parallel.statistics[key]["mean_Nm"], serial[key]["mean_Nm"], rtol=1e-6,
                                    atol=1e-12)
+    # statistics.csv and summary.json as written: every row's windowed mean, percentile peak and largest value
+    tables = [list(csv.reader(open(folder / run / "statistics.csv"))) for run in ("world", "self")]
+    assert tables[0][0] == tables[1][0] and [r[:3] for r in tables[0]] == [r[:3] for r in tables[1]]
+    assert len(tables[0]) == 1 + 3 * 2                     # two monitors and the peak pressure, two windows
+    values = [np.array([[float(x) for x in r[3:]] for r in t[1:]]) for t in tables]
+    np.testing.assert_allclose(values[0], values[1], rtol=1e-6, atol=1e-12)
+    summaries = [json.loads((folder / run / "summary.json").read_text()) for run in ("world", "self")]
+    for key in ("torque_elbow", "torque_elbow_both_segments"):
+        assert summaries[0][key]["window_mean_Nm"] == pytest.approx(summaries[1][key]["window_mean_Nm"], rel=1e-6)
