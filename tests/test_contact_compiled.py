@@ -15,7 +15,8 @@ from mpi4py import MPI
 
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.contact import compiled
-from fabricfem.contact.explicit import numpy_contact, project_compiled, project_with_segment
+from fabricfem.body.blended import BLEND_WIDTH
+from fabricfem.contact.explicit import numpy_contact, project_compiled, project_onto_skin
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.run import run_sleeve
 
@@ -37,22 +38,29 @@ def elbow(angle: float = 2.4) -> list[Ellipsoid]:
 
 
 def test_projection_matches_numpy_including_the_crease():
-    """Random points in and around the segments (some in the lens where two overlap, which the passes cannot clear
-    and the crease push takes): the same projected points, segments and moved flags as project_with_segment."""
+    """Random points in and around the segments, many in the inner elbow where the blend of two segments applies:
+    the compiled projection marks the same crease points and moves the same points as project_onto_skin; away
+    from the crease to the same positions (1e-15 m) and segments; in the crease to the blended skin's closest point
+    within 1e-8 m (both closest-point iterations stop at a tangential residual of 1e-9 m)."""
     rng = np.random.default_rng(3)
     ellipsoids = elbow()
     x = np.vstack([rng.uniform([-0.1, -0.05, -0.03], [0.05, 0.1, 0.03], size=(4000, 3)),      # the inner elbow
                    rng.uniform([0.25, -0.05, -0.04], [0.55, 0.05, 0.04], size=(1000, 3))])   # around the third
-    expected, moved, segment = project_with_segment(x, ellipsoids, strict=False)
+    expected = project_onto_skin(x, ellipsoids)
     zeros = np.zeros(1)
     rows = np.zeros((len(x), 3), dtype=np.int64)
-    trial, position, segment_c, moved_c = project_compiled(x, rows, zeros, zeros, zeros, 1e-4,
-                                                           compiled.stacked(ellipsoids), ellipsoids, False,
-                                                           MPI.COMM_SELF)
+    trial, skin = project_compiled(x, rows, zeros, zeros, zeros, 1e-4, compiled.stacked(ellipsoids), BLEND_WIDTH,
+                                   MPI.COMM_SELF)
+    crease = expected.crease
     assert np.array_equal(trial, x)
-    assert moved.sum() > 1500                                          # many points were inside
-    assert np.abs(position - expected).max() <= 1e-15
-    assert np.array_equal(moved_c, moved) and np.array_equal(segment_c, segment)
+    assert expected.moved.sum() > 1500 and (crease & expected.moved).sum() > 500   # many points inside, in the blend
+    assert np.array_equal(skin.crease, crease) and np.array_equal(skin.moved, expected.moved)
+    assert np.abs(skin.position[~crease] - expected.position[~crease]).max() <= 1e-15
+    assert np.array_equal(skin.segment[~crease], expected.segment[~crease])
+    inside = crease & expected.moved
+    assert np.abs(skin.position[inside] - expected.position[inside]).max() <= 1e-8
+    assert np.abs(skin.normal[inside] - expected.normal[inside]).max() <= 1e-6
+    assert np.abs(skin.weights[inside] - expected.weights[inside]).max() <= 1e-6
 
 
 def test_too_many_segments_rejected():

@@ -126,12 +126,14 @@ def _project_reference(x, ellipsoids, passes=8, tol=1e-12):
 
 
 def test_vectorised_projection_matches_the_plain_algorithm():
-    """project_with_segment (q prefilter, ray casts only inside, re-checks only of moved points) against the
+    """project_onto_skin (q prefilter, ray casts only inside, re-checks only of moved points) against the
     plain every-point-every-segment projection on ~4000 random points within 5 mm of the flexed arm's surfaces,
-    about half of them inside one or both segments (the elbow overlap): the same projected points within 1e-15 m (round-off of
-    the matrix products on subsets) and the same moved set."""
+    about half of them inside a segment: away from the elbow's blend the same projected points within 1e-15 m
+    (round-off of the matrix products on subsets) and the same moved set; in the blend the points end on the
+    blended skin (|phi| <= 1e-9 m, fabricfem.body.blended), outside both segments."""
     from fabricfem.body.arm import default_arm, elbow_flexion
-    from fabricfem.contact.explicit import project_with_segment
+    from fabricfem.body.blended import BLEND_WIDTH, blend, stacked
+    from fabricfem.contact.explicit import project_onto_skin
     body = default_arm(elbow_flexion(final_angle=math.radians(57.0)))
     ellipsoids = list(body.pose(body.kinematics.time_range[1]).values())
     rng = np.random.default_rng(4)
@@ -144,12 +146,18 @@ def test_vectorised_projection_matches_the_plain_algorithm():
         exposed = np.all([o.implicit(surface) > 0.2 for o in ellipsoids if o is not e], axis=0)
         x.append((surface + rng.uniform(-5e-3, 5e-3, (2000, 1)) * e.normal(surface))[exposed])
     x = np.concatenate(x)
-    projected, moved, segment = project_with_segment(x, ellipsoids)
+    skin = project_onto_skin(x, ellipsoids)
+    projected, moved, crease = skin.position, skin.moved, skin.crease
     reference, moved_ref = _project_reference(x, ellipsoids)
-    assert len(x) > 3000 and moved.sum() > 1000 and (moved == moved_ref).all()
-    np.testing.assert_allclose(projected, reference, rtol=0.0, atol=1e-15)
+    away = ~crease
+    assert len(x) > 3000 and moved[away].sum() > 1000 and (moved[away] == moved_ref[away]).all()
+    np.testing.assert_allclose(projected[away], reference[away], rtol=0.0, atol=1e-15)
     inside_after = np.stack([e.implicit(projected[moved]) for e in ellipsoids]).min(axis=0)
     assert inside_after.min() > -1e-12
+    blended = crease & moved
+    assert blended.sum() > 50
+    phi = blend(projected[blended], *stacked(ellipsoids), BLEND_WIDTH)[0]
+    assert np.abs(phi).max() <= 1e-9
 
 
 def test_pose_cache_equals_body_pose():
@@ -198,9 +206,9 @@ def test_projection_frees_points_trapped_where_two_segments_overlap():
     """Points in the lens where the upper-arm and forearm ellipsoids overlap (the inner side of an elbow flexed
     by 90 degrees) end outside both segments (q >= 1 for each, eq. 3.61 with q = f + 1), and each point moves
     into the cone of the outward normals of the segments it was inside of (d . n_k >= 0: the direction of a
-    frictionless contact force against two rigid bodies). Before the crease fallback the one-segment
-    projections sent such points back and forth and the flexion stopped (mesh II, mu = 0.1 at 47 deg and
-    R = 0.07 m at 53 deg with gravity)."""
+    frictionless contact force against two rigid bodies): they go to the blended skin, which lies outside both.
+    Without a blend the one-segment projections sent such points back and forth and the flexion stopped (mesh II,
+    mu = 0.1 at 47 deg and R = 0.07 m at 53 deg with gravity)."""
     from fabricfem.body.ellipsoid import Ellipsoid
     from fabricfem.contact.projection import normalised_radii, project_with_segment
     elbow = np.array([0.335, 0.0, 0.0])

@@ -56,7 +56,7 @@ def test_pants_knee_torque_same_on_one_and_two_ranks():
     COMM_SELF: the ranks differ in the summation order only. Through the sewing, the pull and the first contact of
     the legs (30 records, 0.6 s) the knee torque histories agree within 1e-6 of their largest value (measured
     1.5e-7). From the first contact (record 13, a first difference of 1e-12) the difference grows about threefold
-    per record as the legs fill the pants and stick-slip sets in; over 35 records (the knee moment reaches 0.1 N m)
+    per record as the legs fill the pants and stick-slip sets in; over 35 records (the knee moment reaches 0.019 N m on the blended skin)
     it is 1.2e-6 of the peak, bounded here by 1e-5 (with the reference geometry recomputed per evaluation, which
     differs only in round-off, 9.4e-8 on the same path). Beyond, the walk is chaotic (docs/studies/pants.md)."""
     data = tomllib.loads(Path(SCENE).read_text())
@@ -72,7 +72,7 @@ def test_pants_knee_torque_same_on_one_and_two_ranks():
 
     parallel, serial = history(MPI.COMM_WORLD), history(MPI.COMM_SELF)
     scale = np.max(np.abs(serial))
-    assert len(serial) == 35 and scale > 0.05                       # the legs press on the pants
+    assert len(serial) == 35 and scale > 0.01                       # the legs press on the pants
     first = slice(0, 30)
     assert np.max(np.abs(parallel[first] - serial[first])) <= 1e-6 * np.max(np.abs(serial[first]))
     assert np.max(np.abs(parallel - serial)) <= 1e-5 * scale, np.max(np.abs(parallel - serial)) / scale

@@ -6,23 +6,27 @@ node by node, in the same order as the numpy functions they replace (compiled wi
 multiply-adds, `-ffp-contract=off`, so that the products and sums round as numpy's do):
 
 * `project`: the trial positions x* = X + d + dt v~ + dt^2 a, the normalised radius q = f + 1 of each segment
-  [Man2006, eq. 3.61], and for the points inside a segment the passes of `project_with_segment` (ray cast along
-  grad f / |grad f| against the segments the point is inside of, the deepest one, the move onto its surface,
-  [Man2006, Box 5] step i). A point still inside after MAX_PROJECTION_PASSES is returned as trapped, and
-  `_push_out_of_creases` (numpy) takes it, as in `project_with_segment`.
+  [Man2006, eq. 3.61]; a point within the blend of two segments (the lower bound (sqrt(q) - 1) r_min of its
+  distance below the blend width w for two of them, `projection.crease_points`) inside the blended skin goes to its
+  closest point on it (fabricfem.contact.blend_kernel, with the skin's normal and segment weights there); the
+  others, near one segment only, take the passes of `project_onto_skin` (ray cast along grad f / |grad f|, the
+  move onto the surface, [Man2006, Box 5] step i).
 * `friction`: for the nodes in contact, |lambda_N| = |m (x^c - x*)| / dt^2, the stick point's pull
-  d_T = P (s - x^c) limited by mu |lambda_N| (eq. 3.52), the stick points kept in the segments' frames,
-  a^{n+1} += a^c = (x^c + d_T - x*) / dt^2 ([Man2006, Box 5] step j), and the torques of the registered monitors,
-  a . sum_i (x_i - J) x (-f_i) over the nodes on their segments (fabricfem.contact.torque.local_torques).
+  d_T = P (s - x^c) limited by mu |lambda_N| (eq. 3.52, P with the skin's normal), the stick points kept in the
+  frame of the segment (of largest weight in a crease), a^{n+1} += a^c = (x^c + d_T - x*) / dt^2 ([Man2006, Box 5]
+  step j), and the torques of the registered monitors, a . sum_i s_i (x_i - J) x (-f_i) with s_i the node's
+  weight on the monitor's segments (fabricfem.contact.torque.local_torques).
 
-The only difference from the numpy path is q, which numpy computes by one matrix product (rounded differently
-by BLAS); q only preselects the points that get ray casts, and the ray cast decides (INSIDE_TOLERANCE), so the two
-paths move the same nodes by the same amounts (tests/test_contact_compiled.py).
+Away from the creases the only difference from the numpy path is q, which numpy computes by one matrix product
+(rounded differently by BLAS); q only preselects the points that get ray casts, and the ray cast decides
+(INSIDE_TOLERANCE), so the two paths move the same nodes by the same amounts; in the creases the two closest-point
+iterations agree to their tolerance (tests/test_contact_compiled.py).
 """
 from __future__ import annotations
 
 import numpy as np
 
+from fabricfem.contact.blend_kernel import BLEND_CDEF, BLEND_SOURCE
 from fabricfem.forms.jit import compile_c
 
 FLAGS = ("-O3", "-march=native", "-ffp-contract=off", "-g0")
@@ -32,17 +36,21 @@ MAX_MONITORS = 64          # the torque monitors summed in `friction` (a stack a
 CDEF = """
 int project(int M, const double* reference, const int64_t* rows, const double* d, const double* v, const double* a,
             double dt, int K, const double* center, const double* rotation, const double* radii, double tolerance,
-            int passes, double* trial, double* position, int64_t* segment, uint8_t* moved, int64_t* trapped);
+            int passes, double width, double* trial, double* position, int64_t* segment, uint8_t* moved,
+            uint8_t* crease, double* normals, double* weights, int64_t* trapped);
 void friction(int n, const int64_t* index, const int64_t* rows, const double* trial, double* position,
               const int64_t* segment, const double* mass, double dt, double mu, const double* center,
               const double* rotation, const double* radii, int64_t* stick_segment, double* stick_local,
               double* a, double* force, double* normal_force, uint8_t* slip, int K, int monitors,
-              const uint8_t* on_segments, const double* joints, const double* axes, double* torques);
-"""
+              const uint8_t* on_segments, const double* joints, const double* axes, double* torques,
+              const uint8_t* crease, const double* normals, const double* weights);
+""" + BLEND_CDEF
 
 SOURCE = r"""
 #include <math.h>
+#include <stddef.h>
 #include <stdint.h>
+""" + BLEND_SOURCE + r"""
 
 /* y = R^T (x - c) (the products and sums of numpy's matmul of a row by R: sequential over i) */
 static void to_local(const double* x, const double* c, const double* R, double* y)
@@ -129,7 +137,8 @@ static double smallest(const double* r) { return fmin(fmin(r[0], r[1]), r[2]); }
 /* trial positions and the projection passes of project_with_segment; returns the number of trapped points */
 int project(int M, const double* reference, const int64_t* rows, const double* d, const double* v, const double* a,
             double dt, int K, const double* center, const double* rotation, const double* radii, double tolerance,
-            int passes, double* trial, double* position, int64_t* segment, uint8_t* moved, int64_t* trapped)
+            int passes, double width, double* trial, double* position, int64_t* segment, uint8_t* moved,
+            uint8_t* crease, double* normals, double* weights, int64_t* trapped)
 {
   int n_trapped = 0;
   const double dt2 = dt * dt;
@@ -143,13 +152,14 @@ int project(int M, const double* reference, const int64_t* rows, const double* d
     }
     moved[p] = 0;
     int inside[64];
-    int any = 0, best = 0;
+    int any = 0, best = 0, near = 0;
     double qmin = INFINITY;
     for (int k = 0; k < K; ++k)
     {
       const double q = normalised_radius(x, center + 3 * k, rotation + 9 * k, radii + 3 * k);
       inside[k] = q < 1.0;
       any |= inside[k];
+      near += (sqrt(q) - 1.0) * smallest(radii + 3 * k) < width;   /* a lower bound of the distance below w */
       if (q < qmin)
       {
         qmin = q;
@@ -157,6 +167,23 @@ int project(int M, const double* reference, const int64_t* rows, const double* d
       }
     }
     segment[p] = best;
+    crease[p] = near >= 2;
+    if (crease[p])   /* within the blend of two segments: the blended skin's closest point (blend_kernel) */
+    {
+      double grad[3];
+      double* W = weights + (size_t)K * p;
+      if (blend_eval(x, K, center, rotation, radii, width, grad, W) < 0.0)
+      {
+        blend_closest(trial + 3 * p, K, center, rotation, radii, width, x, normals + 3 * p, W);
+        moved[p] = 1;
+      }
+      int heaviest = 0;
+      for (int k = 1; k < K; ++k)
+        if (W[k] > W[heaviest])
+          heaviest = k;
+      segment[p] = heaviest;
+      continue;
+    }
     for (int pass = 0; any && pass < passes; ++pass)
     {
       int deepest = 0;
@@ -206,7 +233,8 @@ void friction(int n, const int64_t* index, const int64_t* rows, const double* tr
               const int64_t* segment, const double* mass, double dt, double mu, const double* center,
               const double* rotation, const double* radii, int64_t* stick_segment, double* stick_local,
               double* a, double* force, double* normal_force, uint8_t* slip, int K, int monitors,
-              const uint8_t* on_segments, const double* joints, const double* axes, double* torques)
+              const uint8_t* on_segments, const double* joints, const double* axes, double* torques,
+              const uint8_t* crease, const double* normals, const double* weights)
 {
   const double dt2 = dt * dt;
   double moment[64][3];
@@ -238,8 +266,13 @@ void friction(int n, const int64_t* index, const int64_t* rows, const double* tr
       else
         stick[0] = x[0], stick[1] = x[1], stick[2] = x[2];
       double y[3], nrm[3];
-      to_local(x, c, R, y);
-      normal(y, R, radii + 3 * k, nrm);
+      if (crease[p])   /* the blended skin's normal at the foot */
+        nrm[0] = normals[3 * p], nrm[1] = normals[3 * p + 1], nrm[2] = normals[3 * p + 2];
+      else
+      {
+        to_local(x, c, R, y);
+        normal(y, R, radii + 3 * k, nrm);
+      }
       const double diff[3] = {stick[0] - x[0], stick[1] - x[1], stick[2] - x[2]};
       const double along = (diff[0] * nrm[0] + diff[1] * nrm[1]) + diff[2] * nrm[2];
       double dT[3] = {diff[0] - along * nrm[0], diff[1] - along * nrm[1], diff[2] - along * nrm[2]};
@@ -269,11 +302,18 @@ void friction(int n, const int64_t* index, const int64_t* rows, const double* tr
     /* fabricfem.contact.torque.local_torques: (x - J) x (-f) summed over the nodes on each monitor's segments */
     for (int mon = 0; mon < monitors; ++mon)
     {
-      if (!on_segments[mon * K + k])
+      double share = on_segments[mon * K + k];   /* the segment weights of the blended skin in a crease */
+      if (crease[p])
+      {
+        share = 0.0;
+        for (int j = 0; j < K; ++j)
+          share += on_segments[mon * K + j] ? weights[(size_t)K * p + j] : 0.0;
+      }
+      if (share == 0.0)
         continue;
       const double* J = joints + 3 * mon;
       const double r[3] = {x[0] - J[0], x[1] - J[1], x[2] - J[2]};
-      const double f[3] = {-force[3 * p], -force[3 * p + 1], -force[3 * p + 2]};
+      const double f[3] = {-share * force[3 * p], -share * force[3 * p + 1], -share * force[3 * p + 2]};
       moment[mon][0] += r[1] * f[2] - r[2] * f[1];
       moment[mon][1] += r[2] * f[0] - r[0] * f[2];
       moment[mon][2] += r[0] * f[1] - r[1] * f[0];

@@ -28,12 +28,12 @@ from typing import Callable, Iterator, Sequence
 import numpy as np
 from mpi4py import MPI
 
+from fabricfem.body.blended import BLEND_WIDTH, check_width
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.contact import compiled, nodal
 from fabricfem.contact import friction as friction_law
 from fabricfem.contact.nodal import (
     CurrentAreas,
-    nearest_gap,
     normal_pressure,
     positive_parameter,
     pressure_function,
@@ -41,22 +41,25 @@ from fabricfem.contact.nodal import (
 )
 from fabricfem.contact.projection import (  # noqa: F401 (the projections are public here too)
     INSIDE_TOLERANCE,
-    MAX_CREASE_ITERATIONS,
     MAX_PROJECTION_PASSES,
     PARKED_AT,
     ExplicitContact,
     SegmentStack,
+    SkinProjection,
     as_points,
     box5_step,
+    crease_points,
     forward_increment_correction,
     initial_state,
     normalised_radii,
     normalised_radius,
     project_along_gradient,
     project_compiled,
+    project_onto_skin,
     project_with_segment,
     ray_gap,
     row_length,
+    skin_gap,
 )
 from fabricfem.contact.torque import TorqueMonitor, local_torques
 
@@ -122,7 +125,7 @@ class ExplicitBodyContact:
     """
 
     def __init__(self, model, body, friction: float = 0.0, method: str = "lagrange",
-                 penalty: float | None = None):
+                 penalty: float | None = None, blend_width: float = BLEND_WIDTH):
         if method not in EXPLICIT_METHODS:
             raise ValueError(f"method must be one of {EXPLICIT_METHODS}, got {method!r}")
         self.model = model
@@ -135,6 +138,7 @@ class ExplicitBodyContact:
                         else positive_parameter("penalty", penalty))
         self.comm = model.comm
         self.names = list(body.segments)
+        self.blend_width = check_width(blend_width)       # m: the blended skin's width (fabricfem.body.blended)
         held = self.nodes.constrained.any(axis=1)
         self.moving = ~held                                  # nodes that take contact
         self.dofs = self.nodes.dofs[self.moving]             # (M, 3) local rows in W
@@ -166,10 +170,6 @@ class ExplicitBodyContact:
         # t -> (K,) bool of the segments that take contact (an inactive segment is parked far from the garment)
         self.transverse_scale: Callable[[float], float] | None = None
         self.segment_active: Callable[[float], np.ndarray] | None = None
-        # a body overlaps at its joints (hips, knees, elbow): by default a node trapped in such a lens keeps the small
-        # penetration the last push leaves (reported by the records' max_penetration) instead of stopping the run;
-        # True raises instead (`correct`)
-        self.strict_projection = False
         # the Lagrange step by the compiled loops (fabricfem.contact.compiled) or by numpy (COMPILED_CONTACT)
         self.compiled = COMPILED_CONTACT["enabled"] and method == "lagrange"
         self._rows: np.ndarray | None = None      # (M, 3) int64 rows of the nodes in W (compiled loops)
@@ -248,12 +248,12 @@ class ExplicitBodyContact:
 
     def max_penetration(self, d: np.ndarray, t: float) -> float:
         """max(0, -min g) [m] of the nodes at displacements `d` (local array of W) against the body at t, all ranks."""
-        g, _, _ = nearest_gap(self.reference + d[self.dofs], self.body_at(t))
+        g, *_ = skin_gap(self.reference + d[self.dofs], self.body_at(t), self.blend_width)
         return float(self.comm.allreduce(float(np.max(-g, initial=0.0)), op=MPI.MAX))
 
     def min_gap(self, d: np.ndarray, t: float) -> float:
         """Smallest signed gap [m] of the nodes against the body at t (all ranks)."""
-        g, _, _ = nearest_gap(self.reference + d[self.dofs], self.body_at(t))
+        g, *_ = skin_gap(self.reference + d[self.dofs], self.body_at(t), self.blend_width)
         return float(self.comm.allreduce(float(np.min(g, initial=np.inf)), op=MPI.MIN))
 
     def start_trace(self):
@@ -275,11 +275,9 @@ class ExplicitBodyContact:
         return float(self.comm.allreduce(self.max_penetration_seen, op=MPI.MAX))
 
     def _monitor_penetration(self, x: np.ndarray, ellipsoids):
-        """max(0, -g) of the points x against the posed segments (one ray cast from the points inside)."""
-        for e in ellipsoids:
-            inside = normalised_radius(x, e) < 1.0
-            if inside.any():
-                self.max_penetration_seen = max(self.max_penetration_seen, float(np.max(-ray_gap(x[inside], e))))
+        """max(0, -g) of the points x against the blended skin of the posed segments (`skin_gap`)."""
+        g, *_ = skin_gap(x, ellipsoids, self.blend_width)
+        self.max_penetration_seen = max(self.max_penetration_seen, float(np.max(-g, initial=0.0)))
 
     def total_force(self) -> np.ndarray:
         """Sum of the last step's contact forces on the cloth [N] (3,), all ranks."""
@@ -293,12 +291,13 @@ class ExplicitBodyContact:
             self._lumped = cached = (integrator, integrator.dt, m)
         return cached[2]
 
-    def _local_torques(self, position: np.ndarray, force: np.ndarray, segment: np.ndarray) -> list[float]:
-        """This rank's torques [N m] of the monitors for the nodes in contact (their positions, forces on the cloth
-        and segments)."""
+    def _local_torques(self, position: np.ndarray, force: np.ndarray, segment: np.ndarray,
+                       weights: np.ndarray) -> list[float]:
+        """This rank's torques [N m] of the monitors for the nodes in contact (their positions, forces on the cloth,
+        segments and the skin's segment weights)."""
         tic = time.perf_counter()
         torques = local_torques(list(self._monitors.values()), position, force, segment,
-                                lambda joint: self.poses.joint(joint, self.time))
+                                lambda joint: self.poses.joint(joint, self.time), weights)
         self.timings["pose_torque"] += time.perf_counter() - tic
         return torques
 
@@ -362,9 +361,10 @@ class ExplicitBodyContact:
         x_all = as_points("x", self.reference + d[self.dofs])
         q = normalised_radii(x_all, ellipsoids)
         segment = np.argmin(q, axis=0).astype(np.int64)
-        index = np.flatnonzero(np.min(q, axis=0) < 1.0)
+        near = (q.min(axis=0) < 1.0) | crease_points(q, SegmentStack(ellipsoids).scale, self.blend_width)
+        index = np.flatnonzero(near)
         x = x_all[index]
-        g, n, seg = nearest_gap(x, ellipsoids)
+        g, n, seg, weights = skin_gap(x, ellipsoids, self.blend_width)
         segment[index] = seg
         p = normal_pressure(g, np.zeros(len(g)), self.penalty)
         inside = p > 0.0
@@ -385,7 +385,7 @@ class ExplicitBodyContact:
         rhs.getArray()[self.dofs[index]] += force
         contact = index[inside]
         self._set_step(x_all, contact, force[inside], area[inside] * p[inside], segment, slip[inside],
-                       integrator.dt)
+                       integrator.dt, weights[inside])
 
     def correct(self, integrator, t: float):
         """Lagrange method ([Man2006, Box 5] steps i-j with friction): a^{n+1} += a^c so that the predictor of
@@ -407,11 +407,15 @@ class ExplicitBodyContact:
             return
         x_trial = self.reference + d[rows] + dt * v[rows] + dt ** 2 * a[rows]
         stack = SegmentStack(ellipsoids)
-        projected, active, seg = project_with_segment(x_trial, ellipsoids, strict=self.strict_projection,
-                                                      segments=stack)
-        index = np.flatnonzero(active)                                   # nodes in contact
+        skin = project_onto_skin(x_trial, ellipsoids, self.blend_width, segments=stack)
+        seg = skin.segment
+        index = np.flatnonzero(skin.moved)                               # nodes in contact
         m = self._lumped_mass(integrator)[index]                          # M + dt/2 C (per component)
-        trial, final, segment = x_trial[index], projected[index], seg[index]
+        trial, final, segment = x_trial[index], skin.position[index], seg[index]
+        crease = skin.crease[index]
+        weights = np.zeros((len(index), len(ellipsoids)))
+        weights[np.arange(len(index)), segment] = 1.0
+        weights[crease] = skin.weights[index[crease]]
         normal_force = row_length(m * (final - trial)) / dt ** 2             # |lambda_N| [N]
         slip = np.zeros(len(index), dtype=bool)
         # also without a node in contact: _store_stick_points then clears the stick points of the nodes that just
@@ -423,6 +427,7 @@ class ExplicitBodyContact:
             projected_c = final
             stick, known = self._stick_points(stack, index, segment, projected_c)
             n = stack.normal(stack.to_local(projected_c, segment), segment)   # normals at the contact points
+            n[crease] = skin.normal[index[crease]]                            # the blended skin's in a crease
             diff = stick - projected_c
             d_t = diff - (diff * n).sum(axis=1)[:, None] * n                  # P (s - x^c)
             f_t = row_length(m * d_t) / dt ** 2
@@ -438,18 +443,19 @@ class ExplicitBodyContact:
         a[rows[index]] += a_c
         position = x_trial
         position[index] = final
-        self._set_step(position, index, m * a_c, normal_force, seg, slip, dt)
+        self._set_step(position, index, m * a_c, normal_force, seg, slip, dt, weights)
 
     def _correct_compiled(self, integrator, ellipsoids: list[Ellipsoid], d: np.ndarray, v: np.ndarray, a: np.ndarray):
-        """`correct` by the compiled loops of fabricfem.contact.compiled: the same projection, friction and
-        correction node by node (the crease push of trapped points stays `_push_out_of_creases`)."""
+        """`correct` by the compiled loops of fabricfem.contact.compiled: the same projection (with the blended skin's
+        closest point in the creases), friction and correction node by node."""
         lib, ffi = compiled.module(self.comm)
         dt = integrator.dt
         if self._rows is None:
             self._rows = np.ascontiguousarray(self.dofs, dtype=np.int64)
         segments = compiled.stacked(ellipsoids)
-        trial, position, segment, moved = project_compiled(self.reference, self._rows, d, v, a, dt, segments,
-                                                           ellipsoids, self.strict_projection, self.comm)
+        trial, skin = project_compiled(self.reference, self._rows, d, v, a, dt, segments, self.blend_width,
+                                       self.comm)
+        position, segment, moved = skin.position, skin.segment, skin.moved
         index = np.flatnonzero(moved)
         for buffer in (self.force, self.normal_force, self.slip):
             buffer.fill(0)
@@ -469,7 +475,8 @@ class ExplicitBodyContact:
                      p(self._stick_local, "double"), p(a, "double"), p(self.force, "double"),
                      p(self.normal_force, "double"), p(self.slip.view(np.uint8), "uint8_t"), len(ellipsoids),
                      len(monitors), p(on_segments, "uint8_t"), p(joints, "double"), p(axes, "double"),
-                     p(torques, "double"))
+                     p(torques, "double"), p(skin.crease.view(np.uint8), "uint8_t"), p(skin.normal, "double"),
+                     p(skin.weights, "double"))
         if self.mu > 0.0:      # every node not in contact loses its stick point (as `_store_stick_points`)
             self._stick_segment[~moved] = -1
         self.position, self.segment = position, segment
@@ -477,16 +484,18 @@ class ExplicitBodyContact:
         self._accumulate(dt, index, self.normal_force[index], torques.tolist())
 
     def _set_step(self, position: np.ndarray, index: np.ndarray, force: np.ndarray, normal_force: np.ndarray,
-                  segment: np.ndarray, slip: np.ndarray, dt: float):
+                  segment: np.ndarray, slip: np.ndarray, dt: float, weights: np.ndarray):
         """State of the step: positions (M, 3) and segments (M,) of all nodes; contact forces on the cloth,
-        normal forces and slip flags of the nodes `index` in contact (zero / False elsewhere)."""
+        normal forces, slip flags and the skin's segment weights (fabricfem.body.skin) of the nodes `index` in
+        contact (zero / False elsewhere)."""
         self.position, self.segment = position, segment
         for buffer, values in ((self.force, force), (self.normal_force, normal_force), (self.slip, slip)):
             buffer.fill(0)           # the state arrays are overwritten in place every step
             buffer[index] = values
         self.active.fill(False)
         self.active[index] = True
-        self._accumulate(dt, index, normal_force, self._local_torques(position[index], force, segment[index]))
+        self._accumulate(dt, index, normal_force, self._local_torques(position[index], force, segment[index],
+                                                                      weights))
 
 
 class PoseCache:

@@ -15,14 +15,12 @@ from typing import Callable, Sequence
 import numpy as np
 from mpi4py import MPI
 
+from fabricfem.body.blended import BLEND_WIDTH, blend, closest_points
 from fabricfem.body.ellipsoid import Ellipsoid, _ray_to_surface
 from fabricfem.contact import compiled
-from fabricfem.contact.nodal import (
-    positive_parameter,
-)
+from fabricfem.contact.nodal import nearest_gap, positive_parameter
 
 MAX_PROJECTION_PASSES = 8
-MAX_CREASE_ITERATIONS = 20   # bisector pushes out of overlapping segments after the passes (project_with_segment)
 INSIDE_TOLERANCE = 1e-12   # relative to the smallest radius: rounding of a projected point is not "inside"
 PARKED_AT = np.array([1e4, 1e4, 1e4])   # m: where an inactive segment waits (fabricfem.wear donning), far from any garment
 
@@ -46,12 +44,9 @@ def as_masses(masses, n: int) -> np.ndarray:
 
 
 def project_along_gradient(x, ellipsoids: Sequence[Ellipsoid]) -> tuple[np.ndarray, np.ndarray]:
-    """Move the points inside any ellipsoid onto its surface along grad f at the point ([Man2006, Box 5]).
-
-    The ray x + s grad f / |grad f| is intersected with the surface (`Ellipsoid.gap` with one cast);
-    a point inside two overlapping segments is projected out of the deeper one first and re-checked
-    (at most MAX_PROJECTION_PASSES passes). Returns (projected points (N, 3), moved mask (N,)).
-    """
+    """Move the points inside the body onto its skin: along grad f at the point ([Man2006, Box 5], the ray
+    x + s grad f / |grad f| intersected with the surface) away from the joints, to the closest point of the blended
+    skin in a crease (`project_onto_skin`). Returns (projected points (N, 3), moved mask (N,))."""
     out, moved, _ = project_with_segment(x, ellipsoids)
     return out, moved
 
@@ -162,29 +157,99 @@ def row_unit(v: np.ndarray) -> np.ndarray:
     return v / row_length(v)[:, None]
 
 
-def project_with_segment(x, ellipsoids: Sequence[Ellipsoid], strict: bool = True,
-                         segments: SegmentStack | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """`project_along_gradient` that also returns the segment index (N,) each point was last projected
-    out of (for points inside no segment: the segment of smallest normalised radius q, a diagnostic).
-    `segments`: the ellipsoids already stacked (`SegmentStack`), if the caller has them.
+@dataclass
+class SkinProjection:
+    """Trial points projected onto the blended skin of posed segments (`project_onto_skin`): positions (N, 3) [m],
+    moved (N,) bool, segment (N,) (the segment a point was projected out of; in a crease the one of largest
+    weight; for points not moved the nearest by q, a diagnostic), crease (N,) bool (the points within the blend of
+    two segments, projected onto the blended skin), and for the crease points the skin's unit normal (N, 3) at the
+    foot and the segment weights (N, K) (fabricfem.body.skin)."""
 
-    Vectorised search: q = f + 1 (eq. 3.61) of every point and segment first (one matrix product); only the
-    points with q < 1 for some segment (the candidates) get the ray casts of `Ellipsoid.gap`, one evaluation
-    over all (point, segment) pairs with q < 1, and a later pass re-checks only the points moved by the
-    previous one (the others have not moved). The gap of a point with q >= 1 is >= 0 (`Ellipsoid.gap`), so
-    casting rays only from the points inside a segment, against that segment, gives the same projections as
-    casting them from every point against every segment.
+    position: np.ndarray
+    moved: np.ndarray
+    segment: np.ndarray
+    crease: np.ndarray
+    normal: np.ndarray
+    weights: np.ndarray
+
+
+def crease_points(q: np.ndarray, scale: np.ndarray, width: float) -> np.ndarray:
+    """(N,) mask of the points whose distance to two or more segments may be below the blend width w [m]: the lower
+    bound (sqrt(q) - 1) r_min of the distance (sqrt(q) is 1 / r_min-Lipschitz) below w for two segments; q (K, N)."""
+    return ((np.sqrt(q) - 1.0) * scale[:, None] < width).sum(axis=0) >= 2
+
+
+def project_onto_skin(x, ellipsoids: Sequence[Ellipsoid], width: float = BLEND_WIDTH,
+                      segments: SegmentStack | None = None) -> SkinProjection:
+    """Move the points inside the blended skin of the segments (fabricfem.body.blended, width w [m]) onto it.
+
+    Away from the creases (a point near one segment only) the skin is that segment's ellipsoid and a point inside
+    is projected along grad f at the point ([Man2006, Box 5]: a ray cast, `SegmentStack.ray_gap`; a point inside
+    two segments is near both, so one pass suffices; the passes re-check up to MAX_PROJECTION_PASSES). A point
+    within the blend of two segments (`crease_points`) inside the blended skin (phi < 0) is moved to its closest
+    point on it ([Hartmann1999], `closest_points`), with the skin's normal and segment weights there.
+    `segments`: the ellipsoids already stacked (`SegmentStack`), if the caller has them.
     """
     x = as_points("x", x)
-    out = x.copy()
     n = len(x)
-    moved = np.zeros(n, dtype=bool)
-    if n == 0 or not ellipsoids:
-        return out, moved, np.zeros(n, dtype=np.int64)
     stack = SegmentStack(ellipsoids) if segments is None else segments
+    K = len(ellipsoids)
+    normal, weights = np.zeros((n, 3)), np.zeros((n, K))
+    if n == 0 or not ellipsoids:
+        return SkinProjection(x.copy(), np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int64),
+                              np.zeros(n, dtype=bool), normal, weights)
     q = stack.normalised_radii(x)
+    crease = crease_points(q, stack.scale, width)
+    out, moved, segment = _project_single(x, stack, q, ~crease)
+    index = np.flatnonzero(crease)
+    if len(index):
+        posed = (stack.center, stack.rotation, stack.radii)
+        phi, _, weights[index] = blend(x[index], *posed, width)
+        inside = index[phi < 0.0]
+        if len(inside):
+            skin = closest_points(x[inside], *posed, width, strict=False)
+            out[inside], normal[inside], weights[inside] = skin.foot, skin.normal, skin.weights
+            moved[inside] = True
+        segment[index] = np.argmax(weights[index], axis=1)
+    return SkinProjection(out, moved, segment, crease, normal, weights)
+
+
+def skin_gap(x, ellipsoids: Sequence[Ellipsoid], width: float = BLEND_WIDTH
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Signed gap [m] of the points x (N, 3) to the blended skin of the segments (negative inside), the unit outward
+    normal, the segment index (of largest weight in a crease) and the segment weights (N, K) (fabricfem.body.skin):
+    the nearest segment's gap (`nodal.nearest_gap`) away from the creases, the blended skin's closest point within
+    them (`project_onto_skin`)."""
+    x = as_points("x", x)
+    g, n, segment = nearest_gap(x, ellipsoids)
+    weights = np.zeros((len(x), len(ellipsoids)))
+    weights[np.arange(len(x)), segment] = 1.0
+    if len(x) == 0 or len(ellipsoids) < 2:
+        return g, n, segment, weights
+    stack = SegmentStack(ellipsoids)
+    crease = crease_points(stack.normalised_radii(x), stack.scale, width)
+    if crease.any():
+        skin = closest_points(x[crease], stack.center, stack.rotation, stack.radii, width, strict=False)
+        g[crease], n[crease], segment[crease], weights[crease] = skin.gap, skin.normal, skin.segment, skin.weights
+    return g, n, segment, weights
+
+
+def project_with_segment(x, ellipsoids: Sequence[Ellipsoid], segments: SegmentStack | None = None,
+                         width: float = BLEND_WIDTH) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """`project_onto_skin`'s (positions (N, 3), moved (N,), segment (N,))."""
+    p = project_onto_skin(x, ellipsoids, width, segments)
+    return p.position, p.moved, p.segment
+
+
+def _project_single(x: np.ndarray, stack: SegmentStack, q: np.ndarray, allowed: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The ray-cast projection of `project_onto_skin` for the points `allowed` (near one segment only): positions,
+    moved mask and segment index (N,). Vectorised: only the points with q < 1 for some segment get ray casts, and a
+    later pass re-checks only the points the previous one moved."""
+    out = x.copy()
+    moved = np.zeros(len(x), dtype=bool)
     segment = q.argmin(axis=0)
-    inside_q = q < 1.0
+    inside_q = (q < 1.0) & allowed[None, :]
     candidates = np.flatnonzero(inside_q.any(axis=0))
     inside_q = inside_q[:, candidates]        # (K, candidates): inside segment k by q
     for k_pass in range(MAX_PROJECTION_PASSES):
@@ -200,80 +265,45 @@ def project_with_segment(x, ellipsoids: Sequence[Ellipsoid], strict: bool = True
         inside = g < -INSIDE_TOLERANCE * stack.scale[deepest]
         if not inside.any():
             return out, moved, segment
-        # grad f / |grad f| at the trial point, against the deepest segment
         direction = stack.normal(local[pair[deepest[inside], columns[inside]]], deepest[inside])
         points[inside] = points[inside] - g[inside, None] * direction
         out[candidates] = points
         candidates = candidates[inside]
         segment[candidates] = deepest[inside]
         moved[candidates] = True
-        # the next pass re-checks the moved points (the others have not moved)
         inside_q = stack.normalised_radii(out[candidates]) < 1.0
         keep = inside_q.any(axis=0)
         candidates, inside_q = candidates[keep], inside_q[:, keep]
-    return _push_out_of_creases(out, moved, segment, candidates, inside_q, stack, strict)
-
-
-def _push_out_of_creases(out: np.ndarray, moved: np.ndarray, segment: np.ndarray, candidates: np.ndarray,
-                         inside_q: np.ndarray, stack: SegmentStack, strict: bool
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Crease fallback of `project_with_segment` for the points `candidates` still inside after its passes
-    (inside_q: (K, candidates) q < 1). A point in the lens where two segments overlap (the inner side of a flexed
-    elbow) is sent back and forth by the one-segment projections; push it out of all the segments it is inside
-    of at once, along the bisector d of their outward normals (in the cone of the normals, where a contact
-    force between the cloth and two rigid bodies lies), by the largest |g_k| / (d . n_k)."""
-    for _ in range(MAX_CREASE_ITERATIONS):
-        if len(candidates) == 0:
-            return out, moved, segment
-        points = out[candidates]
-        gaps, local, pair = stack.gaps_inside(points, inside_q)
-        gaps = np.minimum(gaps, 0.0)   # 0 where not inside
-        k, j = np.nonzero(inside_q)
-        normals = np.zeros((stack.count,) + points.shape)
-        normals[k, j] = stack.normal(local[pair[k, j]], k)
-        direction = np.zeros_like(points)
-        for normal in normals:  # loop over the few segments, vectorised over the points
-            direction += normal
-        direction /= np.maximum(row_length(direction)[:, None], 1e-300)
-        cosine = np.einsum("kni,ni->kn", normals, direction)
-        reach = np.where(inside_q & (gaps < 0.0), -gaps / np.maximum(cosine, 1e-3), 0.0)
-        out[candidates] = points + reach.max(axis=0)[:, None] * direction
-        segment[candidates] = np.argmin(gaps, axis=0)
-        inside_q = stack.normalised_radii(out[candidates]) < 1.0
-        # rounding of a point projected onto a surface is not "inside" (as in the passes above)
-        gap_left = stack.gaps_inside(out[candidates], inside_q)[0].min(axis=0)
-        keep = gap_left < -INSIDE_TOLERANCE * stack.scale.min()
-        candidates, inside_q = candidates[keep], inside_q[:, keep]
-    if len(candidates) == 0 or not strict:
-        return out, moved, segment      # not strict: the trapped points stay where the last push put them
-    raise ValueError("ellipsoids: points remain inside after repeated projections (overlapping segments "
-                     "trap them); refine the time step")
+    if len(candidates):
+        raise RuntimeError(f"contact: {len(candidates)} points near one segment only remain inside it after "
+                           f"{MAX_PROJECTION_PASSES} projections")
+    return out, moved, segment
 
 
 def project_compiled(reference: np.ndarray, rows: np.ndarray, d: np.ndarray, v: np.ndarray, a: np.ndarray,
-                     dt: float, segments: tuple[np.ndarray, np.ndarray, np.ndarray], ellipsoids: Sequence[Ellipsoid],
-                     strict: bool, comm: MPI.Comm) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """`project_with_segment` of the trial points x* = reference + d[rows] + dt v[rows] + dt^2 a[rows] by the
-    compiled loop (fabricfem.contact.compiled.project; `segments`: its stacked centres, rotations and radii), with
-    `_push_out_of_creases` for the points still inside after the passes; `comm`: the ranks that build the loops on
-    first use (compiled.module). Returns (trial points (M, 3), projected points (M, 3), segment (M,), moved (M,)
-    bool)."""
+                     dt: float, segments: tuple[np.ndarray, np.ndarray, np.ndarray], width: float, comm: MPI.Comm
+                     ) -> tuple[np.ndarray, SkinProjection]:
+    """`project_onto_skin` of the trial points x* = reference + d[rows] + dt v[rows] + dt^2 a[rows] by the
+    compiled loop (fabricfem.contact.compiled.project; `segments`: its stacked centres, rotations and radii; w =
+    `width` [m]); `comm`: the ranks that build the loops on first use (compiled.module). Returns (trial points
+    (M, 3), the SkinProjection of them)."""
     lib, ffi = compiled.module(comm)
     p = functools.partial(compiled.pointer, ffi)
-    M = len(reference)
+    M, K = len(reference), len(segments[0])
     trial, position = np.empty((M, 3)), np.empty((M, 3))
     segment, trapped = np.empty(M, dtype=np.int64), np.empty(M, dtype=np.int64)
-    moved = np.empty(M, dtype=bool)
+    moved, crease = np.empty(M, dtype=bool), np.empty(M, dtype=bool)
+    normal, weights = np.zeros((M, 3)), np.zeros((M, K))
     n_trapped = lib.project(M, p(reference, "double"), p(rows, "int64_t"), p(d, "double"), p(v, "double"),
-                            p(a, "double"), dt, len(segments[0]), *(p(array, "double") for array in segments),
-                            INSIDE_TOLERANCE, MAX_PROJECTION_PASSES, p(trial, "double"), p(position, "double"),
-                            p(segment, "int64_t"), p(moved.view(np.uint8), "uint8_t"), p(trapped, "int64_t"))
+                            p(a, "double"), dt, K, *(p(array, "double") for array in segments),
+                            INSIDE_TOLERANCE, MAX_PROJECTION_PASSES, width, p(trial, "double"), p(position, "double"),
+                            p(segment, "int64_t"), p(moved.view(np.uint8), "uint8_t"),
+                            p(crease.view(np.uint8), "uint8_t"), p(normal, "double"), p(weights, "double"),
+                            p(trapped, "int64_t"))
     if n_trapped:
-        stack = SegmentStack(ellipsoids)
-        stuck = trapped[:n_trapped].copy()
-        _push_out_of_creases(position, moved, segment, stuck, stack.normalised_radii(position[stuck]) < 1.0, stack,
-                             strict)
-    return trial, position, segment, moved
+        raise RuntimeError(f"contact: {n_trapped} points near one segment only remain inside it after "
+                           f"{MAX_PROJECTION_PASSES} projections")
+    return trial, SkinProjection(position, moved, segment, crease, normal, weights)
 
 
 @dataclass

@@ -79,21 +79,25 @@ class TorqueMonitor:
 
 
 def local_torques(monitors: Sequence[TorqueMonitor], position: np.ndarray, force_on_cloth: np.ndarray,
-                  segment: np.ndarray, joint_position: Callable[[str], np.ndarray]) -> list[float]:
+                  segment: np.ndarray, joint_position: Callable[[str], np.ndarray],
+                  weights: np.ndarray | None = None) -> list[float]:
     """This rank's torques [N m] of `monitors` (`TorqueMonitor.value` with comm None) for the nodal forces on the
     cloth `force_on_cloth` (N, 3) [N] at `position` (N, 3) [m] touching `segment` (N,). The moments
     (x_i - J) x (-f_i) of the nodes are computed once per joint (`joint_position(name)` gives J [m], asked only
-    when a node touches the monitor's segments) and summed per monitor over the nodes on its segments."""
+    when a node touches the monitor's segments) and summed per monitor over the nodes on its segments. With the
+    skin's segment `weights` (N, K) (fabricfem.body.skin), node i carries the share sum_{k on the monitor's
+    segments} w_ik of its moment instead."""
     moments: dict[str, np.ndarray] = {}
     out = []
     for monitor in monitors:
-        mask = monitor.on_segments[segment]
+        share = None if weights is None else weights @ monitor.on_segments.astype(float)
+        mask = monitor.on_segments[segment] if share is None else share > 0.0
         if not mask.any():
             out.append(0.0)
             continue
         if monitor.joint not in moments:
             moments[monitor.joint] = _cross(position - joint_position(monitor.joint), -force_on_cloth)
-        moment = moments[monitor.joint]
+        moment = moments[monitor.joint] if share is None else moments[monitor.joint] * share[:, None]
         out.append(float(np.dot((moment if mask.all() else moment[mask]).sum(axis=0), monitor.axis)))
     return out
 

@@ -1,0 +1,236 @@
+"""The blended skin (fabricfem.body.blended) in C, for the explicit contact's compiled step (fabricfem.contact.compiled):
+the same formulas node by node.
+
+* `ellipsoid_distance`: the exact signed distance and outward normal of a point to one ellipsoid (the monotone
+  Newton iteration on the Lagrange multiplier of `fabricfem.body.ellipsoid._closest_sorted`, [Eberly2013]). A point
+  on a symmetry plane of the sorted axes (y_min = 0 exactly) is moved off it by 1e-15 of the smallest radius, so
+  that the general root applies (the numpy code splits cases instead; the difference is of that size).
+* `blend_eval`: phi, grad phi and the segment weights of the quadratic smooth minimum folded over the segments in
+  their order ([Quilez2013], `fabricfem.body.blended.blend`). A segment whose distance is certainly at least 2 w
+  above the nearest one's (the lower bound (sqrt(q) - 1) r_min of its distance, q = f + 1 [Man2006, eq. 3.61]) is
+  left out of the fold: its smooth-minimum terms are zero there.
+* `blend_closest`: the foot of a point on phi = 0 by the orthogonal projection iteration ([Hartmann1999],
+  `fabricfem.body.blended.closest_points`), with the gap, the normal and the weights at the foot.
+* `blend_query`: `blend_closest` over N points (the tests compare it with the numpy functions).
+"""
+from __future__ import annotations
+
+BLEND_CDEF = """
+void blend_query(int N, const double* x, int K, const double* center, const double* rotation, const double* radii,
+                 double width, double* gap, double* foot, double* normal, double* weights, uint8_t* converged);
+"""
+
+BLEND_SOURCE = r"""
+#define BLEND_ITERATIONS 200
+#define BLEND_FULL_STEPS 10
+#define BLEND_TOLERANCE 1e-9
+#define BLEND_MAX_SEGMENTS 64
+
+/* exact signed distance of x to the ellipsoid (c, R, r) and the unit outward normal n at the closest point */
+static double ellipsoid_distance(const double* x, const double* c, const double* R, const double* r, double* n)
+{
+  double y[3];
+  const double p0 = x[0] - c[0], p1 = x[1] - c[1], p2 = x[2] - c[2];
+  for (int j = 0; j < 3; ++j)
+    y[j] = (p0 * R[j] + p1 * R[3 + j]) + p2 * R[6 + j];
+  int o[3] = {0, 1, 2};                      /* axes by decreasing radius (stable) */
+  for (int i = 0; i < 2; ++i)
+    for (int j = 0; j < 2 - i; ++j)
+      if (r[o[j]] < r[o[j + 1]])
+      {
+        const int t = o[j];
+        o[j] = o[j + 1];
+        o[j + 1] = t;
+      }
+  double rs[3], ys[3], a[3], ry[3];
+  for (int i = 0; i < 3; ++i)
+  {
+    rs[i] = r[o[i]];
+    ys[i] = fabs(y[o[i]]);
+  }
+  if (ys[2] == 0.0)
+    ys[2] = 1e-15 * rs[2];
+  for (int i = 0; i < 3; ++i)
+  {
+    a[i] = rs[i] * rs[i] - rs[2] * rs[2];
+    ry[i] = rs[i] * ys[i];
+  }
+  double s = -INFINITY, tied = 0.0, upper = 0.0;
+  for (int i = 0; i < 3; ++i)
+  {
+    s = fmax(s, ry[i] - a[i]);
+    if (a[i] == 0.0)
+      tied += ry[i] * ry[i];
+    upper += ry[i] * ry[i];
+  }
+  s = fmax(s, sqrt(tied));
+  upper = sqrt(upper);
+  for (int it = 0; it < 100; ++it)
+  {
+    double g = -1.0, dg = 0.0;
+    for (int i = 0; i < 3; ++i)
+    {
+      const double ratio = ry[i] / (a[i] + s);
+      g += ratio * ratio;
+      dg -= 2.0 * ratio * ratio / (a[i] + s);
+    }
+    const double next = fmin(fmax(s - g / dg, s), upper);
+    const int done = fabs(next - s) <= 4.0 * 2.220446049250313e-16 * next;
+    s = next;
+    if (done)
+      break;
+  }
+  double z[3], zl[3], d2 = 0.0, q = 0.0;
+  for (int i = 0; i < 3; ++i)
+  {
+    const double zi = rs[i] * rs[i] * ys[i] / (a[i] + s);
+    z[o[i]] = y[o[i]] < 0.0 ? -zi : zi;
+  }
+  for (int i = 0; i < 3; ++i)
+  {
+    d2 += (y[i] - z[i]) * (y[i] - z[i]);
+    q += (y[i] / r[i]) * (y[i] / r[i]);
+    zl[i] = z[i] / (r[i] * r[i]);
+  }
+  const double l = sqrt(zl[0] * zl[0] + zl[1] * zl[1] + zl[2] * zl[2]);
+  for (int i = 0; i < 3; ++i)
+    n[i] = ((R[3 * i] * zl[0] + R[3 * i + 1] * zl[1]) + R[3 * i + 2] * zl[2]) / l;
+  return q >= 1.0 ? sqrt(d2) : -sqrt(d2);
+}
+
+/* phi, grad phi and the weights W (K) of the blended body at x (fabricfem.body.blended.blend) */
+static double blend_eval(const double* x, int K, const double* center, const double* rotation, const double* radii,
+                         double width, double* grad, double* W)
+{
+  double bound[BLEND_MAX_SEGMENTS], nearest = INFINITY;
+  for (int k = 0; k < K; ++k)
+  {
+    const double* c = center + 3 * k;
+    const double* R = rotation + 9 * k;
+    const double* r = radii + 3 * k;
+    double y[3];
+    const double p0 = x[0] - c[0], p1 = x[1] - c[1], p2 = x[2] - c[2];
+    for (int j = 0; j < 3; ++j)
+      y[j] = (p0 * R[j] + p1 * R[3 + j]) + p2 * R[6 + j];
+    const double q = (y[0] / r[0]) * (y[0] / r[0]) + (y[1] / r[1]) * (y[1] / r[1]) + (y[2] / r[2]) * (y[2] / r[2]);
+    bound[k] = (sqrt(q) - 1.0) * fmin(fmin(r[0], r[1]), r[2]);   /* <= the distance: sqrt(q) is 1/r_min-Lipschitz */
+    W[k] = 0.0;
+  }
+  double d[BLEND_MAX_SEGMENTS], n[BLEND_MAX_SEGMENTS][3];
+  for (int k = 0; k < K; ++k)   /* the exact distance of the segment of smallest bound first */
+    if (bound[k] < nearest)
+      nearest = bound[k];
+  double smallest = INFINITY;
+  for (int k = 0; k < K; ++k)
+    if (bound[k] <= nearest)
+    {
+      d[k] = ellipsoid_distance(x, center + 3 * k, rotation + 9 * k, radii + 3 * k, n[k]);
+      smallest = fmin(smallest, d[k]);
+      bound[k] = -INFINITY;   /* computed */
+    }
+  for (int k = 0; k < K; ++k)
+    if (bound[k] != -INFINITY)
+    {
+      if (bound[k] >= smallest + 2.0 * width)
+        d[k] = INFINITY;      /* left out of the fold */
+      else
+      {
+        d[k] = ellipsoid_distance(x, center + 3 * k, rotation + 9 * k, radii + 3 * k, n[k]);
+        smallest = fmin(smallest, d[k]);
+      }
+    }
+  double phi = INFINITY;
+  int first = 1;
+  for (int k = 0; k < K; ++k)
+  {
+    if (d[k] == INFINITY)
+      continue;
+    if (first)
+    {
+      phi = d[k];
+      W[k] = 1.0;
+      first = 0;
+      continue;
+    }
+    const double b = d[k];
+    const double h = fmax(width - fabs(phi - b), 0.0) / width;
+    const double other = 0.5 * h;
+    const double keep = phi <= b ? 1.0 - other : other;
+    for (int j = 0; j < k; ++j)
+      W[j] *= keep;
+    W[k] = 1.0 - keep;
+    phi = fmin(phi, b) - width * h * h / 4.0;
+  }
+  grad[0] = grad[1] = grad[2] = 0.0;
+  for (int k = 0; k < K; ++k)
+    if (W[k] > 0.0)
+      for (int i = 0; i < 3; ++i)
+        grad[i] += W[k] * n[k][i];
+  return phi;
+}
+
+/* Newton steps onto phi = 0; returns phi at the end and grad phi, W there */
+static double blend_onto(double* p, int K, const double* center, const double* rotation, const double* radii,
+                         double width, double* grad, double* W)
+{
+  double phi = blend_eval(p, K, center, rotation, radii, width, grad, W);
+  for (int it = 0; it < BLEND_ITERATIONS && fabs(phi) > BLEND_TOLERANCE; ++it)
+  {
+    const double g2 = grad[0] * grad[0] + grad[1] * grad[1] + grad[2] * grad[2];
+    for (int i = 0; i < 3; ++i)
+      p[i] -= phi / g2 * grad[i];
+    phi = blend_eval(p, K, center, rotation, radii, width, grad, W);
+  }
+  return phi;
+}
+
+/* the foot p of x on phi = 0, the unit normal and the weights there; returns 1 if converged */
+static int blend_closest(const double* x, int K, const double* center, const double* rotation, const double* radii,
+                         double width, double* p, double* normal, double* W)
+{
+  double grad[3];
+  p[0] = x[0], p[1] = x[1], p[2] = x[2];
+  int converged = 0;
+  for (int it = 0; it < BLEND_ITERATIONS; ++it)
+  {
+    blend_onto(p, K, center, rotation, radii, width, grad, W);
+    const double l = sqrt(grad[0] * grad[0] + grad[1] * grad[1] + grad[2] * grad[2]);
+    const double nn[3] = {grad[0] / l, grad[1] / l, grad[2] / l};
+    const double r[3] = {x[0] - p[0], x[1] - p[1], x[2] - p[2]};
+    const double along = r[0] * nn[0] + r[1] * nn[1] + r[2] * nn[2];
+    const double t[3] = {r[0] - along * nn[0], r[1] - along * nn[1], r[2] - along * nn[2]};
+    if (sqrt(t[0] * t[0] + t[1] * t[1] + t[2] * t[2]) <= BLEND_TOLERANCE)
+    {
+      converged = 1;
+      break;
+    }
+    const double step = it < BLEND_FULL_STEPS ? 1.0 : 0.5;
+    for (int i = 0; i < 3; ++i)
+      p[i] += step * t[i];
+  }
+  if (!converged)
+    blend_onto(p, K, center, rotation, radii, width, grad, W);
+  else
+    blend_eval(p, K, center, rotation, radii, width, grad, W);
+  const double l = sqrt(grad[0] * grad[0] + grad[1] * grad[1] + grad[2] * grad[2]);
+  for (int i = 0; i < 3; ++i)
+    normal[i] = grad[i] / l;
+  return converged;
+}
+
+void blend_query(int N, const double* x, int K, const double* center, const double* rotation, const double* radii,
+                 double width, double* gap, double* foot, double* normal, double* weights, uint8_t* converged)
+{
+  double grad[3];
+  for (int p = 0; p < N; ++p)
+  {
+    const double phi = blend_eval(x + 3 * p, K, center, rotation, radii, width, grad, weights + (size_t)K * p);
+    converged[p] = blend_closest(x + 3 * p, K, center, rotation, radii, width, foot + 3 * p, normal + 3 * p,
+                                 weights + (size_t)K * p);
+    double d2 = 0.0;
+    for (int i = 0; i < 3; ++i)
+      d2 += (x[3 * p + i] - foot[3 * p + i]) * (x[3 * p + i] - foot[3 * p + i]);
+    gap[p] = phi < 0.0 ? -sqrt(d2) : sqrt(d2);
+  }
+}
+"""
