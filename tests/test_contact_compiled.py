@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from fabricfem.body.blended import BLEND_WIDTH
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.contact import compiled
-from fabricfem.body.blended import BLEND_WIDTH
 from fabricfem.contact.explicit import numpy_contact, project_compiled, project_onto_skin
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.run import run_sleeve
