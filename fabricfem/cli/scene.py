@@ -15,6 +15,8 @@ from fabricfem.scenes.batch import read_summary
 from fabricfem.scenes.run import run_scene, scene_name, with_output_dir
 from fabricfem.scenes.sweep import parse_vary, run_sweep
 from fabricfem.solvers.newton import SolverError
+from fabricfem.studies.accuracy_ladder import HEADER as LADDER_HEADER
+from fabricfem.studies.accuracy_ladder import ladder_plan, run_ladder_accurate, uses_ladder
 
 
 def _add_scene_options(parser: argparse.ArgumentParser) -> None:
@@ -45,7 +47,9 @@ def _run(args: argparse.Namespace) -> int:
     try:
         with json_stdout(args.json):
             if accurate:
-                _, outcome = run_accurate(scene if out is None else with_output_dir(scene, out), target, args.quantity)
+                scene = scene if out is None else with_output_dir(scene, out)
+                accurate_run = run_ladder_accurate if uses_ladder(scene, args.quantity) else run_accurate
+                _, outcome = accurate_run(scene, target, args.quantity)
             else:
                 outcome = run_scene(scene, out=out, resume=args.resume)
     except (SolverError, DynamicsError) as exc:   # the run stopped: summary.json says "failed: ..."
@@ -61,6 +65,15 @@ def _run(args: argparse.Namespace) -> int:
 def _plan(args: argparse.Namespace) -> int:
     """plan: the levels with their estimates and costs; exit 2 (SceneError) when no level meets the target."""
     scene, target = _scene_and_target(args)
+    if uses_ladder(scene, args.quantity):   # a wear scene's windowed statistic: the mesh ladder
+        with json_stdout(args.json):
+            ladder = ladder_plan(scene, target, args.quantity)
+        if args.json:
+            print_json({"quantity": ladder.quantity, "target": ladder.target, "method": "mesh ladder",
+                        "chosen": ladder.chosen, "note": ladder.note,
+                        "levels": [dict(zip(LADDER_HEADER, row)) for row in ladder.plan_rows()]})
+        ladder.require()
+        return 0
     with json_stdout(args.json):
         levels = plan(scene, target, args.quantity)
     if args.json:

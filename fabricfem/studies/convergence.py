@@ -110,6 +110,22 @@ def ladder_rows(levels: list[dict], folders: list[Path], ratio: float) -> list[d
     return rows
 
 
+def run_ladder(scene: Scene, out: Path, levels: int, ratio: float, quick: bool = False,
+               comm: MPI.Comm = MPI.COMM_WORLD, ranks_per_variant: int = 1,
+               what: str = "convergence study") -> tuple[list[dict], list[Path]]:
+    """Run (or read back) the levels 0 .. levels - 1 of the ladder (module docstring) into out/level_k as one
+    resumable batch; returns (the levels' scene data, their folders), coarse to fine. BatchError naming a level
+    that failed."""
+    datas = [level_data(scene, k, ratio, out, quick) for k in range(levels)]
+    scenes = [validate(d, source=f"level {k}", path=scene.path) for k, d in enumerate(datas)]
+    folders = [out / f"level_{k}" for k in range(levels)]
+    jobs = [Job(f"level {k} ({mesh_label(d)})", float(ratio ** (3 * k)),
+                lambda sub, s=s: run_scene(s, sub).status,
+                lambda s=s, f=f: completed(f, scene_sha256(s))) for k, (d, s, f) in enumerate(zip(datas, scenes, folders))]
+    check(run_batch(jobs, comm, ranks_per_variant, what), what, str(out))
+    return datas, folders
+
+
 def run_convergence(scene: Scene, out: str | Path, levels: int = 3, ratio: float = 1.5, quick: bool = False,
                     comm: MPI.Comm = MPI.COMM_WORLD, ranks_per_variant: int = 1) -> list[dict]:
     """Run the ladder (module docstring) and write convergence.csv and .png under `out`; returns the rows."""
@@ -121,13 +137,7 @@ def run_convergence(scene: Scene, out: str | Path, levels: int = 3, ratio: float
         raise ValueError(f"ratio must lie in (1, 4], got {ratio!r}")
     out = Path(out)
     levels = 2 if quick else levels
-    datas = [level_data(scene, k, ratio, out, quick) for k in range(levels)]
-    scenes = [validate(d, source=f"level {k}", path=scene.path) for k, d in enumerate(datas)]
-    folders = [out / f"level_{k}" for k in range(levels)]
-    jobs = [Job(f"level {k} ({mesh_label(d)})", float(ratio ** (3 * k)),
-                lambda sub, s=s: run_scene(s, sub).status,
-                lambda s=s, f=f: completed(f, scene_sha256(s))) for k, (d, s, f) in enumerate(zip(datas, scenes, folders))]
-    check(run_batch(jobs, comm, ranks_per_variant, "convergence study"), "convergence study", str(out))
+    datas, folders = run_ladder(scene, out, levels, ratio, quick, comm, ranks_per_variant)
     rows = ladder_rows(datas, folders, ratio) if comm.rank == 0 else None
     rows = comm.bcast(rows, root=0)
     if comm.rank == 0:
