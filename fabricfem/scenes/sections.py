@@ -244,7 +244,8 @@ class AccuracySection:
                                "max_strain", None)
     target: float | None = doc("relative error target, in (0, 1) (e.g. 0.02)", None)
     finer_levels: int = doc("levels finer than the scene's mesh that may be chosen (cell counts x 2, x 4, ...; "
-                            "wear: x ratio, x ratio^2, ...)", 2)
+                            "wear: x ratio, x ratio^2, ...; a wear scene's windowed statistic: the mesh ladder's "
+                            "levels above the scene's mesh, the finest the reference)", 2)
     membrane: bool = doc("a shell scene: also solve the membrane model at the pilot levels and choose it where its "
                          "difference to the shell's extrapolated value meets the target (not with edge moments or "
                          "rotation monitors)", True)
@@ -258,7 +259,8 @@ class AccuracySection:
                                "(default: the whole scene)", None)
     ratio: float | None = doc("wear: refinement ratio between levels, in (1, 4]: tube cell counts x ratio^k "
                               "(rounded), pattern element size h / ratio^k (default: 2 where the coarsest pilot "
-                              "keeps 6 cells around a tube, else the largest ratio that does; 2 for a pattern)", None)
+                              "keeps 6 cells around a tube, else the largest ratio that does; 2 for a pattern; "
+                              "1.5 on the mesh ladder of a windowed statistic)", None)
 
 
 def section(cls, table: dict | None):

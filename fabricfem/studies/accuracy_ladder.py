@@ -143,10 +143,11 @@ def ladder_plan(scene: Scene, target: float | None = None, quantity: str | None 
 def _richardson_note(finest: dict) -> str:
     """What Richardson says of the ladder (convergence.ladder_rows' finest row): the extrapolated value and order,
     or why not."""
-    if finest["extrapolated_Nm"] is None:
+    if finest["observed_order"] is None and finest["extrapolated_Nm"] is None:
         return f"Richardson: {finest['note']}"
-    if finest["note"] != "asymptotic":
-        return f"Richardson: not asymptotic ({finest['note']}); the differences are measured, not estimated errors"
+    if finest["note"] != "asymptotic" or finest["extrapolated_Nm"] is None:
+        return (f"Richardson: not asymptotic ({finest['note']}); the differences are measured, not estimated "
+                f"errors")
     gci = "" if finest["gci"] is None else f" (estimated error of the finest {finest['gci']:.2e})"
     return (f"Richardson: asymptotic, order {finest['observed_order']:.3g}, extrapolated "
             f"{finest['extrapolated_Nm']:.6g}{gci}")
