@@ -20,7 +20,6 @@ points that move with the segments), with a penalty alternative.
 from __future__ import annotations
 
 import functools
-import math
 import time
 from contextlib import contextmanager
 from typing import Callable, Iterator, Sequence
@@ -30,6 +29,7 @@ from mpi4py import MPI
 
 from fabricfem.body.blended import BLEND_WIDTH, check_width
 from fabricfem.body.ellipsoid import Ellipsoid
+from fabricfem.body.skin import Skin
 from fabricfem.contact import compiled, nodal
 from fabricfem.contact import friction as friction_law
 from fabricfem.contact.nodal import (
@@ -39,6 +39,7 @@ from fabricfem.contact.nodal import (
     pressure_function,
     pressure_on_body,
 )
+from fabricfem.contact.poses import PoseCache, unchecked_ellipsoid
 from fabricfem.contact.projection import (  # noqa: F401 (the projections are public here too)
     INSIDE_TOLERANCE,
     MAX_PROJECTION_PASSES,
@@ -84,7 +85,9 @@ EXPLICIT_METHODS = ("lagrange", "penalty")
 
 class ExplicitBodyContact:
     """Nodal frictional contact of a shell in explicit central differences (fabricfem.dynamics.explicit)
-    against rigid ellipsoids that move with a `Body` ([Man2006, ch. 3], Box 5; ch. 5). SI units.
+    against the skin of a `Body` ([Man2006, ch. 3], Box 5; ch. 5): by default its rigid ellipsoids joined by the
+    blend of width `blend_width` [m] in the creases (fabricfem.body.blended), or any `skin` of the surface contract
+    (fabricfem.body.skin, e.g. a rigged surface mesh). SI units.
 
     Nodes: the owned displacement nodes of the shell (fabricfem.contact.nodal.contact_nodes); nodes with a
     held displacement component carry no contact. Everything is vectorised over the nodes and local to a
@@ -125,7 +128,7 @@ class ExplicitBodyContact:
     """
 
     def __init__(self, model, body, friction: float = 0.0, method: str = "lagrange",
-                 penalty: float | None = None, blend_width: float = BLEND_WIDTH):
+                 penalty: float | None = None, blend_width: float = BLEND_WIDTH, skin: Skin | None = None):
         if method not in EXPLICIT_METHODS:
             raise ValueError(f"method must be one of {EXPLICIT_METHODS}, got {method!r}")
         self.model = model
@@ -139,6 +142,11 @@ class ExplicitBodyContact:
         self.comm = model.comm
         self.names = list(body.segments)
         self.blend_width = check_width(blend_width)       # m: the blended skin's width (fabricfem.body.blended)
+        # another skin of the body (fabricfem.body.skin, e.g. a rigged surface mesh) instead of the blended segments:
+        # its gap, foot, normal and weights by its query; the segments' frames still carry the stick points
+        if skin is not None and tuple(skin.segment_names) != tuple(body.segments):
+            raise ValueError(f"skin: its segments {list(skin.segment_names)} are not the body's {list(body.segments)}")
+        self.skin = skin
         held = self.nodes.constrained.any(axis=1)
         self.moving = ~held                                  # nodes that take contact
         self.dofs = self.nodes.dofs[self.moving]             # (M, 3) local rows in W
@@ -171,7 +179,7 @@ class ExplicitBodyContact:
         self.transverse_scale: Callable[[float], float] | None = None
         self.segment_active: Callable[[float], np.ndarray] | None = None
         # the Lagrange step by the compiled loops (fabricfem.contact.compiled) or by numpy (COMPILED_CONTACT)
-        self.compiled = COMPILED_CONTACT["enabled"] and method == "lagrange"
+        self.compiled = COMPILED_CONTACT["enabled"] and method == "lagrange" and skin is None
         self._rows: np.ndarray | None = None      # (M, 3) int64 rows of the nodes in W (compiled loops)
         self._monitor_arrays: tuple | None = None  # the monitors' segment flags and axes (compiled loops)
 
@@ -248,13 +256,33 @@ class ExplicitBodyContact:
 
     def max_penetration(self, d: np.ndarray, t: float) -> float:
         """max(0, -min g) [m] of the nodes at displacements `d` (local array of W) against the body at t, all ranks."""
-        g, *_ = skin_gap(self.reference + d[self.dofs], self.body_at(t), self.blend_width)
+        g, *_ = self.gaps(self.reference + d[self.dofs], t, self.body_at(t))
         return float(self.comm.allreduce(float(np.max(-g, initial=0.0)), op=MPI.MAX))
 
     def min_gap(self, d: np.ndarray, t: float) -> float:
         """Smallest signed gap [m] of the nodes against the body at t (all ranks)."""
-        g, *_ = skin_gap(self.reference + d[self.dofs], self.body_at(t), self.blend_width)
+        g, *_ = self.gaps(self.reference + d[self.dofs], t, self.body_at(t))
         return float(self.comm.allreduce(float(np.min(g, initial=np.inf)), op=MPI.MIN))
+
+    def gaps(self, x: np.ndarray, t: float, ellipsoids: list[Ellipsoid]
+             ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The skin seen from the points x (N, 3) [m] at time t [s] (the segments posed as `ellipsoids`): signed gap
+        [m], unit outward normal, segment index and segment weights (N, K) (fabricfem.body.skin): the blended
+        segments' (`skin_gap`) or the given skin's query."""
+        if self.skin is None:
+            return skin_gap(x, ellipsoids, self.blend_width)
+        q = self.skin.query(x, t)
+        return q.gap, q.normal, q.segment, q.weights
+
+    def project(self, x: np.ndarray, t: float, ellipsoids: list[Ellipsoid], stack: SegmentStack) -> SkinProjection:
+        """The points x (N, 3) [m] inside the skin at time t [s] moved onto it (`project_onto_skin` for the blended
+        segments; the given skin's closest points otherwise, all with the skin's normal and weights)."""
+        if self.skin is None:
+            return project_onto_skin(x, ellipsoids, self.blend_width, segments=stack)
+        q = self.skin.query(x, t)
+        moved = q.gap < 0.0
+        return SkinProjection(np.where(moved[:, None], q.foot, x), moved, q.segment, np.ones(len(x), dtype=bool),
+                              q.normal, q.weights)
 
     def start_trace(self):
         """Record every step's time, registered torques (instantaneous, not averaged) and total normal force."""
@@ -275,8 +303,8 @@ class ExplicitBodyContact:
         return float(self.comm.allreduce(self.max_penetration_seen, op=MPI.MAX))
 
     def _monitor_penetration(self, x: np.ndarray, ellipsoids):
-        """max(0, -g) of the points x against the blended skin of the posed segments (`skin_gap`)."""
-        g, *_ = skin_gap(x, ellipsoids, self.blend_width)
+        """max(0, -g) of the points x against the skin at the time of the last step."""
+        g, *_ = self.gaps(x, self.time, ellipsoids)
         self.max_penetration_seen = max(self.max_penetration_seen, float(np.max(-g, initial=0.0)))
 
     def total_force(self) -> np.ndarray:
@@ -338,8 +366,8 @@ class ExplicitBodyContact:
             return ellipsoids
         scale = 1.0 if self.transverse_scale is None else float(self.transverse_scale(t))
         active = np.ones(len(ellipsoids), dtype=bool) if self.segment_active is None else self.segment_active(t)
-        return [_ellipsoid(e.center, e.rotation, e.radii * np.array([1.0, scale, scale])) if on
-                else _ellipsoid(PARKED_AT + 10.0 * k, np.eye(3), np.full(3, 1e-3))
+        return [unchecked_ellipsoid(e.center, e.rotation, e.radii * np.array([1.0, scale, scale])) if on
+                else unchecked_ellipsoid(PARKED_AT + 10.0 * k, np.eye(3), np.full(3, 1e-3))
                 for k, (e, on) in enumerate(zip(ellipsoids, active))]
 
     def _posed(self, t: float) -> list[Ellipsoid]:
@@ -362,9 +390,11 @@ class ExplicitBodyContact:
         q = normalised_radii(x_all, ellipsoids)
         segment = np.argmin(q, axis=0).astype(np.int64)
         near = (q.min(axis=0) < 1.0) | crease_points(q, SegmentStack(ellipsoids).scale, self.blend_width)
+        if self.skin is not None:      # another skin: its own query decides
+            near[:] = True
         index = np.flatnonzero(near)
         x = x_all[index]
-        g, n, seg, weights = skin_gap(x, ellipsoids, self.blend_width)
+        g, n, seg, weights = self.gaps(x, t, ellipsoids)
         segment[index] = seg
         p = normal_pressure(g, np.zeros(len(g)), self.penalty)
         inside = p > 0.0
@@ -407,7 +437,7 @@ class ExplicitBodyContact:
             return
         x_trial = self.reference + d[rows] + dt * v[rows] + dt ** 2 * a[rows]
         stack = SegmentStack(ellipsoids)
-        skin = project_onto_skin(x_trial, ellipsoids, self.blend_width, segments=stack)
+        skin = self.project(x_trial, t_next, ellipsoids, stack)
         seg = skin.segment
         index = np.flatnonzero(skin.moved)                               # nodes in contact
         m = self._lumped_mass(integrator)[index]                          # M + dt/2 C (per component)
@@ -496,97 +526,3 @@ class ExplicitBodyContact:
         self.active[index] = True
         self._accumulate(dt, index, normal_force, self._local_torques(position[index], force, segment[index],
                                                                       weights))
-
-
-class PoseCache:
-    """Posed segments and joint positions of a `Body` at the last few times [s]. An explicit step asks for
-    the pose at t_{n+2} and the joint position at t_{n+1}, which the previous step has posed already (the
-    same floating-point time), so each step poses the body once. Returns the same ellipsoids as
-    `Body.pose(t)` (in segment order) and the same points as `Body.joint_position`."""
-
-    SIZE = 3
-
-    def __init__(self, body):
-        self.body = body
-        self._positions: dict[float, dict] = {}
-        self._ellipsoids: dict[float, list[Ellipsoid]] = {}
-        self._last_pose: dict[str, tuple[bytes, Ellipsoid]] = {}   # segment -> (its three points, its pose)
-        self._validated = False
-
-    def positions(self, t: float) -> dict:
-        t = float(t)
-        p = self._positions.get(t)
-        if p is None:
-            if len(self._positions) >= self.SIZE:
-                self._positions.pop(next(iter(self._positions)))
-            p = self._positions[t] = self.body.kinematics.positions(t)
-        return p
-
-    def ellipsoids(self, t: float) -> list[Ellipsoid]:
-        t = float(t)
-        e = self._ellipsoids.get(t)
-        if e is None:
-            if len(self._ellipsoids) >= self.SIZE:
-                self._ellipsoids.pop(next(iter(self._ellipsoids)))
-            positions = self.positions(t)
-            if self._validated:
-                e = [self._posed(name, s, positions) for name, s in self.body.segments.items()]
-            else:   # the first pose goes through the validating constructors (Segment.pose, Ellipsoid)
-                e = [s.pose(positions) for s in self.body.segments.values()]
-                self._validated = True
-            self._ellipsoids[t] = e
-        return e
-
-    def _posed(self, name: str, segment, positions: dict) -> Ellipsoid:
-        """`_posed_segment`, or the segment's last pose when its joints and marker have not moved (the same
-        function of the same three points: a still upper arm is posed once)."""
-        key = b"".join(np.asarray(positions[p], dtype=float).tobytes()
-                       for p in (segment.proximal, segment.distal, segment.marker))
-        last = self._last_pose.get(name)
-        if last is not None and last[0] == key:
-            return last[1]
-        posed = _posed_segment(segment, positions)
-        self._last_pose[name] = (key, posed)
-        return posed
-
-    def joint(self, name: str, t: float) -> np.ndarray:
-        """Position [m] of a joint or marker at time t (ValueError for an unknown name)."""
-        if name not in self.body.kinematics.names:
-            raise ValueError(f"name: unknown joint or marker {name!r}")
-        return np.asarray(self.positions(t)[name], dtype=float)
-
-
-def _posed_segment(segment, positions) -> Ellipsoid:
-    """`Segment.pose` (fabricfem.body.pose.segment_frame, [Man2006, sec. 5.1]) with the same arithmetic but
-    without re-validating the inputs of every explicit step (the rigid motion keeps the frame proper; the
-    first pose of a PoseCache is validated): x^c = J1 + f (J2 - J1), e1 = (J2 - J1) / |J2 - J1|,
-    e2 = the unit part of M - x^c normal to e1, e3 = e1 x e2. On Python floats: the products and sums of three
-    of numpy's dot and norm in the same order, without the calls on 3-vectors."""
-    j1, j2, marker = (np.asarray(positions[name], dtype=float).tolist()
-                      for name in (segment.proximal, segment.distal, segment.marker))
-    axis = [b - a for a, b in zip(j1, j2)]
-    length = math.sqrt(_dot(axis, axis))
-    center = [a + segment.center_fraction * d for a, d in zip(j1, axis)]
-    e1 = [d / length for d in axis]
-    offset = [m - c for m, c in zip(marker, center)]
-    along = _dot(offset, e1)
-    perpendicular = [o - along * e for o, e in zip(offset, e1)]
-    width = math.sqrt(_dot(perpendicular, perpendicular))
-    e2 = [p / width for p in perpendicular]
-    e3 = [e1[1] * e2[2] - e1[2] * e2[1], e1[2] * e2[0] - e1[0] * e2[2], e1[0] * e2[1] - e1[1] * e2[0]]
-    return _ellipsoid(np.array(center), np.array(list(zip(e1, e2, e3))), np.array(segment.radii, dtype=float))
-
-
-def _dot(a: list[float], b: list[float]) -> float:
-    """a . b of two 3-vectors as numpy sums them: (a0 b0 + a1 b1) + a2 b2."""
-    return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2]
-
-
-def _ellipsoid(center: np.ndarray, rotation: np.ndarray, radii: np.ndarray) -> Ellipsoid:
-    """An Ellipsoid from already valid parts, without the checks of its constructor (an explicit step poses the
-    body every step; the first pose of a PoseCache is validated)."""
-    posed = object.__new__(Ellipsoid)        # frozen dataclass: fields set as its __post_init__ does
-    object.__setattr__(posed, "center", center)
-    object.__setattr__(posed, "rotation", rotation)
-    object.__setattr__(posed, "radii", radii)
-    return posed

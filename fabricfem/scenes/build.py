@@ -525,4 +525,4 @@ def garment_scene_run(scene: Scene, comm) -> GarmentRun:
                              contact_method=plan.contact.method or "lagrange", friction=plan.contact.friction,
                              penalty=plan.contact.penalty,
                              psri_degrees=tuple(garment.quadrature) if garment.quadrature else (4, 2),
-                             axis=plan.axis, handles=handles)
+                             axis=plan.axis, handles=handles, blend_width=parsed.body.blend_width)

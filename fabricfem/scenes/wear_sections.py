@@ -49,6 +49,9 @@ class WearBodySection:
     type: str = doc("arm | lower_body | limb (default_arm = arm)")
     center: list | None = doc("limb: [x, y, z] centre [m]", None)
     radii: list | None = doc("limb: [r1, r2, r3] semi-axes along x, y, z [m]", None)
+    blend_width: float = doc("width of the smooth blend of the segments at the joints [m]: the skin has no crease "
+                             "there and lies at most blend_width / 4 outside the segments (fabricfem.body.blended)",
+                             0.05)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -35,7 +35,9 @@ import numpy as np
 from mpi4py import MPI
 
 from fabricfem.body.blend import BlendedStart, smoothstep
+from fabricfem.body.blended import BLEND_WIDTH
 from fabricfem.body.pose import Body
+from fabricfem.body.skin import Skin
 from fabricfem.contact.explicit import ExplicitBodyContact
 from fabricfem.contact.seams import SeamSpec, SeamTies
 from fabricfem.dynamics import stability
@@ -360,7 +362,8 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
                       friction: float = 0.0, penalty: float | None = None,
                       psri_degrees: tuple[int, int] = (4, 2), measure_strain: bool = True,
                       config: object = None, axis: tuple[str, Callable[[float], float]] | None = None,
-                      handles: Sequence[Callable[[ShellModel], object]] = ()) -> GarmentRun:
+                      handles: Sequence[Callable[[ShellModel], object]] = (), blend_width: float = BLEND_WIDTH,
+                      skin: Skin | None = None) -> GarmentRun:
     """Shell, seams, body contact, monitors, integrator and phases of a garment run (module docstring).
 
     Args:
@@ -374,6 +377,8 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
         axis: (label, motion time [s] -> value): the records' coordinate (e.g. the elbow angle [deg]); None: time.
         handles: builders model -> hook of the donning handles (fabricfem.contact.handles: EdgeGrip during the
             pull phase, Belt from the belt phase), applied after the seams and before the body contact.
+        blend_width: the width [m] of the blend that joins the body's segments into a skin without creases
+            (fabricfem.body.blended); skin: another skin of the body (fabricfem.body.skin, e.g. a surface mesh).
     """
     if fabric.density <= 0.0:
         raise ValueError("density: the explicit engine needs a positive fabric density [kg/m^3]")
@@ -392,7 +397,8 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
     kin = body.kinematics
     motion_time = timeline.motion_length(kin)
     posed = Body(list(body.segments.values()), DelayedKinematics(kin, timeline.start_of("motion")), body.schedule)
-    contact = ExplicitBodyContact(model, posed, friction=friction, method=contact_method, penalty=penalty)
+    contact = ExplicitBodyContact(model, posed, friction=friction, method=contact_method, penalty=penalty,
+                                  blend_width=blend_width, skin=skin)
     for spec in torques:
         contact.track_torque(spec.name, spec.joint, spec.axis, spec.segments)
     if timeline.grow_from < 1.0:
