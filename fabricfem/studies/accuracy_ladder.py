@@ -54,8 +54,10 @@ def quantity_name(scene: Scene, quantity: str | None) -> str | None:
 def uses_ladder(scene: Scene, quantity: str | None) -> bool:
     """Whether an accuracy target on `quantity` (else the scene's [accuracy] quantity) is planned on the ladder: a
     wear scene's windowed statistic."""
+    if scene.kind != "wear":
+        return False
     name = quantity_name(scene, quantity) or section(AccuracySection, scene.get("accuracy")).quantity
-    return scene.kind == "wear" and isinstance(name, str) and name.endswith(WINDOWED_SUFFIX)
+    return isinstance(name, str) and name.endswith(WINDOWED_SUFFIX)
 
 
 @dataclass
