@@ -1,0 +1,96 @@
+"""The cloth's current surface triangulation, the same on every rank.
+
+A shell's quadrilateral Q2 cell has nine displacement nodes on a 3 x 3 grid; split through its nodes, it is four
+sub-quadrilaterals of two triangles each, eight triangles per cell. The triangles are numbered by the global
+index of the scalar displacement space's nodes (dolfinx's index map), gathered once onto every rank; every step
+each rank sends the current positions (and velocities) of its owned nodes to all others (`MPI.Allgatherv`), so
+that every rank holds the whole surface and a search on it finds the pairs across rank boundaries as on one rank.
+Units: metres, seconds.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse
+from mpi4py import MPI
+from scipy.sparse.csgraph import connected_components
+
+from fabricfem.contact import nodal
+
+# basix's Q2 quadrilateral: vertices (0, 0), (1, 0), (0, 1), (1, 1), the midpoints of the edges (v0 v1), (v0 v2),
+# (v1 v3), (v2 v3), the centre; GRID[j][i] is the local node at (i / 2, j / 2) of the reference square
+GRID = np.array([[0, 4, 1], [5, 8, 6], [2, 7, 3]])
+# the eight triangles (counter-clockwise in the reference square, so that their normals follow the cell's)
+SPLIT = np.array([(GRID[j, i], GRID[j, i + 1], GRID[j + 1, i + 1]) for j in range(2) for i in range(2)]
+                 + [(GRID[j, i], GRID[j + 1, i + 1], GRID[j + 1, i]) for j in range(2) for i in range(2)])
+
+
+class ClothSurface:
+    """The shell's nodes and Q2 cells as one global triangulation on every rank (module docstring).
+
+    Attributes:
+        nodes: fabricfem.contact.nodal.ContactNodes of the owned nodes of this rank.
+        owned: (n,) global indices of this rank's owned nodes (the order of `nodes`).
+        count: N, the number of nodes of the whole cloth.
+        triangles: (T, 3) global node indices of the triangles; triangle_cell: (T,) their cells (rows of
+            cell_nodes); cell_nodes: (C, 9) global node indices of every cell.
+        reference: (N, 3) reference positions [m]; area: (N,) lumped reference areas [m^2]; held: (N,) True for
+            a node with a prescribed displacement component (all ranks).
+    """
+
+    def __init__(self, model):
+        self.comm = model.comm
+        self.nodes = nodal.contact_nodes(model)
+        scalar = self.nodes.scalar_space
+        index_map = scalar.dofmap.index_map
+        local_to_global = np.asarray(index_map.local_to_global(
+            np.arange(index_map.size_local + index_map.num_ghosts, dtype=np.int32)), dtype=np.int64)
+        self.owned = local_to_global[self.nodes.node_index]
+        n_cells = model.mesh.topology.index_map(2).size_local
+        cells = local_to_global[np.asarray(scalar.dofmap.list.array).reshape(-1, 9)[:n_cells]]
+        self.cell_nodes = np.concatenate(self.comm.allgather(cells)).astype(np.int64)
+        self.count = int(index_map.size_global)
+        C = len(self.cell_nodes)
+        self.triangles = self.cell_nodes[:, SPLIT].reshape(-1, 3)
+        self.triangle_cell = np.repeat(np.arange(C, dtype=np.int64), len(SPLIT))
+        self._counts = np.array(self.comm.allgather(len(self.owned)), dtype=np.int64)
+        self._order = self._gather_ints(self.owned)
+        self.reference = self.gather(self.nodes.reference)
+        self.area = self.gather(self.nodes.area[:, None])[:, 0]
+        self.held = self.gather(self.nodes.constrained.any(axis=1).astype(float)[:, None])[:, 0] > 0.0
+
+    def _gather_ints(self, values: np.ndarray) -> np.ndarray:
+        out = np.empty(int(self._counts.sum()), dtype=np.int64)
+        self.comm.Allgatherv(np.ascontiguousarray(values, dtype=np.int64), [out, self._counts, MPI.INT64_T])
+        return out
+
+    def gather(self, owned_values: np.ndarray) -> np.ndarray:
+        """(N, k) array of all nodes (global order) from this rank's (n, k) values of its owned nodes (all ranks
+        call this)."""
+        owned_values = np.ascontiguousarray(owned_values, dtype=float)
+        k = owned_values.shape[1]
+        received = np.empty((int(self._counts.sum()), k))
+        self.comm.Allgatherv(owned_values, [received, self._counts * k, MPI.DOUBLE])
+        out = np.empty((self.count, k))
+        out[self._order] = received
+        return out
+
+    def positions(self, d: np.ndarray) -> np.ndarray:
+        """(N, 3) current positions X + u [m] of all nodes from the local array `d` of the model's space W."""
+        return self.gather(self.nodes.reference + d[self.nodes.dofs])
+
+    def owned_rows(self, values: np.ndarray) -> np.ndarray:
+        """The (n, k) rows of an (N, k) all-node array that belong to this rank's owned nodes."""
+        return values[self.owned]
+
+    def parts(self, joined: np.ndarray | None = None) -> np.ndarray:
+        """(N,) label of the connected part of each node: nodes of a cell are connected, and so are the node pairs
+        `joined` ((k, 2) global indices, e.g. a garment's seams)."""
+        first = np.repeat(self.cell_nodes[:, 0], self.cell_nodes.shape[1])
+        rows, cols = [first], [self.cell_nodes.ravel()]
+        if joined is not None and len(joined):
+            pairs = np.asarray(joined, dtype=np.int64).reshape(-1, 2)
+            rows.append(pairs[:, 0])
+            cols.append(pairs[:, 1])
+        rows, cols = np.concatenate(rows), np.concatenate(cols)
+        graph = scipy.sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(self.count, self.count))
+        return connected_components(graph, directed=False)[1]

@@ -1,0 +1,222 @@
+"""Cloth-cloth contact in explicit central differences: a shell's nodes against its own triangles (and those of
+every other garment panel in the same mesh), penalty with Coulomb friction ([Bridson2002, sec. 6-7]).
+
+Geometry (fabricfem.contact.cloth_surface, fabricfem.contact.proximity): the Q2 cells split into triangles through
+their nodes; every vertex p closer than the contact distance d_c (default the shell's thickness) to a triangle
+(a, b, c) that is not a neighbour forms a pair, with x_c = sum_i w_i x_i the closest point (barycentric w) and
+delta = |x_p - x_c| [m]. Neighbours: the vertex is a node of the triangle's cell, or the two belong to the same
+connected part of the mesh (its cells, joined by the node pairs `joined`, e.g. a garment's seams) and are closer
+than EXCLUSION x d_c in the reference (stress-free) configuration, where they touch by construction and contact
+would fight the shell's own stiffness. Separate parts (two sheets, two garments) are never neighbours, however
+close their reference positions.
+
+Response, in `forces` (before the division of the step; d^{n+1} and v~ = v^n + dt/2 a^n of the integrator):
+
+    n = (x_p - x_c) / delta,      v_rel = v_p - sum_i w_i v_i,      v_N = v_rel . n
+    f_N = s < k_N A_p (d_c - delta) - c v_N >,   c = 2 zeta sqrt(s k_N A_p m_eff)     ([Bridson2002, sec. 7.1])
+    f_T = -min(mu f_N, m_eff |v_T| / dt) v_T / |v_T|,   v_T = v_rel - v_N n                 ([Bridson2002, sec. 7.2])
+    1 / m_eff = 1 / m_p + sum_i w_i^2 / m_i
+
+f = f_N n + f_T acts on p and -w_i f on the triangle's nodes (momentum conserved). k_N [Pa/m] is the penalty of the
+body contact (fabricfem.contact.nodal.default_penalty: 10 E t / h^2), A_p the vertex's lumped reference area
+[m^2], m the lumped masses (M + dt/2 C) [kg], zeta the damping ratio of the pair's spring (the damping never pulls:
+< . > is the positive part). The friction is Coulomb's law mu f_N while the pair slides; the bound m_eff |v_T| / dt
+is the force that stops the relative tangential velocity within the step (sticking). s = 1 / (the number of pairs
+of p whose closest point lies on the same feature): a vertex above an edge or a node of the other layer is one
+contact, not one per triangle around that feature.
+
+Parallel: every rank gathers the positions and velocities of all nodes (ClothSurface), finds all pairs and computes
+all forces, and adds the forces of its owned nodes to its rows, so the pairs across rank boundaries are treated as
+on one rank. Not done: edge-edge proximity (two edges crossing with no vertex within d_c of a triangle).
+SI units.
+"""
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+
+from fabricfem.contact import friction as friction_law
+from fabricfem.contact import nodal
+from fabricfem.contact.cloth_surface import ClothSurface
+from fabricfem.contact.proximity import Pairs, compiled_pairs
+
+EXCLUSION = 2.0          # reference distance / d_c below which a vertex and a triangle are neighbours
+DEFAULT_DAMPING = 0.5    # zeta of the pair's penalty spring
+FEATURE_TOLERANCE = 1e-6  # barycentric coordinates below this name no node of the closest feature
+
+
+def checked_contact_distance(value: float | None, thickness: float, element_size: float) -> float:
+    """d_c [m]: `value` (default: the shell's `thickness`), refused (ValueError naming `contact_distance`) unless
+    0 < d_c <= the mesh size `element_size` [m]."""
+    d = thickness if value is None else value
+    if isinstance(d, bool) or not (isinstance(d, (int, float)) and math.isfinite(d) and d > 0.0):
+        raise ValueError(f"contact_distance must be a positive length [m], got {value!r}")
+    if d > element_size:
+        raise ValueError(f"contact_distance = {d:g} m exceeds the mesh size {element_size:g} m")
+    return float(d)
+
+
+class SelfContact:
+    """Cloth-cloth contact of a shell model as an explicit hook (fabricfem.solvers.system.ExplicitHook; module
+    docstring for the law).
+
+    Args:
+        model: the ShellModel (quadrilateral Q2 cells; all its panels and garments are one surface).
+        contact_distance: d_c [m], default the fabric's thickness; 0 < d_c <= the mesh size.
+        friction: Coulomb coefficient mu >= 0 between cloth layers.
+        penalty: k_N [Pa/m], default fabricfem.contact.nodal.default_penalty.
+        damping: zeta >= 0 of the pair springs.
+        joined: (k, 2) global node indices (ClothSurface numbering) of node pairs that make two mesh parts one
+            (a garment's seams), for the neighbour rule (module docstring).
+
+    After each step: `force` (N, 3) the contact forces [N] on all nodes (global order of `surface`, every rank),
+    `normal_force` / `friction_force` its two parts, `pairs` the active pairs, `timings` [s] accumulated.
+    """
+
+    def __init__(self, model, contact_distance: float | None = None, friction: float = 0.0,
+                 penalty: float | None = None, damping: float = DEFAULT_DAMPING, joined: np.ndarray | None = None):
+        self.model = model
+        self.comm = model.comm
+        self.surface = ClothSurface(model)
+        self.distance = checked_contact_distance(contact_distance, model.fabric.thickness,
+                                                 self.surface.nodes.element_size)
+        self.mu = friction_law.friction_coefficient(friction)
+        self.penalty = (nodal.default_penalty(model, self.surface.nodes.element_size) if penalty is None
+                        else nodal.positive_parameter("penalty", penalty))
+        if isinstance(damping, bool) or not (isinstance(damping, (int, float)) and damping >= 0.0):
+            raise ValueError(f"damping must be a number >= 0, got {damping!r}")
+        self.damping = float(damping)
+        s = self.surface
+        self.part = s.parts(joined)
+        near = self.search(s.reference, EXCLUSION * self.distance)
+        same = self.part[near.vertex] == self.part[s.triangles[near.triangle, 0]]
+        self._excluded = np.sort(self._keys(near.subset(same)))
+        N = s.count
+        self.force, self.normal_force, self.friction_force = np.zeros((N, 3)), np.zeros((N, 3)), np.zeros((N, 3))
+        self.pairs = Pairs(*(np.zeros(0, dtype=np.int64),) * 2, np.zeros(0), np.zeros((0, 3)))
+        self._mass: tuple[object, float, np.ndarray] | None = None
+        self.timings = {"gather": 0.0, "search": 0.0, "response": 0.0}
+
+    def penalty_frequency(self) -> float:
+        """omega_p = sqrt(4 k_N / (rho t)) [rad/s]: the pair spring on the reduced mass of two nodes (factor 2), a
+        node both a vertex and a triangle's node (factor 2); add it to the step's frequency as the body contact's."""
+        return float(np.sqrt(4.0 * self.penalty / self.model.fabric.areal_density))
+
+    def search(self, x: np.ndarray, radius: float | None = None) -> Pairs:
+        """The vertex-triangle pairs of the positions x (N, 3) [m] closer than `radius` (default d_c), the vertex not
+        a node of the triangle's cell (fabricfem.contact.proximity.compiled_pairs)."""
+        s = self.surface
+        return compiled_pairs(x, s.triangles, s.triangle_cell, s.cell_nodes,
+                              self.distance if radius is None else radius, self.comm)
+
+    def _keys(self, pairs: Pairs) -> np.ndarray:
+        return pairs.vertex * len(self.surface.triangles) + pairs.triangle
+
+    def contact_pairs(self, x: np.ndarray, radius: float | None = None) -> Pairs:
+        """`search` without the reference neighbours (module docstring): the pairs that take contact."""
+        pairs = self.search(x, radius)
+        keys = self._keys(pairs)
+        where = np.searchsorted(self._excluded, keys)
+        excluded = self._excluded[np.minimum(where, len(self._excluded) - 1)] == keys if len(self._excluded) else \
+            np.zeros(len(keys), dtype=bool)
+        return pairs.subset(~excluded)
+
+    def smallest_distance(self, x: np.ndarray, radius: float) -> float:
+        """Smallest distance [m] between a vertex and a non-neighbouring triangle at the positions x, `radius` [m]
+        if none is closer than that."""
+        pairs = self.contact_pairs(x, radius)
+        return float(pairs.distance.min()) if len(pairs) else float(radius)
+
+    def _masses(self, integrator) -> np.ndarray:
+        """(N,) lumped translational mass (M + dt/2 C) [kg] of all nodes, inf for a node with a held component."""
+        cached = self._mass
+        if cached is None or cached[0] is not integrator or cached[1] != integrator.dt:
+            s = self.surface
+            m = integrator.denominator.getArray(readonly=True)[s.nodes.dofs[:, 0]]
+            mass = s.gather(m[:, None])[:, 0]
+            mass[s.held] = np.inf
+            self._mass = cached = (integrator, integrator.dt, mass)
+        return cached[2]
+
+    # ------------------------------------------------------------------ integrator hooks
+    def forces(self, integrator, t: float, rhs) -> None:
+        """rhs += the contact forces at d^{n+1} (owned rows; module docstring)."""
+        s = self.surface
+        tic = time.perf_counter()
+        d = integrator.d.getArray(readonly=True)
+        v = integrator.velocity_predictor.getArray(readonly=True)
+        rows = s.nodes.dofs
+        state = s.gather(np.hstack([s.nodes.reference + d[rows], v[rows]]))
+        x, vel = state[:, :3], state[:, 3:]
+        toc = time.perf_counter()
+        self.pairs = pairs = self.contact_pairs(x)
+        tac = time.perf_counter()
+        self._respond(x, vel, pairs, self._masses(integrator), integrator.dt)
+        rhs.getArray()[rows] += s.owned_rows(self.force)
+        self.timings["gather"] += toc - tic
+        self.timings["search"] += tac - toc
+        self.timings["response"] += time.perf_counter() - tac
+
+    def correct(self, integrator, t: float) -> None:
+        """Nothing after the division (a penalty law)."""
+
+    def state(self) -> dict:
+        """Nothing to checkpoint (the law keeps no history)."""
+        return {}
+
+    def restore(self, state: dict) -> None:
+        """Nothing to restore (`state`)."""
+
+    def _respond(self, x: np.ndarray, vel: np.ndarray, pairs: Pairs, mass: np.ndarray, dt: float) -> None:
+        """The forces of the pairs (module docstring) into force, normal_force, friction_force (N, 3) [N]."""
+        N = self.surface.count
+        for buffer in (self.force, self.normal_force, self.friction_force):
+            buffer.fill(0.0)
+        if not len(pairs):
+            return
+        tri = self.surface.triangles[pairs.triangle]
+        w, p = pairs.bary, pairs.vertex
+        xc = np.einsum("ij,ijk->ik", w, x[tri])
+        normal = self._normals(x[p] - xc, pairs.distance, x[tri])
+        v_rel = vel[p] - np.einsum("ij,ijk->ik", w, vel[tri])
+        v_n = np.einsum("ij,ij->i", v_rel, normal)
+        share = _feature_share(p, tri, w)
+        inverse_mass = 1.0 / mass[p] + np.einsum("ij,ij->i", w ** 2, 1.0 / mass[tri])
+        m_eff = np.where(inverse_mass > 0.0, 1.0 / np.where(inverse_mass > 0.0, inverse_mass, 1.0), np.inf)
+        spring = share * self.penalty * self.surface.area[p]
+        damper = 2.0 * self.damping * np.sqrt(spring * np.where(np.isfinite(m_eff), m_eff, 0.0))
+        f_n = np.maximum(spring * (self.distance - pairs.distance) - damper * v_n, 0.0)
+        f_normal = f_n[:, None] * normal
+        f_friction = np.zeros_like(f_normal)
+        if self.mu > 0.0:
+            v_t = v_rel - v_n[:, None] * normal
+            speed = np.linalg.norm(v_t, axis=1)
+            magnitude = np.minimum(self.mu * f_n, m_eff * speed / dt)
+            f_friction = -(magnitude / np.where(speed > 0.0, speed, 1.0))[:, None] * v_t
+        for total, pair_force in ((self.normal_force, f_normal), (self.friction_force, f_friction)):
+            nodes = np.concatenate([p, tri.ravel()])
+            for k in range(3):
+                values = np.concatenate([pair_force[:, k], -(w * pair_force[:, k:k + 1]).ravel()])
+                total[:, k] = np.bincount(nodes, values, minlength=N)
+        np.add(self.normal_force, self.friction_force, out=self.force)
+
+    def _normals(self, offset: np.ndarray, distance: np.ndarray, corners: np.ndarray) -> np.ndarray:
+        """Unit (x_p - x_c) / delta, or the triangle's unit normal (towards p's side) where delta < 1e-9 d_c."""
+        tiny = distance < 1e-9 * self.distance
+        normal = offset / np.where(tiny, 1.0, distance)[:, None]
+        if tiny.any():
+            face = np.cross(corners[tiny, 1] - corners[tiny, 0], corners[tiny, 2] - corners[tiny, 0])
+            normal[tiny] = face / np.linalg.norm(face, axis=1)[:, None]
+        return normal
+
+
+def _feature_share(vertex: np.ndarray, tri: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """(n,) 1 / (number of pairs of the same vertex whose closest point lies on the same feature: the triangle's
+    interior, an edge or a node, named by its nodes with w > FEATURE_TOLERANCE: a vertex above a node of the other layer
+    is found by each triangle around that node, in the node's, an edge's or the interior's region by round-off)."""
+    feature = np.sort(np.where(w > FEATURE_TOLERANCE, tri, -1), axis=1)
+    _, inverse, counts = np.unique(np.column_stack([vertex, feature]), axis=0, return_inverse=True,
+                                   return_counts=True)
+    return 1.0 / counts[inverse.ravel()]
