@@ -1,0 +1,130 @@
+"""Cloth-cloth contact (fabricfem.contact.self_contact): the pair search against brute force and ipctk, the load
+balance of two pressed sheets, the independent intersection counter, the refused contact distances, and 1 against
+2 ranks on a short fold."""
+from __future__ import annotations
+
+import ipctk
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+from fabricfem.contact import proximity
+from fabricfem.contact.cloth_surface import ClothSurface
+from fabricfem.contact.intersections import intersecting_pairs
+from fabricfem.contact.self_contact import SelfContact
+from fabricfem.meshes import plate
+from fabricfem.shell import ShellModel
+from fabricfem.verify import self_contact as case
+
+
+def _grid(n: int, L: float = 0.1):
+    """An n x n node grid in z = 0 split into triangles (two per square, a square is a 'cell')."""
+    s = np.linspace(0.0, L, n)
+    X, Y = np.meshgrid(s, s, indexing="ij")
+    x = np.stack([X.ravel(), Y.ravel(), np.zeros(X.size)], axis=1)
+    idx = np.arange(n * n).reshape(n, n)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel()
+    triangles = np.stack([np.stack([a, b, d], 1), np.stack([a, d, c], 1)], axis=1).reshape(-1, 3)
+    cells = np.repeat(np.arange(len(a)), 2)
+    cell_nodes = np.stack([a, b, c, d], axis=1)
+    return x, triangles, cells, cell_nodes
+
+
+def test_pair_search_matches_brute_force():
+    """The compiled hash and ipctk's broad phase find exactly the pairs of the brute-force search (every vertex
+    against every triangle) on a sheet folded onto itself 0.8 mm apart with 1e-5 m noise; distances and barycentric
+    coordinates agree to round-off."""
+    x, triangles, cells, cell_nodes = _grid(11)
+    right = x[:, 0] > 0.05
+    x[right, 0] = 0.1 - x[right, 0]
+    x[right, 2] = 8e-4
+    x += 1e-5 * np.random.default_rng(0).standard_normal(x.shape)
+    reference = proximity.brute_force_pairs(x, triangles, cells, cell_nodes, 1e-3).sorted()
+    assert len(reference) > 100
+    for pairs in (proximity.compiled_pairs(x, triangles, cells, cell_nodes, 1e-3, MPI.COMM_SELF),
+                  proximity.ipctk_pairs(x, triangles, cells, cell_nodes, 1e-3)):
+        pairs = pairs.sorted()
+        np.testing.assert_array_equal(pairs.vertex, reference.vertex)
+        np.testing.assert_array_equal(pairs.triangle, reference.triangle)
+        np.testing.assert_allclose(pairs.distance, reference.distance, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(pairs.bary, reference.bary, rtol=0, atol=1e-12)
+
+
+def test_closest_points_match_ipctk():
+    """The numpy closest point's distance equals ipctk's point-triangle distance (sqrt of its squared distance)
+    for random points around random triangles, every Voronoi region hit."""
+    rng = np.random.default_rng(1)
+    p, a, b, c = (rng.standard_normal((200, 3)) for _ in range(4))
+    _, distance = proximity.closest_points(p, a, b, c)
+    expected = [np.sqrt(ipctk.point_triangle_distance(*(v[i] for v in (p, a, b, c)))) for i in range(len(p))]
+    np.testing.assert_allclose(distance, expected, rtol=1e-12, atol=1e-14)
+
+
+def test_stacked_sheets_load_balance():
+    """Two stacked sheets pressed by a uniform pressure: the contact force on the upper sheet equals the applied
+    load within 1 % (static equilibrium), and the sheets stay at least half the thickness apart."""
+    out = case.press(steps=900)
+    assert out["contact"][2] == pytest.approx(-out["load"][2], rel=0.01)
+    assert out["min_distance"] >= 0.5 * case.THICKNESS
+
+
+def test_intersection_counter():
+    """A flat sheet has no intersecting pairs; a flap through it at x = 0.3 of a cell (y in [0.1 W, 0.9 W], inside
+    the cell) crosses the cell's two triangles: the flap's triangle over y in [0.1 W, W/2] at z = 0 meets both (the
+    cell's diagonal is at y = 0.3 W there), the one over [W/2, 0.9 W] only the triangle above the diagonal: 3
+    pairs."""
+    x, triangles, _, _ = _grid(6, L=0.5)
+    assert intersecting_pairs(x, triangles) == 0
+    h, x0, W = 0.1, 0.2 + 0.3 * 0.1, 0.1       # the cell [0.2, 0.3] x [0, 0.1]; the flap at x0
+    y0, y1 = 0.1 * W, 0.9 * W
+    flap = np.array([(x0, y0, -h), (x0, y1, -h), (x0, y0, h), (x0, y1, h)])
+    n = len(x)
+    flap_triangles = np.array([(n, n + 1, n + 3), (n, n + 3, n + 2)])
+    assert intersecting_pairs(np.vstack([x, flap]), np.vstack([triangles, flap_triangles])) == 3
+
+
+def _small_model(comm=MPI.COMM_WORLD) -> ShellModel:
+    model = ShellModel(plate(0.1, 0.1, 4, 4, cell="quadrilateral", comm=comm), case.cotton())
+    model.compile()
+    return model
+
+
+def test_surface_triangulation_and_refused_distances():
+    """The Q2 cells split through their nodes cover the sheet once (triangle areas sum to its area, none
+    intersect); a contact distance <= 0 or above the mesh size is refused naming the key."""
+    model = _small_model()
+    surface = ClothSurface(model)
+    x = surface.reference
+    t = surface.triangles
+    area = 0.5 * np.linalg.norm(np.cross(x[t[:, 1]] - x[t[:, 0]], x[t[:, 2]] - x[t[:, 0]]), axis=1)
+    assert area.sum() == pytest.approx(0.01, rel=1e-12)
+    assert intersecting_pairs(x, t) == 0
+    assert SelfContact(model).distance == pytest.approx(case.THICKNESS)
+    for bad in (0.0, -1e-3, 0.03, float("nan")):
+        with pytest.raises(ValueError, match="contact_distance"):
+            SelfContact(model, contact_distance=bad)
+
+
+def _short_fold(comm, steps: int = 2000) -> tuple[np.ndarray, int]:
+    """Positions (N, 3) [m] of all nodes, ordered by their reference coordinates, after `steps` of the fold with
+    self-contact, and the number of contact pairs then."""
+    model = case.fold_model(comm)
+    contact = SelfContact(model)
+    integrator = case._integrator(model, [contact], case.FOLD_RAYLEIGH)
+    for _ in range(steps):
+        integrator.step()
+    x = contact.surface.positions(integrator.d.getArray(readonly=True))
+    order = np.lexsort(np.round(contact.surface.reference / 1e-9).T)
+    integrator.destroy()
+    return x[order], len(contact.pairs)
+
+
+@pytest.mark.mpi
+def test_one_and_two_ranks_agree_on_a_short_fold():
+    """The fold's upper leg falling onto the lower one until contact acts: the positions on the ranks of
+    COMM_WORLD and on one rank agree within 1e-6 m (the same pairs found across rank boundaries; only the
+    summation order differs)."""
+    parallel, pairs = _short_fold(MPI.COMM_WORLD)
+    serial, _ = _short_fold(MPI.COMM_SELF)
+    assert pairs > 0
+    assert np.max(np.abs(parallel - serial)) < 1e-6
