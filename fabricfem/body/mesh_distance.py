@@ -1,0 +1,124 @@
+"""Signed distance, closest point and normal of points to a closed, outward-oriented triangulation.
+
+The closest point C of a point x and its triangle I come from libigl's AABB tree (`igl.AABB.squared_distance`,
+C++), built once per posed surface and kept for every later query of the same pose. The sign is that of
+(x - C) . n with n the angle-weighted pseudonormal of the feature C lies on ([Baerentzen2005]): the face normal
+inside a triangle, the sum of the two face normals on an edge, the angle-weighted sum of the face normals at a
+vertex; it is correct for any x of a closed, consistently oriented, non-self-intersecting surface. This is the sign
+of `igl.signed_distance(..., SIGNED_DISTANCE_TYPE_PSEUDONORMAL)` (tested against it); the pseudonormals are computed
+here with numpy from a topology built once, so that a posed surface costs one tree build and one pass over its
+faces, and a repeated query of the same pose only the tree search (the figures are in
+docs/findings/2026-11-27-mesh-skin.md).
+
+The returned normal is the unit gradient of the signed distance, sign (x - C) / |x - C|, continuous in x off the
+medial axis; where |x - C| is below `FOOT_NORMAL_DISTANCE` (x on the surface) it is the feature's pseudonormal.
+Units: metres.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import igl
+import numpy as np
+
+FEATURE_TOLERANCE = 1e-7        # barycentric coordinates below this put the foot on an edge or a vertex
+FOOT_NORMAL_DISTANCE = 1e-7     # m: nearer than this the normal is the feature's pseudonormal
+
+
+@dataclass(frozen=True, eq=False)
+class Topology:
+    """The edges of a triangulation, built once for all its poses: `faces` (F, 3), `face_edges` (F, 3) the index
+    of the edge opposite each corner, `n_edges` their number."""
+
+    faces: np.ndarray
+    face_edges: np.ndarray
+    n_edges: int
+
+    @classmethod
+    def of(cls, faces: np.ndarray) -> Topology:
+        f = np.ascontiguousarray(faces, dtype=np.int64)
+        opposite = np.stack([f[:, [1, 2]], f[:, [2, 0]], f[:, [0, 1]]], axis=1).reshape(-1, 2)   # (3F, 2)
+        _, inverse = np.unique(np.sort(opposite, axis=1), axis=0, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        return cls(f, inverse.reshape(-1, 3), int(inverse.max()) + 1)
+
+
+def face_normals_areas(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Unit outward face normals (F, 3) and areas (F,) [m^2] of a triangulation (right-handed corners)."""
+    p = vertices[faces]
+    cross = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    double = np.linalg.norm(cross, axis=1)
+    return cross / np.maximum(double, 1e-300)[:, None], 0.5 * double
+
+
+def corner_angles(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(F, 3) interior angles [rad] of the triangles at their corners."""
+    p = vertices[faces]
+    out = np.empty(faces.shape)
+    for i in range(3):      # the three corners, vectorised over the faces
+        u = p[:, (i + 1) % 3] - p[:, i]
+        v = p[:, (i + 2) % 3] - p[:, i]
+        out[:, i] = np.arctan2(np.linalg.norm(np.cross(u, v), axis=1), np.einsum("ij,ij->i", u, v))
+    return out
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-300)
+
+
+class PosedSurface:
+    """A triangulation in one pose with its AABB tree and pseudonormals (module docstring).
+
+    Args:
+        vertices: (V, 3) [m].
+        topology: the faces and edges (`Topology.of(faces)`), shared by every pose of the same mesh.
+        tree: (igl.AABB, the vertices it was built on) of an earlier pose to reuse instead of a new build. The
+            tree's boxes then lag the triangles by at most delta = max |vertices - built vertices| [m], and a
+            search may return a triangle up to 2 delta farther than the closest (the distance and foot are exact
+            for the triangle returned: libigl evaluates the triangles on the vertices passed to the search).
+    """
+
+    def __init__(self, vertices: np.ndarray, topology: Topology, tree: tuple[igl.AABB, np.ndarray] | None = None):
+        self.vertices = np.ascontiguousarray(vertices, dtype=float)
+        self.topology = topology
+        faces = topology.faces
+        if tree is None:
+            self.tree = igl.AABB()
+            self.tree.init(self.vertices, faces)
+            self.built_on = self.vertices
+        else:
+            self.tree, self.built_on = tree
+        self.face_normals, self.face_areas = face_normals_areas(self.vertices, faces)
+        weighted = corner_angles(self.vertices, faces).reshape(-1, 1) * np.repeat(self.face_normals, 3, axis=0)
+        corners, edges = faces.reshape(-1), topology.face_edges.reshape(-1)
+        n_vertices = len(self.vertices)
+        self.vertex_normals = _unit(np.column_stack(
+            [np.bincount(corners, weights=weighted[:, i], minlength=n_vertices) for i in range(3)]))
+        per_corner = np.repeat(self.face_normals, 3, axis=0)
+        self.edge_normals = _unit(np.column_stack(
+            [np.bincount(edges, weights=per_corner[:, i], minlength=topology.n_edges) for i in range(3)]))
+
+    def closest(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(gap (N,) [m] negative inside, triangle (N,) int, barycentric coordinates (N, 3) of the foot,
+        foot (N, 3) [m], unit outward normal (N, 3)) of the points x (N, 3) [m]."""
+        x = np.ascontiguousarray(x, dtype=float)
+        faces = self.topology.faces
+        sqrd, tri, foot = self.tree.squared_distance(self.vertices, faces, x)
+        corner = self.vertices[faces[tri]]
+        bary = igl.barycentric_coordinates(foot, np.ascontiguousarray(corner[:, 0]),
+                                           np.ascontiguousarray(corner[:, 1]), np.ascontiguousarray(corner[:, 2]))
+        small = bary < FEATURE_TOLERANCE
+        count = small.sum(axis=1)
+        pseudo = self.face_normals[tri]
+        on_edge = count == 1
+        if on_edge.any():
+            pseudo[on_edge] = self.edge_normals[self.topology.face_edges[tri[on_edge], np.argmax(small[on_edge], 1)]]
+        on_vertex = count >= 2
+        if on_vertex.any():
+            pseudo[on_vertex] = self.vertex_normals[faces[tri[on_vertex], np.argmax(bary[on_vertex], 1)]]
+        offset = x - foot
+        sign = np.where(np.einsum("ij,ij->i", offset, pseudo) >= 0.0, 1.0, -1.0)
+        distance = np.sqrt(np.maximum(sqrd, 0.0))
+        far = distance > FOOT_NORMAL_DISTANCE
+        normal = np.where(far[:, None], sign[:, None] * offset / np.where(far, distance, 1.0)[:, None], pseudo)
+        return sign * distance, tri, bary, foot, normal

@@ -1,0 +1,314 @@
+"""A body's skin from a closed triangulated surface: read, checked, rigged to the segments and posed (a `Skin`).
+
+Reading (`read_skin`): any format trimesh reads (OBJ, PLY, STL, glTF/GLB, COLLADA .dae and zipped .zae through
+pycollada; the scene's node transforms applied, all parts concatenated, vertices merged), scaled to metres by
+`units` (the file's length unit: "m", "cm", "mm", "in" or metres per file unit, `fabricfem.body.conventions`) and
+turned z-up by `up` (the file's up axis, "z" or "y": x_body = z_file, y_body = x_file, z_body = y_file for "y",
+the mapping of the motion files). Every check is made before the rigging's linear solve and refused with one
+ValueError line naming the key to change:
+
+* `up`: the body's height (z extent) is less than half its largest horizontal extent (lying on its side);
+* `units`: the body's height is outside `height_range` (0.5 to 2.5 m): "units: the body is 170 m tall; ...";
+* `components`: policy for a file of several connected parts. "largest" (default) keeps the part of largest
+  area and drops the others (eyes, teeth, accessories; their face counts in `SkinMesh.dropped`); "all" keeps them
+  all (each must then be closed);
+* `repair`: a kept surface with boundary edges (holes) or enclosing a negative volume (inverted normals) is refused
+  unless repair = True, which closes holes with trimesh's fill_holes (refused still if some stay open) and flips
+  an inside-out surface.
+
+The Debian asset assimp-testmodels `models/Collada/human.zae` (`fabricfem.body.human`) has 5 parts: the body
+(26756 triangles, closed, 0.0549 m^3) and four open eye shells (80 boundary edges): it loads with the default
+policy ("largest", no repair).
+
+Rigging and posing (`MeshSkin`): linear blend skinning with bone heat weights (`fabricfem.body.skinning`); the
+rest pose is given by the joints' and markers' positions in the mesh (`rest_positions`, default the body's own
+pose at the first time of its kinematics), each joint inside the mesh (a joint farther than `joint_tolerance`
+outside is refused naming `rest_positions`). Queries (`MeshSkin.query`, the Skin contract of fabricfem.body.skin):
+the posed mesh's AABB tree, closest point and pseudonormal sign (`fabricfem.body.mesh_distance`), the weights
+interpolated barycentrically at the foot; the posed surfaces of the last few times are cached. The body's segment
+schedule (segments switched off) is not applied to a mesh skin: its surface stays whole.
+
+`ellipsoid_skin` triangulates a body's own segments (the blended ellipsoids by default, or any implicit function)
+by marching cubes and rigs it: the default triangulated skin and the tests' reference.
+"""
+from __future__ import annotations
+
+from collections import OrderedDict
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Mapping
+
+import numpy as np
+import trimesh
+
+from fabricfem.body.blended import BlendedEllipsoids, triangulate
+from fabricfem.body.conventions import to_body, unit_scale, up_rotation
+from fabricfem.body.ellipsoid import _as_points
+from fabricfem.body.mesh_distance import PosedSurface, Topology
+from fabricfem.body.skin import SkinQuery
+from fabricfem.body.skinning import (
+                                     HEAT,
+                                     WEIGHT_CUTOFF,
+                                     blend_transforms,
+                                     bone_heat_weights,
+                                     bones,
+                                     check_rest_positions,
+                                     frames,
+                                     pose_vertices,
+)
+
+HEIGHT_RANGE = (0.5, 2.5)     # m: a body's height outside this is taken for a wrong `units`
+COMPONENTS = ("largest", "all")
+CACHE_SIZE = 4                # posed surfaces kept (an explicit step asks the same time several times)
+
+
+@dataclass(frozen=True, eq=False)
+class SkinMesh:
+    """A closed, outward-oriented triangulation in the body frame: vertices (V, 3) [m], faces (F, 3) int64;
+    `source` (file or origin), `dropped` (face counts of the parts left out), `repaired` (what repair changed)."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    source: str = "arrays"
+    dropped: tuple[int, ...] = ()
+    repaired: tuple[str, ...] = ()
+
+    @property
+    def height(self) -> float:
+        """z extent [m]."""
+        return float(np.ptp(self.vertices[:, 2]))
+
+    @property
+    def volume(self) -> float:
+        """Enclosed volume [m^3] (positive for outward normals)."""
+        return float(trimesh.Trimesh(self.vertices, self.faces, process=False).volume)
+
+
+def _cleaned(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
+    """The mesh with coincident vertices merged and degenerate and duplicate faces removed (nothing re-oriented)."""
+    mesh.merge_vertices()
+    mesh.update_faces(mesh.nondegenerate_faces())
+    mesh.update_faces(mesh.unique_faces())
+    mesh.remove_unreferenced_vertices()
+    return mesh
+
+
+def _boundary_edges(mesh: trimesh.Trimesh) -> int:
+    return len(trimesh.grouping.group_rows(mesh.edges_sorted, require_count=1))
+
+
+def _closed(mesh: trimesh.Trimesh, source: str, repair: bool) -> tuple[trimesh.Trimesh, tuple[str, ...]]:
+    """The mesh closed and outward (module docstring, `repair`), with what repair did; ValueError naming
+    `repair`."""
+    done = []
+    holes = _boundary_edges(mesh)
+    if holes:
+        if not repair:
+            raise ValueError(f"repair: {source} has {holes} boundary edges (holes); give repair = true to close "
+                             "them (trimesh fill_holes) or close the surface")
+        trimesh.repair.fill_holes(mesh)
+        left = _boundary_edges(mesh)
+        if left:
+            raise ValueError(f"repair: {source} keeps {left} of its {holes} boundary edges open after fill_holes; "
+                             "close the surface before reading it")
+        done.append(f"closed {holes} boundary edges")
+    volume = float(mesh.volume)
+    if volume < 0.0:
+        if not repair:
+            raise ValueError(f"repair: {source} encloses a negative volume ({volume:.4g} m^3): its normals point "
+                             "inwards; give repair = true to flip them")
+        mesh.invert()
+        done.append("flipped the inverted normals")
+    return mesh, tuple(done)
+
+
+def _components(mesh: trimesh.Trimesh, components: str) -> tuple[trimesh.Trimesh, tuple[int, ...]]:
+    """The kept part(s) and the face counts of the dropped ones (`components` policy)."""
+    if components not in COMPONENTS:
+        raise ValueError(f"components must be one of {COMPONENTS}, got {components!r}")
+    parts = mesh.split(only_watertight=False)
+    if components == "all" or len(parts) <= 1:
+        return mesh, ()
+    keep = int(np.argmax([p.area for p in parts]))
+    return parts[keep], tuple(len(p.faces) for k, p in enumerate(parts) if k != keep)
+
+
+def _check_size(vertices: np.ndarray, source: str, units, up: str, height_range) -> None:
+    """ValueError naming `up` (lying body) or `units` (height outside height_range)."""
+    extent = np.ptp(vertices, axis=0)
+    if extent[2] < 0.5 * extent[:2].max():
+        raise ValueError(f"up: {source} read with up = {up!r} is {extent[2]:.3g} high and {extent[:2].max():.3g} "
+                         "long: it lies on its side; give the file's up axis (\"y\" or \"z\")")
+    if height_range is not None and not (height_range[0] <= extent[2] <= height_range[1]):
+        raise ValueError(f"units: the body is {extent[2]:.4g} m tall with units = {units!r} (expected "
+                         f"{height_range[0]} to {height_range[1]} m); give the file's length unit")
+
+
+def skin_mesh(vertices: np.ndarray, faces: np.ndarray, source: str = "arrays", repair: bool = False
+              ) -> SkinMesh:
+    """A `SkinMesh` of arrays in the body frame [m] (cleaned, and closed and outward or refused naming `repair`)."""
+    mesh = _cleaned(trimesh.Trimesh(np.asarray(vertices, dtype=float), np.asarray(faces, dtype=np.int64),
+                                    process=False))
+    mesh, done = _closed(mesh, source, repair)
+    return SkinMesh(np.ascontiguousarray(mesh.vertices, dtype=float),
+                    np.ascontiguousarray(mesh.faces, dtype=np.int64), source, (), done)
+
+
+def read_skin(path: str | Path, units: str | float = "m", up: str = "z", components: str = "largest",
+              repair: bool = False, height_range: tuple[float, float] | None = HEIGHT_RANGE) -> SkinMesh:
+    """Read a closed triangulated skin into the body frame (metres, z up) and check it (module docstring).
+
+    Args:
+        path: a mesh file trimesh reads (OBJ, PLY, STL, glTF/GLB, COLLADA .dae/.zae).
+        units: the file's length unit (a name or metres per unit).
+        up: the file's up axis, "z" or "y".
+        components: "largest" (keep the part of largest area) or "all".
+        repair: close holes (trimesh fill_holes) and flip inverted normals instead of refusing.
+        height_range: (low, high) [m] of a plausible body height (None: not checked, e.g. a limb).
+
+    Raises:
+        ValueError (one line) naming `path`, `units`, `up`, `components` or `repair`.
+    """
+    scale, _ = unit_scale(units), up_rotation(up)
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"path: no mesh file {path}")
+    try:
+        loaded = trimesh.load(str(path), force="mesh", process=False)
+    except Exception as exc:  # noqa: BLE001 - any reader failure is reported as the file's fault
+        raise ValueError(f"path: trimesh cannot read {path}: {exc}") from None
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        raise ValueError(f"path: {path} holds no triangles")
+    mesh = _cleaned(trimesh.Trimesh(to_body(loaded.vertices, scale, up), loaded.faces, process=False))
+    mesh, dropped = _components(mesh, components)
+    _check_size(mesh.vertices, path.name, units, up, height_range)
+    mesh, done = _closed(mesh, path.name, repair)
+    return SkinMesh(np.ascontiguousarray(mesh.vertices, dtype=float),
+                    np.ascontiguousarray(mesh.faces, dtype=np.int64), str(path), dropped, done)
+
+
+class MeshSkin:
+    """The Skin (fabricfem.body.skin) of a triangulated surface rigged to a Body (module docstring).
+
+    Args:
+        mesh: the closed skin in the rest pose [m] (`read_skin`, `skin_mesh`).
+        body: the segments and their kinematics.
+        rest_positions: joint and marker positions [m] in the mesh's rest pose (name -> (3,)); default: the body's
+            pose at the first time of its kinematics.
+        joint_tolerance: how far [m] a joint may lie outside the mesh (0: inside or on it).
+        tree_tolerance: the AABB tree of an earlier pose is reused while no vertex moved more than this [m] since
+            its build (0: a new tree for every pose); a gap is then at most 2 tree_tolerance above the exact one
+            (`PosedSurface`).
+        heat, cutoff: the bone heat constant and weight cut (`fabricfem.body.skinning.bone_heat_weights`).
+
+    Raises:
+        ValueError naming `rest_positions` (missing names, a joint outside the mesh).
+    """
+
+    def __init__(self, mesh: SkinMesh, body, rest_positions: Mapping[str, np.ndarray] | None = None,
+                 joint_tolerance: float = 0.0, tree_tolerance: float = 0.0, heat: float = HEAT,
+                 cutoff: float = WEIGHT_CUTOFF):
+        self.mesh, self.body = mesh, body
+        self.segment_names = tuple(body.segments)
+        t0 = float(body.kinematics.time_range[0])
+        origin = "given" if rest_positions is not None else f"the body's pose at t = {t0:g} s"
+        rest = check_rest_positions(body, rest_positions if rest_positions is not None
+                                    else body.kinematics.positions(t0))
+        self.topology = Topology.of(mesh.faces)
+        self.rest = PosedSurface(mesh.vertices, self.topology)
+        joints = list(body.joints)
+        gap = self.rest.closest(np.array([rest[n] for n in joints]))[0]
+        worst = int(np.argmax(gap))
+        if gap[worst] > joint_tolerance:
+            raise ValueError(f"rest_positions: joint {joints[worst]!r} ({origin}) lies {gap[worst]:.4g} m outside "
+                             f"the skin {Path(mesh.source).name}; give the joints' positions in the mesh's rest pose")
+        self.rest_positions = rest
+        self.rest_centers, self.rest_rotations = frames(body, rest)
+        self.weights = bone_heat_weights(mesh.vertices, mesh.faces, *bones(body, rest), heat, cutoff)
+        if not (np.isfinite(tree_tolerance) and tree_tolerance >= 0.0):
+            raise ValueError(f"tree_tolerance must be a length >= 0 [m], got {tree_tolerance!r}")
+        self.tree_tolerance = float(tree_tolerance)
+        self.tree_builds = 0
+        self._tree = None
+        self._posed: OrderedDict[float, PosedSurface] = OrderedDict()
+
+    def transforms(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """The segments' rigid maps rest -> pose at time t [s], (A (K, 3, 3), b (K, 3) [m]) (`blend_transforms`)."""
+        centers, rotations = frames(self.body, self.body.kinematics.positions(t))
+        return blend_transforms(self.rest_centers, self.rest_rotations, centers, rotations)
+
+    def posed(self, t: float) -> PosedSurface:
+        """The posed surface at time t [s] with its AABB tree (cached for the last `CACHE_SIZE` times)."""
+        key = float(t)
+        if key in self._posed:
+            self._posed.move_to_end(key)
+            return self._posed[key]
+        vertices = pose_vertices(self.mesh.vertices, self.weights, *self.transforms(key))
+        tree = self._tree
+        if tree is not None and not (np.linalg.norm(vertices - tree[1], axis=1).max() <= self.tree_tolerance):
+            tree = None
+        surface = PosedSurface(vertices, self.topology, tree)
+        if tree is None:
+            self.tree_builds += 1
+            self._tree = (surface.tree, surface.built_on)
+        self._posed[key] = surface
+        if len(self._posed) > CACHE_SIZE:
+            self._posed.popitem(last=False)
+        return surface
+
+    def closest(self, x, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(gap (N,) [m], triangle (N,), barycentric coordinates (N, 3), foot (N, 3) [m], normal (N, 3)) of the
+        points x (N, 3) [m] on the skin posed at time t [s] (`PosedSurface.closest`)."""
+        pts, _ = _as_points(x)
+        return self.posed(t).closest(pts)
+
+    def foot_weights(self, triangle: np.ndarray, bary: np.ndarray) -> np.ndarray:
+        """(N, K) segment weights at feet given by triangle and barycentric coordinates (interpolated linearly)."""
+        b = np.clip(bary, 0.0, 1.0)
+        b /= b.sum(axis=1, keepdims=True)
+        return np.einsum("nj,njk->nk", b, self.weights[self.mesh.faces[triangle]])
+
+    def query(self, x, t: float) -> SkinQuery:
+        """The Skin contract (fabricfem.body.skin) at time t [s] for the points x (N, 3) [m]."""
+        gap, triangle, bary, foot, normal = self.closest(x, t)
+        return SkinQuery(gap, foot, normal, self.foot_weights(triangle, bary))
+
+    def surface(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """The posed skin at time t [s]: vertices (V, 3) [m], triangles (F, 3), outward oriented."""
+        return self.posed(t).vertices, self.mesh.faces
+
+
+def union_implicit(body, t: float) -> Callable[[np.ndarray], np.ndarray]:
+    """phi(x) = min_k d_k(x) [m], the exact signed distance to the union of the body's segments posed at time t
+    [s] (`Ellipsoid.closest_point`, [Eberly2013]): negative inside."""
+    posed = list(body.pose(t).values())
+
+    def phi(x: np.ndarray) -> np.ndarray:
+        return np.min([e.closest_point(x)[1] for e in posed], axis=0)   # the few segments, vectorised over x
+    return phi
+
+
+def ellipsoid_skin(body, t: float | None = None, spacing: float = 0.01,
+                   implicit: Callable[[np.ndarray], np.ndarray] | None = None, **rig) -> MeshSkin:
+    """A triangulated skin of the body's own segments, rigged to them with the body's pose at t as rest pose.
+
+    Args:
+        body: the Body; t: the rest time [s] (default: the first time of its kinematics).
+        spacing: marching-cubes grid spacing [m] ([Lewiner2003], skimage.measure.marching_cubes): the vertices lie
+            on the surface to the grid interpolation's error, the chords cut the surface by at most
+            spacing^2 / (8 R) for a radius of curvature R.
+        implicit: phi(x) (N, 3) -> (N,) [m], negative inside; default the blended ellipsoids
+            (`BlendedEllipsoids.implicit` at t); `union_implicit(body, t)` gives the plain union.
+        rig: keywords of `MeshSkin` (joint_tolerance defaults to 2 spacing: the joints at the segments' tips lie
+            on the surface, and the chords cut the tips).
+    """
+    t = float(body.kinematics.time_range[0]) if t is None else float(t)
+    if not (np.isfinite(spacing) and spacing > 0.0):
+        raise ValueError(f"spacing must be a positive length [m], got {spacing!r}")
+    blended = BlendedEllipsoids(body)
+    phi = implicit if implicit is not None else (lambda x: blended.implicit(x, t))
+    lower, upper = blended.bounds(t)
+    vertices, faces = triangulate(phi, (lower, upper), spacing)
+    mesh = skin_mesh(vertices, faces, source=f"ellipsoid skin at t = {t:g} s, spacing {spacing:g} m")
+    rig.setdefault("joint_tolerance", 2.0 * spacing)
+    return MeshSkin(mesh, body, rest_positions=body.kinematics.positions(t), **rig)
