@@ -34,6 +34,7 @@ import math
 from typing import Sequence
 
 import numpy as np
+from skimage.measure import marching_cubes
 
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.body.skin import SkinQuery
@@ -179,8 +180,6 @@ class BlendedEllipsoids:
 def triangulate(implicit, bounds: tuple[np.ndarray, np.ndarray], spacing: float) -> tuple[np.ndarray, np.ndarray]:
     """Triangulation of {implicit(x) = 0} inside `bounds` (lower, upper corners [m]) by marching cubes
     (skimage.measure.marching_cubes) on a grid of `spacing` [m], outward oriented (the normals along grad phi)."""
-    from skimage.measure import marching_cubes
-
     lower, upper = (np.asarray(b, dtype=float) for b in bounds)
     lower, upper = lower - 2.0 * spacing, upper + 2.0 * spacing
     axes = [np.arange(lo, hi + spacing, spacing) for lo, hi in zip(lower, upper)]

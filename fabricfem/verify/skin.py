@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import math
 
+import igl
 import numpy as np
+from skimage.measure import find_contours
 
 from fabricfem.body import default_arm, elbow_flexion, lower_body, obstacle_walk
 from fabricfem.body.blended import BlendedEllipsoids, closest_points, triangulate
@@ -56,8 +58,6 @@ def crease_paths(skin: BlendedEllipsoids, t: float, joint: np.ndarray, bisector:
     """Paths across the crease: the skin's sections by planes through the bisector (and beside it), traced on a
     CONTOUR_GRID by marching squares (skimage.measure.find_contours, independent of the closest-point code),
     resampled every PATH_SPACING of arc length within HALF_WIDTH of the crease point."""
-    from skimage.measure import find_contours
-
     s = np.linspace(0.0, 0.3, 30001)
     along = joint + s[:, None] * bisector
     crease = along[int(np.argmax(skin.implicit(along, t) > 0.0))]
@@ -84,8 +84,6 @@ def crease_paths(skin: BlendedEllipsoids, t: float, joint: np.ndarray, bisector:
 def crease_rows(name: str, skin: BlendedEllipsoids, t: float, joint: np.ndarray, bisector: np.ndarray) -> list:
     """The rows of one crease: the normal's largest turn per mm and the gap's continuity on each offset path, the
     gap against the triangulation, the rounding against the segments' exact distance."""
-    import igl
-
     out = []
     with Timer() as timer:
         paths = crease_paths(skin, t, joint, bisector)
