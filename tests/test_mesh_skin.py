@@ -5,7 +5,16 @@ import numpy as np
 import pytest
 import trimesh
 
-from fabricfem.body import Body, JointTrajectory, Segment, default_arm, elbow_flexion, lower_body, winter_walking
+from fabricfem.body import (
+    Body,
+    JointTrajectory,
+    Segment,
+    default_arm,
+    elbow_flexion,
+    lower_body,
+    obstacle_walk,
+    winter_walking,
+)
 from fabricfem.body.human import HUMAN_DIMENSIONS, HUMAN_KEYS, HUMAN_PATH, human_rest
 from fabricfem.body.mesh_skin import MeshSkin, ellipsoid_skin, read_skin, skin_mesh
 from fabricfem.body.skin import Skin
@@ -42,16 +51,17 @@ def standing_body_mesh(scale: float = 1.0):
 
 
 @needs_human
-def test_the_debian_human_reads_rigs_and_poses_rigidly_mid_segment():
+@pytest.mark.parametrize("motion, times", [(winter_walking, (0.2, 0.7, 1.3)), (obstacle_walk, (2.6, 2.9, 3.2))])
+def test_the_debian_human_reads_rigs_and_poses_rigidly_mid_segment(motion, times):
     mesh = read_skin(HUMAN_PATH, **HUMAN_KEYS)
     assert len(mesh.faces) == 26756 and len(mesh.dropped) == 4          # the eye shells left out
     assert 1.65 < mesh.height < 1.67 and mesh.volume > 0.05
-    body = lower_body(HUMAN_DIMENSIONS, winter_walking(HUMAN_DIMENSIONS))
+    body = lower_body(HUMAN_DIMENSIONS, motion(HUMAN_DIMENSIONS))
     skin = MeshSkin(mesh, body, rest_positions=human_rest())
     assert isinstance(skin, Skin)
     assert np.all(skin.weights >= 0.0) and np.allclose(skin.weights.sum(axis=1), 1.0)
     rest = {n: s.pose(human_rest()) for n, s in body.segments.items()}
-    for t in (0.2, 0.7, 1.3):
+    for t in times:
         posed, vertices = body.pose(t), skin.surface(t)[0]
         for k, name in enumerate(skin.segment_names):
             if not name.startswith(("thigh", "shank")):
