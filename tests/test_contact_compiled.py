@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from fabricfem.body.blended import BLEND_WIDTH
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.contact import compiled
 from fabricfem.contact.explicit import numpy_contact, project_compiled, project_onto_skin
+from fabricfem.contact.projection import resolve_widths
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.run import run_sleeve
 
@@ -49,7 +49,8 @@ def test_projection_matches_numpy_including_the_crease():
     expected = project_onto_skin(x, ellipsoids)
     zeros = np.zeros(1)
     rows = np.zeros((len(x), 3), dtype=np.int64)
-    trial, skin = project_compiled(x, rows, zeros, zeros, zeros, 1e-4, compiled.stacked(ellipsoids), BLEND_WIDTH,
+    widths = resolve_widths(None, len(ellipsoids))            # every two segments blend over BLEND_WIDTH
+    trial, skin = project_compiled(x, rows, zeros, zeros, zeros, 1e-4, compiled.stacked(ellipsoids), widths,
                                    MPI.COMM_SELF)
     crease = expected.crease
     assert np.array_equal(trial, x)

@@ -132,7 +132,7 @@ def test_vectorised_projection_matches_the_plain_algorithm():
     (round-off of the matrix products on subsets) and the same moved set; in the blend the points end on the
     blended skin (|phi| <= 1e-9 m, fabricfem.body.blended), outside both segments."""
     from fabricfem.body.arm import default_arm, elbow_flexion
-    from fabricfem.body.blended import BLEND_WIDTH, blend, stacked
+    from fabricfem.body.blended import BLEND_WIDTH, blend, pair_widths, stacked
     from fabricfem.contact.explicit import project_onto_skin
     body = default_arm(elbow_flexion(final_angle=math.radians(57.0)))
     ellipsoids = list(body.pose(body.kinematics.time_range[1]).values())
@@ -156,7 +156,7 @@ def test_vectorised_projection_matches_the_plain_algorithm():
     assert inside_after.min() > -1e-12
     blended = crease & moved
     assert blended.sum() > 50
-    phi = blend(projected[blended], *stacked(ellipsoids), BLEND_WIDTH)[0]
+    phi = blend(projected[blended], *stacked(ellipsoids), pair_widths(list(body.segments.values()), BLEND_WIDTH))[0]
     assert np.abs(phi).max() <= 1e-9
 
 

@@ -5,20 +5,24 @@ Where two ellipsoidal segments overlap (the elbow, the knees, the hips) their un
 which the fabric is pinched ever deeper as the mesh is refined. The blended body replaces the union by the zero set
 of a smooth minimum of the segments' exact signed distances d_k(x) [m] (negative inside; the closest point on
 an ellipsoid by Newton's method on the Lagrange multiplier, [Eberly2013], `Ellipsoid.closest_point`), whose
-gradients are the unit outward normals at the closest points. The segments are folded in their order with the quadratic polynomial smooth
-minimum of width w [m] ([Quilez2013]):
+gradients are the unit outward normals at the closest points. Two segments a, b are joined with the quadratic
+polynomial smooth minimum of width w_ab [m] ([Quilez2013]):
 
     smin(a, b) = min(a, b) - w h^2 / 4,   h = max(w - |a - b|, 0) / w,
     grad smin = (1 - h / 2) grad(min) + h / 2 grad(max)
 
-so phi = smin(...smin(smin(d_1, d_2), d_3)..., d_K), grad phi = sum_k W_k grad d_k with weights W_k >= 0 summing
-to 1 (the segment weights of the contract). smin is C1 (phi's gradient, the skin's normal, is continuous) and
-equals min(a, b) wherever |a - b| >= w: the skin is each segment's own ellipsoid away from the creases, and in a
-crease the blend fills the corner, turning the normal over a band of width ~ w instead of at a line. The quadratic
-blend turns the normal more evenly than the cubic one of the same rounding (docs/findings/2026-11-27-blended-skin.md). Rounding bound: each fold lowers the minimum by at
-most w / 4, so where phi = 0, min_k d_k <= m w / 4 with m the number of folds active there (|a - b| < w): the
-blended skin lies outside the segments' union by at most w / 4 where two segments meet (measured in the verify
-case `skin-continuity`), m w / 4 where m + 1 do.
+and the skin is the zero set of phi = min(min_k d_k, min over the pairs with |d_a - d_b| < w_ab of smin_ab),
+grad phi = sum_k W_k grad d_k with the weights W >= 0 (summing to 1) of the smallest term: the segment weights of the
+contract. Segments joined at a joint (they share a joint name: upper arm and forearm, thigh and shank, pelvis and
+thigh) blend over the body's width w; segments that are not (the two thighs, a hand and a thigh) over
+SEPARATE_FRACTION w only, so that a gap between them stays open down to SEPARATE_FRACTION w / 2 instead of being
+bridged by a web, while a node between two such segments that touch still has a skin with a normal to go to.
+smin is C1 and equals min(a, b) wherever |a - b| >= w_ab: the skin is each segment's own ellipsoid away from the
+joints, and in a crease the blend fills the corner, turning the normal over a band of width ~ w instead of at a
+line (phi is C1 where one pair decides; where two pairs' blends meet, between two legs at the crotch, it keeps the
+crease the two legs make). The quadratic blend turns the normal more evenly than the cubic one of the same rounding
+(docs/findings/2026-11-27-blended-skin.md). Rounding bound: smin_ab >= min(d_a, d_b) - w_ab / 4, so where phi = 0
+the skin lies outside the segments' union by at most w / 4 (measured in the verify case `skin-continuity`).
 
 The gap of a point is its distance to the zero set, found by the orthogonal projection iteration ([Hartmann1999]):
 Newton steps onto phi = 0 along grad phi alternated with the projection of x onto the tangent plane at the foot,
@@ -40,6 +44,8 @@ from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.body.skin import SkinQuery
 
 BLEND_WIDTH = 0.05            # m: the default width w of the smooth minimum (rounding <= w / 4 = 12.5 mm)
+SEPARATE_FRACTION = 0.2       # the width of the blend of two segments not joined at a joint, over w
+MIN_GRADIENT = 0.5            # |grad phi| below this (a web between two facing segments) is not divided by
 CLOSEST_ITERATIONS = 200      # orthogonal projection iterations of `closest_points`
 FULL_STEPS = 10               # undamped tangential steps before the iteration halves them (concave blends)
 CLOSEST_TOLERANCE = 1e-9      # m: |phi| and the tangential residual at convergence
@@ -71,29 +77,51 @@ def segment_distances(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray,
     return d, grad
 
 
-def blend(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, radii: np.ndarray, width: float
+def pair_widths(segments, width: float) -> np.ndarray:
+    """(K, K) blend widths w_ab [m] of the segments (fabricfem.body.pose.Segment, in order): `width` for two
+    segments sharing a joint name, SEPARATE_FRACTION `width` for the others, 0 on the diagonal."""
+    joints = [{s.proximal, s.distal} for s in segments]
+    K = len(joints)
+    out = np.full((K, K), SEPARATE_FRACTION * check_width(width))
+    for a in range(K):
+        for b in range(K):
+            if joints[a] & joints[b]:
+                out[a, b] = width
+    np.fill_diagonal(out, 0.0)
+    return out
+
+
+def blend(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, radii: np.ndarray, widths: np.ndarray
           ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """phi (N,) [m], grad phi (N, 3) and the segment weights W (N, K) of the blended body at the points x (N, 3)
-    (the folded cubic smooth minimum of the module docstring, [Quilez2013])."""
+    """phi (N,) [m], grad phi (N, 3) and the segment weights W (N, K) of the blended body at the points x (N, 3):
+    the smallest of the segments' distances and of the smooth minima of the pairs within their widths `widths`
+    (K, K) [m] (`pair_widths`; module docstring, [Quilez2013])."""
     d, grad_d = segment_distances(np.asarray(x, dtype=float).reshape(-1, 3), centers, rotations, radii)
     K, N = d.shape
+    columns = np.arange(N)
+    nearest = d.argmin(axis=0)
+    phi = d[nearest, columns]
     weights = np.zeros((N, K))
-    phi = d[0].copy()
-    weights[:, 0] = 1.0
-    for k in range(1, K):          # a loop over the few segments, vectorised over the points
-        b = d[k]
-        h = np.maximum(width - np.abs(phi - b), 0.0) / width
-        other = 0.5 * h                                        # the weight of the larger of the two
-        first_smaller = phi <= b
-        c_phi = np.where(first_smaller, 1.0 - other, other)
-        weights *= c_phi[:, None]
-        weights[:, k] = 1.0 - c_phi
-        phi = np.minimum(phi, b) - width * h * h / 4.0
+    weights[columns, nearest] = 1.0
+    for a in range(K):             # a loop over the few pairs of segments, vectorised over the points
+        for b in range(a + 1, K):
+            w = widths[a, b]
+            near = np.flatnonzero(np.abs(d[a] - d[b]) < w) if w > 0.0 else np.zeros(0, dtype=np.int64)
+            if len(near) == 0:
+                continue
+            h = (w - np.abs(d[a, near] - d[b, near])) / w
+            value = np.minimum(d[a, near], d[b, near]) - w * h * h / 4.0
+            lower = value < phi[near]
+            rows, h = near[lower], h[lower]
+            phi[rows] = value[lower]
+            share_a = np.where(d[a, rows] <= d[b, rows], 1.0 - 0.5 * h, 0.5 * h)
+            weights[rows] = 0.0
+            weights[rows, a], weights[rows, b] = share_a, 1.0 - share_a
     grad = np.einsum("nk,kni->ni", weights, grad_d)
     return phi, grad, weights
 
 
-def closest_points(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, radii: np.ndarray, width: float,
+def closest_points(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, radii: np.ndarray, widths: np.ndarray,
                    strict: bool = True) -> SkinQuery:
     """The contract's SkinQuery of the points x (N, 3) against the blended body: the foot p on phi = 0 with
     x - p parallel to grad phi(p) ([Hartmann1999] orthogonal projection), gap = sign(phi(x)) |x - p| [m], the unit
@@ -101,15 +129,15 @@ def closest_points(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, ra
     than its radius of curvature on the concave side of a blend; where it does not, RuntimeError (`strict`) or the
     foot of the last iterate (not strict: the gap then bounds the distance from above)."""
     x = np.asarray(x, dtype=float).reshape(-1, 3)
-    phi_x, _, _ = blend(x, centers, rotations, radii, width)
+    phi_x, _, _ = blend(x, centers, rotations, radii, widths)
     p = x.copy()
     active = np.ones(len(x), dtype=bool)
     for iteration in range(CLOSEST_ITERATIONS):
         if not active.any():
             break
         step = 1.0 if iteration < FULL_STEPS else 0.5
-        pa = _onto_surface(p[active], centers, rotations, radii, width)
-        _, g, _ = blend(pa, centers, rotations, radii, width)
+        pa = _onto_surface(p[active], centers, rotations, radii, widths)
+        _, g, _ = blend(pa, centers, rotations, radii, widths)
         n = g / np.linalg.norm(g, axis=1)[:, None]
         r = x[active] - pa
         tangential = r - (r * n).sum(axis=1)[:, None] * n
@@ -122,30 +150,32 @@ def closest_points(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, ra
         if strict:
             raise RuntimeError(f"blended skin: the closest point of {int(active.sum())} points did not converge "
                                f"(farther from the skin than its curvature radius?)")
-        p[active] = _onto_surface(p[active], centers, rotations, radii, width)
-    phi, g, w = blend(p, centers, rotations, radii, width)
+        p[active] = _onto_surface(p[active], centers, rotations, radii, widths)
+    phi, g, w = blend(p, centers, rotations, radii, widths)
     n = g / np.linalg.norm(g, axis=1)[:, None]
     gap = np.linalg.norm(x - p, axis=1) * np.where(phi_x < 0.0, -1.0, 1.0)
     return SkinQuery(gap, p, n, w)
 
 
-def _onto_surface(p: np.ndarray, centers, rotations, radii, width: float) -> np.ndarray:
+def _onto_surface(p: np.ndarray, centers, rotations, radii, widths: np.ndarray) -> np.ndarray:
     """Newton steps p <- p - phi grad phi / |grad phi|^2 until |phi| <= CLOSEST_TOLERANCE."""
     for _ in range(CLOSEST_ITERATIONS):
-        phi, g, _ = blend(p, centers, rotations, radii, width)
+        phi, g, _ = blend(p, centers, rotations, radii, widths)
         if np.all(np.abs(phi) <= CLOSEST_TOLERANCE):
             return p
-        p = p - (phi / (g * g).sum(axis=1))[:, None] * g
+        p = p - (phi / np.maximum((g * g).sum(axis=1), MIN_GRADIENT ** 2))[:, None] * g
     return p
 
 
 class BlendedEllipsoids:
     """The Skin (fabricfem.body.skin) of a `Body`: its segments' ellipsoids posed at t, joined by the smooth
-    minimum of width `width` [m] (module docstring). `segment_names`: the body's segments in order."""
+    minimum of width `width` [m] at the joints (module docstring, `pair_widths`). `segment_names`: the body's
+    segments in order."""
 
     def __init__(self, body, width: float = BLEND_WIDTH):
         self.body = body
         self.width = check_width(width)
+        self.widths = pair_widths(list(body.segments.values()), self.width)
         self.segment_names = tuple(body.segments)
 
     @property
@@ -160,10 +190,10 @@ class BlendedEllipsoids:
 
     def implicit(self, x: np.ndarray, t: float) -> np.ndarray:
         """phi (N,) [m] at the points x (N, 3) at time t [s]: < 0 inside the body."""
-        return blend(x, *self.posed(t), self.width)[0]
+        return blend(x, *self.posed(t), self.widths)[0]
 
     def query(self, x: np.ndarray, t: float) -> SkinQuery:
-        return closest_points(x, *self.posed(t), self.width)
+        return closest_points(x, *self.posed(t), self.widths)
 
     def surface(self, t: float, spacing: float = 0.005) -> tuple[np.ndarray, np.ndarray]:
         """Marching-cubes triangulation (scikit-image) of phi = 0 at time t [s] on a grid of `spacing` [m]:

@@ -5,10 +5,10 @@ the same formulas node by node.
   Newton iteration on the Lagrange multiplier of `fabricfem.body.ellipsoid._closest_sorted`, [Eberly2013]). A point
   on a symmetry plane of the sorted axes (y_min = 0 exactly) is moved off it by 1e-15 of the smallest radius, so
   that the general root applies (the numpy code splits cases instead; the difference is of that size).
-* `blend_eval`: phi, grad phi and the segment weights of the quadratic smooth minimum folded over the segments in
-  their order ([Quilez2013], `fabricfem.body.blended.blend`). A segment whose distance is certainly at least 2 w
-  above the nearest one's (the lower bound (sqrt(q) - 1) r_min of its distance, q = f + 1 [Man2006, eq. 3.61]) is
-  left out of the fold: its smooth-minimum terms are zero there.
+* `blend_eval`: phi, grad phi and the segment weights: the smallest of the segments' distances and of the pairs'
+  quadratic smooth minima within their widths ([Quilez2013], `fabricfem.body.blended.blend`). A segment whose
+  distance is certainly at least the widest blend above the nearest one's (the lower bound (sqrt(q) - 1) r_min of
+  its distance, q = f + 1 [Man2006, eq. 3.61]) is left out: it cannot enter phi there.
 * `blend_closest`: the foot of a point on phi = 0 by the orthogonal projection iteration ([Hartmann1999],
   `fabricfem.body.blended.closest_points`), with the gap, the normal and the weights at the foot.
 * `blend_query`: `blend_closest` over N points (the tests compare it with the numpy functions).
@@ -17,7 +17,8 @@ from __future__ import annotations
 
 BLEND_CDEF = """
 void blend_query(int N, const double* x, int K, const double* center, const double* rotation, const double* radii,
-                 double width, double* gap, double* foot, double* normal, double* weights, uint8_t* converged);
+                 const double* widths, double* gap, double* foot, double* normal, double* weights,
+                 uint8_t* converged);
 """
 
 BLEND_SOURCE = r"""
@@ -25,6 +26,7 @@ BLEND_SOURCE = r"""
 #define BLEND_FULL_STEPS 10
 #define BLEND_TOLERANCE 1e-9
 #define BLEND_MAX_SEGMENTS 64
+#define BLEND_MIN_GRADIENT 0.5
 
 /* exact signed distance of x to the ellipsoid (c, R, r) and the unit outward normal n at the closest point */
 static double ellipsoid_distance(const double* x, const double* c, const double* R, const double* r, double* n)
@@ -98,11 +100,15 @@ static double ellipsoid_distance(const double* x, const double* c, const double*
   return q >= 1.0 ? sqrt(d2) : -sqrt(d2);
 }
 
-/* phi, grad phi and the weights W (K) of the blended body at x (fabricfem.body.blended.blend) */
+/* phi, grad phi and the weights W (K) of the blended body at x (fabricfem.body.blended.blend; widths: (K, K)) */
 static double blend_eval(const double* x, int K, const double* center, const double* rotation, const double* radii,
-                         double width, double* grad, double* W)
+                         const double* widths, double* grad, double* W)
 {
-  double bound[BLEND_MAX_SEGMENTS], nearest = INFINITY;
+  double bound[BLEND_MAX_SEGMENTS], d[BLEND_MAX_SEGMENTS], n[BLEND_MAX_SEGMENTS][3];
+  double widest = 0.0, lowest = INFINITY;
+  d[0] = INFINITY;
+  for (int k = 0; k < K * K; ++k)
+    widest = fmax(widest, widths[k]);
   for (int k = 0; k < K; ++k)
   {
     const double* c = center + 3 * k;
@@ -114,52 +120,57 @@ static double blend_eval(const double* x, int K, const double* center, const dou
       y[j] = (p0 * R[j] + p1 * R[3 + j]) + p2 * R[6 + j];
     const double q = (y[0] / r[0]) * (y[0] / r[0]) + (y[1] / r[1]) * (y[1] / r[1]) + (y[2] / r[2]) * (y[2] / r[2]);
     bound[k] = (sqrt(q) - 1.0) * fmin(fmin(r[0], r[1]), r[2]);   /* <= the distance: sqrt(q) is 1/r_min-Lipschitz */
+    lowest = fmin(lowest, bound[k]);
     W[k] = 0.0;
   }
-  double d[BLEND_MAX_SEGMENTS], n[BLEND_MAX_SEGMENTS][3];
-  for (int k = 0; k < K; ++k)   /* the exact distance of the segment of smallest bound first */
-    if (bound[k] < nearest)
-      nearest = bound[k];
+  /* the exact distances of the segments that can matter: a segment whose distance is at least the nearest one's
+     + the widest blend cannot enter phi (each term is >= min(d_a, d_b) - w / 4 and equals min where |d_a - d_b| >= w) */
   double smallest = INFINITY;
   for (int k = 0; k < K; ++k)
-    if (bound[k] <= nearest)
+    if (bound[k] == lowest)
     {
       d[k] = ellipsoid_distance(x, center + 3 * k, rotation + 9 * k, radii + 3 * k, n[k]);
       smallest = fmin(smallest, d[k]);
-      bound[k] = -INFINITY;   /* computed */
     }
   for (int k = 0; k < K; ++k)
-    if (bound[k] != -INFINITY)
+    if (bound[k] != lowest)
     {
-      if (bound[k] >= smallest + 2.0 * width)
-        d[k] = INFINITY;      /* left out of the fold */
+      if (bound[k] >= smallest + widest)
+        d[k] = INFINITY;
       else
       {
         d[k] = ellipsoid_distance(x, center + 3 * k, rotation + 9 * k, radii + 3 * k, n[k]);
         smallest = fmin(smallest, d[k]);
       }
     }
-  double phi = INFINITY;
-  int first = 1;
-  for (int k = 0; k < K; ++k)
-  {
-    if (d[k] == INFINITY)
-      continue;
-    if (first)
+  int nearest = 0;
+  for (int k = 1; k < K; ++k)
+    if (d[k] < d[nearest])
+      nearest = k;
+  double phi = d[nearest];
+  W[nearest] = 1.0;
+  int best_a = -1, best_b = -1;
+  double best_share = 1.0;
+  for (int a = 0; a < K; ++a)
+    for (int b = a + 1; b < K; ++b)
     {
-      phi = d[k];
-      W[k] = 1.0;
-      first = 0;
-      continue;
+      const double w = widths[a * K + b];
+      if (!(w > 0.0) || d[a] == INFINITY || d[b] == INFINITY || !(fabs(d[a] - d[b]) < w))
+        continue;
+      const double h = (w - fabs(d[a] - d[b])) / w;
+      const double value = fmin(d[a], d[b]) - w * h * h / 4.0;
+      if (value < phi)
+      {
+        phi = value;
+        best_a = a, best_b = b;
+        best_share = d[a] <= d[b] ? 1.0 - 0.5 * h : 0.5 * h;
+      }
     }
-    const double b = d[k];
-    const double h = fmax(width - fabs(phi - b), 0.0) / width;
-    const double other = 0.5 * h;
-    const double keep = phi <= b ? 1.0 - other : other;
-    for (int j = 0; j < k; ++j)
-      W[j] *= keep;
-    W[k] = 1.0 - keep;
-    phi = fmin(phi, b) - width * h * h / 4.0;
+  if (best_a >= 0)
+  {
+    W[nearest] = 0.0;
+    W[best_a] = best_share;
+    W[best_b] = 1.0 - best_share;
   }
   grad[0] = grad[1] = grad[2] = 0.0;
   for (int k = 0; k < K; ++k)
@@ -171,29 +182,30 @@ static double blend_eval(const double* x, int K, const double* center, const dou
 
 /* Newton steps onto phi = 0; returns phi at the end and grad phi, W there */
 static double blend_onto(double* p, int K, const double* center, const double* rotation, const double* radii,
-                         double width, double* grad, double* W)
+                         const double* widths, double* grad, double* W)
 {
-  double phi = blend_eval(p, K, center, rotation, radii, width, grad, W);
+  double phi = blend_eval(p, K, center, rotation, radii, widths, grad, W);
   for (int it = 0; it < BLEND_ITERATIONS && fabs(phi) > BLEND_TOLERANCE; ++it)
   {
-    const double g2 = grad[0] * grad[0] + grad[1] * grad[1] + grad[2] * grad[2];
+    const double g2 = fmax(grad[0] * grad[0] + grad[1] * grad[1] + grad[2] * grad[2],
+                           BLEND_MIN_GRADIENT * BLEND_MIN_GRADIENT);
     for (int i = 0; i < 3; ++i)
       p[i] -= phi / g2 * grad[i];
-    phi = blend_eval(p, K, center, rotation, radii, width, grad, W);
+    phi = blend_eval(p, K, center, rotation, radii, widths, grad, W);
   }
   return phi;
 }
 
 /* the foot p of x on phi = 0, the unit normal and the weights there; returns 1 if converged */
 static int blend_closest(const double* x, int K, const double* center, const double* rotation, const double* radii,
-                         double width, double* p, double* normal, double* W)
+                         const double* widths, double* p, double* normal, double* W)
 {
   double grad[3];
   p[0] = x[0], p[1] = x[1], p[2] = x[2];
   int converged = 0;
   for (int it = 0; it < BLEND_ITERATIONS; ++it)
   {
-    blend_onto(p, K, center, rotation, radii, width, grad, W);
+    blend_onto(p, K, center, rotation, radii, widths, grad, W);
     const double l = sqrt(grad[0] * grad[0] + grad[1] * grad[1] + grad[2] * grad[2]);
     const double nn[3] = {grad[0] / l, grad[1] / l, grad[2] / l};
     const double r[3] = {x[0] - p[0], x[1] - p[1], x[2] - p[2]};
@@ -209,9 +221,9 @@ static int blend_closest(const double* x, int K, const double* center, const dou
       p[i] += step * t[i];
   }
   if (!converged)
-    blend_onto(p, K, center, rotation, radii, width, grad, W);
+    blend_onto(p, K, center, rotation, radii, widths, grad, W);
   else
-    blend_eval(p, K, center, rotation, radii, width, grad, W);
+    blend_eval(p, K, center, rotation, radii, widths, grad, W);
   const double l = sqrt(grad[0] * grad[0] + grad[1] * grad[1] + grad[2] * grad[2]);
   for (int i = 0; i < 3; ++i)
     normal[i] = grad[i] / l;
@@ -219,13 +231,14 @@ static int blend_closest(const double* x, int K, const double* center, const dou
 }
 
 void blend_query(int N, const double* x, int K, const double* center, const double* rotation, const double* radii,
-                 double width, double* gap, double* foot, double* normal, double* weights, uint8_t* converged)
+                 const double* widths, double* gap, double* foot, double* normal, double* weights,
+                 uint8_t* converged)
 {
   double grad[3];
   for (int p = 0; p < N; ++p)
   {
-    const double phi = blend_eval(x + 3 * p, K, center, rotation, radii, width, grad, weights + (size_t)K * p);
-    converged[p] = blend_closest(x + 3 * p, K, center, rotation, radii, width, foot + 3 * p, normal + 3 * p,
+    const double phi = blend_eval(x + 3 * p, K, center, rotation, radii, widths, grad, weights + (size_t)K * p);
+    converged[p] = blend_closest(x + 3 * p, K, center, rotation, radii, widths, foot + 3 * p, normal + 3 * p,
                                  weights + (size_t)K * p);
     double d2 = 0.0;
     for (int i = 0; i < 3; ++i)

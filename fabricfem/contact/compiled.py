@@ -36,7 +36,7 @@ MAX_MONITORS = 64          # the torque monitors summed in `friction` (a stack a
 CDEF = """
 int project(int M, const double* reference, const int64_t* rows, const double* d, const double* v, const double* a,
             double dt, int K, const double* center, const double* rotation, const double* radii, double tolerance,
-            int passes, double width, double* trial, double* position, int64_t* segment, uint8_t* moved,
+            int passes, const double* widths, double* trial, double* position, int64_t* segment, uint8_t* moved,
             uint8_t* crease, double* normals, double* weights, int64_t* trapped);
 void friction(int n, const int64_t* index, const int64_t* rows, const double* trial, double* position,
               const int64_t* segment, const double* mass, double dt, double mu, const double* center,
@@ -137,7 +137,7 @@ static double smallest(const double* r) { return fmin(fmin(r[0], r[1]), r[2]); }
 /* trial positions and the projection passes of project_with_segment; returns the number of trapped points */
 int project(int M, const double* reference, const int64_t* rows, const double* d, const double* v, const double* a,
             double dt, int K, const double* center, const double* rotation, const double* radii, double tolerance,
-            int passes, double width, double* trial, double* position, int64_t* segment, uint8_t* moved,
+            int passes, const double* widths, double* trial, double* position, int64_t* segment, uint8_t* moved,
             uint8_t* crease, double* normals, double* weights, int64_t* trapped)
 {
   int n_trapped = 0;
@@ -152,14 +152,14 @@ int project(int M, const double* reference, const int64_t* rows, const double* d
     }
     moved[p] = 0;
     int inside[64];
-    int any = 0, best = 0, near = 0;
-    double qmin = INFINITY;
+    int any = 0, best = 0;
+    double qmin = INFINITY, bound[64];
     for (int k = 0; k < K; ++k)
     {
       const double q = normalised_radius(x, center + 3 * k, rotation + 9 * k, radii + 3 * k);
       inside[k] = q < 1.0;
       any |= inside[k];
-      near += (sqrt(q) - 1.0) * smallest(radii + 3 * k) < width;   /* a lower bound of the distance below w */
+      bound[k] = (sqrt(q) - 1.0) * smallest(radii + 3 * k);   /* a lower bound of the distance */
       if (q < qmin)
       {
         qmin = q;
@@ -167,14 +167,21 @@ int project(int M, const double* reference, const int64_t* rows, const double* d
       }
     }
     segment[p] = best;
-    crease[p] = near >= 2;
+    crease[p] = 0;   /* a pair of segments whose distances may both be below their blend width */
+    for (int a = 0; a < K && !crease[p]; ++a)
+      for (int b = a + 1; b < K; ++b)
+        if (bound[a] < widths[a * K + b] && bound[b] < widths[a * K + b])
+        {
+          crease[p] = 1;
+          break;
+        }
     if (crease[p])   /* within the blend of two segments: the blended skin's closest point (blend_kernel) */
     {
       double grad[3];
       double* W = weights + (size_t)K * p;
-      if (blend_eval(x, K, center, rotation, radii, width, grad, W) < 0.0)
+      if (blend_eval(x, K, center, rotation, radii, widths, grad, W) < 0.0)
       {
-        blend_closest(trial + 3 * p, K, center, rotation, radii, width, x, normals + 3 * p, W);
+        blend_closest(trial + 3 * p, K, center, rotation, radii, widths, x, normals + 3 * p, W);
         moved[p] = 1;
       }
       int heaviest = 0;

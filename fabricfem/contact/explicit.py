@@ -27,7 +27,7 @@ from typing import Callable, Iterator, Sequence
 import numpy as np
 from mpi4py import MPI
 
-from fabricfem.body.blended import BLEND_WIDTH, check_width
+from fabricfem.body.blended import BLEND_WIDTH, check_width, pair_widths
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.body.skin import Skin
 from fabricfem.contact import compiled, nodal
@@ -142,6 +142,7 @@ class ExplicitBodyContact:
         self.comm = model.comm
         self.names = list(body.segments)
         self.blend_width = check_width(blend_width)       # m: the blended skin's width (fabricfem.body.blended)
+        self.widths = np.ascontiguousarray(pair_widths(list(body.segments.values()), self.blend_width))
         # another skin of the body (fabricfem.body.skin, e.g. a rigged surface mesh) instead of the blended segments:
         # its gap, foot, normal and weights by its query; the segments' frames still carry the stick points
         if skin is not None and tuple(skin.segment_names) != tuple(body.segments):
@@ -270,7 +271,7 @@ class ExplicitBodyContact:
         [m], unit outward normal, segment index and segment weights (N, K) (fabricfem.body.skin): the blended
         segments' (`skin_gap`) or the given skin's query."""
         if self.skin is None:
-            return skin_gap(x, ellipsoids, self.blend_width)
+            return skin_gap(x, ellipsoids, self.widths)
         q = self.skin.query(x, t)
         return q.gap, q.normal, q.segment, q.weights
 
@@ -278,7 +279,7 @@ class ExplicitBodyContact:
         """The points x (N, 3) [m] inside the skin at time t [s] moved onto it (`project_onto_skin` for the blended
         segments; the given skin's closest points otherwise, all with the skin's normal and weights)."""
         if self.skin is None:
-            return project_onto_skin(x, ellipsoids, self.blend_width, segments=stack)
+            return project_onto_skin(x, ellipsoids, self.widths, segments=stack)
         q = self.skin.query(x, t)
         moved = q.gap < 0.0
         return SkinProjection(np.where(moved[:, None], q.foot, x), moved, q.segment, np.ones(len(x), dtype=bool),
@@ -389,7 +390,7 @@ class ExplicitBodyContact:
         x_all = as_points("x", self.reference + d[self.dofs])
         q = normalised_radii(x_all, ellipsoids)
         segment = np.argmin(q, axis=0).astype(np.int64)
-        near = (q.min(axis=0) < 1.0) | crease_points(q, SegmentStack(ellipsoids).scale, self.blend_width)
+        near = (q.min(axis=0) < 1.0) | crease_points(q, SegmentStack(ellipsoids).scale, self.widths)
         if self.skin is not None:      # another skin: its own query decides
             near[:] = True
         index = np.flatnonzero(near)
@@ -483,8 +484,7 @@ class ExplicitBodyContact:
         if self._rows is None:
             self._rows = np.ascontiguousarray(self.dofs, dtype=np.int64)
         segments = compiled.stacked(ellipsoids)
-        trial, skin = project_compiled(self.reference, self._rows, d, v, a, dt, segments, self.blend_width,
-                                       self.comm)
+        trial, skin = project_compiled(self.reference, self._rows, d, v, a, dt, segments, self.widths, self.comm)
         position, segment, moved = skin.position, skin.segment, skin.moved
         index = np.flatnonzero(moved)
         for buffer in (self.force, self.normal_force, self.slip):

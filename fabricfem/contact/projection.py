@@ -173,15 +173,35 @@ class SkinProjection:
     weights: np.ndarray
 
 
-def crease_points(q: np.ndarray, scale: np.ndarray, width: float) -> np.ndarray:
-    """(N,) mask of the points whose distance to two or more segments may be below the blend width w [m]: the lower
-    bound (sqrt(q) - 1) r_min of the distance (sqrt(q) is 1 / r_min-Lipschitz) below w for two segments; q (K, N)."""
-    return ((np.sqrt(q) - 1.0) * scale[:, None] < width).sum(axis=0) >= 2
+def resolve_widths(widths: np.ndarray | None, count: int) -> np.ndarray:
+    """The (K, K) blend widths [m] of `count` segments: `widths`, or BLEND_WIDTH between every two of them (segments
+    whose joints are not known: fabricfem.body.blended.pair_widths knows them from a body)."""
+    if widths is not None:
+        out = np.asarray(widths, dtype=float)
+        if out.shape != (count, count):
+            raise ValueError(f"widths: expected a ({count}, {count}) matrix of blend widths, got shape {out.shape}")
+        return out
+    out = np.full((count, count), BLEND_WIDTH)
+    np.fill_diagonal(out, 0.0)
+    return out
 
 
-def project_onto_skin(x, ellipsoids: Sequence[Ellipsoid], width: float = BLEND_WIDTH,
+def crease_points(q: np.ndarray, scale: np.ndarray, widths: np.ndarray) -> np.ndarray:
+    """(N,) mask of the points whose distances to two segments a, b may both be below their blend width w_ab [m]
+    (`widths` (K, K), fabricfem.body.blended.pair_widths): the lower bound (sqrt(q) - 1) r_min of the distance
+    (sqrt(q) is 1 / r_min-Lipschitz) below w_ab for both; q (K, N)."""
+    bound = (np.sqrt(q) - 1.0) * scale[:, None]
+    out = np.zeros(q.shape[1], dtype=bool)
+    for a in range(len(q)):          # the few pairs of segments, vectorised over the points
+        for b in range(a + 1, len(q)):
+            out |= (bound[a] < widths[a, b]) & (bound[b] < widths[a, b])
+    return out
+
+
+def project_onto_skin(x, ellipsoids: Sequence[Ellipsoid], widths: np.ndarray | None = None,
                       segments: SegmentStack | None = None) -> SkinProjection:
-    """Move the points inside the blended skin of the segments (fabricfem.body.blended, width w [m]) onto it.
+    """Move the points inside the blended skin of the segments (fabricfem.body.blended; blend widths `widths` (K, K)
+    [m], `resolve_widths`) onto it.
 
     Away from the creases (a point near one segment only) the skin is that segment's ellipsoid and a point inside
     is projected along grad f at the point ([Man2006, Box 5]: a ray cast, `SegmentStack.ray_gap`; a point inside
@@ -199,22 +219,23 @@ def project_onto_skin(x, ellipsoids: Sequence[Ellipsoid], width: float = BLEND_W
         return SkinProjection(x.copy(), np.zeros(n, dtype=bool), np.zeros(n, dtype=np.int64),
                               np.zeros(n, dtype=bool), normal, weights)
     q = stack.normalised_radii(x)
-    crease = crease_points(q, stack.scale, width)
+    widths = resolve_widths(widths, K)
+    crease = crease_points(q, stack.scale, widths)
     out, moved, segment = _project_single(x, stack, q, ~crease)
     index = np.flatnonzero(crease)
     if len(index):
         posed = (stack.center, stack.rotation, stack.radii)
-        phi, _, weights[index] = blend(x[index], *posed, width)
+        phi, _, weights[index] = blend(x[index], *posed, widths)
         inside = index[phi < 0.0]
         if len(inside):
-            skin = closest_points(x[inside], *posed, width, strict=False)
+            skin = closest_points(x[inside], *posed, widths, strict=False)
             out[inside], normal[inside], weights[inside] = skin.foot, skin.normal, skin.weights
             moved[inside] = True
         segment[index] = np.argmax(weights[index], axis=1)
     return SkinProjection(out, moved, segment, crease, normal, weights)
 
 
-def skin_gap(x, ellipsoids: Sequence[Ellipsoid], width: float = BLEND_WIDTH
+def skin_gap(x, ellipsoids: Sequence[Ellipsoid], widths: np.ndarray | None = None
              ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Signed gap [m] of the points x (N, 3) to the blended skin of the segments (negative inside), the unit outward
     normal, the segment index (of largest weight in a crease) and the segment weights (N, K) (fabricfem.body.skin):
@@ -227,17 +248,18 @@ def skin_gap(x, ellipsoids: Sequence[Ellipsoid], width: float = BLEND_WIDTH
     if len(x) == 0 or len(ellipsoids) < 2:
         return g, n, segment, weights
     stack = SegmentStack(ellipsoids)
-    crease = crease_points(stack.normalised_radii(x), stack.scale, width)
+    widths = resolve_widths(widths, len(ellipsoids))
+    crease = crease_points(stack.normalised_radii(x), stack.scale, widths)
     if crease.any():
-        skin = closest_points(x[crease], stack.center, stack.rotation, stack.radii, width, strict=False)
+        skin = closest_points(x[crease], stack.center, stack.rotation, stack.radii, widths, strict=False)
         g[crease], n[crease], segment[crease], weights[crease] = skin.gap, skin.normal, skin.segment, skin.weights
     return g, n, segment, weights
 
 
 def project_with_segment(x, ellipsoids: Sequence[Ellipsoid], segments: SegmentStack | None = None,
-                         width: float = BLEND_WIDTH) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                         widths: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """`project_onto_skin`'s (positions (N, 3), moved (N,), segment (N,))."""
-    p = project_onto_skin(x, ellipsoids, width, segments)
+    p = project_onto_skin(x, ellipsoids, widths, segments)
     return p.position, p.moved, p.segment
 
 
@@ -281,12 +303,12 @@ def _project_single(x: np.ndarray, stack: SegmentStack, q: np.ndarray, allowed: 
 
 
 def project_compiled(reference: np.ndarray, rows: np.ndarray, d: np.ndarray, v: np.ndarray, a: np.ndarray,
-                     dt: float, segments: tuple[np.ndarray, np.ndarray, np.ndarray], width: float, comm: MPI.Comm
-                     ) -> tuple[np.ndarray, SkinProjection]:
+                     dt: float, segments: tuple[np.ndarray, np.ndarray, np.ndarray], widths: np.ndarray,
+                     comm: MPI.Comm) -> tuple[np.ndarray, SkinProjection]:
     """`project_onto_skin` of the trial points x* = reference + d[rows] + dt v[rows] + dt^2 a[rows] by the
-    compiled loop (fabricfem.contact.compiled.project; `segments`: its stacked centres, rotations and radii; w =
-    `width` [m]); `comm`: the ranks that build the loops on first use (compiled.module). Returns (trial points
-    (M, 3), the SkinProjection of them)."""
+    compiled loop (fabricfem.contact.compiled.project; `segments`: its stacked centres, rotations and radii; the
+    blend widths `widths` (K, K) [m], C-contiguous); `comm`: the ranks that build the loops on first use
+    (compiled.module). Returns (trial points (M, 3), the SkinProjection of them)."""
     lib, ffi = compiled.module(comm)
     p = functools.partial(compiled.pointer, ffi)
     M, K = len(reference), len(segments[0])
@@ -296,8 +318,8 @@ def project_compiled(reference: np.ndarray, rows: np.ndarray, d: np.ndarray, v: 
     normal, weights = np.zeros((M, 3)), np.zeros((M, K))
     n_trapped = lib.project(M, p(reference, "double"), p(rows, "int64_t"), p(d, "double"), p(v, "double"),
                             p(a, "double"), dt, K, *(p(array, "double") for array in segments),
-                            INSIDE_TOLERANCE, MAX_PROJECTION_PASSES, width, p(trial, "double"), p(position, "double"),
-                            p(segment, "int64_t"), p(moved.view(np.uint8), "uint8_t"),
+                            INSIDE_TOLERANCE, MAX_PROJECTION_PASSES, p(widths, "double"), p(trial, "double"),
+                            p(position, "double"), p(segment, "int64_t"), p(moved.view(np.uint8), "uint8_t"),
                             p(crease.view(np.uint8), "uint8_t"), p(normal, "double"), p(weights, "double"),
                             p(trapped, "int64_t"))
     if n_trapped:

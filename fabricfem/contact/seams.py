@@ -159,6 +159,12 @@ class SeamTies:
         """|x_a - x_b| [m] of every stitched pair at displacements `d` (local array of W), all ranks."""
         return self._pair_gaps(self._gather(self._reference + d[self._rows]))
 
+    def joined_nodes(self) -> np.ndarray:
+        """(k, 2) global node indices (the scalar space's index map: fabricfem.contact.cloth_surface numbering) of
+        the stitched node pairs, the same on every rank."""
+        members = self.nodes.members.astype(np.int64)
+        return np.column_stack([members[self._pair_a], members[self._pair_b]])
+
     def max_gap(self, d: np.ndarray) -> float:
         """Largest distance [m] between paired nodes (all ranks)."""
         g = self.gaps(d)

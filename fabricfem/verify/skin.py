@@ -88,11 +88,11 @@ def crease_rows(name: str, skin: BlendedEllipsoids, t: float, joint: np.ndarray,
     with Timer() as timer:
         paths = crease_paths(skin, t, joint, bisector)
         posed = skin.posed(t)
-        on_skin = [closest_points(p, *posed, skin.width) for p in paths]
+        on_skin = [closest_points(p, *posed, skin.widths) for p in paths]
     for offset in OFFSETS:
         turns, jumps = [], []
         for skin_point in on_skin:
-            q = closest_points(skin_point.foot + offset * skin_point.normal, *posed, skin.width)
+            q = closest_points(skin_point.foot + offset * skin_point.normal, *posed, skin.widths)
             cosine = np.clip((q.normal[1:] * q.normal[:-1]).sum(axis=1), -1.0, 1.0)
             turns.append(np.degrees(np.arccos(cosine)).max())
             jumps.append(np.abs(q.gap - offset).max())
@@ -107,7 +107,7 @@ def crease_rows(name: str, skin: BlendedEllipsoids, t: float, joint: np.ndarray,
         vertices, triangles = triangulate(lambda x: skin.implicit(x, t), (centre - 0.06, centre + 0.06),
                                           TRIANGULATION)
         squared, _, _ = igl.point_mesh_squared_distance(probe, vertices, triangles)
-        gap = closest_points(probe, *posed, skin.width).gap
+        gap = closest_points(probe, *posed, skin.widths).gap
     out.append(result("skin-continuity", f"{name}: max |gap - distance to the {1e3 * TRIANGULATION:g} mm "
                       f"triangulation| [m]", float(np.abs(np.sqrt(squared) - gap).max()), 0.0, GAP_TOLERANCE,
                       len(probe), timer.elapsed, scale=1.0))
