@@ -14,6 +14,7 @@ import pickle
 import resource
 import shutil
 import time
+import weakref
 from pathlib import Path
 from typing import Iterable, Mapping, Sequence
 from xml.etree import ElementTree
@@ -175,9 +176,21 @@ def _in_header_order(row: Sequence | Mapping, header: Sequence[str]) -> Sequence
     return [row.get(key, "") for key in header]
 
 
+_P1_SPACES: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def p1_space(mesh, vector: bool) -> fem.FunctionSpace:
+    """The P1 space of `mesh` (3-vector or scalar), made once per mesh (a new space costs a JIT cache lookup)."""
+    spaces = _P1_SPACES.setdefault(mesh, {})
+    if vector not in spaces:
+        spaces[vector] = (fem.VectorFunctionSpace(mesh, ("Lagrange", 1), dim=3) if vector
+                          else fem.FunctionSpace(mesh, ("Lagrange", 1)))
+    return spaces[vector]
+
+
 def gather_surface(mesh, displacement: fem.Function | None = None) -> tuple[np.ndarray, np.ndarray] | None:
     """Deformed owned cells of all ranks on rank 0: (points (n, 3), cells (m, k) into points)."""
-    V1 = fem.VectorFunctionSpace(mesh, ("Lagrange", 1), dim=3)
+    V1 = p1_space(mesh, True)
     u1 = fem.Function(V1)
     if displacement is not None:
         u1.interpolate(displacement)
@@ -198,7 +211,7 @@ def gather_surface(mesh, displacement: fem.Function | None = None) -> tuple[np.n
 def gather_field(mesh, field: fem.Function) -> np.ndarray | None:
     """A scalar field at the vertices of the owned cells of all ranks on rank 0 (interpolated to P1), in the
     point layout of `gather_surface` (one copy of each vertex per cell)."""
-    V1 = fem.FunctionSpace(mesh, ("Lagrange", 1))
+    V1 = p1_space(mesh, False)
     f1 = fem.Function(V1)
     f1.interpolate(field)
     n_cells = mesh.topology.index_map(mesh.topology.dim).size_local

@@ -510,7 +510,13 @@ class ShellModel(ShellLoads, ShellSymmetry):
         return probe.node_value(self.director_field(), point)
 
     def displacement(self) -> fem.Function:
-        """Displacement as a collapsed vector Function (for output)."""
+        """Displacement as a collapsed vector Function (for output; a new Function, its space made once)."""
         if self.model == "naghdi":
-            return self.w.sub(0).collapse()
+            if getattr(self, "_displacement_map", None) is None:
+                space, dofs = self.W.sub(0).collapse()
+                self._displacement_map = (space, np.asarray(dofs, dtype=np.int64))   # dofs: into w.x.array
+            space, dofs = self._displacement_map
+            u = fem.Function(space)
+            u.x.array[:] = self.w.x.array[dofs]
+            return u
         return self.w

@@ -7,6 +7,7 @@ Every run ends with its status in summary.json ("completed" or "stopped early: <
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -103,6 +104,7 @@ def _completed_status(out: Path, sha256: str, comm) -> str:
 def run_wear_scene(scene: Scene, out: Path, comm=MPI.COMM_WORLD, resume: bool = False, sha: str = ""):
     """`fabricfem run` of a wear scene: its WearRun (`build_wear_run`) with progress, the recorder's outputs and
     the summary (fabricfem.wear.run.run_wear); the explicit engine checkpoints and resumes."""
+    started = time.perf_counter()
     run, headline, render_at, _ = build_wear_run(scene, comm)
     parsed, report = scene.parsed, None
     if parsed.is_tube_on_limb:
@@ -115,7 +117,7 @@ def run_wear_scene(scene: Scene, out: Path, comm=MPI.COMM_WORLD, resume: bool = 
             raise SceneError(f"resume: no checkpoint in {out}/checkpoint (run the scene without --resume first)")
     return run_wear(run, out, headline, render_at, scene.parsed.output.render, scene.parsed.output.body_samples,
                     checkpoint, resume, report, parsed.checks, parsed.failure_strain,
-                    parsed.output.windows)
+                    parsed.output.windows, started)
 
 
 def _compression_report(run: GarmentRun, limb: Ellipsoid, out: Path, name: str, render: bool) -> dict:

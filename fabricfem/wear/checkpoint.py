@@ -15,6 +15,8 @@ fabricfem.scenes.run).
 """
 from __future__ import annotations
 
+import time
+
 from fabricfem import io
 
 PARTS = ("integrator", "contact", "handles")   # the run's parts a checkpoint holds besides its records
@@ -26,7 +28,9 @@ class Checkpoint(io.Checkpoint):
 
     def save(self, run, history, records: int, recorder=None) -> None:
         """Write the state after `records` record intervals (all ranks); the recorder's copies of its XDMF files
-        (xdmf_<records>_*) replace those of the previous checkpoint once the state is written."""
+        (xdmf_<records>_*) replace those of the previous checkpoint once the state is written. `seconds` [s]
+        sums the wall time of the saves."""
+        tic = time.perf_counter()
         tag = f"xdmf_{records}"
         self.write({"records": records, "history": history, "integrator": run.integrator.state(),
                     "contact": run.contact.state(), "handles": [handle.state() for handle in run.handles],
@@ -35,6 +39,7 @@ class Checkpoint(io.Checkpoint):
             for old in self.folder.glob("xdmf_*"):
                 if not old.name.startswith(f"{tag}_"):
                     old.unlink()
+        self.seconds = getattr(self, "seconds", 0.0) + time.perf_counter() - tic
 
     def load(self, run, recorder=None):
         """Restore the saved state into `run` (and `recorder`); returns (history, records done)."""

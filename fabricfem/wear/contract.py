@@ -90,6 +90,7 @@ class WearHistory:
     report: dict = field(default_factory=dict, kw_only=True)     # a scene's report of its final state (rank 0)
     verdict: dict = field(default_factory=dict, kw_only=True)    # the plausibility checks (fabricfem.wear.verdict)
     statistics: dict = field(default_factory=dict, kw_only=True)  # windowed means, percentile peaks (wear.statistics)
+    wall_split: dict = field(default_factory=dict, kw_only=True)  # the process's wall time by phase (wear.run)
 
     @property
     def completed(self) -> bool:
@@ -166,7 +167,8 @@ class WearHistory:
         """Over the motion phase: peak and final per torque monitor (with their time and axis value), pressure
         peak and mean (Pa, kPa, mmHg) with the segment and position of the peak; after the sewing: the largest
         strain, penetration and seam gap; the dofs, wall time [s], explicit step dt_s [s] and the number of
-        steps (fabricfem.scenes.accuracy reads them)."""
+        steps (fabricfem.scenes.accuracy reads them); `wall_split`: the process's wall time by phase
+        (fabricfem.wear.run.wall_split) when the run was made by `fabricfem run`."""
         out: dict = {"records": len(self.steps), "completed": self.completed, "ndofs": self.ndofs,
                      "wall_s": self.wall, "dt_s": self.timings.get("dt"),
                      "time_steps": int(sum(s.time_steps for s in self.steps))}
@@ -184,6 +186,8 @@ class WearHistory:
         out.update(self.report)
         if self.verdict:
             out["verdict"] = self.verdict
+        if getattr(self, "wall_split", None):     # (a history pickled before the split has none)
+            out["wall_split"] = self.wall_split
         if self.statistics:
             out["statistics"] = self.statistics
             for name in self.monitors:   # the first window's mean, a plain key for plans and sweeps

@@ -10,25 +10,31 @@ storage of the torques against the body time, with the motion's own time and Ope
 fabricfem.wear.outputs.STO_NOTE), renders of the pressure on the skin at the requested
 coordinates and at the record of the largest pressure of the motion (pressure_peak.png). It reads the
 run only through the wearer contract (fabricfem.wear.contract.WearRun).
+
+The time loop pays only for copies: the XDMF records are kept in memory and written in bulk and the body frames
+written by a writer thread (fabricfem.wear.writer; every FLUSH_EVERY records, at a checkpoint and at `close`);
+the pressure on the skin of the peak record is computed when the frame is final (the next render, a checkpoint,
+`close`), not at every new peak. `seconds` [s] is the wall time spent in `record`.
 """
 from __future__ import annotations
 
+import copy
+import time
 from pathlib import Path
 
 import numpy as np
 from dolfinx import fem
-from dolfinx import io as dio
 
 from fabricfem import io as fio
 from fabricfem.wear.outputs import (
     STO_NOTE,
-    body_surface,
     plot_wear_history,
     render_skin_pressure,
     skin_pressure,
     wear_sto_columns,
     write_sto,
 )
+from fabricfem.wear.writer import BackgroundWriter, BodyFrames, FieldSeries
 
 COLOUR_PERCENTILE = 99.0   # the renders' colour range ends at this percentile of the pressures in contact
 
@@ -61,7 +67,11 @@ class WearRecorder:
         # one field per file (meshio's XDMF reader keeps one function per time step): file stem -> its function;
         # a resumed run puts back the files' copies of its checkpoint and appends to them (`restore`)
         self.fields = {"cloth": self.u_out, "cloth_pressure": self.p_out}
+        self.writer = BackgroundWriter() if comm.rank == 0 else None
         self.files = {name: self._open(name, "w") for name in self.fields}
+        self.bodies = BodyFrames(body_samples)   # the body frames' files, written on the writer thread
+        self.peak_frame: tuple | None = None   # (step, displacement, pressure) of a new peak, kept when final
+        self.seconds = 0.0               # s, wall time in `record`
         self.frames: list[tuple[float, str]] = []
         self.renders: list[str] = []     # names of the pressure renders written
         self.skin_frames: list = []      # (name, title, (points, triangles, values [Pa]), garment surface), rank 0
@@ -70,78 +80,114 @@ class WearRecorder:
         self.unit = "deg" if "[deg]" in self.label else "s"
 
     def record(self, step) -> None:
-        """Write the record of `step` (its coordinate is the time coordinate of the files)."""
+        """Keep the record of `step` for the files (its coordinate is the time coordinate of the files)."""
+        tic = time.perf_counter()
         run, x, stamp = self.run, step.coordinate, step.output_time
-        self.u_out.interpolate(run.model.displacement())
-        self.p_out.interpolate(run.pressure_field())
-        for name, field in self.fields.items():
-            self.files[name].write_function(field, stamp)
+        displacement, pressure = run.model.displacement(), run.pressure_field()
+        self.u_out.interpolate(displacement)
+        self.p_out.interpolate(pressure)
+        for series in self.files.values():
+            series.add(stamp)
         if run.comm.rank == 0:
-            import pyvista as pv  # optional heavy package, loaded only when a render is made
-            points, triangles = body_surface(run.posed_bodies(x), self.samples)
             name = f"body_{len(self.frames):04d}.vtp"   # frame k of record k, also after a resume
-            faces = np.hstack([np.full((len(triangles), 1), 3), triangles]).ravel()
-            pv.PolyData(points, faces).save(str(self.out / name))
+            bodies, path = copy.deepcopy(run.posed_bodies(x)), self.out / name
+            self.writer.submit(lambda: self.bodies.write(path, bodies))
             self.frames.append((stamp, name))
         while self.render and self.pending and x >= self.pending[0] - 1e-9:
             at = self.pending.pop(0)
+            self._keep_peak_frame()
             self._keep_skin_frame(step, f"pressure_{at:05.2f}{self.unit}.png")
         peak = step.peak_pressure
         if self.render and step.phase == "motion" and peak > self.peak:
-            # the peak pressure map: the skin at the record of the largest pressure of the motion so far
+            # the peak pressure map: the skin at the record of the largest pressure of the motion so far (the
+            # state kept here, its skin pressure computed once no later record replaces it)
             self.peak = peak
-            self.skin_frames = [f for f in self.skin_frames if f[0] != "pressure_peak.png"]
-            self._keep_skin_frame(step, "pressure_peak.png")
+            self.peak_frame = (step, self._copy(displacement, self.peak_frame, 1),
+                               self._copy(pressure, self.peak_frame, 2))
+        self.seconds += time.perf_counter() - tic
 
-    def _open(self, name: str, mode: str):
-        """The XDMF file <out>/<name>.xdmf opened in `mode` ("w": new, with the mesh; "a": appended to)."""
-        handle = dio.XDMFFile(self.run.comm, str(self.out / f"{name}.xdmf"), mode)
-        if mode == "w":
-            handle.write_mesh(self.run.model.mesh)
-        return handle
+    @staticmethod
+    def _copy(function: fem.Function, previous: tuple | None, k: int) -> fem.Function:
+        """A copy of `function` (into previous[k], the copy of an earlier peak, when there is one)."""
+        copy = previous[k] if previous is not None else fem.Function(function.function_space)
+        copy.x.array[:] = function.x.array
+        return copy
+
+    def _keep_peak_frame(self) -> None:
+        """The skin frame of the kept peak record (pressure_peak.png), replacing the earlier one (all ranks)."""
+        if self.peak_frame is None:
+            return
+        step, displacement, pressure = self.peak_frame
+        self.peak_frame = None
+        self.skin_frames = [f for f in self.skin_frames if f[0] != "pressure_peak.png"]
+        self._keep_skin_frame(step, "pressure_peak.png", displacement, pressure)
+
+    def _open(self, name: str, mode: str) -> FieldSeries:
+        """The XDMF series <out>/<name>.xdmf ("w": new, with the mesh; "a": appended to), written in bulk."""
+        return FieldSeries(self.out / f"{name}.xdmf", self.fields[name], mode, self.writer)
+
+    def _flush(self) -> None:
+        """Every kept record on disk (all ranks): the XDMF series flushed and the writer thread waited for."""
+        for series in self.files.values():
+            series.flush()
+        if self.writer is not None:
+            self.writer.wait()
 
     def state(self, folder: Path, tag: str) -> dict:
         """What a checkpoint keeps of the recorder (all ranks call it): the body frames, the skin frames kept for
-        the renders, and copies of the XDMF files as they are now, <folder>/<tag>_<file stem>.xdmf/.h5 (each file
-        closed, copied, reopened for appending: a kill later may leave the open HDF5 file unreadable)."""
+        the renders, and copies of the XDMF files as they are now, <folder>/<tag>_<file stem>.xdmf/.h5 (the kept
+        records written first; the files are closed between the bulk writes)."""
+        self._keep_peak_frame()
+        self._flush()
         for name in self.fields:
-            self.files[name].close()
             fio.copy_xdmf(self.out / f"{name}.xdmf", folder, f"{tag}_{name}", self.run.comm)
-            self.files[name] = self._open(name, "a")
-        return {"frames": list(self.frames), "skin_frames": list(self.skin_frames), "pending": list(self.pending),
+        return {"frames": list(self.frames), "skin_frames": [tuple(f) for f in self.skin_frames],
+                "pending": list(self.pending),
                 "peak": self.peak, "series": tag}
 
     def restore(self, state: dict, folder: Path) -> None:
         """Continue from a checkpoint's `state` in `folder`: its copies of the XDMF files put back in place (the
         records up to the checkpoint; those after it are written again, once) and appended to from here on."""
         self.frames, self.skin_frames, self.pending = state["frames"], state["skin_frames"], state["pending"]
-        self.peak = state["peak"]
+        self.peak, self.peak_frame = state["peak"], None
+        self._flush()
         for name in self.fields:
-            self.files[name].close()
             fio.SurfaceSeries.restore(self.out / f"{name}.xdmf", folder, f"{state['series']}_{name}", self.run.comm)
             self.files[name] = self._open(name, "a")
+            self.files[name] = self._open(name, "a")
 
-    def _keep_skin_frame(self, step, name: str) -> None:
-        """The pressure on the body's skin at this record (rank 0 keeps it; rendered at `close` with one colour
+    def _keep_skin_frame(self, step, name: str, displacement: fem.Function | None = None,
+                         pressure: fem.Function | None = None) -> None:
+        """The pressure on the body's skin at record `step` (rank 0 keeps it; rendered at `close` with one colour
         range across the frames): the garment's nodal pressure [Pa] spread onto the skin within two node
-        spacings (wear.outputs.skin_pressure)."""
+        spacings (wear.outputs.skin_pressure); `displacement` [m] and `pressure` [Pa]: the garment's at that
+        record (default: now). The skin pressure is computed on the writer thread (the frame's entry is whole
+        after `_flush`)."""
         run = self.run
-        surface = fio.gather_surface(run.model.mesh, run.model.displacement())
-        values = fio.gather_field(run.model.mesh, run.pressure_field())
+        displacement = run.model.displacement() if displacement is None else displacement
+        surface = fio.gather_surface(run.model.mesh, displacement)
+        values = fio.gather_field(run.model.mesh, run.pressure_field() if pressure is None else pressure)
         if run.comm.rank != 0:
             return
         points, cells = surface
-        spacing = float(np.median(np.linalg.norm(points[cells[:, 0]] - points[cells[:, 1]], axis=1)))
-        radius = 2.0 * max(spacing, 1e-6)
-        skin = skin_pressure(run.posed_bodies(step.coordinate), 2 * self.samples, points, values, radius)
+        bodies, samples = run.posed_bodies(step.coordinate), 2 * self.samples
         what = self.label.split(" [")[0]
         title = f"{run.name}: {what} {step.coordinate:.2f} {self.unit}, pressure on the skin"
-        self.skin_frames.append((name, title, skin, (points, cells)))
+        entry = [name, title, None, (points, cells)]
+        self.skin_frames.append(entry)
+
+        def spread() -> None:
+            spacing = float(np.median(np.linalg.norm(points[cells[:, 0]] - points[cells[:, 1]], axis=1)))
+            entry[2] = skin_pressure(bodies, samples, points, values, 2.0 * max(spacing, 1e-6))
+        self.writer.submit(spread)
 
     def close(self, history) -> None:
-        """Close the XDMF files and write torque.csv, body.pvd, torque.sto, torque.png and the renders."""
-        for handle in self.files.values():
-            handle.close()
+        """Write the kept records (XDMF files, body frames) and torque.csv, body.pvd, torque.sto, torque.png and
+        the renders; end the writer thread."""
+        self._keep_peak_frame()
+        self._flush()
+        if self.writer is not None:
+            self.writer.close()
         comm = self.run.comm
         fio.write_csv(self.out / "torque.csv", history.header, history.rows(), comm)
         if comm.rank == 0:

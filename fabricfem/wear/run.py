@@ -1,6 +1,7 @@
 """Run a garment on a moving wearer by its route, through the wearer contract (fabricfem.wear.contract)."""
 from __future__ import annotations
 
+import os
 import signal
 import time
 from contextlib import contextmanager
@@ -19,6 +20,8 @@ from fabricfem.wear.sleeve import build_explicit
 from fabricfem.wear.sleeve_implicit import build_implicit
 from fabricfem.wear.statistics import PEAK_PERCENTILE, default_windows, motion_statistics, statistics_rows
 from fabricfem.wear.verdict import DEFAULT_FAILURE_STRAIN, Bounds, verdict, wear_checks
+
+_RUNS_MADE: list[str] = []   # the wear runs of this process so far (the first one's setup includes the imports)
 
 # route name ([route] solver) -> builder of the sleeve's WearRun from its configuration
 ROUTES: dict[str, Callable[[SleeveConfig, MPI.Comm], WearRun]] = {
@@ -44,11 +47,14 @@ def run_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
 def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], render: bool = True,
              body_samples: int = 24, checkpoint=None, resume: bool = False,
              report: Callable[[WearRun, WearHistory], dict | None] | None = None, bounds: Bounds = Bounds(),
-             failure_strain: float = DEFAULT_FAILURE_STRAIN, windows: list | None = None):
+             failure_strain: float = DEFAULT_FAILURE_STRAIN, windows: list | None = None,
+             started: float | None = None):
     """Run any WearRun with progress lines (rank 0), write the WearRecorder's outputs under `out`, print the
     closing summary (peak and final torque per monitor, pressures, strain, penetration, seam gap) and return the
     history. The explicit engine's runs also take a `checkpoint` (fabricfem.wear.checkpoint.Checkpoint), `resume`
-    from it, and stop at the next record on Ctrl-C (SIGINT, on any rank) with valid outputs and a checkpoint."""
+    from it, and stop at the next record on Ctrl-C (SIGINT, on any rank) with valid outputs and a checkpoint.
+    `history.wall_split` (`wall_split`): its setup counted from the process's start for the process's first run,
+    else from `started` (time.perf_counter() when the run's building began; default: this call)."""
     comm = run.comm
     say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
     t0 = time.perf_counter()
@@ -61,14 +67,17 @@ def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], ren
         recorder.record(step)
         say(f"  {step.line()}  {clock(run.fraction(step), step.phase)}")
 
+    loop_start = time.perf_counter()
     if checkpoint is None:
         history = run.run(on_step=on_step, stop_on_failure=False)
     else:
         with interrupt_flag(comm) as interrupted:
             history = run.run(on_step=on_step, stop_on_failure=False, checkpoint=checkpoint, resume=resuming,
                               recorder=recorder, should_stop=interrupted)
-        if history.failure.startswith("interrupted"):
-            checkpoint.save(run, history, len(history.steps), recorder)   # one record interval per record
+    loop_end = time.perf_counter()
+    output = recorder.seconds + getattr(checkpoint, "seconds", 0.0)
+    if checkpoint is not None and history.failure.startswith("interrupted"):
+        checkpoint.save(run, history, len(history.steps), recorder)   # one record interval per record
     history.wall = time.perf_counter() - t0
     checks = wear_checks(history, bounds, failure_strain)
     history.verdict = verdict(checks)
@@ -97,7 +106,46 @@ def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], ren
         say(f"STOPPED EARLY: {history.failure}")
     say(f"wrote {out}/cloth.xdmf, body.pvd (+ body_*.vtp), torque.csv, torque.sto, torque.png"
         + "".join(f", {name}" for name in recorder.renders))
+    first = not _RUNS_MADE
+    _RUNS_MADE.append(run.name)
+    setup = process_age(loop_start) if first else loop_start - (t0 if started is None else started)
+    history.wall_split = wall_split(setup, loop_end - loop_start, output, time.perf_counter() - loop_end)
+    history.wall_split["setup_from"] = "process start" if first else "run start"
+    say(f"wall time: {format_wall_split(history.wall_split)}")
     return history
+
+
+def process_age(at: float | None = None) -> float:
+    """Wall time [s] from the start of this process to the time.perf_counter() value `at` (default now): Linux's
+    start time of the process (/proc/self/stat, 10 ms ticks) against the boot clock; elsewhere NaN."""
+    now = time.perf_counter()
+    at = now if at is None else at
+    try:
+        with open("/proc/self/stat") as f:
+            ticks = float(f.read().rsplit(")", 1)[1].split()[19])
+        age = time.clock_gettime(time.CLOCK_BOOTTIME) - ticks / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError, AttributeError):
+        return float("nan")
+    return age - (now - at)
+
+
+def wall_split(setup: float, loop: float, output: float, after: float) -> dict:
+    """The wall time of a `fabricfem run` by phase [s] (rank 0's clock): setup (from the process's start to the
+    first step: interpreter, imports, scene, mesh, forms, recorder), loop (the time loop, its output included),
+    output_in_loop (the records written and the checkpoints, inside the loop), after (checks, statistics, the
+    files written at the end: CSV, STO, plots and renders); the total, outside_loop_share = (setup + after) /
+    total and output_share_of_loop = output_in_loop / loop."""
+    total = setup + loop + after
+    return {"setup_s": setup, "loop_s": loop, "output_in_loop_s": output, "after_s": after, "total_s": total,
+            "outside_loop_share": (setup + after) / total if total > 0 else float("nan"),
+            "output_share_of_loop": output / loop if loop > 0 else float("nan")}
+
+
+def format_wall_split(split: dict) -> str:
+    """One line of `wall_split`: the phases [s] and the two shares."""
+    return (f"setup {split['setup_s']:.2f} s, time loop {split['loop_s']:.2f} s (output in it "
+            f"{split['output_in_loop_s']:.2f} s = {split['output_share_of_loop']:.1%}), after {split['after_s']:.2f} s; "
+            f"outside the loop {split['outside_loop_share']:.1%} of {split['total_s']:.2f} s")
 
 
 @contextmanager
