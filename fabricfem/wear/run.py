@@ -109,7 +109,8 @@ def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], ren
     first = not _RUNS_MADE
     _RUNS_MADE.append(run.name)
     setup = process_age(loop_start) if first else loop_start - (t0 if started is None else started)
-    history.wall_split = wall_split(setup, loop_end - loop_start, output, time.perf_counter() - loop_end)
+    history.wall_split = wall_split(setup, loop_end - loop_start, output, time.perf_counter() - loop_end,
+                                    recorder.writer.cpu if recorder.writer is not None else 0.0)
     history.wall_split["setup_from"] = "process start" if first else "run start"
     say(f"wall time: {format_wall_split(history.wall_split)}")
     return history
@@ -129,16 +130,17 @@ def process_age(at: float | None = None) -> float:
     return age - (now - at)
 
 
-def wall_split(setup: float, loop: float, output: float, after: float) -> dict:
+def wall_split(setup: float, loop: float, output: float, after: float, writer_cpu: float = 0.0) -> dict:
     """The wall time of a `fabricfem run` by phase [s] (rank 0's clock): setup (from the process's start to the
     first step: interpreter, imports, scene, mesh, forms, recorder), loop (the time loop, its output included),
     output_in_loop (the records written and the checkpoints, inside the loop), after (checks, statistics, the
     files written at the end: CSV, STO, plots and renders); the total, outside_loop_share = (setup + after) /
-    total and output_share_of_loop = output_in_loop / loop."""
+    total and output_share_of_loop = output_in_loop / loop; writer_cpu_s: the CPU time of the writer thread (rank 0,
+    fabricfem.wear.writer: files written beside the loop and at the end; on a busy core it slows the loop too)."""
     total = setup + loop + after
     return {"setup_s": setup, "loop_s": loop, "output_in_loop_s": output, "after_s": after, "total_s": total,
             "outside_loop_share": (setup + after) / total if total > 0 else float("nan"),
-            "output_share_of_loop": output / loop if loop > 0 else float("nan")}
+            "output_share_of_loop": output / loop if loop > 0 else float("nan"), "writer_cpu_s": writer_cpu}
 
 
 def format_wall_split(split: dict) -> str:

@@ -20,6 +20,7 @@ import os
 import queue
 import re
 import threading
+import time
 import zlib
 from pathlib import Path
 from typing import Callable
@@ -38,9 +39,11 @@ FLUSH_EVERY = 50          # records kept in memory between two writes of an XDMF
 
 class BackgroundWriter:
     """One daemon thread that runs submitted jobs (callables of plain numpy / file I/O) in order. `wait()` returns
-    when every job submitted so far has run and raises the first error a job raised (RuntimeError naming it)."""
+    when every job submitted so far has run and raises the first error a job raised (RuntimeError naming it).
+    `cpu` [s]: the thread's CPU time in its jobs."""
 
     def __init__(self):
+        self.cpu = 0.0
         self._jobs: queue.Queue = queue.Queue()
         self._errors: list[BaseException] = []
         self._thread = threading.Thread(target=self._work, name="fabricfem-writer", daemon=True)
@@ -49,6 +52,7 @@ class BackgroundWriter:
     def _work(self) -> None:
         while True:
             job = self._jobs.get()
+            tic = time.thread_time()
             try:
                 if job is None:
                     return
@@ -56,6 +60,7 @@ class BackgroundWriter:
             except BaseException as exc:   # kept, raised on the caller's thread by wait()
                 self._errors.append(exc)
             finally:
+                self.cpu += time.thread_time() - tic
                 self._jobs.task_done()
 
     def submit(self, job: Callable[[], None]) -> None:
