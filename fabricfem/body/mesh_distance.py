@@ -27,12 +27,18 @@ FOOT_NORMAL_DISTANCE = 1e-7     # m: nearer than this the normal is the feature'
 
 @dataclass(frozen=True, eq=False)
 class Topology:
-    """The edges of a triangulation, built once for all its poses: `faces` (F, 3), `face_edges` (F, 3) the index
-    of the edge opposite each corner, `n_edges` their number."""
+    """The edges and vertex rings of a closed triangulation, built once for all its poses: `faces` (F, 3),
+    `face_edges` (F, 3) the index of the edge opposite each corner, `n_edges` their number, `edge_faces` (E, 2) the
+    two faces of each edge, and the faces around each vertex as a CSR table: those of vertex v are
+    `ring_face[ring_start[v]:ring_start[v + 1]]`, v being their corner `ring_corner[...]`."""
 
     faces: np.ndarray
     face_edges: np.ndarray
     n_edges: int
+    edge_faces: np.ndarray
+    ring_start: np.ndarray
+    ring_face: np.ndarray
+    ring_corner: np.ndarray
 
     @classmethod
     def of(cls, faces: np.ndarray) -> Topology:
@@ -40,7 +46,20 @@ class Topology:
         opposite = np.stack([f[:, [1, 2]], f[:, [2, 0]], f[:, [0, 1]]], axis=1).reshape(-1, 2)   # (3F, 2)
         _, inverse = np.unique(np.sort(opposite, axis=1), axis=0, return_inverse=True)
         inverse = inverse.reshape(-1)
-        return cls(f, inverse.reshape(-1, 3), int(inverse.max()) + 1)
+        n_edges = int(inverse.max()) + 1
+        count = np.bincount(inverse, minlength=n_edges)
+        edge_faces = np.zeros((n_edges, 2), dtype=np.int64)
+        order = np.argsort(inverse, kind="stable")
+        if np.all(count == 2):                # a closed manifold: two faces per edge
+            edge_faces = (order // 3).reshape(-1, 2)
+        else:                                 # an open or non-manifold surface: the first face twice where alone
+            first = np.concatenate([[0], np.cumsum(count)[:-1]])
+            edge_faces[:, 0] = order[first] // 3
+            edge_faces[:, 1] = order[first + (count > 1)] // 3
+        corners = f.reshape(-1)
+        ring = np.argsort(corners, kind="stable")
+        start = np.concatenate([[0], np.cumsum(np.bincount(corners))]).astype(np.int64)
+        return cls(f, inverse.reshape(-1, 3), n_edges, edge_faces, start, ring // 3, ring % 3)
 
 
 def face_normals_areas(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -88,37 +107,141 @@ class PosedSurface:
             self.built_on = self.vertices
         else:
             self.tree, self.built_on = tree
-        self.face_normals, self.face_areas = face_normals_areas(self.vertices, faces)
-        weighted = corner_angles(self.vertices, faces).reshape(-1, 1) * np.repeat(self.face_normals, 3, axis=0)
-        corners, edges = faces.reshape(-1), topology.face_edges.reshape(-1)
-        n_vertices = len(self.vertices)
-        self.vertex_normals = _unit(np.column_stack(
-            [np.bincount(corners, weights=weighted[:, i], minlength=n_vertices) for i in range(3)]))
-        per_corner = np.repeat(self.face_normals, 3, axis=0)
-        self.edge_normals = _unit(np.column_stack(
-            [np.bincount(edges, weights=per_corner[:, i], minlength=topology.n_edges) for i in range(3)]))
 
     def closest(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(gap (N,) [m] negative inside, triangle (N,) int, barycentric coordinates (N, 3) of the foot,
         foot (N, 3) [m], unit outward normal (N, 3)) of the points x (N, 3) [m]."""
         x = np.ascontiguousarray(x, dtype=float)
-        faces = self.topology.faces
-        sqrd, tri, foot = self.tree.squared_distance(self.vertices, faces, x)
-        corner = self.vertices[faces[tri]]
-        bary = igl.barycentric_coordinates(foot, np.ascontiguousarray(corner[:, 0]),
-                                           np.ascontiguousarray(corner[:, 1]), np.ascontiguousarray(corner[:, 2]))
-        small = bary < FEATURE_TOLERANCE
-        count = small.sum(axis=1)
-        pseudo = self.face_normals[tri]
-        on_edge = count == 1
-        if on_edge.any():
-            pseudo[on_edge] = self.edge_normals[self.topology.face_edges[tri[on_edge], np.argmax(small[on_edge], 1)]]
-        on_vertex = count >= 2
-        if on_vertex.any():
-            pseudo[on_vertex] = self.vertex_normals[faces[tri[on_vertex], np.argmax(bary[on_vertex], 1)]]
-        offset = x - foot
-        sign = np.where(np.einsum("ij,ij->i", offset, pseudo) >= 0.0, 1.0, -1.0)
-        distance = np.sqrt(np.maximum(sqrd, 0.0))
-        far = distance > FOOT_NORMAL_DISTANCE
-        normal = np.where(far[:, None], sign[:, None] * offset / np.where(far, distance, 1.0)[:, None], pseudo)
-        return sign * distance, tri, bary, foot, normal
+        sqrd, tri, foot = self.tree.squared_distance(self.vertices, self.topology.faces, x)
+        return signed_closest(self.vertices, self.topology, x, sqrd, tri, foot)
+
+
+def _face_normals(vertices: np.ndarray, faces: np.ndarray, which: np.ndarray) -> np.ndarray:
+    """Unit outward normals (N, 3) of the faces `which` (N,)."""
+    p = vertices[faces[which]]
+    return _unit(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]))
+
+
+def pseudonormals(vertices: np.ndarray, topology: Topology, tri: np.ndarray, bary: np.ndarray) -> np.ndarray:
+    """(N, 3) angle-weighted pseudonormals ([Baerentzen2005]) of the features the feet lie on (triangle `tri`,
+    barycentric coordinates `bary`; a coordinate below FEATURE_TOLERANCE puts the foot on an edge, two on a vertex),
+    computed for those features only from the posed `vertices` (V, 3) [m]."""
+    faces = topology.faces
+    small = bary < FEATURE_TOLERANCE
+    count = small.sum(axis=1)
+    pseudo = _face_normals(vertices, faces, tri)
+    on_edge = np.flatnonzero(count == 1)
+    if len(on_edge):
+        pair = topology.edge_faces[topology.face_edges[tri[on_edge], np.argmax(small[on_edge], 1)]]
+        pseudo[on_edge] = _unit(_face_normals(vertices, faces, pair[:, 0]) + _face_normals(vertices, faces, pair[:, 1]))
+    on_vertex = np.flatnonzero(count >= 2)
+    if len(on_vertex):
+        v = faces[tri[on_vertex], np.argmax(bary[on_vertex], 1)]
+        first, sizes = topology.ring_start[v], topology.ring_start[v + 1] - topology.ring_start[v]
+        owner = np.repeat(np.arange(len(v)), sizes)
+        slot = np.repeat(first - np.concatenate([[0], np.cumsum(sizes)[:-1]]), sizes) + np.arange(sizes.sum())
+        ring, corner = topology.ring_face[slot], topology.ring_corner[slot]
+        p = vertices[faces[ring]]
+        rows = np.arange(len(ring))
+        u = p[rows, (corner + 1) % 3] - p[rows, corner]
+        w = p[rows, (corner + 2) % 3] - p[rows, corner]
+        cross = np.cross(u, w)
+        angle = np.arctan2(np.linalg.norm(cross, axis=1), np.einsum("ij,ij->i", u, w))
+        weighted = angle[:, None] * _unit(cross)
+        pseudo[on_vertex] = _unit(np.column_stack([np.bincount(owner, weights=weighted[:, i], minlength=len(v))
+                                                   for i in range(3)]))
+    return pseudo
+
+
+def signed_closest(vertices: np.ndarray, topology: Topology, x: np.ndarray, sqrd: np.ndarray, tri: np.ndarray,
+                   foot: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(gap (N,) [m], triangle, barycentric coordinates (N, 3), foot (N, 3) [m], unit normal (N, 3)) of the points x
+    (N, 3) [m] from their closest points (squared distance [m^2], triangle, foot) on the posed `vertices`: the sign
+    and the normal of the module docstring."""
+    corner = vertices[topology.faces[tri]]
+    bary = igl.barycentric_coordinates(foot, np.ascontiguousarray(corner[:, 0]), np.ascontiguousarray(corner[:, 1]),
+                                       np.ascontiguousarray(corner[:, 2])).reshape(-1, 3)
+    pseudo = pseudonormals(vertices, topology, tri, bary)
+    offset = x - foot
+    sign = np.where(np.einsum("ij,ij->i", offset, pseudo) >= 0.0, 1.0, -1.0)
+    distance = np.sqrt(np.maximum(sqrd, 0.0))
+    far = distance > FOOT_NORMAL_DISTANCE
+    normal = np.where(far[:, None], sign[:, None] * offset / np.where(far, distance, 1.0)[:, None], pseudo)
+    return sign * distance, tri, bary, foot, normal
+
+
+def _orthogonal(A: np.ndarray) -> bool:
+    """All maps A (K, 3, 3) rotations (to 1e-9): the segments move rigidly (no transverse growth)."""
+    return bool(np.abs(np.einsum("kji,kjl->kil", A, A) - np.eye(3)).max() < 1e-9)
+
+
+class SegmentTrees:
+    """Closest points on a skin posed by linear blend skinning, its rigid parts searched in trees of the rest pose.
+
+    A triangle whose three corners have weight 1 on one segment k moves rigidly with it, x -> A_k x + b_k: its
+    distance to a point x is that of the rest triangle to A_k^T (x - b_k), so the rigid triangles of each segment keep
+    one AABB tree built once on the rest pose. The other, blended, triangles (bands around the joints) are searched
+    in a tree of their posed vertices, rebuilt only when one of them moved more than `tolerance` [m] since its build
+    (reused within: a gap at most 2 tolerance above the exact one, `PosedSurface`; 0: exact, rebuilt for every new
+    pose). The closest point is the nearest of the K + 1 searches (exact). Maps that are not rotations (a body
+    growing transversally during the donning) search all triangles in one tree of the posed vertices.
+
+    Args:
+        rest: (V, 3) rest vertices [m]; topology: their faces; weights: (V, K) skinning weights;
+        tolerance: the blended tree's reuse distance [m].
+    """
+
+    def __init__(self, rest: np.ndarray, topology: Topology, weights: np.ndarray, tolerance: float = 0.0):
+        self.rest, self.topology, self.tolerance = np.ascontiguousarray(rest, dtype=float), topology, float(tolerance)
+        faces = topology.faces
+        owner = np.argmax(weights, axis=1)[faces]
+        single = ((weights > 0.0).sum(axis=1) == 1)[faces].all(axis=1)
+        rigid = single & (owner[:, 0] == owner[:, 1]) & (owner[:, 1] == owner[:, 2])
+        self.groups = []
+        for k in range(weights.shape[1]):
+            ids = np.flatnonzero(rigid & (owner[:, 0] == k))
+            if len(ids):
+                sub = np.ascontiguousarray(faces[ids])
+                tree = igl.AABB()
+                tree.init(self.rest, sub)
+                self.groups.append((k, ids, sub, tree))
+        self.blend_ids = np.flatnonzero(~rigid)
+        self.blend_vertices, local = np.unique(faces[self.blend_ids], return_inverse=True)
+        self.blend_faces = np.ascontiguousarray(local.reshape(-1, 3), dtype=np.int64)   # into blend_vertices
+        self.builds = 0
+        self._blend_tree: tuple[igl.AABB, np.ndarray] | None = None
+        self._full: tuple[igl.AABB, np.ndarray] | None = None
+
+    def _tree(self, vertices: np.ndarray, faces: np.ndarray, cached, tolerance: float):
+        """(tree, rebuilt?) on `vertices` reused from `cached` while no vertex moved more than tolerance."""
+        if cached is not None and cached[1].shape == vertices.shape and (
+                np.linalg.norm(vertices - cached[1], axis=1).max(initial=0.0) <= tolerance):
+            return cached, False
+        tree = igl.AABB()
+        tree.init(vertices, faces)
+        self.builds += 1
+        return (tree, vertices), True
+
+    def search(self, vertices: np.ndarray, A: np.ndarray, b: np.ndarray, x: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(squared distance (N,) [m^2], triangle (N,), foot (N, 3) [m]) of the points x (N, 3) [m] on the skin
+        posed as `vertices` (V, 3) [m] by the maps A (K, 3, 3), b (K, 3) [m]."""
+        x = np.ascontiguousarray(x, dtype=float)
+        vertices = np.ascontiguousarray(vertices, dtype=float)
+        if not _orthogonal(A):
+            self._full, _ = self._tree(vertices, self.topology.faces, self._full, 0.0)
+            return self._full[0].squared_distance(vertices, self.topology.faces, x)
+        best = np.full(len(x), np.inf)
+        tri = np.zeros(len(x), dtype=np.int64)
+        foot = np.zeros_like(x)
+        for k, ids, sub, tree in self.groups:
+            d2, t, f = tree.squared_distance(self.rest, sub, np.ascontiguousarray((x - b[k]) @ A[k]))
+            better = d2 < best
+            best[better], tri[better], foot[better] = d2[better], ids[t[better]], f[better] @ A[k].T + b[k]
+        if len(self.blend_ids):
+            moving = np.ascontiguousarray(vertices[self.blend_vertices])
+            self._blend_tree, _ = self._tree(moving, self.blend_faces, self._blend_tree, self.tolerance)
+            d2, t, f = self._blend_tree[0].squared_distance(moving, self.blend_faces, x)
+            better = d2 < best
+            best[better], tri[better], foot[better] = d2[better], self.blend_ids[t[better]], f[better]
+        return best, tri, foot

@@ -33,6 +33,7 @@ by marching cubes and rigs it: the default triangulated skin and the tests' refe
 """
 from __future__ import annotations
 
+import copy
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,7 +45,7 @@ import trimesh
 from fabricfem.body.blended import BlendedEllipsoids, triangulate
 from fabricfem.body.conventions import to_body, unit_scale, up_rotation
 from fabricfem.body.ellipsoid import _as_points
-from fabricfem.body.mesh_distance import PosedSurface, Topology
+from fabricfem.body.mesh_distance import PosedSurface, SegmentTrees, Topology, signed_closest
 from fabricfem.body.skin import SkinQuery
 from fabricfem.body.skinning import (
                                      HEAT,
@@ -200,6 +201,11 @@ class MeshSkin:
             its build (0: a new tree for every pose); a gap is then at most 2 tree_tolerance above the exact one
             (`PosedSurface`).
         heat, cutoff: the bone heat constant and weight cut (`fabricfem.body.skinning.bone_heat_weights`).
+        margin: None: every query searches every point; a length [m]: the contact's active set (`query`), the
+            points whose gap is certainly above it are not searched (gap = +inf).
+    The queries search the rigid triangles of each segment in trees of the rest pose and the blended ones in a
+    tree of the posed vertices rebuilt beyond `tree_tolerance` (`SegmentTrees`); `transverse_scale` (None or
+    t -> g) grows the skin across the segments' axes as the donning grows the body (`transforms`).
 
     Raises:
         ValueError naming `rest_positions` (missing names, a joint outside the mesh).
@@ -207,7 +213,7 @@ class MeshSkin:
 
     def __init__(self, mesh: SkinMesh, body, rest_positions: Mapping[str, np.ndarray] | None = None,
                  joint_tolerance: float = 0.0, tree_tolerance: float = 0.0, heat: float = HEAT,
-                 cutoff: float = WEIGHT_CUTOFF):
+                 cutoff: float = WEIGHT_CUTOFF, margin: float | None = None):
         self.mesh, self.body = mesh, body
         self.segment_names = tuple(body.segments)
         t0 = float(body.kinematics.time_range[0])
@@ -231,19 +237,97 @@ class MeshSkin:
         self.tree_builds = 0
         self._tree = None
         self._posed: OrderedDict[float, PosedSurface] = OrderedDict()
+        self._maps: OrderedDict[float, list] = OrderedDict()
+        segments = list(body.segments.values())
+        self._points = tuple([getattr(g, end) for g in segments] for end in ("proximal", "distal", "marker"))
+        self._fraction = np.array([g.center_fraction for g in segments], dtype=float)
+        single = (self.weights > 0.0).sum(axis=1) == 1
+        owner = np.argmax(self.weights, axis=1)
+        self._rigid_vertices = [(k, np.flatnonzero(single & (owner == k))) for k in range(len(segments))]
+        self._blended_vertices = np.flatnonzero(~single)
+        self.trees = SegmentTrees(mesh.vertices, self.topology, self.weights, self.tree_tolerance)
+        if margin is not None and not (np.isfinite(margin) and margin >= 0.0):
+            raise ValueError(f"margin must be a length >= 0 [m] or None, got {margin!r}")
+        self.margin = None if margin is None else float(margin)
+        self.transverse_scale: Callable[[float], float] | None = None
+        self.exact_points = 0
+        self._travel, self._last_maps = 0.0, None
+        self._active: dict[int, tuple] = {}
+        on = self.weights > 0.0
+        low = np.array([mesh.vertices[c].min(axis=0) for c in on.T])
+        high = np.array([mesh.vertices[c].max(axis=0) for c in on.T])
+        self._sphere_center = 0.5 * (low + high)
+        self._sphere_radius = np.array([np.linalg.norm(mesh.vertices[c] - m, axis=1).max()
+                                        for c, m in zip(on.T, self._sphere_center)])
 
     def transforms(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """The segments' rigid maps rest -> pose at time t [s], (A (K, 3, 3), b (K, 3) [m]) (`blend_transforms`)."""
-        centers, rotations = frames(self.body, self.body.kinematics.positions(t))
-        return blend_transforms(self.rest_centers, self.rest_rotations, centers, rotations)
+        """The segments' maps rest -> pose at time t [s], (A (K, 3, 3), b (K, 3) [m]) (`blend_transforms`); with a
+        `transverse_scale` g(t) (the donning's growth) A_k = R_k diag(1, g, g) (R_k^0)^T: each segment's part of the
+        skin scaled by g across the segment's axis (its local e1), as the contact grows the segments' radii."""
+        centers, rotations = self._frames(self.body.kinematics.positions(t))
+        if self.transverse_scale is None or float(self.transverse_scale(t)) == 1.0:
+            return blend_transforms(self.rest_centers, self.rest_rotations, centers, rotations)
+        g = float(self.transverse_scale(t))
+        A = np.einsum("kij,klj->kil", rotations * np.array([1.0, g, g]), self.rest_rotations)
+        return A, centers - np.einsum("kij,kj->ki", A, self.rest_centers)
+
+    def _frames(self, positions: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """`frames` vectorised over the segments (the formulas of fabricfem.body.pose.segment_frame, without its
+        checks: the first pose, at the rigging, went through them)."""
+        j1, j2, m = (np.array([positions[n] for n in names], dtype=float) for names in self._points)
+        axis = j2 - j1
+        centers = j1 + self._fraction[:, None] * axis
+        e1 = axis / np.linalg.norm(axis, axis=1, keepdims=True)
+        offset = m - centers
+        perpendicular = offset - np.einsum("ki,ki->k", offset, e1)[:, None] * e1
+        e2 = perpendicular / np.linalg.norm(perpendicular, axis=1, keepdims=True)
+        return centers, np.stack([e1, e2, np.cross(e1, e2)], axis=2)
+
+    def maps(self, t: float) -> list:
+        """[A, b, posed vertices (V, 3) [m] or None until `vertices` asks] at time t [s] (`transforms`; the last
+        `CACHE_SIZE` times cached)."""
+        key = float(t)
+        if key in self._maps:
+            self._maps.move_to_end(key)
+            return self._maps[key]
+        A, b = self.transforms(key)
+        out = self._maps[key] = [A, b, None]
+        if len(self._maps) > CACHE_SIZE:
+            self._maps.popitem(last=False)
+        return out
+
+    def vertices(self, t: float) -> np.ndarray:
+        """The posed vertices (V, 3) [m] at time t [s] (linear blend skinning, cached with `maps`)."""
+        entry = self.maps(t)
+        if entry[2] is None:
+            A, b = entry[0], entry[1]
+            out = np.empty_like(self.mesh.vertices)
+            for k, ids in self._rigid_vertices:       # weight 1 on one segment: its rigid map
+                out[ids] = self.mesh.vertices[ids] @ A[k].T + b[k]
+            blended = self._blended_vertices
+            out[blended] = pose_vertices(self.mesh.vertices[blended], self.weights[blended], A, b)
+            entry[2] = out
+        return entry[2]
+
+    def with_body(self, body) -> MeshSkin:
+        """This skin (mesh, weights, rest frames, trees shared) moved by another Body of the same segments, e.g. the
+        garment run's body on the run's clock (fabricfem.wear.garment); no cached poses."""
+        if tuple(body.segments) != self.segment_names:
+            raise ValueError(f"skin: its segments {list(self.segment_names)} are not the body's {list(body.segments)}")
+        twin = copy.copy(self)
+        twin.body = body
+        twin._posed, twin._maps, twin._active, twin._tree = OrderedDict(), OrderedDict(), {}, None
+        twin._travel, twin._last_maps = 0.0, None
+        return twin
 
     def posed(self, t: float) -> PosedSurface:
-        """The posed surface at time t [s] with its AABB tree (cached for the last `CACHE_SIZE` times)."""
+        """The posed surface at time t [s] with an AABB tree of all its triangles (cached for the last `CACHE_SIZE`
+        times; the contact's queries use `closest` and its segment trees instead)."""
         key = float(t)
         if key in self._posed:
             self._posed.move_to_end(key)
             return self._posed[key]
-        vertices = pose_vertices(self.mesh.vertices, self.weights, *self.transforms(key))
+        vertices = self.vertices(key)
         tree = self._tree
         if tree is not None and not (np.linalg.norm(vertices - tree[1], axis=1).max() <= self.tree_tolerance):
             tree = None
@@ -258,9 +342,16 @@ class MeshSkin:
 
     def closest(self, x, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(gap (N,) [m], triangle (N,), barycentric coordinates (N, 3), foot (N, 3) [m], normal (N, 3)) of the
-        points x (N, 3) [m] on the skin posed at time t [s] (`PosedSurface.closest`)."""
+        points x (N, 3) [m] on the skin posed at time t [s] (`SegmentTrees.search`, then the sign and normal of
+        `fabricfem.body.mesh_distance.signed_closest`)."""
         pts, _ = _as_points(x)
-        return self.posed(t).closest(pts)
+        A, b, _ = self.maps(t)
+        vertices = self.vertices(t)
+        builds = self.trees.builds
+        sqrd, tri, foot = self.trees.search(vertices, A, b, pts)
+        self.tree_builds += self.trees.builds - builds
+        self.exact_points += len(pts)
+        return signed_closest(vertices, self.topology, pts, sqrd, tri, foot)
 
     def foot_weights(self, triangle: np.ndarray, bary: np.ndarray) -> np.ndarray:
         """(N, K) segment weights at feet given by triangle and barycentric coordinates (interpolated linearly)."""
@@ -268,14 +359,53 @@ class MeshSkin:
         b /= b.sum(axis=1, keepdims=True)
         return np.einsum("nj,njk->nk", b, self.weights[self.mesh.faces[triangle]])
 
+    def travel(self, t: float) -> float:
+        """The skin's travel [m] up to time t [s]: the sum over the successive times asked of a bound on the largest
+        vertex displacement between them, max_k (|A_k - A'_k|_F R_k + |(A_k - A'_k) c_k + b_k - b'_k|) over the
+        segments' bounding spheres (c_k, R_k) of their weighted rest vertices (a vertex moves by a convex combination
+        of its segments' displacements)."""
+        A, b, _ = self.maps(t)
+        if self._last_maps is not None:
+            dA, db = A - self._last_maps[0], b - self._last_maps[1]
+            move = (np.linalg.norm(dA, axis=(1, 2)) * self._sphere_radius
+                    + np.linalg.norm(np.einsum("kij,kj->ki", dA, self._sphere_center) + db, axis=1))
+            self._travel += float(move.max(initial=0.0))
+        self._last_maps = (A, b)
+        return self._travel
+
     def query(self, x, t: float) -> SkinQuery:
-        """The Skin contract (fabricfem.body.skin) at time t [s] for the points x (N, 3) [m]."""
-        gap, triangle, bary, foot, normal = self.closest(x, t)
-        return SkinQuery(gap, foot, normal, self.foot_weights(triangle, bary))
+        """The Skin contract (fabricfem.body.skin) at time t [s] for the points x (N, 3) [m].
+
+        With a `margin` [m] only the points that may lie within it are searched: a point last searched at x0 with
+        gap g0 and skin travel s0 has now a gap >= g0 - |x - x0| - (travel(t) - s0) (the gap is 1-Lipschitz in x,
+        and moves by at most the skin's displacement); where that bound exceeds the margin the point is not searched
+        and gets gap = +inf, foot = x, and its last normal and weights. Every gap below the margin is exact, so
+        contact (gap < 0) is decided exactly. The state is kept per number of points (the contact asks all its
+        nodes each time)."""
+        pts, _ = _as_points(x)
+        if self.margin is None:
+            gap, triangle, bary, foot, normal = self.closest(pts, t)
+            return SkinQuery(gap, foot, normal, self.foot_weights(triangle, bary))
+        travel = self.travel(t)
+        n = len(pts)
+        state = self._active.get(n)
+        if state is None:
+            state = self._active[n] = (pts.copy(), np.full(n, -np.inf), np.zeros(n), np.zeros((n, 3)),
+                                       np.zeros((n, len(self.segment_names))))
+        x0, g0, s0, normals, weights = state
+        search = np.flatnonzero(g0 - np.linalg.norm(pts - x0, axis=1) - (travel - s0) <= self.margin)
+        gap = np.full(n, np.inf)
+        foot = pts.copy()
+        if len(search):
+            g, triangle, bary, f, nrm = self.closest(pts[search], t)
+            gap[search], foot[search] = g, f
+            x0[search], g0[search], s0[search] = pts[search], g, travel
+            normals[search], weights[search] = nrm, self.foot_weights(triangle, bary)
+        return SkinQuery(gap, foot, normals.copy(), weights.copy())
 
     def surface(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """The posed skin at time t [s]: vertices (V, 3) [m], triangles (F, 3), outward oriented."""
-        return self.posed(t).vertices, self.mesh.faces
+        return self.vertices(t), self.mesh.faces
 
 
 def union_implicit(body, t: float) -> Callable[[np.ndarray], np.ndarray]:

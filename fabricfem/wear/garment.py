@@ -397,6 +397,8 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
     kin = body.kinematics
     motion_time = timeline.motion_length(kin)
     posed = Body(list(body.segments.values()), DelayedKinematics(kin, timeline.start_of("motion")), body.schedule)
+    if skin is not None and hasattr(skin, "with_body"):     # a rigged mesh skin moves with the run's clock
+        skin = skin.with_body(posed)
     contact = ExplicitBodyContact(model, posed, friction=friction, method=contact_method, penalty=penalty,
                                   blend_width=blend_width, skin=skin)
     for spec in torques:
@@ -405,6 +407,8 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
         t_don0, t_don = timeline.start_of("don"), timeline.donning_time
         g0 = timeline.grow_from
         contact.transverse_scale = lambda t: g0 + (1.0 - g0) * smoothstep((t - t_don0) / t_don)
+        if skin is not None and hasattr(skin, "transverse_scale"):
+            skin.transverse_scale = contact.transverse_scale
     if posed.schedule is not None:
         names = list(posed.segments)
         contact.segment_active = lambda t: np.isin(names, posed.active(t))
