@@ -37,7 +37,9 @@ int64_t vertex_triangle_pairs(int64_t N, const double* x, int64_t T, const int64
                               int64_t* pair_p, int64_t* pair_t, double* distance, double* bary);
 """
 
-SOURCE = r"""
+# the headers and the closest point of a triangle [Ericson2005, sec. 5.1.5], shared with
+# fabricfem.contact.cloth_kernel (its narrow phase finds the same distances)
+CLOSEST_C = r"""
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -84,7 +86,9 @@ static double closest(const double* p, const double* a, const double* b, const d
   }
   return s;
 }
+"""
 
+SOURCE = CLOSEST_C + r"""
 /* all (vertex, triangle) pairs closer than radius (a vertex of the triangle's cell excluded); returns their number
    (only the first `capacity` are written), -1 if out of memory */
 int64_t vertex_triangle_pairs(int64_t N, const double* x, int64_t T, const int64_t* tri, const int64_t* tri_cell,

@@ -25,6 +25,11 @@ is the force that stops the relative tangential velocity within the step (sticki
 of p whose closest point lies on the same feature): a vertex above an edge or a node of the other layer is one
 contact, not one per triangle around that feature.
 
+Per step (`forces`): the pairs come from a Verlet list (fabricfem.contact.cloth_kernel: the candidates within d_c +
+s of the last search, s the skin, default d_c, searched again once a node has moved more than s / 2), the same
+pairs as a search at every step; the response runs in C (`cloth_kernel.respond`; `_respond` is its numpy twin).
+Velocities are gathered only when there are pairs.
+
 Parallel: every rank gathers the positions and velocities of all nodes (ClothSurface), finds all pairs and computes
 all forces, and adds the forces of its owned nodes to its rows, so the pairs across rank boundaries are treated as
 on one rank. Not done: edge-edge proximity (two edges crossing with no vertex within d_c of a triangle).
@@ -37,8 +42,8 @@ import time
 
 import numpy as np
 
+from fabricfem.contact import cloth_kernel, nodal
 from fabricfem.contact import friction as friction_law
-from fabricfem.contact import nodal
 from fabricfem.contact.cloth_surface import ClothSurface
 from fabricfem.contact.proximity import Pairs, compiled_pairs
 
@@ -70,13 +75,16 @@ class SelfContact:
         damping: zeta >= 0 of the pair springs.
         joined: (k, 2) global node indices (ClothSurface numbering) of node pairs that make two mesh parts one
             (a garment's seams), for the neighbour rule (module docstring).
+        skin: s [m] of the Verlet list (module docstring), default d_c; > 0.
 
     After each step: `force` (N, 3) the contact forces [N] on all nodes (global order of `surface`, every rank),
-    `normal_force` / `friction_force` its two parts, `pairs` the active pairs, `timings` [s] accumulated.
+    `normal_force` / `friction_force` its two parts, `pairs` the active pairs, `timings` [s] accumulated,
+    `searches` the number of pair searches (Verlet list rebuilds).
     """
 
     def __init__(self, model, contact_distance: float | None = None, friction: float = 0.0,
-                 penalty: float | None = None, damping: float = DEFAULT_DAMPING, joined: np.ndarray | None = None):
+                 penalty: float | None = None, damping: float = DEFAULT_DAMPING, joined: np.ndarray | None = None,
+                 skin: float | None = None):
         self.model = model
         self.comm = model.comm
         self.surface = ClothSurface(model)
@@ -98,11 +106,21 @@ class SelfContact:
         self.pairs = Pairs(*(np.zeros(0, dtype=np.int64),) * 2, np.zeros(0), np.zeros((0, 3)))
         self._mass: tuple[object, float, np.ndarray] | None = None
         self.timings = {"gather": 0.0, "search": 0.0, "response": 0.0}
+        self.skin = self.distance if skin is None else nodal.positive_parameter("skin", skin)
+        self._candidates: Pairs | None = None
+        self._searched_at = np.zeros((N, 3))
+        self.searches = 0
+        self._triangles = np.ascontiguousarray(s.triangles, dtype=np.int64)
 
     def penalty_frequency(self) -> float:
         """omega_p = sqrt(4 k_N / (rho t)) [rad/s]: the pair spring on the reduced mass of two nodes (factor 2), a
         node both a vertex and a triangle's node (factor 2); add it to the step's frequency as the body contact's."""
         return float(np.sqrt(4.0 * self.penalty / self.model.fabric.areal_density))
+
+    def limit_frequency(self, omega: float) -> None:
+        """Lower k_N (never raise it) so that `penalty_frequency()` <= omega [rad/s]: k_N <= rho t omega^2 / 4 [Pa/m]
+        (a penalty that leaves the critical step of the shell alone)."""
+        self.penalty = min(self.penalty, self.model.fabric.areal_density * omega ** 2 / 4.0)
 
     def search(self, x: np.ndarray, radius: float | None = None) -> Pairs:
         """The vertex-triangle pairs of the positions x (N, 3) [m] closer than `radius` (default d_c), the vertex not
@@ -123,21 +141,36 @@ class SelfContact:
             np.zeros(len(keys), dtype=bool)
         return pairs.subset(~excluded)
 
+    def near_pairs(self, x: np.ndarray) -> Pairs:
+        """The pairs closer than d_c at the positions x (N, 3) [m] that take contact, from the Verlet list
+        (module docstring; the same pairs as `contact_pairs(x)`), grouped by vertex."""
+        x = np.ascontiguousarray(x, dtype=float)
+        if self._candidates is not None:
+            pairs = cloth_kernel.narrow(x, self._searched_at, 0.5 * self.skin, self._candidates, self._triangles,
+                                        self.distance, self.comm)
+            if pairs is not None:
+                return pairs
+        self._candidates = self.contact_pairs(x, self.distance + self.skin)
+        self._searched_at = x.copy()
+        self.searches += 1
+        return cloth_kernel.narrow(x, x, 0.0, self._candidates, self._triangles, self.distance, self.comm)
+
     def smallest_distance(self, x: np.ndarray, radius: float) -> float:
         """Smallest distance [m] between a vertex and a non-neighbouring triangle at the positions x, `radius` [m]
         if none is closer than that."""
         pairs = self.contact_pairs(x, radius)
         return float(pairs.distance.min()) if len(pairs) else float(radius)
 
-    def _masses(self, integrator) -> np.ndarray:
-        """(N,) lumped translational mass (M + dt/2 C) [kg] of all nodes, inf for a node with a held component."""
+    def _masses(self, integrator) -> tuple[np.ndarray, np.ndarray]:
+        """(N,) lumped translational mass (M + dt/2 C) [kg] of all nodes, inf for a node with a held component, and
+        its inverse [1/kg] (0 there)."""
         cached = self._mass
         if cached is None or cached[0] is not integrator or cached[1] != integrator.dt:
             s = self.surface
             m = integrator.denominator.getArray(readonly=True)[s.nodes.dofs[:, 0]]
             mass = s.gather(m[:, None])[:, 0]
             mass[s.held] = np.inf
-            self._mass = cached = (integrator, integrator.dt, mass)
+            self._mass = cached = (integrator, integrator.dt, (mass, np.ascontiguousarray(1.0 / mass)))
         return cached[2]
 
     # ------------------------------------------------------------------ integrator hooks
@@ -145,16 +178,23 @@ class SelfContact:
         """rhs += the contact forces at d^{n+1} (owned rows; module docstring)."""
         s = self.surface
         tic = time.perf_counter()
-        d = integrator.d.getArray(readonly=True)
-        v = integrator.velocity_predictor.getArray(readonly=True)
         rows = s.nodes.dofs
-        state = s.gather(np.hstack([s.nodes.reference + d[rows], v[rows]]))
-        x, vel = state[:, :3], state[:, 3:]
+        x = s.gather(s.nodes.reference + integrator.d.getArray(readonly=True)[rows])
         toc = time.perf_counter()
-        self.pairs = pairs = self.contact_pairs(x)
+        had_pairs = len(self.pairs) > 0
+        self.pairs = pairs = self.near_pairs(x)
         tac = time.perf_counter()
-        self._respond(x, vel, pairs, self._masses(integrator), integrator.dt)
-        rhs.getArray()[rows] += s.owned_rows(self.force)
+        if len(pairs) or had_pairs:
+            for buffer in (self.force, self.normal_force, self.friction_force):
+                buffer.fill(0.0)
+        if len(pairs):      # the same count on every rank (all search the gathered surface)
+            vel = s.gather(integrator.velocity_predictor.getArray(readonly=True)[rows])
+            mass, inverse = self._masses(integrator)
+            cloth_kernel.respond(pairs, self._triangles, x, vel, inverse, self.surface.area,
+                                 (self.penalty, self.distance, self.damping, self.mu, integrator.dt,
+                                  FEATURE_TOLERANCE), self.normal_force, self.friction_force, self.comm)
+            np.add(self.normal_force, self.friction_force, out=self.force)
+            rhs.getArray()[rows] += s.owned_rows(self.force)
         self.timings["gather"] += toc - tic
         self.timings["search"] += tac - toc
         self.timings["response"] += time.perf_counter() - tac

@@ -88,6 +88,27 @@ def route_of(data: dict) -> str:
     return solver
 
 
+def _check_self_contact(contact: dict, garment: dict, solver: str) -> None:
+    """[contact] self_contact on the explicit engine only; self_contact_distance in (0, mesh size] (the tube's
+    sqrt(2 pi R L / (n_around n_along)), the pattern's element size h [m], as fabricfem.contact.nodal measures it)."""
+    if contact.get("self_contact") and solver != "explicit":
+        raise SceneError(f"contact.self_contact: the cloth's contact with itself runs on the explicit engine "
+                         f"(route.solver = \"explicit\"), not the {solver} route")
+    distance = contact.get("self_contact_distance")
+    if distance is None:
+        return
+    if isinstance(distance, bool) or not (isinstance(distance, (int, float)) and math.isfinite(distance)
+                                          and distance > 0.0):
+        raise SceneError(f"contact.self_contact_distance: must be a positive length [m], got {distance!r}")
+    if garment.get("builder", "pattern") == "tube":
+        size = math.sqrt(2.0 * math.pi * garment["radius"] * garment["length"]
+                         / (garment["n_around"] * garment["n_along"]))
+    else:
+        size = garment.get("h", GarmentSection.h)
+    if distance > size:
+        raise SceneError(f"contact.self_contact_distance: {distance:g} m exceeds the mesh size {size:g} m")
+
+
 def check_wear(data: dict) -> None:
     """The data checks of a wear scene beyond its tables' keys and types (fabricfem.scenes.schema.check_sections):
     choices, vectors and cross-references, before any meshing."""
@@ -118,6 +139,7 @@ def check_wear(data: dict) -> None:
     if method is not None and solver in ROUTE_METHODS and method not in ROUTE_METHODS[solver]:
         raise SceneError(f"contact.method: method must be one of {ROUTE_METHODS[solver]} for solver {solver!r}, "
                          f"got {method!r}")
+    _check_self_contact(data.get("contact", {}), garment, solver)
     donning = data.get("donning", {})
     _choice("donning.method", donning.get("method", "none"), ("none", "grow"))
     if donning.get("method") == "grow":

@@ -138,12 +138,21 @@ class ContactSpec:
     predictor: bool = param("forearm contact nodes follow the forearm's rotation", True)
     relaxation_steps: int = param("pseudo-time relaxations at one angle after a stabilised solve", 40)
     drag_tolerance: float = param("accept a relaxed state when sum|drag| < this * sum|contact force|", 1e-3)
+    self_contact: bool = param("explicit engine: the cloth's contact with itself, so that folds and layers do not "
+                               "pass through each other (fabricfem.contact.self_contact)", False)
+    self_contact_distance: float | None = param("explicit, self_contact: contact distance between cloth layers [m], "
+                                                "0 < d_c <= the mesh size; default the fabric's thickness", None)
+    self_friction: float = param("explicit, self_contact: Coulomb coefficient mu between cloth layers [-]", 0.0)
 
     def __post_init__(self):
-        _non_negative(self, "", "friction")
+        _non_negative(self, "", "friction", "self_friction")
         _positive(self, "augmentation_tolerance")
         if self.penalty is not None:
             _positive(self, "penalty")
+        if not isinstance(self.self_contact, bool):
+            raise ValueError(f"self_contact must be true or false, got {self.self_contact!r}")
+        if self.self_contact_distance is not None:
+            _positive(self, "self_contact_distance")
 
 
 @dataclass(frozen=True)

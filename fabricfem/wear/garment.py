@@ -40,6 +40,7 @@ from fabricfem.body.pose import Body
 from fabricfem.body.skin import Skin
 from fabricfem.contact.explicit import ExplicitBodyContact
 from fabricfem.contact.seams import SeamSpec, SeamTies
+from fabricfem.contact.self_contact import SelfContact
 from fabricfem.dynamics import stability
 from fabricfem.dynamics.explicit import CentralDifference
 from fabricfem.dynamics.strain_limit import FastProjection
@@ -47,6 +48,11 @@ from fabricfem.materials import Fabric
 from fabricfem.shell import ShellModel
 from fabricfem.wear.contract import WearHistory, WearStep
 from fabricfem.wear.engine import Phase, run_phases
+
+# the self-contact's penalty spring at most this fraction of the shell's highest frequency: the critical step
+# shrinks by at most 1 / sqrt(1 + 0.5^2), 11 % (with the default k_N = 10 E t / h^2 its spring would set the step:
+# 1.6x more steps on the sleeve's mesh 40x52); k_N still holds 1 kPa at 50 um of the 1 mm contact distance there
+SELF_CONTACT_FREQUENCY = 0.5
 
 
 @dataclass(frozen=True)
@@ -183,6 +189,7 @@ class GarmentRun:
     safety: float = 0.8          # dt = safety x the estimated critical step
     _last_strain: float = 0.0    # largest Green strain of the last record (adaptive_steps)
     _steps_now: int = 0          # steps per record in use
+    self_contact: SelfContact | None = None   # the cloth-cloth contact hook (None: the cloth may pass through itself)
 
     @property
     def axis_label(self) -> str:
@@ -363,7 +370,8 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
                       psri_degrees: tuple[int, int] = (4, 2), measure_strain: bool = True,
                       config: object = None, axis: tuple[str, Callable[[float], float]] | None = None,
                       handles: Sequence[Callable[[ShellModel], object]] = (), blend_width: float = BLEND_WIDTH,
-                      skin: Skin | None = None) -> GarmentRun:
+                      skin: Skin | None = None, self_contact: bool = False,
+                      self_contact_distance: float | None = None, self_friction: float = 0.0) -> GarmentRun:
     """Shell, seams, body contact, monitors, integrator and phases of a garment run (module docstring).
 
     Args:
@@ -379,6 +387,8 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
             pull phase, Belt from the belt phase), applied after the seams and before the body contact.
         blend_width: the width [m] of the blend that joins the body's segments into a skin without creases
             (fabricfem.body.blended); skin: another skin of the body (fabricfem.body.skin, e.g. a surface mesh).
+        self_contact: the cloth against itself (contact.self_contact.SelfContact, the seams join the panels), with
+            self_contact_distance d_c [m] (default the thickness; 0 < d_c <= mesh size) and self_friction mu >= 0.
     """
     if fabric.density <= 0.0:
         raise ValueError("density: the explicit engine needs a positive fabric density [kg/m^3]")
@@ -394,9 +404,9 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
     if settings.gravity is not None:
         model.add_gravity(tuple(settings.gravity))
     model.compile()
-    kin = body.kinematics
-    motion_time = timeline.motion_length(kin)
-    posed = Body(list(body.segments.values()), DelayedKinematics(kin, timeline.start_of("motion")), body.schedule)
+    motion_time = timeline.motion_length(body.kinematics)
+    posed = Body(list(body.segments.values()), DelayedKinematics(body.kinematics, timeline.start_of("motion")),
+                 body.schedule)
     if skin is not None and hasattr(skin, "with_body"):     # a rigged mesh skin moves with the run's clock
         skin = skin.with_body(posed)
     contact = ExplicitBodyContact(model, posed, friction=friction, method=contact_method, penalty=penalty,
@@ -414,24 +424,45 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
         contact.segment_active = lambda t: np.isin(names, posed.active(t))
     ties = SeamTies(model, seams, sewing_time=timeline.sewing_time) if seams else None
     handles = [make(model) for make in handles]
-    rayleigh = (settings.mass_damping, settings.stiffness_damping)
-    omega = math.hypot(stability.max_frequency(model, settings.rotary_inertia_scale, settings.critical_step),
-                       contact.penalty_frequency())
-    dt_estimate = stability.critical_time_step(model, rayleigh, omega_max=omega, mass_scale=settings.mass_scale)
+    cloth = _self_contact(model, ties, self_contact_distance, self_friction) if self_contact else None
+    dt_estimate = _critical_step(model, settings, contact, cloth)
     steps_per_record = math.ceil(timeline.record_time / (settings.time_step_safety * dt_estimate))
     dt = timeline.record_time / steps_per_record
     # the seams first, the body contact last: a seam drawn across the body cannot pull a node into it
-    hooks = ([ties] if ties else []) + list(handles) + [contact]
+    hooks = ([ties] if ties else []) + list(handles) + ([cloth] if cloth else []) + [contact]
     t_sewn = timeline.start_of("pull")
     # the garment's weight acts once it is sewn (panels would fall while their seams close), ramped on over
     # a tenth of the sewing time
     load = 1.0 if t_sewn == 0.0 else (lambda t: smoothstep((t - t_sewn) / (0.1 * t_sewn)))
-    integrator = CentralDifference(model, dt, load_factor=load, rayleigh=rayleigh, dt_crit=dt_estimate,
+    integrator = CentralDifference(model, dt, load_factor=load, dt_crit=dt_estimate,
+                                   rayleigh=(settings.mass_damping, settings.stiffness_damping),
                                    energy_bound=None, rotary_inertia_scale=settings.rotary_inertia_scale,
-                                   mass_scale=settings.mass_scale,
-                                   contact=hooks)
+                                   mass_scale=settings.mass_scale, contact=hooks)
     phases = [Phase(n, records) for n, records in timeline.phase_records(motion_time).items()]
     strain = FastProjection(model, 1.0) if measure_strain else None
     return GarmentRun(name, model, posed, contact, ties, integrator, timeline, phases, dt, dt_estimate,
                       steps_per_record, tuple(torques), config, strain, axis, tuple(handles),
-                      settings.time_step_safety, 0.0, steps_per_record)
+                      settings.time_step_safety, 0.0, steps_per_record, self_contact=cloth)
+
+
+def _critical_step(model: ShellModel, settings: ExplicitSettings, contact: ExplicitBodyContact,
+                   cloth: SelfContact | None) -> float:
+    """The estimated critical step [s] of the shell with the body contact's and the self-contact's penalty
+    springs; the self-contact's k_N first lowered to SELF_CONTACT_FREQUENCY of the shell's highest frequency."""
+    omega_shell = stability.max_frequency(model, settings.rotary_inertia_scale, settings.critical_step)
+    if cloth is not None:
+        cloth.limit_frequency(SELF_CONTACT_FREQUENCY * omega_shell)
+    omega = math.hypot(omega_shell, contact.penalty_frequency(), cloth.penalty_frequency() if cloth else 0.0)
+    return stability.critical_time_step(model, (settings.mass_damping, settings.stiffness_damping), omega_max=omega,
+                                        mass_scale=settings.mass_scale)
+
+
+def _self_contact(model: ShellModel, ties: SeamTies | None, distance: float | None, friction: float) -> SelfContact:
+    """The cloth-cloth contact hook of a garment: contact distance `distance` [m] (default the thickness), Coulomb
+    `friction`, the seams' tied node pairs joining the panels; a bad value refused naming its scene key."""
+    joined = ties.joined_nodes() if ties is not None else None
+    try:
+        return SelfContact(model, contact_distance=distance, friction=friction, joined=joined)
+    except ValueError as exc:
+        key = "self_contact_distance" if "contact_distance" in str(exc) else "self_friction"
+        raise ValueError(f"{key}: {exc}") from None

@@ -172,7 +172,8 @@ def tube_flexion_run(name: str, fabric: Fabric, tube_spec: TubeSpec, arm: ArmDim
                              timeline=timeline, settings=flexion_settings(route, similarity),
                              contact_method=contact.method or "lagrange", friction=contact.friction,
                              penalty=contact.penalty, psri_degrees=tube_spec.quadrature, config=config, axis=axis,
-                             skin=skin)
+                             self_contact=contact.self_contact, self_contact_distance=contact.self_contact_distance,
+                             self_friction=contact.self_friction, skin=skin)
 
 
 def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> GarmentRun:
