@@ -8,6 +8,7 @@ a fixed colour range, so that frames share one scale (1 kPa = 7.50 mmHg, the uni
 """
 from __future__ import annotations
 
+import functools
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -39,19 +40,22 @@ def torque_rms_error(angles: np.ndarray, torques: np.ndarray, ref_angles: np.nda
 
 def body_surface(ellipsoids, samples: int = 24) -> tuple[np.ndarray, np.ndarray]:
     """Triangulated surfaces of posed ellipsoids: (points (n, 3) [m], triangles (m, 3))."""
-    points, cells, offset = [], [], 0
     n_theta, n_phi = samples, 2 * samples
-    for e in ellipsoids:
-        pts = e.surface_points(n_theta, n_phi)
-        i, j = np.meshgrid(np.arange(n_theta - 1), np.arange(n_phi), indexing="ij")
-        a = i * n_phi + j
-        b = i * n_phi + (j + 1) % n_phi
-        c, d = a + n_phi, b + n_phi
-        tri = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([b, d, c], -1).reshape(-1, 3)])
-        points.append(pts.reshape(-1, 3))
-        cells.append(tri + offset)
-        offset += len(points[-1])
-    return np.concatenate(points), np.concatenate(cells)
+    points = [e.surface_points(n_theta, n_phi).reshape(-1, 3) for e in ellipsoids]
+    if not points:
+        return np.zeros((0, 3)), np.zeros((0, 3), dtype=np.int64)
+    return np.concatenate(points), _surface_triangles(n_theta, n_phi, len(points)).copy()
+
+
+@functools.lru_cache(maxsize=16)
+def _surface_triangles(n_theta: int, n_phi: int, count: int) -> np.ndarray:
+    """The triangles of `count` (theta, phi) grids of n_theta x n_phi points, one after the other."""
+    i, j = np.meshgrid(np.arange(n_theta - 1), np.arange(n_phi), indexing="ij")
+    a = i * n_phi + j
+    b = i * n_phi + (j + 1) % n_phi
+    c, d = a + n_phi, b + n_phi
+    tri = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3), np.stack([b, d, c], -1).reshape(-1, 3)])
+    return np.concatenate([tri + k * n_theta * n_phi for k in range(count)])
 
 
 def plot_wear_history(path, history, axis_label: str = "time [s]", title: str = ""):

@@ -18,7 +18,6 @@ the pressure on the skin of the peak record is computed when the frame is final 
 """
 from __future__ import annotations
 
-import copy
 import time
 from pathlib import Path
 
@@ -28,12 +27,14 @@ from dolfinx import fem
 from fabricfem import io as fio
 from fabricfem.wear.outputs import (
     STO_NOTE,
+    body_surface,
     plot_wear_history,
     render_skin_pressure,
     skin_pressure,
     wear_sto_columns,
     write_sto,
 )
+from fabricfem.wear.skin_records import SkinPressureRecords
 from fabricfem.wear.writer import BackgroundWriter, BodyFrames, FieldSeries
 
 COLOUR_PERCENTILE = 99.0   # the renders' colour range ends at this percentile of the pressures in contact
@@ -69,7 +70,7 @@ class WearRecorder:
         self.fields = {"cloth": self.u_out, "cloth_pressure": self.p_out}
         self.writer = BackgroundWriter() if comm.rank == 0 else None
         self.files = {name: self._open(name, "w") for name in self.fields}
-        self.bodies = BodyFrames(body_samples)   # the body frames' files, written on the writer thread
+        self.bodies = BodyFrames()       # the body frames' files, written on the writer thread
         self.peak_frame: tuple | None = None   # (step, displacement, pressure) of a new peak, kept when final
         self.seconds = 0.0               # s, wall time in `record`
         self.frames: list[tuple[float, str]] = []
@@ -77,6 +78,7 @@ class WearRecorder:
         self.skin_frames: list = []      # (name, title, (points, triangles, values [Pa]), garment surface), rank 0
         self.peak = 0.0                  # Pa, the largest peak pressure of the motion's records so far
         self.label = run.axis_label
+        self.skin_records = SkinPressureRecords.of(run, self.out)   # a mesh skin's pressure per record
         self.unit = "deg" if "[deg]" in self.label else "s"
 
     def record(self, step) -> None:
@@ -90,8 +92,8 @@ class WearRecorder:
             series.add(stamp)
         if run.comm.rank == 0:
             name = f"body_{len(self.frames):04d}.vtp"   # frame k of record k, also after a resume
-            bodies, path = copy.deepcopy(run.posed_bodies(x)), self.out / name
-            self.writer.submit(lambda: self.bodies.write(path, bodies))
+            (points, triangles), path = body_surface(run.posed_bodies(x), self.samples), self.out / name
+            self.writer.submit(lambda: self.bodies.write(path, points, triangles))
             self.frames.append((stamp, name))
         while self.render and self.pending and x >= self.pending[0] - 1e-9:
             at = self.pending.pop(0)
@@ -104,6 +106,8 @@ class WearRecorder:
             self.peak = peak
             self.peak_frame = (step, self._copy(displacement, self.peak_frame, 1),
                                self._copy(pressure, self.peak_frame, 2))
+        if self.skin_records is not None:
+            self.skin_records.record()
         self.seconds += time.perf_counter() - tic
 
     @staticmethod
@@ -184,6 +188,8 @@ class WearRecorder:
     def close(self, history) -> None:
         """Write the kept records (XDMF files, body frames) and torque.csv, body.pvd, torque.sto, torque.png and
         the renders; end the writer thread."""
+        if self.skin_records is not None:
+            self.skin_records.close()
         self._keep_peak_frame()
         self._flush()
         if self.writer is not None:

@@ -32,8 +32,6 @@ from dolfinx import fem
 from dolfinx import io as dio
 from mpi4py import MPI
 
-from fabricfem.wear.outputs import body_surface
-
 FLUSH_EVERY = 50          # records kept in memory between two writes of an XDMF series
 
 
@@ -127,16 +125,14 @@ def write_vtp(path: str | Path, points: np.ndarray, triangles: np.ndarray, polys
 
 
 class BodyFrames:
-    """The posed body per record as VTP files, made on the writer thread: the surface of the ellipsoids
-    (wear.outputs.body_surface with `samples`), its <Polys> block made once per triangulation."""
+    """The posed body per record as VTP files (`write` on the writer thread), the <Polys> block of the
+    triangulation made once while it does not change."""
 
-    def __init__(self, samples: int):
-        self.samples = samples
+    def __init__(self):
         self.polys: tuple[np.ndarray, str] | None = None
 
-    def write(self, path: str | Path, bodies: list) -> None:
-        """Write the surface of the posed ellipsoids `bodies` [m] to `path` (not changed by the caller after)."""
-        points, triangles = body_surface(bodies, self.samples)
+    def write(self, path: str | Path, points: np.ndarray, triangles: np.ndarray) -> None:
+        """Write the surface `points` (n, 3) [m], `triangles` (m, 3) to `path` (arrays not changed after)."""
         if self.polys is None or not np.array_equal(self.polys[0], triangles):
             self.polys = (triangles, polys_block(triangles))
         write_vtp(path, points, triangles, self.polys[1])
