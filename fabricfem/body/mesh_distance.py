@@ -176,51 +176,68 @@ def _orthogonal(A: np.ndarray) -> bool:
 
 
 class SegmentTrees:
-    """Closest points on a skin posed by linear blend skinning, its rigid parts searched in trees of the rest pose.
+    """Closest points on a skin posed by linear blend skinning, searched in trees kept in the segments' frames.
 
-    A triangle whose three corners have weight 1 on one segment k moves rigidly with it, x -> A_k x + b_k: its
-    distance to a point x is that of the rest triangle to A_k^T (x - b_k), so the rigid triangles of each segment keep
-    one AABB tree built once on the rest pose. The other, blended, triangles (bands around the joints) are searched
-    in a tree of their posed vertices, rebuilt only when one of them moved more than `tolerance` [m] since its build
-    (reused within: a gap at most 2 tolerance above the exact one, `PosedSurface`; 0: exact, rebuilt for every new
-    pose). The closest point is the nearest of the K + 1 searches (exact). Maps that are not rotations (a body
-    growing transversally during the donning) search all triangles in one tree of the posed vertices.
+    Every triangle belongs to the segment k of largest summed weight at its corners and is kept in that segment's
+    rest frame, where a posed point v reads A_k^T (v - b_k) (x -> A_k x + b_k the segment's rigid map). A triangle
+    whose three corners have weight 1 on k moves rigidly with it: in its frame it never moves, and the tree of the
+    rigid triangles of each segment is built once. The other, blended, triangles of k (bands around its joints) move
+    in its frame only by the other segments' motion relative to it; their tree is rebuilt when one of their
+    vertices moved more than `tolerance` [m] in that frame since its build (reused within: a gap at most
+    2 tolerance above the exact one, `PosedSurface`; 0: exact, rebuilt whenever they moved). Distances are
+    invariant under the rigid maps, so the closest point is the nearest over the groups' searches; a point is
+    searched first in the group whose box (in its frame) is nearest, then only in the groups whose box is nearer
+    than the distance found. Maps that are not rotations (a body growing across its segments during the donning)
+    search all triangles in one tree of the posed vertices (reused within `tolerance` too).
 
     Args:
         rest: (V, 3) rest vertices [m]; topology: their faces; weights: (V, K) skinning weights;
-        tolerance: the blended tree's reuse distance [m].
+        tolerance: the blended trees' reuse distance [m].
     """
 
     def __init__(self, rest: np.ndarray, topology: Topology, weights: np.ndarray, tolerance: float = 0.0):
         self.rest, self.topology, self.tolerance = np.ascontiguousarray(rest, dtype=float), topology, float(tolerance)
         faces = topology.faces
-        owner = np.argmax(weights, axis=1)[faces]
         single = ((weights > 0.0).sum(axis=1) == 1)[faces].all(axis=1)
-        rigid = single & (owner[:, 0] == owner[:, 1]) & (owner[:, 1] == owner[:, 2])
-        self.groups = []
+        corner = np.argmax(weights, axis=1)[faces]
+        rigid = single & (corner[:, 0] == corner[:, 1]) & (corner[:, 1] == corner[:, 2])
+        owner = np.argmax(weights[faces].sum(axis=1), axis=1)
+        self.groups: list[dict] = []
         for k in range(weights.shape[1]):
-            ids = np.flatnonzero(rigid & (owner[:, 0] == k))
-            if len(ids):
-                sub = np.ascontiguousarray(faces[ids])
-                tree = igl.AABB()
-                tree.init(self.rest, sub)
-                self.groups.append((k, ids, sub, tree))
+            for is_rigid in (True, False):
+                ids = np.flatnonzero((owner == k) & (rigid == is_rigid))
+                if len(ids):
+                    vids, local = np.unique(faces[ids], return_inverse=True)
+                    self.groups.append({"segment": k, "rigid": is_rigid, "faces": ids, "vertices": vids,
+                                        "local": np.ascontiguousarray(local.reshape(-1, 3), dtype=np.int64),
+                                        "tree": None, "built_on": None,
+                                        "rest": np.ascontiguousarray(self.rest[vids]) if is_rigid else None})
         self.blend_ids = np.flatnonzero(~rigid)
-        self.blend_vertices, local = np.unique(faces[self.blend_ids], return_inverse=True)
-        self.blend_faces = np.ascontiguousarray(local.reshape(-1, 3), dtype=np.int64)   # into blend_vertices
         self.builds = 0
-        self._blend_tree: tuple[igl.AABB, np.ndarray] | None = None
         self._full: tuple[igl.AABB, np.ndarray] | None = None
 
     def _tree(self, vertices: np.ndarray, faces: np.ndarray, cached, tolerance: float):
-        """(tree, rebuilt?) on `vertices` reused from `cached` while no vertex moved more than tolerance."""
+        """(tree, the vertices it was built on) on `vertices`, reused from `cached` while no vertex moved more than
+        tolerance."""
         if cached is not None and cached[1].shape == vertices.shape and (
                 np.linalg.norm(vertices - cached[1], axis=1).max(initial=0.0) <= tolerance):
-            return cached, False
+            return cached
         tree = igl.AABB()
         tree.init(vertices, faces)
         self.builds += 1
-        return (tree, vertices), True
+        return tree, vertices
+
+    def _frame_vertices(self, group: dict, vertices: np.ndarray, A: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """The group's vertices in its segment's frame, its tree (re)built (`_tree`)."""
+        k = group["segment"]
+        if group["rigid"]:
+            local, tolerance = group["rest"], np.inf
+        else:
+            local = np.ascontiguousarray((vertices[group["vertices"]] - b[k]) @ A[k])
+            tolerance = self.tolerance
+        cached = None if group["tree"] is None else (group["tree"], group["built_on"])
+        group["tree"], group["built_on"] = self._tree(local, group["local"], cached, tolerance)
+        return local
 
     def search(self, vertices: np.ndarray, A: np.ndarray, b: np.ndarray, x: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -229,19 +246,28 @@ class SegmentTrees:
         x = np.ascontiguousarray(x, dtype=float)
         vertices = np.ascontiguousarray(vertices, dtype=float)
         if not _orthogonal(A):
-            self._full, _ = self._tree(vertices, self.topology.faces, self._full, 0.0)
+            self._full = self._tree(vertices, self.topology.faces, self._full, self.tolerance)
             return self._full[0].squared_distance(vertices, self.topology.faces, x)
         best = np.full(len(x), np.inf)
         tri = np.zeros(len(x), dtype=np.int64)
         foot = np.zeros_like(x)
-        for k, ids, sub, tree in self.groups:
-            d2, t, f = tree.squared_distance(self.rest, sub, np.ascontiguousarray((x - b[k]) @ A[k]))
-            better = d2 < best
-            best[better], tri[better], foot[better] = d2[better], ids[t[better]], f[better] @ A[k].T + b[k]
-        if len(self.blend_ids):
-            moving = np.ascontiguousarray(vertices[self.blend_vertices])
-            self._blend_tree, _ = self._tree(moving, self.blend_faces, self._blend_tree, self.tolerance)
-            d2, t, f = self._blend_tree[0].squared_distance(moving, self.blend_faces, x)
-            better = d2 < best
-            best[better], tri[better], foot[better] = d2[better], self.blend_ids[t[better]], f[better]
+        frames, bounds = [], []
+        for g in self.groups:
+            local = self._frame_vertices(g, vertices, A, b)
+            xl = np.ascontiguousarray((x - b[g["segment"]]) @ A[g["segment"]])
+            outside = np.maximum(local.min(axis=0) - xl, 0.0) + np.maximum(xl - local.max(axis=0), 0.0)
+            frames.append((local, xl))
+            bounds.append(np.einsum("ij,ij->i", outside, outside))       # squared distance to the group's box
+        first = np.argmin(np.array(bounds), axis=0)
+        for sweep in (0, 1):
+            for j, g in enumerate(self.groups):
+                pick = np.flatnonzero(first == j) if sweep == 0 else np.flatnonzero((first != j) & (bounds[j] < best))
+                if not len(pick):
+                    continue
+                local, xl = frames[j]
+                d2, t, f = g["tree"].squared_distance(local, g["local"], np.ascontiguousarray(xl[pick]))
+                better = d2 < best[pick]
+                at = pick[better]
+                k = g["segment"]
+                best[at], tri[at], foot[at] = d2[better], g["faces"][t[better]], f[better] @ A[k].T + b[k]
         return best, tri, foot

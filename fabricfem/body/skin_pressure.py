@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import h5py
 import meshio
 import numpy as np
 from mpi4py import MPI
@@ -62,7 +63,9 @@ class SkinPressureWriter:
         if comm.rank == 0:
             self.folder.mkdir(parents=True, exist_ok=True)
             self._series = meshio.xdmf.TimeSeriesWriter(str(self.folder / f"{stem}.xdmf"))
-            self._series.__enter__()
+            # the HDF5 file beside the XDMF file (meshio's __enter__ opens it in the working directory)
+            self._series.h5_filename = str(self.folder / f"{stem}.h5")
+            self._series.h5_file = h5py.File(self._series.h5_filename, "w")
             self._series.write_points_cells(skin.mesh.vertices, [("triangle", skin.mesh.faces)])
 
     def write(self, t: float, points: np.ndarray, normal_force: np.ndarray) -> np.ndarray | None:

@@ -525,7 +525,7 @@ def garment_scene_run(scene: Scene, comm) -> GarmentRun:
                              contact_method=plan.contact.method or "lagrange", friction=plan.contact.friction,
                              penalty=plan.contact.penalty,
                              psri_degrees=tuple(garment.quadrature) if garment.quadrature else (4, 2),
-                             axis=plan.axis, handles=handles, blend_width=parsed.body.blend_width,
+                             axis=plan.axis, handles=handles, blend_width=parsed.body.blend_width, skin=plan.skin,
                              self_contact=plan.contact.self_contact,
                              self_contact_distance=plan.contact.self_contact_distance,
                              self_friction=plan.contact.self_friction)

@@ -9,11 +9,12 @@ schema table `SECTIONS_OF`; fabricfem.scenes.schema checks a file against it.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import MappingProxyType
 from typing import Mapping
 
 from fabricfem.body.arm import ArmDimensions
+from fabricfem.body.human import HUMAN_DIMENSIONS
 from fabricfem.body.lower_body import LowerBodyDimensions
 from fabricfem.scenes.errors import SceneError
 from fabricfem.scenes.sections import (
@@ -154,15 +155,33 @@ def _shell_parts(data: Mapping) -> dict:
             "accuracy": _part(AccuracySection, data.get("accuracy"), "accuracy")}
 
 
+def _skeleton(body: Mapping) -> str:
+    """The segments of [body]: its preset's, or those a mesh skin is rigged to (`skeleton`)."""
+    if body["type"] == "mesh":
+        return str(body.get("skeleton"))
+    return "arm" if body["type"] == "default_arm" else str(body["type"])
+
+
+def _lower_body(body: Mapping) -> LowerBodyDimensions:
+    """The lower body's dimensions of [body]: its keys over the ANSUR II defaults, or over the Debian human's
+    (fabricfem.body.human) for a mesh with rest_positions = "human"."""
+    if body["type"] == "mesh" and body.get("rest_positions") == "human":
+        try:
+            return replace(HUMAN_DIMENSIONS, **_own(LowerBodyDimensions, body))
+        except (TypeError, ValueError) as exc:
+            raise SceneError(f"body: {exc}") from None
+    return _part(LowerBodyDimensions, body, "body")
+
+
 def _wear(data: Mapping) -> WearScene:
     body, motion = data["body"], data["motion"]
-    body_type, route = body["type"], data.get("route", {})
+    route = data.get("route", {})
     return WearScene(
         scene=_part(SceneSection, data.get("scene"), "scene"),
         garment=_part(GarmentSection, data["garment"], "garment"), fabric=_frozen(data["fabric"]),
         catalogue=data["fabric"].get("catalogue"), body=_part(WearBodySection, body, "body"),
-        arm=_part(ArmDimensions, body, "body") if body_type in ("arm", "default_arm") else None,
-        lower_body=_part(LowerBodyDimensions, body, "body") if body_type == "lower_body" else None,
+        arm=_part(ArmDimensions, body, "body") if _skeleton(body) == "arm" else None,
+        lower_body=_lower_body(body) if _skeleton(body) == "lower_body" else None,
         motion=_part(WearMotionSection, motion, "motion"),
         flexion=_part(FlexionSpec, motion, "motion") if motion["type"] == "elbow_flexion" else None,
         settle_time=float(motion.get("settle_time", FlexionSpec.settle_time if motion["type"] == "elbow_flexion"

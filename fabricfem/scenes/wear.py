@@ -47,6 +47,7 @@ from fabricfem.patterns import pattern_path
 from fabricfem.scenes.contract import WearScene
 from fabricfem.scenes.errors import SceneError
 from fabricfem.scenes.errors import suggest as _suggest
+from fabricfem.scenes.mesh_body import check_mesh_keys, scene_skin
 from fabricfem.scenes.wear_sections import GarmentSection, WearDonningSection, WearMotionSection
 from fabricfem.wear.compression import StillPose, limb_body
 from fabricfem.wear.config import ROUTE_METHODS, ContactSpec
@@ -54,7 +55,7 @@ from fabricfem.wear.garment import ExplicitSettings, Timeline, TorqueSpec
 from fabricfem.wear.sleeve import ARM_MONITORS, flexion_settings, flexion_timeline, similarity_factor
 
 GRAVITY = 9.81                     # m/s^2
-BODY_TYPES = ("arm", "default_arm", "limb", "lower_body")
+BODY_TYPES = ("arm", "default_arm", "limb", "lower_body", "mesh")
 MOTION_TYPES = ("elbow_flexion", "still", "walking", "obstacle_walk", "file")
 PLACES = ("garment",)
 BUILDERS = ("tube", "pattern")
@@ -131,8 +132,11 @@ def check_wear(data: dict) -> None:
             _vector(f"body.{key}", body[key])
         if min(body["radii"]) <= 0:
             raise SceneError(f"body.radii: must be positive, got {body['radii']}")
+    if body["type"] == "mesh":
+        check_mesh_keys(body)
+    segments = body.get("skeleton") if body["type"] == "mesh" else body["type"]
     _choice("motion.type", motion["type"], MOTION_TYPES)
-    if motion["type"] == "elbow_flexion" and body["type"] not in ("arm", "default_arm"):
+    if motion["type"] == "elbow_flexion" and segments not in ("arm", "default_arm"):
         raise SceneError(f"motion.type: elbow_flexion drives the arm, not a {body['type']!r}")
     solver = data.get("route", {}).get("solver", "explicit")
     method = data.get("contact", {}).get("method")
@@ -154,7 +158,7 @@ def check_wear(data: dict) -> None:
         if not spec["segments"] or not all(isinstance(s, str) for s in spec["segments"]):
             raise SceneError(f"torque[{i}].segments: a list of segment names, got {spec['segments']!r}")
     route = route_of(data)
-    if motion["type"] in ("walking", "obstacle_walk") and body["type"] != "lower_body":
+    if motion["type"] in ("walking", "obstacle_walk") and segments != "lower_body":
         raise SceneError(f"motion.type: {motion['type']!r} drives the lower body, not a {body['type']!r}")
     if "place" in motion:
         _choice("motion.place", motion["place"], PLACES)
@@ -255,6 +259,7 @@ class WearPlan:
     contact: ContactSpec
     axis: tuple | None
     handles: list = dataclasses.field(default_factory=list)   # (kind, edge names, options) of the donning handles
+    skin: object = None      # a mesh body's rigged skin (fabricfem.scenes.mesh_body.scene_skin), else None
 
 
 def _motion_units(units: str | float | None) -> str | float | None:
@@ -473,7 +478,8 @@ def plan(wear: WearScene, fabric, scene_path: Path | None = None) -> WearPlan:
                                 time_step_safety=step_safety(route.time_step_safety, critical_step),
                                 mass_scale=route.mass_scale, critical_step=critical_step,
                                 gravity=gravity if route.gravity else None)
-    return WearPlan(body, torques, timeline, settings, wear.contact, axis, handles)
+    skin = scene_skin(wear.body, body, scene_path) if wear.body.type == "mesh" else None
+    return WearPlan(body, torques, timeline, settings, wear.contact, axis, handles, skin)
 
 
 def read_pattern(wear: WearScene, scene_path: Path | None):

@@ -44,9 +44,23 @@ class WearFabricSection:
 class WearBodySection:
     """[body]: the wearer, a preset of named ellipsoid segments: arm (upper arm + forearm, ANSUR II; the keys of
     ArmDimensions), lower_body (trunk, pelvis, thighs, shanks, feet, ANSUR II; the keys of LowerBodyDimensions),
-    limb (one ellipsoid along x: center, radii)."""
+    limb (one ellipsoid along x: center, radii), or mesh: a closed triangulated skin read from `file` and rigged
+    by linear blend skinning to the segments of `skeleton` (fabricfem.body.mesh_skin), which the motion moves."""
 
-    type: str = doc("arm | lower_body | limb (default_arm = arm)")
+    type: str = doc("arm | lower_body | limb | mesh (default_arm = arm)")
+    file: str | None = doc("mesh: the skin's surface mesh (OBJ, PLY, STL, glTF/GLB, COLLADA .dae/.zae), relative "
+                           "to the scene file, or \"human\" (the Debian assimp-testmodels human.zae)", None)
+    units: str | float = doc("mesh: the file's length unit (m, cm, mm, in, or metres per file unit)", "m")
+    up: str = doc("mesh: the file's up axis, z or y", "z")
+    repair: bool = doc("mesh: close holes and flip inverted normals instead of refusing the file", False)
+    components: str = doc("mesh: largest (keep the part of largest area) or all (every part, each closed)",
+                          "largest")
+    skeleton: str | None = doc("mesh: the segments it is rigged to and moved by: lower_body or arm (their dimension "
+                               "keys apply)", None)
+    rest_positions: str | dict | None = doc("mesh: the skeleton's joints and markers in the mesh [m]: a table name "
+                                            "-> [x, y, z] (body frame), or \"human\" (measured on the Debian "
+                                            "human, fabricfem.body.human; its lower-body dimensions are then the "
+                                            "defaults); default: the skeleton's own first pose", None)
     center: list | None = doc("limb: [x, y, z] centre [m]", None)
     radii: list | None = doc("limb: [r1, r2, r3] semi-axes along x, y, z [m]", None)
     blend_width: float = doc("width of the smooth blend of the segments at the joints [m]: the skin has no crease "
