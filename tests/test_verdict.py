@@ -38,7 +38,8 @@ def test_a_plausible_sleeve_completes_with_every_check_passed(tmp_path, capsys):
     assert summary["status"] == "completed" and summary["verdict"]["status"] == "plausible"
     names = {c["name"] for c in summary["verdict"]["checks"]}
     assert names == {"penetration", "seam gap", "fabric strain", "skin pressure", "kinetic energy", "start distance",
-                     "contact"}
+                     "contact", "intersecting triangle pairs"}
+    assert summary["max_intersecting_pairs"] == 0 and summary["self_contact"] is False
     assert "CHECK FAILED" not in capsys.readouterr().out
 
 
@@ -64,6 +65,34 @@ def test_each_check_compares_its_record_values_with_its_bound(values, failed):
     checks = wear_checks(history, Bounds(), failure_strain=0.3)
     assert {c.name for c in checks if not c.passed} == failed
     assert all(c.line().startswith(f"CHECK FAILED {c.name}") for c in checks if not c.passed)
+
+
+@pytest.mark.parametrize("self_contact, counts, failed", [
+    (True, [0, 0], False), (True, [0, 3], True), (False, [0, 3], False), (False, [None, None], None)])
+def test_intersecting_triangle_pairs_fail_only_with_self_contact_on(self_contact, counts, failed):
+    """The records' largest count of intersecting triangle pairs is a failed check above 0 with self-contact on,
+    information (passed, its value kept) with it off, and no check when no record counted."""
+    history = WearHistory("sleeve", steps=[_step(intersecting_pairs=c) for c in counts], initial_gap=0.01,
+                          self_contact=self_contact)
+    check = {c.name: c for c in wear_checks(history, Bounds())}.get("intersecting triangle pairs")
+    if failed is None:
+        assert check is None and "max_intersecting_pairs" not in history.summary()
+        return
+    assert check.passed is not failed and check.value == max(counts)
+    assert history.summary()["max_intersecting_pairs"] == max(counts)
+
+
+@pytest.mark.parametrize("values, words", [
+    ({"self_contact": True, "self_contact_distance": 0.0}, "contact.self_contact_distance: must be a positive"),
+    ({"self_contact": True, "self_contact_distance": 0.05}, "contact.self_contact_distance: 0.05 m exceeds the mesh"),
+    ({"self_contact": True, "self_friction": -0.1}, "self_friction must be a number >= 0"),
+])
+def test_bad_self_contact_keys_exit_2_with_one_line_naming_them(tmp_path, capsys, values, words):
+    """A zero contact distance, one beyond the mesh size (10 x 13: 0.049 m) and a negative friction are refused
+    before any meshing: exit 2, one line naming the key."""
+    assert cli.main(["run", str(_sleeve(tmp_path, contact=values))]) == 2
+    err = capsys.readouterr().err.strip()
+    assert words in err and len(err.splitlines()) == 1
 
 
 def test_the_energy_balance_of_a_dynamic_run():

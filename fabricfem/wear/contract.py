@@ -49,6 +49,7 @@ class WearStep:
     axis_value: float | None = None   # the record on the run's axis (a joint angle [deg]), None: the time
     newton_iterations: int = 0        # Newton iterations since the previous record (Newton routes)
     drag_ratio: float = 0.0           # fictitious drag / contact force left in a relaxed state (quasi-static)
+    intersecting_pairs: int | None = None   # pairs of the cloth's triangles that cross (None: not counted)
 
     @property
     def coordinate(self) -> float:
@@ -91,6 +92,7 @@ class WearHistory:
     verdict: dict = field(default_factory=dict, kw_only=True)    # the plausibility checks (fabricfem.wear.verdict)
     statistics: dict = field(default_factory=dict, kw_only=True)  # windowed means, percentile peaks (wear.statistics)
     wall_split: dict = field(default_factory=dict, kw_only=True)  # the process's wall time by phase (wear.run)
+    self_contact: bool = field(default=False, kw_only=True)     # the cloth's contact with itself was on
 
     @property
     def completed(self) -> bool:
@@ -142,13 +144,13 @@ class WearHistory:
                 "peak_pressure_mmHg", "peak_segment", "peak_x_m", "peak_y_m", "peak_z_m", "mean_pressure_Pa",
                 "max_penetration_m", "contact_force_N", "seam_gap_m", *(f"seam_{n}_N_per_m" for n in self.seams),
                 "max_strain", "time_steps", "kinetic_energy_J", "strain_energy_J", "wall_s", "newton_iterations",
-                "drag_ratio")
+                "drag_ratio", "intersecting_pairs")
 
     def rows(self) -> list[list]:
         return [[s.time, s.phase, s.coordinate, *s.torques.values(), s.peak_pressure, s.peak_pressure / PA_PER_MMHG,
                  s.peak_segment, *s.peak_position, s.mean_pressure, s.max_penetration, s.contact_force, s.seam_gap,
                  *s.seam_forces.values(), s.max_strain, s.time_steps, s.kinetic_energy, s.strain_energy, s.wall,
-                 s.newton_iterations, s.drag_ratio]
+                 s.newton_iterations, s.drag_ratio, "" if s.intersecting_pairs is None else s.intersecting_pairs]
                 for s in self.steps]
 
     def torque_curves(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
@@ -183,6 +185,10 @@ class WearHistory:
         out["max_strain"] = max(s.max_strain for s in sewn)
         out["max_penetration_m"] = max(s.max_penetration for s in sewn)
         out["max_seam_gap_after_sewing_m"] = max(s.seam_gap for s in sewn)
+        counted = [s.intersecting_pairs for s in self.steps if s.intersecting_pairs is not None]
+        if counted:     # the independent check of the cloth's state (fabricfem.contact.intersections)
+            out["max_intersecting_pairs"] = max(counted)
+            out["self_contact"] = bool(getattr(self, "self_contact", False))
         out.update(self.report)
         if self.verdict:
             out["verdict"] = self.verdict

@@ -38,7 +38,9 @@ from fabricfem.body.blend import BlendedStart, smoothstep
 from fabricfem.body.blended import BLEND_WIDTH
 from fabricfem.body.pose import Body
 from fabricfem.body.skin import Skin
+from fabricfem.contact.cloth_surface import ClothSurface
 from fabricfem.contact.explicit import ExplicitBodyContact
+from fabricfem.contact.intersections import intersecting_pairs
 from fabricfem.contact.seams import SeamSpec, SeamTies
 from fabricfem.contact.self_contact import SelfContact
 from fabricfem.dynamics import stability
@@ -190,6 +192,7 @@ class GarmentRun:
     _last_strain: float = 0.0    # largest Green strain of the last record (adaptive_steps)
     _steps_now: int = 0          # steps per record in use
     self_contact: SelfContact | None = None   # the cloth-cloth contact hook (None: the cloth may pass through itself)
+    _surface: ClothSurface | None = None      # the cloth's triangulation of the intersection count
 
     @property
     def axis_label(self) -> str:
@@ -294,6 +297,15 @@ class GarmentRun:
         if self.strain is not None:
             self.strain.destroy()
 
+    def intersections(self, d: np.ndarray) -> int:
+        """The number of intersecting triangle pairs of the cloth at the displacements `d` (local array of W):
+        the independent check of fabricfem.contact.intersections on the whole surface, counted on rank 0 and sent
+        to every rank (all ranks call this)."""
+        if self._surface is None:
+            self._surface = self.self_contact.surface if self.self_contact is not None else ClothSurface(self.model)
+        x = self._surface.positions(d)
+        return self.comm.bcast(intersecting_pairs(x, self._surface.triangles) if self.comm.rank == 0 else None, root=0)
+
     def _peak(self, pressure: np.ndarray) -> tuple[float, str, tuple, float]:
         """(peak [Pa], segment, position, area-weighted mean over the contact [Pa]) over all ranks."""
         c, comm = self.contact, self.comm
@@ -332,6 +344,7 @@ class GarmentRun:
                                  f"{history.initial_gap:.3e} m); place the garment around it or grow the body "
                                  f"(donning grow_from < 1)")
         history.timings = {"dt": self.dt, "dt_estimate": self.dt_estimate}
+        history.self_contact = self.self_contact is not None
 
         def record(phase: Phase, k: int, steps: int) -> WearStep:
             means = contact.mean_torques()
@@ -348,7 +361,8 @@ class GarmentRun:
                 seam_forces=self.seams.line_forces() if self.seams else {},
                 max_strain=self._note_strain(max(strains["max_warp"], strains["max_weft"])), time_steps=steps,
                 kinetic_energy=integ.kinetic_energy(), strain_energy=integ.strain_energy(),
-                wall=time.perf_counter() - t0, axis_value=self.axis_at(integ.t, phase))
+                wall=time.perf_counter() - t0, axis_value=self.axis_at(integ.t, phase),
+                intersecting_pairs=self.intersections(d))
 
         save = None
         if checkpoint is not None:

@@ -13,6 +13,9 @@ wear scene's [checks] section; the strain bound is the fabric's `failure_strain`
     start distance     smallest garment-body gap at the start [m], for a garment that is not sewn, pulled or
                        grown onto the body first                                            <= max_start_gap
     contact            the body touches the garment during the motion (largest contact force > 0 [N])
+    intersecting       the largest number of intersecting triangle pairs of the cloth over the records
+    triangle pairs     (fabricfem.contact.intersections; counted by the explicit engine)    <= 0 with self-contact
+                       on; without it the count is reported as information (never fails)
 
 A failed check is one console line and an entry of summary.json's "verdict"; the run's status becomes
 "completed with warnings" and `fabricfem run` exits with EXIT_WARNINGS (3), distinct from success (0), a run that
@@ -104,11 +107,25 @@ def wear_checks(history: WearHistory, bounds: Bounds = Bounds(),
     if math.isfinite(history.initial_gap) and not dressed:
         checks.append(bounded_check("start distance", "smallest garment-body gap at the start", history.initial_gap,
                              bounds.max_start_gap, "m"))
+    checks.extend(_intersection_checks(history))
     if bounds.require_contact:
         force = max(s.contact_force for s in motion)
         checks.append(Check("contact", "the body never touches the garment during the motion (largest contact "
                             "force 0 N)", force, 0.0, "N", force > 0.0))
     return checks
+
+
+def _intersection_checks(history: WearHistory) -> list[Check]:
+    """"intersecting triangle pairs" over all records that counted them: bound 0 with self-contact on; without it
+    information only (passed, whatever the count); none when no record counted."""
+    counted = [s.intersecting_pairs for s in history.steps if s.intersecting_pairs is not None]
+    if not counted:
+        return []
+    if getattr(history, "self_contact", False):
+        return [bounded_check("intersecting triangle pairs", "largest number of intersecting triangle pairs of the "
+                              "cloth (self-contact on)", max(counted), 0.0, "")]
+    return [Check("intersecting triangle pairs", "largest number of intersecting triangle pairs of the cloth "
+                  "(self-contact off: information, the bound not applied)", float(max(counted)), 0.0, "", True)]
 
 
 def verdict(checks: list[Check]) -> dict:
