@@ -437,6 +437,10 @@ class ExplicitBodyContact:
             self._correct_compiled(integrator, ellipsoids, d, v, a)
             return
         x_trial = self.reference + d[rows] + dt * v[rows] + dt ** 2 * a[rows]
+        if self.skin is not None and COMPILED_CONTACT["enabled"]:   # the skin's query, then the compiled friction
+            self._correct_compiled(integrator, ellipsoids, d, v, a,
+                                   (x_trial, self.project(x_trial, t_next, ellipsoids, SegmentStack(ellipsoids))))
+            return
         stack = SegmentStack(ellipsoids)
         skin = self.project(x_trial, t_next, ellipsoids, stack)
         seg = skin.segment
@@ -476,15 +480,22 @@ class ExplicitBodyContact:
         position[index] = final
         self._set_step(position, index, m * a_c, normal_force, seg, slip, dt, weights)
 
-    def _correct_compiled(self, integrator, ellipsoids: list[Ellipsoid], d: np.ndarray, v: np.ndarray, a: np.ndarray):
+    def _correct_compiled(self, integrator, ellipsoids: list[Ellipsoid], d: np.ndarray, v: np.ndarray, a: np.ndarray,
+                          projected: tuple[np.ndarray, SkinProjection] | None = None):
         """`correct` by the compiled loops of fabricfem.contact.compiled: the same projection (with the blended skin's
-        closest point in the creases), friction and correction node by node."""
+        closest point in the creases), friction and correction node by node; `projected`: the trial points and
+        their projection onto another skin (its normals and weights are used for every node, crease = True)."""
         lib, ffi = compiled.module(self.comm)
         dt = integrator.dt
         if self._rows is None:
             self._rows = np.ascontiguousarray(self.dofs, dtype=np.int64)
         segments = compiled.stacked(ellipsoids)
-        trial, skin = project_compiled(self.reference, self._rows, d, v, a, dt, segments, self.widths, self.comm)
+        if projected is None:
+            trial, skin = project_compiled(self.reference, self._rows, d, v, a, dt, segments, self.widths, self.comm)
+        else:
+            trial, skin = projected
+            skin = SkinProjection(*(np.ascontiguousarray(getattr(skin, f)) for f in
+                                    ("position", "moved", "segment", "crease", "normal", "weights")))
         position, segment, moved = skin.position, skin.segment, skin.moved
         index = np.flatnonzero(moved)
         for buffer in (self.force, self.normal_force, self.slip):
