@@ -17,6 +17,7 @@ from mpi4py import MPI
 
 from fabricfem.body.blended import BLEND_WIDTH, blend, closest_points
 from fabricfem.body.ellipsoid import Ellipsoid, _ray_to_surface
+from fabricfem.body.skin import SkinQuery
 from fabricfem.contact import compiled
 from fabricfem.contact.nodal import nearest_gap, positive_parameter
 
@@ -251,9 +252,25 @@ def skin_gap(x, ellipsoids: Sequence[Ellipsoid], widths: np.ndarray | None = Non
     widths = resolve_widths(widths, len(ellipsoids))
     crease = crease_points(stack.normalised_radii(x), stack.scale, widths)
     if crease.any():
-        skin = closest_points(x[crease], stack.center, stack.rotation, stack.radii, widths, strict=False)
+        skin = compiled_closest_points(x[crease], stack, widths)
         g[crease], n[crease], segment[crease], weights[crease] = skin.gap, skin.normal, skin.segment, skin.weights
     return g, n, segment, weights
+
+
+def compiled_closest_points(x: np.ndarray, stack: SegmentStack, widths: np.ndarray) -> SkinQuery:
+    """fabricfem.body.blended.closest_points of the points x (N, 3) [m] by the compiled kernel
+    (fabricfem.contact.blend_kernel `blend_query`, the same iteration; not strict: a point whose iteration does not
+    converge keeps the foot of its last iterate)."""
+    lib, ffi = compiled.module(MPI.COMM_SELF)
+    p = functools.partial(compiled.pointer, ffi)
+    x = np.ascontiguousarray(x, dtype=float)
+    N, K = len(x), stack.count
+    gap, foot, normal, weights = np.empty(N), np.empty((N, 3)), np.empty((N, 3)), np.empty((N, K))
+    converged = np.empty(N, dtype=np.uint8)
+    arrays = (np.ascontiguousarray(a, dtype=float) for a in (stack.center, stack.rotation, stack.radii, widths))
+    lib.blend_query(N, p(x, "double"), K, *(p(a, "double") for a in arrays), p(gap, "double"), p(foot, "double"),
+                    p(normal, "double"), p(weights, "double"), p(converged, "uint8_t"))
+    return SkinQuery(gap, foot, normal, weights)
 
 
 def project_with_segment(x, ellipsoids: Sequence[Ellipsoid], segments: SegmentStack | None = None,
