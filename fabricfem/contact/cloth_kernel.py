@@ -23,7 +23,7 @@ import numpy as np
 
 from fabricfem.contact.compiled import pointer
 from fabricfem.contact.proximity import CLOSEST_C, FLAGS, Pairs
-from fabricfem.forms.jit import compile_c
+from fabricfem.forms.jit import built_once
 
 CDEF = """
 int64_t narrow_candidates(int64_t N, const double* x, const double* x0, double limit, int64_t M, const int64_t* cand_p,
@@ -157,15 +157,9 @@ void respond_pairs(int64_t n, const int64_t* pair_p, const int64_t* pair_t, cons
 }
 """
 
-_MODULE: dict = {}
-
-
 def _module(comm):
     """(lib, ffi) of the compiled loops, built on first use (rank 0 of `comm` builds, the others wait)."""
-    if "lib" not in _MODULE:
-        built = compile_c("fabricfem_cloth_kernel", CDEF, SOURCE, comm, FLAGS)
-        _MODULE.update(lib=built.lib, ffi=built.ffi)
-    return _MODULE["lib"], _MODULE["ffi"]
+    return built_once("fabricfem_cloth_kernel", CDEF, SOURCE, comm, FLAGS)
 
 
 def narrow(x: np.ndarray, x0: np.ndarray, limit: float, candidates: Pairs, triangles: np.ndarray, radius: float,

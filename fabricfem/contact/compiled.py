@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from fabricfem.contact.blend_kernel import BLEND_CDEF, BLEND_SOURCE
-from fabricfem.forms.jit import compile_c
+from fabricfem.forms.jit import built_once
 
 FLAGS = ("-O3", "-march=native", "-ffp-contract=off", "-g0")
 MAX_SEGMENTS = 64          # the body segments a point is checked against (a stack array in `project`)
@@ -332,16 +332,10 @@ void friction(int n, const int64_t* index, const int64_t* rows, const double* tr
 }
 """
 
-_MODULE: dict = {}
-
-
 def module(comm):
     """The compiled module: (lib, ffi), built on first use by rank 0 of `comm` while the others wait
-    (fabricfem.forms.jit.compile_c)."""
-    if "lib" not in _MODULE:
-        built = compile_c("fabricfem_contact", CDEF, SOURCE, comm, FLAGS)
-        _MODULE.update(lib=built.lib, ffi=built.ffi)
-    return _MODULE["lib"], _MODULE["ffi"]
+    (fabricfem.forms.jit.built_once)."""
+    return built_once("fabricfem_contact", CDEF, SOURCE, comm, FLAGS)
 
 
 def pointer(ffi, array: np.ndarray, ctype: str):

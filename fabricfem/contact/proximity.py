@@ -27,7 +27,7 @@ import ipctk
 import numpy as np
 
 from fabricfem.contact.compiled import pointer
-from fabricfem.forms.jit import compile_c
+from fabricfem.forms.jit import built_once
 
 FLAGS = ("-O3", "-march=native", "-g0")
 
@@ -197,15 +197,9 @@ int64_t vertex_triangle_pairs(int64_t N, const double* x, int64_t T, const int64
 }
 """
 
-_MODULE: dict = {}
-
-
 def _module(comm):
-    """(lib, ffi) of the compiled search, built on first use (rank 0 of `comm` builds, the others wait)."""
-    if "lib" not in _MODULE:
-        built = compile_c("fabricfem_proximity", CDEF, SOURCE, comm, FLAGS)
-        _MODULE.update(lib=built.lib, ffi=built.ffi)
-    return _MODULE["lib"], _MODULE["ffi"]
+    """(lib, ffi) of the compiled loops, built on first use (rank 0 of `comm` builds, the others wait)."""
+    return built_once("fabricfem_proximity", CDEF, SOURCE, comm, FLAGS)
 
 
 @dataclass

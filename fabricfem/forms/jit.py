@@ -69,3 +69,15 @@ def compile_c(prefix: str, cdef: str, source: str, comm, flags: Sequence[str]) -
     spec.loader.exec_module(module)
     _LOADED.append(module)
     return module
+
+
+_BUILT: dict[str, ModuleType] = {}   # the modules of `built_once`, by prefix
+
+
+def built_once(prefix: str, cdef: str, source: str, comm, flags: Sequence[str]) -> tuple[object, object]:
+    """(lib, ffi) of `compile_c(prefix, ...)`, built on the first call of this process and kept (a module whose
+    source is fixed: the contact loops, the cloth-cloth search and response)."""
+    if prefix not in _BUILT:
+        _BUILT[prefix] = compile_c(prefix, cdef, source, comm, flags)
+    module = _BUILT[prefix]
+    return module.lib, module.ffi
