@@ -12,10 +12,10 @@ from toml_text import dumps
 
 from fabricfem import cli
 from fabricfem.benchmarks.sleeve_accuracy import SLEEVE_FIGURES, sleeve_choices, verdict
-from fabricfem.scenes.build import load as load_scene
 from fabricfem.scenes.accuracy import cells_of, level_scene, parse_target, plan
-from fabricfem.scenes.richardson import richardson
+from fabricfem.scenes.build import load as load_scene
 from fabricfem.scenes.particle_level import particle_variant, solve_particles
+from fabricfem.scenes.richardson import richardson
 from fabricfem.scenes.schema import SceneError
 from fabricfem.verify.accuracy import CORNER, CORNER_BENDING, CORNER_BENDING_UZ_REFERENCE, DRAPE, ROLLUP
 

@@ -6,7 +6,6 @@ import tomllib
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.cli import main

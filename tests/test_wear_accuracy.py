@@ -2,7 +2,6 @@
 as the levels, a quantity of the wear run's summary.json, the pilots cut to a window of body time; the plan of a
 small sleeve (observed order or NOT ASYMPTOTIC, a choice or a refusal), `run --accuracy` delivering the whole
 scene, the compression sleeve on a cylinder against Laplace's law, and bad input refused before meshing."""
-import copy
 import json
 import tomllib
 from pathlib import Path

@@ -114,9 +114,9 @@ def _mesh_rows(mesh: str, evaluations: int, repeats: int, comm: MPI.Comm) -> lis
 
 
 def _write(out: Path, rows: list[dict]) -> None:
-    import matplotlib   # noqa: PLC0415 (optional plotting package)
+    import matplotlib  # noqa: PLC0415 (optional plotting package)
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt   # noqa: PLC0415 (optional plotting package)
+    import matplotlib.pyplot as plt  # noqa: PLC0415 (optional plotting package)
 
     out.mkdir(parents=True, exist_ok=True)
     fio.write_csv(out / "internal_force.csv", COLUMNS, rows, MPI.COMM_SELF)
