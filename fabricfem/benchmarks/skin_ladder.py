@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import os
 import subprocess
 import sys
 import tomllib
@@ -60,7 +61,9 @@ def run_level(scene: Path, mesh: str, out: Path, ranks: int = 1) -> Path:
         return folder
     path = level_scene(scene, mesh, out)
     command = [sys.executable, "-m", "fabricfem.cli", "run", str(path), "--out", str(folder)]
-    subprocess.run((["mpirun", "-n", str(ranks)] if ranks > 1 else []) + command, check=False)
+    # this process has started MPI (mpi4py): its run-time variables must not reach the child's mpirun
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_COMM", "OMPI_MCA_ess", "PMIX_", "OMPI_FILE"))}
+    subprocess.run((["mpirun", "-n", str(ranks)] if ranks > 1 else []) + command, check=False, env=env)
     return folder
 
 

@@ -181,6 +181,10 @@ class ExplicitBodyContact:
         self.segment_active: Callable[[float], np.ndarray] | None = None
         # the Lagrange step by the compiled loops (fabricfem.contact.compiled) or by numpy (COMPILED_CONTACT)
         self.compiled = COMPILED_CONTACT["enabled"] and method == "lagrange" and skin is None
+        # the compiled loops are built here, by every rank together (fabricfem.forms.jit.compile_c waits for all
+        # ranks): built on first use instead, a rank with crease nodes in its penetration monitor built them alone
+        # while another waited in the step's build, and the run hung
+        compiled.module(self.comm)
         self._rows: np.ndarray | None = None      # (M, 3) int64 rows of the nodes in W (compiled loops)
         self._monitor_arrays: tuple | None = None  # the monitors' segment flags and axes (compiled loops)
 
