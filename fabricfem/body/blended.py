@@ -13,8 +13,8 @@ polynomial smooth minimum of width w_ab [m] ([Quilez2013]):
 
 and the skin is the zero set of phi = min(min_k d_k, min over the pairs with |d_a - d_b| < w_ab of smin_ab),
 grad phi = sum_k W_k grad d_k with the weights W >= 0 (summing to 1) of the smallest term: the segment weights of the
-contract. Segments joined at a joint (they share a joint name: upper arm and forearm, thigh and shank, pelvis and
-thigh) blend over the body's width w; segments that are not (the two thighs, a hand and a thigh) over
+contract. Segments that meet at a joint with their tips (they share a joint name and it lies in the outer part of
+both: upper arm and forearm, thigh and shank; `pair_widths`) blend over the body's width w; segments that are not (the two thighs, a hand and a thigh) over
 SEPARATE_FRACTION w only, so that a gap between them stays open down to SEPARATE_FRACTION w / 2 instead of being
 bridged by a web, while a node between two such segments that touch still has a skin with a normal to go to.
 smin is C1 and equals min(a, b) wherever |a - b| >= w_ab: the skin is each segment's own ellipsoid away from the
@@ -44,7 +44,8 @@ from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.body.skin import SkinQuery
 
 BLEND_WIDTH = 0.05            # m: the default width w of the smooth minimum (rounding <= w / 4 = 12.5 mm)
-SEPARATE_FRACTION = 0.2       # the width of the blend of two segments not joined at a joint, over w
+SEPARATE_FRACTION = 0.2       # the width of the blend of two segments that do not meet at their tips, over w
+JOINT_TIP_Q = 0.5             # q of a shared joint in both segments from which they meet at their tips (pair_widths)
 MIN_GRADIENT = 0.5            # |grad phi| below this (a web between two facing segments) is not divided by
 CLOSEST_ITERATIONS = 200      # orthogonal projection iterations of `closest_points`
 FULL_STEPS = 10               # undamped tangential steps before the iteration halves them (concave blends)
@@ -77,18 +78,31 @@ def segment_distances(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray,
     return d, grad
 
 
-def pair_widths(segments, width: float) -> np.ndarray:
+def pair_widths(segments, width: float, positions: dict | None = None) -> np.ndarray:
     """(K, K) blend widths w_ab [m] of the segments (fabricfem.body.pose.Segment, in order): `width` for two
-    segments sharing a joint name, SEPARATE_FRACTION `width` for the others, 0 on the diagonal."""
+    segments that meet at a shared joint, SEPARATE_FRACTION `width` for the others, 0 on the diagonal. With the
+    joint and marker `positions` of a pose ({name: (3,) [m]}), two segments sharing a joint meet there only when
+    the joint lies in the outer part of both ellipsoids (q >= JOINT_TIP_Q, q = f + 1 [Man2006, eq. 3.61]: the
+    elbow and the knees, where the tips overlap); a joint deep inside one of them (the waist at the trunk's centre,
+    the ankle inside the foot) has no crease to fill, and a full blend there would only thicken the body (by up to
+    w / 4 where the two surfaces run side by side)."""
     joints = [{s.proximal, s.distal} for s in segments]
+    posed = [s.pose(positions) for s in segments] if positions is not None else None
     K = len(joints)
     out = np.full((K, K), SEPARATE_FRACTION * check_width(width))
     for a in range(K):
         for b in range(K):
-            if joints[a] & joints[b]:
+            shared = joints[a] & joints[b]
+            if shared and (posed is None or _meet_at_tips(posed[a], posed[b], positions[next(iter(shared))])):
                 out[a, b] = width
     np.fill_diagonal(out, 0.0)
     return out
+
+
+def _meet_at_tips(a: Ellipsoid, b: Ellipsoid, joint: np.ndarray) -> bool:
+    """True when the joint [m] lies in the outer part of both ellipsoids (q >= JOINT_TIP_Q, or outside)."""
+    point = np.asarray(joint, dtype=float).reshape(1, 3)
+    return all(float(np.sum((e.to_local(point) / e.radii) ** 2)) >= JOINT_TIP_Q for e in (a, b))
 
 
 def blend(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, radii: np.ndarray, widths: np.ndarray
@@ -175,7 +189,8 @@ class BlendedEllipsoids:
     def __init__(self, body, width: float = BLEND_WIDTH):
         self.body = body
         self.width = check_width(width)
-        self.widths = pair_widths(list(body.segments.values()), self.width)
+        t0 = body.kinematics.time_range[0]
+        self.widths = pair_widths(list(body.segments.values()), self.width, body.kinematics.positions(t0))
         self.segment_names = tuple(body.segments)
 
     @property

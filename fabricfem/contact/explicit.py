@@ -142,7 +142,8 @@ class ExplicitBodyContact:
         self.comm = model.comm
         self.names = list(body.segments)
         self.blend_width = check_width(blend_width)       # m: the blended skin's width (fabricfem.body.blended)
-        self.widths = np.ascontiguousarray(pair_widths(list(body.segments.values()), self.blend_width))
+        rest = body.kinematics.positions(body.kinematics.time_range[0])
+        self.widths = np.ascontiguousarray(pair_widths(list(body.segments.values()), self.blend_width, rest))
         # another skin of the body (fabricfem.body.skin, e.g. a rigged surface mesh) instead of the blended segments:
         # its gap, foot, normal and weights by its query; the segments' frames still carry the stick points
         if skin is not None and tuple(skin.segment_names) != tuple(body.segments):
