@@ -2,7 +2,7 @@
 # Idempotent set-up for a fresh Debian bookworm machine:
 #   1. Debian packages (dolfinx 0.5.2 stack, gmsh, meshio + h5py, OpenMPI) via apt, as root or with sudo;
 #   2. a virtual environment .venv from /usr/bin/python3 --system-site-packages;
-#   3. the project installed editable, numpy pinned to the Debian numpy (numpy 2 breaks petsc4py); ezc3d (C3D
+#   3. the project installed editable, numpy and scipy pinned to Debian's (numpy 2 breaks petsc4py); ezc3d (C3D
 #      files) comes with it: should pip ever want another numpy for it, install it with --no-deps instead;
 #   4. optional test data: Debian assimp-testmodels (CMU motion-capture BVH files in
 #      /usr/share/assimp/models/BVH/, used by the mocap-roundtrip verify case), only as root with apt-get;
@@ -38,7 +38,11 @@ fi
 stamp="$VENV/.fabricfem-installed"
 if [ ! -f "$stamp" ] || [ pyproject.toml -nt "$stamp" ]; then
   numpy_version="$(/usr/bin/python3 -c 'import numpy; print(numpy.__version__)')"
-  echo "numpy==$numpy_version" > "$VENV/constraints.txt"
+  scipy_version="$(/usr/bin/python3 -c 'import scipy; print(scipy.__version__)')"
+  # scipy pinned to Debian's too: a newer scipy from pip (scikit-image's latest wants one) changes the numbers of
+  # the verified cases (the generalized-alpha dissipation test measured 3 % off with scipy 1.15), and pip then
+  # picks the scikit-image release that accepts Debian's scipy
+  printf 'numpy==%s\nscipy==%s\n' "$numpy_version" "$scipy_version" > "$VENV/constraints.txt"
   echo "[bootstrap] installing fabricfem (editable), numpy pinned to $numpy_version"
   "$VENV/bin/python" -m pip install -q --disable-pip-version-check -c "$VENV/constraints.txt" -e ".[dev]"
   touch "$stamp"

@@ -233,7 +233,7 @@ def test_default_factor_gives_the_old_segments_and_checkpoints():
     items = [(k, {a: v for a, v in value.items() if a != "long_axis_factor"} if k == "arm" else value)
              for k, value in items]
     assert hashlib.sha1(repr(items).encode()).hexdigest()[:16] == "c3df774b0f2f3969"    # the items of that run
-    assert _key(estimate) == repr(("engine", items))
+    assert _key(estimate) == repr(("engine, blended skin w = 0.05", items))
     assert _checkpoint(Path("out"), estimate).name != "c3df774b0f2f3969.json"          # rerun on the engine
     assert _checkpoint(Path("out"), cfg) not in (_checkpoint(Path("out"), estimate),
                                                  Path("out") / "runs" / "c3df774b0f2f3969.json")

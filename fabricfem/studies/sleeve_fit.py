@@ -206,13 +206,17 @@ def summary_row(scale: float, arm: ArmDimensions, curves: dict[str, tuple[np.nda
 
 
 # ------------------------------------------------------------------------------------------------ study
+SKIN = "engine, blended skin w = 0.05"   # the checkpoint tag (fabricfem.body.blended.BLEND_WIDTH)
+
+
 def _key(config: SleeveConfig) -> str:
-    """The configuration as a string; the arm's long_axis_factor is left out at its default 0.5 so that runs
-    checkpointed before the factor existed keep their key."""
+    """The configuration as a string, tagged with the engine and the body's skin (SKIN: runs of the union of
+    ellipsoids are rerun on the blended skin, not read back); the arm's long_axis_factor is left out at its default
+    0.5 so that runs checkpointed before the factor existed keep their items."""
     items = config.key_items()
     if items["arm"].get("long_axis_factor") == DEFAULT_LONG_AXIS_FACTOR:
         del items["arm"]["long_axis_factor"]
-    return repr(("engine", sorted(items.items())))
+    return repr((SKIN, sorted(items.items())))
 
 
 def _checkpoint(out: Path, config: SleeveConfig) -> Path:

@@ -212,7 +212,8 @@ class RouteSpec:
 
 # parameter -> default, of the parameters added after study runs were checkpointed (SleeveConfig.key_items)
 # (critical_step: the runs stored before it used the element formula)
-ADDED_LATER = {"mass_scale": 1.0, "critical_step": "estimate", "stiffness_damping": 0.0}
+ADDED_LATER = {"mass_scale": 1.0, "critical_step": "estimate", "stiffness_damping": 0.0, "self_contact": False,
+               "self_contact_distance": None, "self_friction": 0.0}
 
 SECTIONS = {"tube": TubeSpec, "material": FabricSpec, "motion": FlexionSpec, "contact": ContactSpec,
             "route": RouteSpec}
