@@ -14,9 +14,9 @@ polynomial smooth minimum of width w_ab [m] ([Quilez2013]):
 and the skin is the zero set of phi = min(min_k d_k, min over the pairs with |d_a - d_b| < w_ab of smin_ab),
 grad phi = sum_k W_k grad d_k with the weights W >= 0 (summing to 1) of the smallest term: the segment weights of the
 contract. Segments that meet at a joint with their tips (they share a joint name and it lies in the outer part of
-both: upper arm and forearm, thigh and shank; `pair_widths`) blend over the body's width w; segments that are not (the two thighs, a hand and a thigh) over
-SEPARATE_FRACTION w only, so that a gap between them stays open down to SEPARATE_FRACTION w / 2 instead of being
-bridged by a web, while a node between two such segments that touch still has a skin with a normal to go to.
+both: upper arm and forearm, thigh and shank; `pair_widths`) blend over the body's width w; segments that do not
+(the two thighs, a hand and a thigh, the trunk and the pelvis at the trunk's centre) over SEPARATE_FRACTION w
+only, so that a gap between them stays open down to SEPARATE_FRACTION w / 2 instead of being bridged by a web, while a node between two such segments that touch still has a skin with a normal to go to.
 smin is C1 and equals min(a, b) wherever |a - b| >= w_ab: the skin is each segment's own ellipsoid away from the
 joints, and in a crease the blend fills the corner, turning the normal over a band of width ~ w instead of at a
 line (phi is C1 where one pair decides; where two pairs' blends meet, between two legs at the crotch, it keeps the
@@ -29,8 +29,9 @@ Newton steps onto phi = 0 along grad phi alternated with the projection of x ont
 until x - p is parallel to grad phi(p) (`closest_points`). Units: metres throughout.
 
 `blend` evaluates phi, grad phi and the weights; `closest_points` the contract's SkinQuery; `BlendedEllipsoids` is
-the Skin of a Body (posed at any t). The same arithmetic is compiled for the explicit contact (BLEND_C, used by
-fabricfem.contact.compiled).
+the Skin of a Body (posed at any t), and its `widths` are the ones the explicit contact uses. The same arithmetic
+is compiled for the explicit contact in fabricfem.contact.blend_kernel (BLEND_SOURCE, part of
+fabricfem.contact.compiled's loops).
 """
 from __future__ import annotations
 

@@ -1,4 +1,5 @@
-"""The blended skin (fabricfem.body.blended) in C, for the explicit contact's compiled step (fabricfem.contact.compiled):
+"""The blended skin (fabricfem.body.blended) in C, for the explicit contact's compiled step
+(fabricfem.contact.compiled):
 the same formulas node by node.
 
 * `ellipsoid_distance`: the exact signed distance and outward normal of a point to one ellipsoid (the monotone
@@ -124,7 +125,8 @@ static double blend_eval(const double* x, int K, const double* center, const dou
     W[k] = 0.0;
   }
   /* the exact distances of the segments that can matter: a segment whose distance is at least the nearest one's
-     + the widest blend cannot enter phi (each term is >= min(d_a, d_b) - w / 4 and equals min where |d_a - d_b| >= w) */
+     + the widest blend cannot enter phi (each term is >= min(d_a, d_b) - w / 4 and equals min where
+     |d_a - d_b| >= w) */
   double smallest = INFINITY;
   for (int k = 0; k < K; ++k)
     if (bound[k] == lowest)

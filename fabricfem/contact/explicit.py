@@ -27,7 +27,7 @@ from typing import Callable, Iterator, Sequence
 import numpy as np
 from mpi4py import MPI
 
-from fabricfem.body.blended import BLEND_WIDTH, check_width, pair_widths
+from fabricfem.body.blended import BLEND_WIDTH, BlendedEllipsoids
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.body.skin import Skin
 from fabricfem.contact import compiled, nodal
@@ -141,9 +141,9 @@ class ExplicitBodyContact:
                         else positive_parameter("penalty", penalty))
         self.comm = model.comm
         self.names = list(body.segments)
-        self.blend_width = check_width(blend_width)       # m: the blended skin's width (fabricfem.body.blended)
-        rest = body.kinematics.positions(body.kinematics.time_range[0])
-        self.widths = np.ascontiguousarray(pair_widths(list(body.segments.values()), self.blend_width, rest))
+        blended = BlendedEllipsoids(body, blend_width)     # the default skin (fabricfem.body.blended)
+        self.blend_width = blended.width                   # m
+        self.widths = np.ascontiguousarray(blended.widths)  # (K, K) m: the pairs' blend widths at the rest pose
         # another skin of the body (fabricfem.body.skin, e.g. a rigged surface mesh) instead of the blended segments:
         # its gap, foot, normal and weights by its query; the segments' frames still carry the stick points
         if skin is not None and tuple(skin.segment_names) != tuple(body.segments):
