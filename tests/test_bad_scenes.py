@@ -80,6 +80,8 @@ BAD = [  # (scene kind, mutation, text the one-line error must contain)
     ("wear", _set("garment", n_around=0), "garment.n_around"),
     ("wear", _set("garment", builder="knit"), "garment.builder"),
     ("wear", _set("motion", type="dance"), "motion.type"),
+    ("wear", _set("body", blend_width=-1.0), "body.blend_width"),
+    ("wear", _set("body", blend_width=0.0), "body.blend_width"),
     ("wear", _set("motion", final_angle=200.0), "final_angle"),
     ("wear", lambda d: (d["route"].update(solver="quasistatic", mass_damping=-1.0),     # the Newton route's
                         d["contact"].update(method="penalty")), "route.mass_damping"),      # contact method

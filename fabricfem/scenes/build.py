@@ -484,7 +484,7 @@ def tube_scene_run(scene: Scene, comm):
     if parsed.route.solver != "explicit":
         return ROUTES[parsed.route.solver](sleeve_config(parsed), comm)
     return tube_flexion_run(scene_name(scene), wear.wear_fabric(parsed, build_fabric), fitting_tube(parsed), parsed.arm,
-                            parsed.flexion, parsed.contact, parsed.route, comm)
+                            parsed.flexion, parsed.contact, parsed.route, comm, blend_width=parsed.body.blend_width)
 
 
 def scene_limb(parsed: WearScene) -> Ellipsoid:

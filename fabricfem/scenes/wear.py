@@ -22,6 +22,7 @@ import numpy as np
 
 from fabricfem.body.arm import default_arm
 from fabricfem.body.blend import BlendedStart
+from fabricfem.body.blended import BLEND_WIDTH
 from fabricfem.body.conventions import LENGTH_UNITS
 from fabricfem.body.crossing import obstacle_walk
 from fabricfem.body.lower_body import lower_body, standing, winter_walking
@@ -114,6 +115,9 @@ def check_wear(data: dict) -> None:
     """The data checks of a wear scene beyond its tables' keys and types (fabricfem.scenes.schema.check_sections):
     choices, vectors and cross-references, before any meshing."""
     garment, body, motion = data["garment"], data["body"], data["motion"]
+    blend = body.get("blend_width", BLEND_WIDTH)
+    if not (isinstance(blend, (int, float)) and math.isfinite(blend) and blend > 0.0):
+        raise SceneError(f"body.blend_width: must be a positive length [m], got {blend!r}")
     _choice("garment.builder", garment.get("builder", "pattern"), BUILDERS)
     if garment.get("builder", "pattern") == "tube":
         missing = [k for k in ("length", "radius", "n_around", "n_along") if k not in garment]

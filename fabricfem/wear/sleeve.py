@@ -79,6 +79,7 @@ import math
 from mpi4py import MPI
 
 from fabricfem.body.arm import ArmDimensions, default_arm, elbow_flexion
+from fabricfem.body.blended import BLEND_WIDTH
 from fabricfem.body.pose import Body
 from fabricfem.body.skin import Skin
 from fabricfem.dynamics.stability import plane_stress_wave_speed, step_safety
@@ -156,10 +157,11 @@ def flexion_settings(route: RouteSpec, similarity: float) -> ExplicitSettings:
 
 def tube_flexion_run(name: str, fabric: Fabric, tube_spec: TubeSpec, arm: ArmDimensions, motion: FlexionSpec,
                      contact: ContactSpec, route: RouteSpec, comm: MPI.Comm = MPI.COMM_WORLD,
-                     config: object = None, skin: Skin | None = None) -> GarmentRun:
+                     config: object = None, skin: Skin | None = None,
+                     blend_width: float = BLEND_WIDTH) -> GarmentRun:
     """The arm in a tube sleeve on the garment engine: the tube's shoulder end (end0) held, the arm flexing at the
     elbow (`flexion_timeline`), the torque monitors ARM_MONITORS; `skin`: another skin of the arm (e.g. a rigged
-    mesh, fabricfem.body.mesh_skin) instead of the blended ellipsoids. `fabricfem run` of a tube-on-arm scene and the
+    mesh, fabricfem.body.mesh_skin) instead of the blended ellipsoids of `blend_width` [m]. `fabricfem run` of a tube-on-arm scene and the
     sleeve study's explicit route (`build_explicit`) both build their run here."""
     similarity = similarity_factor(fabric, route)
     body, timeline, axis = flexion_timeline(motion, route, similarity, arm)
@@ -173,7 +175,7 @@ def tube_flexion_run(name: str, fabric: Fabric, tube_spec: TubeSpec, arm: ArmDim
                              contact_method=contact.method or "lagrange", friction=contact.friction,
                              penalty=contact.penalty, psri_degrees=tube_spec.quadrature, config=config, axis=axis,
                              self_contact=contact.self_contact, self_contact_distance=contact.self_contact_distance,
-                             self_friction=contact.self_friction, skin=skin)
+                             self_friction=contact.self_friction, skin=skin, blend_width=blend_width)
 
 
 def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> GarmentRun:
