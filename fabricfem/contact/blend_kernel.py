@@ -10,6 +10,8 @@ the same formulas node by node.
   quadratic smooth minima within their widths ([Quilez2013], `fabricfem.body.blended.blend`). A segment whose
   distance is certainly at least the widest blend above the nearest one's (the lower bound (sqrt(q) - 1) r_min of
   its distance, q = f + 1 [Man2006, eq. 3.61]) is left out: it cannot enter phi there.
+* `blend_lower_bound`: a lower bound of phi from the segments' lower bounds (the same expression of them, phi
+  being non-decreasing in each distance): a point it puts outside needs no exact distance at all.
 * `blend_closest`: the foot of a point on phi = 0 by the orthogonal projection iteration ([Hartmann1999],
   `fabricfem.body.blended.closest_points`), with the gap, the normal and the weights at the foot.
 * `blend_query`: `blend_closest` over N points (the tests compare it with the numpy functions).
@@ -180,6 +182,31 @@ static double blend_eval(const double* x, int K, const double* center, const dou
       for (int i = 0; i < 3; ++i)
         grad[i] += W[k] * n[k][i];
   return phi;
+}
+
+/* a lower bound of phi from the segments' lower bounds b_k <= d_k (valid outside every segment, all b_k > 0;
+   -INFINITY otherwise): phi is the smallest of the d_k and of the pairs' smooth minima, each non-decreasing in
+   its arguments, so phi >= the same expression of the b_k */
+static double blend_lower_bound(int K, const double* bound, const double* widths)
+{
+  double lower = INFINITY;
+  for (int k = 0; k < K; ++k)
+  {
+    if (!(bound[k] > 0.0))
+      return -INFINITY;
+    lower = fmin(lower, bound[k]);
+  }
+  for (int a = 0; a < K; ++a)
+    for (int b = a + 1; b < K; ++b)
+    {
+      const double w = widths[a * K + b];
+      if (w > 0.0 && fabs(bound[a] - bound[b]) < w)
+      {
+        const double h = (w - fabs(bound[a] - bound[b])) / w;
+        lower = fmin(lower, fmin(bound[a], bound[b]) - w * h * h / 4.0);
+      }
+    }
+  return lower;
 }
 
 /* Newton steps onto phi = 0; returns phi at the end and grad phi, W there */

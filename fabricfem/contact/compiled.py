@@ -8,7 +8,8 @@ multiply-adds, `-ffp-contract=off`, so that the products and sums round as numpy
 * `project`: the trial positions x* = X + d + dt v~ + dt^2 a, the normalised radius q = f + 1 of each segment
   [Man2006, eq. 3.61]; a point within the blend of two segments (the lower bound (sqrt(q) - 1) r_min of its
   distance below the blend width w for two of them, `projection.crease_points`) inside the blended skin goes to its
-  closest point on it (fabricfem.contact.blend_kernel, with the skin's normal and segment weights there); the
+  closest point on it (fabricfem.contact.blend_kernel, with the skin's normal and segment weights there; one
+  that `blend_lower_bound` puts outside is left where it is without an exact distance); the
   others, near one segment only, take the passes of `project_onto_skin` (ray cast along grad f / |grad f|, the
   move onto the surface, [Man2006, Box 5] step i).
 * `friction`: for the nodes in contact, |lambda_N| = |m (x^c - x*)| / dt^2, the stick point's pull
@@ -175,6 +176,13 @@ int project(int M, const double* reference, const int64_t* rows, const double* d
           crease[p] = 1;
           break;
         }
+    if (crease[p] && blend_lower_bound(K, bound, widths) > 0.0)   /* certainly outside the blended skin */
+    {
+      double* W = weights + (size_t)K * p;
+      for (int k = 0; k < K; ++k)
+        W[k] = k == best ? 1.0 : 0.0;
+      continue;
+    }
     if (crease[p])   /* within the blend of two segments: the blended skin's closest point (blend_kernel) */
     {
       double grad[3];
