@@ -297,8 +297,9 @@ def test_mass_scaling_keeps_the_physical_weight_and_damping():
 
 def test_eigenvalue_critical_step_is_the_dense_eigenvalue_and_the_stability_limit():
     """The critical step of the explicit routes by default (stability.max_frequency "eigenvalue"): SLEPc's largest
-    omega of K vs M_L (rotary-inertia scale 100, as the wear engine) equals the dense generalized eigenvalue of
-    the free dofs (scipy, tolerance 1e-6 relative: SLEPc's rtol), and central differences [Man2006, eq. 2.86] of
+    omega of K vs M_L (rotary-inertia scale 100, as the wear engine) bounds the dense generalized eigenvalue of
+    the free dofs (scipy) from above by at most sqrt(1 + rtol) - 1 = 5e-5 relative (the Ritz value within rtol = 1e-4
+    of an eigenvalue, times 1 + rtol [Parlett1998, thm. 4.5.1]), and central differences [Man2006, eq. 2.86] of
     the same sheet under its weight (undamped, amplitudes ~1e-6 m: linear) stay bounded at 0.97 x 2 / omega and
     blow up at 1.03 x (their exact limit dt omega = 2, growth 1.3 per step at 1.03: past the energy bound within
     the 400 steps run)."""
@@ -318,7 +319,7 @@ def test_eigenvalue_critical_step_is_the_dense_eigenvalue_and_the_stability_limi
     free = np.setdiff1d(np.arange(m.size), np.concatenate([bc.dof_indices()[0] for bc in model.bcs]))
     Kd = K.convert("dense").getDenseArray()[np.ix_(free, free)]
     dense = np.sqrt(scipy.linalg.eigh(Kd, np.diag(m[free]), eigvals_only=True)[-1])
-    assert omega == pytest.approx(dense, rel=1e-6)
+    assert dense * (1.0 - 1e-12) <= omega <= dense * (1.0 + 1e-4)
     assert omega < max_frequency(model, s, "estimate")
     assert runs_stably(model, 0.97 * 2.0 / omega, 400, rotary_inertia_scale=s)
     assert not runs_stably(model, 1.03 * 2.0 / omega, 400, rotary_inertia_scale=s)
