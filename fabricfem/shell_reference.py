@@ -78,9 +78,16 @@ def cell_kernel_form(model, reference: ReferenceAtQuadrature, address: int, cons
     """dolfinx Form (cpp) of a compiled cell kernel at `address` on the state space of `model`, with the coefficients
     (state, reference.full, reference.reduced) and `constants` packed in that order; it holds the C++ Constants and
     Functions (shared pointers)."""
-    return _cpp.fem.Form_float64([model.W._cpp_object], {fem.IntegralType.cell: ([(-1, address)], None)},
-                                 [model.w._cpp_object, reference.full._cpp_object, reference.reduced._cpp_object],
-                                 [c._cpp_object for c in constants], False, model.mesh._mesh)
+    form = KernelForm([model.W._cpp_object], {fem.IntegralType.cell: ([(-1, address)], None)},
+                      [model.w._cpp_object, reference.full._cpp_object, reference.reduced._cpp_object],
+                      [c._cpp_object for c in constants], False, model.mesh._mesh)
+    form.kernel_address = address
+    return form
+
+
+class KernelForm(_cpp.fem.Form_float64):
+    """dolfinx's Form (cpp) of a hand-written cell kernel, with the kernel's address (`kernel_address`, an int) for
+    loops that call the kernel themselves (fabricfem.dynamics.compiled_loop)."""
 
 
 class PrepackedForms:

@@ -36,6 +36,14 @@ the step is shortened to step_safety x dt_crit(omega) ([Man2006, eq. 2.86], Rayl
 stability.critical_time_step) when it is longer; never lengthened. `step_reductions` counts the shortenings,
 `omega_tracked` is the last estimate [rad/s].
 
+Compiled loop (`compiled`, default "auto"): when no Python hook acts in a step (one MPI rank, no contact or seams,
+no wrapped step such as the strain limit's projection, diagonal damping; fabricfem.dynamics.compiled_loop
+`reason_not_compiled`), `run` takes the steps between records and safe-step checks in one C call with the same
+arithmetic (same trajectory to round-off); otherwise, or with compiled=False, the Python loop below. compiled=True
+refuses (ValueError with the reason) a run the compiled loop cannot take. `route` says which loop ran last
+("compiled" or "python: <reason>"); the compiled loop adds the wall time of its C calls to timings["compiled_steps"]
+(and leaves "internal_forces" and "contact" alone).
+
 Changing the step (`set_time_step`, e.g. a run that shortens it as the fabric stiffens): M + dt/2 C is rebuilt at
 the next step and the hooks that keep quantities of the step (TimeStepListener, e.g. the seams' masses) are told.
 """
@@ -49,6 +57,7 @@ import numpy as np
 from dolfinx.fem import petsc as fem_petsc
 
 from fabricfem.dynamics import stability
+from fabricfem.dynamics.compiled_loop import CompiledLoop, reason_not_compiled
 from fabricfem.dynamics.mass import InertiaDamping, rotary_scale
 from fabricfem.dynamics.newmark import DynamicsError, LoadFactor, TimeIntegrator
 from fabricfem.dynamics.safe_step import FrequencyTracker
@@ -88,6 +97,7 @@ class CentralDifference(TimeIntegrator):
             fabricfem.contact.explicit.ExplicitBodyContact, fabricfem.contact.seams.SeamTies.
         step_check_every: steps between the safe-step estimates (module docstring); None: no estimates.
         step_safety: the step's fraction of 2 / omega of the tracked frequency (default STEP_SAFETY["eigenvalue"]).
+        compiled: "auto" (the compiled loop when it applies), True (required) or False (module docstring).
     """
 
     def __init__(self, model, dt: float, load_factor: LoadFactor = 1.0, rayleigh: tuple[float, float] = (0.0, 0.0),
@@ -95,7 +105,9 @@ class CentralDifference(TimeIntegrator):
                  energy_bound: float | str | None = "auto", damping_update_every: int = 1,
                  rotary_inertia_scale: float = 1.0, contact: ExplicitHook | Sequence[ExplicitHook] | None = None,
                  mass_scale: float = 1.0, step_check_every: int | None = None,
-                 step_safety: float = stability.STEP_SAFETY["eigenvalue"]):
+                 step_safety: float = stability.STEP_SAFETY["eigenvalue"], compiled: bool | str = "auto"):
+        if compiled not in (True, False, "auto"):
+            raise ValueError(f"compiled must be True, False or 'auto', got {compiled!r}")
         scale = rotary_scale(rotary_inertia_scale)
         if isinstance(mass_scale, bool) or not (isinstance(mass_scale, (int, float)) and mass_scale >= 1.0):
             raise ValueError(f"mass_scale must be a number >= 1, got {mass_scale!r}")
@@ -139,6 +151,7 @@ class CentralDifference(TimeIntegrator):
         self.tracker = FrequencyTracker(self) if step_check_every else None
         self.step_reductions = 0
         self.omega_tracked = 0.0
+        self.compiled, self.route, self._loop = compiled, "", None
 
     @property
     def velocity_predictor(self):
@@ -237,6 +250,26 @@ class CentralDifference(TimeIntegrator):
         self.v.getArray()[self.bc_rows] = (d_new_bc - d_old_bc) / dt
         self.t = t_new
         return 0
+
+    def compiled_reason(self) -> str:
+        """Why `run` takes the Python loop ("" when the compiled loop applies; module docstring)."""
+        if self.compiled is False:
+            return "compiled = False"
+        if "step" in vars(self) or type(self).step is not CentralDifference.step:
+            return "the step is wrapped or overridden (e.g. the strain limit's projection)"
+        return reason_not_compiled(self)
+
+    def _advance(self, n_steps, output_every, record, report, should_stop, history) -> None:
+        """TimeIntegrator._advance, by the compiled loop where it applies (module docstring)."""
+        reason = self.compiled_reason()
+        if reason and self.compiled is True:
+            raise ValueError(f"compiled=True, but the compiled explicit loop does not apply: {reason}")
+        self.route = f"python: {reason}" if reason else "compiled"
+        if reason:
+            return super()._advance(n_steps, output_every, record, report, should_stop, history)
+        if self._loop is None:
+            self._loop = CompiledLoop(self)
+        self._loop.advance(n_steps, output_every, record, report, should_stop, history)
 
     def destroy(self):
         if self.tracker is not None:

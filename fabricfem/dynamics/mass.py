@@ -129,7 +129,18 @@ def _subspaces(model) -> list[tuple[object, str]]:
 
 
 def _hrz_nodal_factors(model, scalar_element) -> tuple[np.ndarray, int]:
-    """Per owned cell and local node A: area_e int_e N_A^2 / sum_B int_e N_B^2 [m^2] ([Man2006, eq. 2.82], lambda)."""
+    """Per owned cell and local node A: area_e int_e N_A^2 / sum_B int_e N_B^2 [m^2] ([Man2006, eq. 2.82], lambda);
+    computed once per model and element (they depend on the fixed reference geometry only; the JIT lookup of the
+    Jacobian's expression cost about 2 ms per integrator)."""
+    cache = model.__dict__.setdefault("_hrz_factors", {})
+    key = str(scalar_element)
+    if key not in cache:
+        cache[key] = _hrz_factors_of(model, scalar_element)
+    return cache[key]
+
+
+def _hrz_factors_of(model, scalar_element) -> tuple[np.ndarray, int]:
+    """_hrz_nodal_factors, computed."""
     mesh = model.mesh
     cellname = mesh.ufl_cell().cellname()
     basix_cell = {"triangle": basix.CellType.triangle, "quadrilateral": basix.CellType.quadrilateral}[cellname]
