@@ -32,7 +32,10 @@ Velocities are gathered only when there are pairs.
 
 Parallel: every rank gathers the positions and velocities of all nodes (ClothSurface), finds all pairs and computes
 all forces, and adds the forces of its owned nodes to its rows, so the pairs across rank boundaries are treated as
-on one rank. Not done: edge-edge proximity (two edges crossing with no vertex within d_c of a triangle).
+on one rank. Several garments (fabricfem.scenes.garments): with `layer` set (each node's garment), the pairs
+between two garments a < b are answered by their own call of the response and their normal forces kept in
+`between[(a, b)]` (the per-garment monitors, fabricfem.wear.layers); the forces are the same. Not done: edge-edge
+proximity (two edges crossing with no vertex within d_c of a triangle).
 SI units.
 """
 from __future__ import annotations
@@ -111,6 +114,8 @@ class SelfContact:
         self._searched_at = np.zeros((N, 3))
         self.searches = 0
         self._triangles = np.ascontiguousarray(s.triangles, dtype=np.int64)
+        self.layer: np.ndarray | None = None     # (N,) garment of every node (several garments), else None
+        self.between: dict[tuple[int, int], np.ndarray] = {}   # (a, b) -> (N, 3) normal forces [N] between them
 
     def penalty_frequency(self) -> float:
         """omega_p = sqrt(4 k_N / (rho t)) [rad/s]: the pair spring on the reduced mass of two nodes (factor 2), a
@@ -187,17 +192,40 @@ class SelfContact:
         if len(pairs) or had_pairs:
             for buffer in (self.force, self.normal_force, self.friction_force):
                 buffer.fill(0.0)
+        self.between = {}
         if len(pairs):      # the same count on every rank (all search the gathered surface)
             vel = s.gather(integrator.velocity_predictor.getArray(readonly=True)[rows])
             mass, inverse = self._masses(integrator)
-            cloth_kernel.respond(pairs, self._triangles, x, vel, inverse, self.surface.area,
-                                 (self.penalty, self.distance, self.damping, self.mu, integrator.dt,
-                                  FEATURE_TOLERANCE), self.normal_force, self.friction_force, self.comm)
+            law = (self.penalty, self.distance, self.damping, self.mu, integrator.dt, FEATURE_TOLERANCE)
+            if self.layer is None:
+                cloth_kernel.respond(pairs, self._triangles, x, vel, inverse, self.surface.area, law,
+                                     self.normal_force, self.friction_force, self.comm)
+            else:
+                self._respond_by_layers(pairs, x, vel, inverse, law)
             np.add(self.normal_force, self.friction_force, out=self.force)
             rhs.getArray()[rows] += s.owned_rows(self.force)
         self.timings["gather"] += toc - tic
         self.timings["search"] += tac - toc
         self.timings["response"] += time.perf_counter() - tac
+
+    def _respond_by_layers(self, pairs: Pairs, x: np.ndarray, vel: np.ndarray, inverse: np.ndarray,
+                           law: tuple) -> None:
+        """The pairs' forces as `cloth_kernel.respond` gives them, those between two garments (node labels
+        `layer`, a < b) also kept apart: their normal forces [N] in `between[(a, b)]` (N, 3). A vertex's pairs on
+        one feature stay together (the feature's nodes belong to one garment), so the feature share is unchanged."""
+        a = self.layer[pairs.vertex]
+        b = self.layer[self._triangles[pairs.triangle, 0]]
+        lo, hi = np.minimum(a, b), np.maximum(a, b)
+        same = lo == hi
+        cloth_kernel.respond(pairs.subset(same), self._triangles, x, vel, inverse, self.surface.area, law,
+                             self.normal_force, self.friction_force, self.comm)
+        for first, second in sorted(set(zip(lo[~same].tolist(), hi[~same].tolist()))):
+            normal, friction = np.zeros_like(self.normal_force), np.zeros_like(self.friction_force)
+            cloth_kernel.respond(pairs.subset((lo == first) & (hi == second)), self._triangles, x, vel, inverse,
+                                 self.surface.area, law, normal, friction, self.comm)
+            self.normal_force += normal
+            self.friction_force += friction
+            self.between[(first, second)] = normal
 
     def correct(self, integrator, t: float) -> None:
         """Nothing after the division (a penalty law)."""

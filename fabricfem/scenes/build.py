@@ -24,6 +24,7 @@ from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
 from fabricfem.meshes import plate, tube
 from fabricfem.scenes import schema, wear
 from fabricfem.scenes.contract import WearScene
+from fabricfem.scenes.garments import attach_layers, check_layer_gaps
 from fabricfem.scenes.schema import ALL_NODES, Scene, SceneError
 from fabricfem.scenes.sections import (
     DynamicsSection,
@@ -244,6 +245,8 @@ def check_wear_objects(wear_scene: WearScene, path: Path | None) -> None:
     fabric = wear.wear_fabric(wear_scene, build_fabric)
     if not fabric.density > 0.0:
         raise SceneError(f"fabric.density: the explicit engine needs a positive density [kg/m^3], got {fabric.density}")
+    if wear_scene.layered:
+        check_layer_gaps(wear_scene, fabric.thickness)
     wear.check_window(wear_scene, wear.plan(wear_scene, fabric, path))
     wear.check_garment(wear_scene, path)
 
@@ -459,9 +462,9 @@ def build_wear_run(scene: Scene, comm=MPI.COMM_WORLD):
     the elbow by its [route] solver (fabricfem.wear.sleeve.tube_flexion_run on the explicit engine, the Newton
     routes of fabricfem.wear.run.ROUTES), any other garment on the explicit engine (`build_garment_run`)."""
     parsed = scene.parsed
-    if parsed.is_tube_flexion:
+    if parsed.is_tube_flexion and not parsed.layered:
         run = tube_scene_run(scene, comm)
-    elif parsed.is_tube_on_limb:
+    elif parsed.is_tube_on_limb and not parsed.layered:
         run = limb_scene_run(scene, comm)
     else:
         run = garment_scene_run(scene, comm)
@@ -520,12 +523,15 @@ def garment_scene_run(scene: Scene, comm) -> GarmentRun:
         raise SceneError("donning: pull_edges and belt_edges name pattern edges; this garment is a tube")
     handles = wear.edge_handles(plan.handles, pattern_garment) if plan.handles else []
     garment = parsed.garment
-    return build_garment_run(scene_name(scene), fmesh, fabric, plan.body, seams=seams, holds=holds,
-                             torques=plan.torques, timeline=plan.timeline, settings=plan.settings,
-                             contact_method=plan.contact.method or "lagrange", friction=plan.contact.friction,
-                             penalty=plan.contact.penalty,
-                             psri_degrees=tuple(garment.quadrature) if garment.quadrature else (4, 2),
-                             axis=plan.axis, handles=handles, blend_width=parsed.body.blend_width, skin=plan.skin,
-                             self_contact=plan.contact.self_contact,
-                             self_contact_distance=plan.contact.self_contact_distance,
-                             self_friction=plan.contact.self_friction)
+    run = build_garment_run(scene_name(scene), fmesh, fabric, plan.body, seams=seams, holds=holds,
+                            torques=plan.torques, timeline=plan.timeline, settings=plan.settings,
+                            contact_method=plan.contact.method or "lagrange", friction=plan.contact.friction,
+                            penalty=plan.contact.penalty,
+                            psri_degrees=tuple(garment.quadrature) if garment.quadrature else (4, 2),
+                            axis=plan.axis, handles=handles, blend_width=parsed.body.blend_width, skin=plan.skin,
+                            self_contact=plan.contact.self_contact,
+                            self_contact_distance=plan.contact.self_contact_distance,
+                            self_friction=plan.contact.self_friction)
+    if parsed.layered:           # several garments: their monitors, after the start state's checks
+        attach_layers(run, parsed)
+    return run

@@ -40,6 +40,8 @@ from fabricfem.scenes.wear_sections import (
     WearFabricSection,
     WearMotionSection,
     WearRouteSection,
+    first_garment,
+    garment_tables,
 )
 from fabricfem.wear.config import ContactSpec, FlexionSpec, RouteSpec
 from fabricfem.wear.verdict import Bounds
@@ -59,6 +61,7 @@ SECTIONS_OF: dict[str, dict[str, tuple]] = {
              "route": (RouteSpec, WearRouteSection), "torque": (TorqueSection,), "checks": (Bounds,)},
 }
 LIST_SECTIONS = {"support", "load", "torque"}           # arrays of tables ([[load]])
+TABLE_OR_LIST = {"garment"}                            # a table or an array of tables ([garment] or [[garment]])
 REQUIRED_OF = {"static": ("scene", "mesh", "fabric", "solver"), "dynamic": ("scene", "mesh", "fabric", "dynamics"),
                "wear": ("scene", "garment", "fabric", "body", "motion")}
 
@@ -129,6 +132,12 @@ class WearScene:
     accuracy: AccuracySection
     checks: Bounds                  # the bounds of the run's plausibility checks (fabricfem.wear.verdict)
     failure_strain: float           # [fabric] failure_strain: the strain check's bound [-]
+    garments: tuple[GarmentSection, ...] = ()   # every garment, inside out (`garment`: the first, the innermost)
+
+    @property
+    def layered(self) -> bool:
+        """Several garments worn one over the other ([[garment]] with more than one entry)."""
+        return len(self.garments) > 1
 
     @property
     def is_tube_flexion(self) -> bool:
@@ -178,7 +187,7 @@ def _wear(data: Mapping) -> WearScene:
     route = data.get("route", {})
     return WearScene(
         scene=_part(SceneSection, data.get("scene"), "scene"),
-        garment=_part(GarmentSection, data["garment"], "garment"), fabric=_frozen(data["fabric"]),
+        garment=_part(GarmentSection, first_garment(data), "garment"), fabric=_frozen(data["fabric"]),
         catalogue=data["fabric"].get("catalogue"), body=_part(WearBodySection, body, "body"),
         arm=_part(ArmDimensions, body, "body") if _skeleton(body) == "arm" else None,
         lower_body=_lower_body(body) if _skeleton(body) == "lower_body" else None,
@@ -193,7 +202,8 @@ def _wear(data: Mapping) -> WearScene:
         output=_part(OutputSection, data.get("output"), "output"),
         accuracy=_part(AccuracySection, data.get("accuracy"), "accuracy"),
         checks=_part(Bounds, data.get("checks"), "checks"),
-        failure_strain=float(data["fabric"].get("failure_strain", FabricSection.failure_strain)))
+        failure_strain=float(data["fabric"].get("failure_strain", FabricSection.failure_strain)),
+        garments=tuple(_part(GarmentSection, t, f"garment[{i}]") for i, t in enumerate(garment_tables(data))))
 
 
 def parse(data: Mapping, kind: str) -> StaticScene | DynamicScene | WearScene:

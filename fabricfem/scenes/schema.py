@@ -100,7 +100,7 @@ from typing import Any
 
 from fabricfem.parameters import param_doc
 from fabricfem.scenes import wear as wear_module
-from fabricfem.scenes.contract import LIST_SECTIONS, REQUIRED_OF, SECTIONS_OF, parse
+from fabricfem.scenes.contract import LIST_SECTIONS, REQUIRED_OF, SECTIONS_OF, TABLE_OR_LIST, parse
 from fabricfem.scenes.errors import SceneError
 from fabricfem.scenes.errors import suggest as _suggest
 from fabricfem.scenes.legacy import is_old_layout, old_layout_message
@@ -157,7 +157,8 @@ def reference_markdown() -> str:
              "in degrees. A scene names its kind in `[scene] kind`: static ([mesh], [fabric], [[support]], [[load]], "
              "[solver]), dynamic ([dynamics] instead of [solver]), wear ([garment], [fabric], [body], [motion], "
              "optional [donning], [contact], [route], [[torque]], [output]: any garment on any moving wearer; "
-             "scenes/sleeve.toml, scenes/compression_sleeve.toml, scenes/trousers_standing.toml). The older "
+             "scenes/sleeve.toml, scenes/compression_sleeve.toml, scenes/trousers_standing.toml; several garments "
+             "as [[garment]], inside out: scenes/sleeve_layers.toml). The older "
              "sleeve and compression layouts are refused with every moved key in one message.", ""]
     for kind, sections in SECTIONS_OF.items():
         lines += [f"# {kind.capitalize()} scenes (`kind = \"{kind}\"`)", ""]
@@ -165,6 +166,7 @@ def reference_markdown() -> str:
             lines += [" ".join((wear_module.__doc__ or "").split()), ""]
         for name, classes in sections.items():
             title = f"[[{name}]]" if name in LIST_SECTIONS or "." in name else f"[{name}]"
+            title = f"[{name}] or [[{name}]]" if name in TABLE_OR_LIST else title
             lines += _section_table(title, classes)
     return "\n".join(lines)
 
@@ -215,7 +217,7 @@ def check_sections(data: dict, kind: str, source: str) -> None:
         if name not in data:
             raise SceneError(f"{source}: missing section [{name}] of a {kind} scene")
     for name, content in data.items():
-        if name in LIST_SECTIONS:
+        if name in LIST_SECTIONS or (name in TABLE_OR_LIST and isinstance(content, list)):
             if not isinstance(content, list):
                 raise SceneError(f"{source}: [{name}] must be an array of tables: write [[{name}]]")
             for i, table in enumerate(content):

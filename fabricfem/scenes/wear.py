@@ -48,6 +48,7 @@ from fabricfem.patterns import pattern_path
 from fabricfem.scenes.contract import WearScene
 from fabricfem.scenes.errors import SceneError
 from fabricfem.scenes.errors import suggest as _suggest
+from fabricfem.scenes.garments import check_layers, first_garment, garment_tables, layered_garment_mesh
 from fabricfem.scenes.mesh_body import check_mesh_keys, scene_skin
 from fabricfem.scenes.wear_sections import GarmentSection, WearDonningSection, WearMotionSection
 from fabricfem.wear.compression import StillPose, limb_body
@@ -76,7 +77,7 @@ def _choice(where: str, value, options) -> None:
 
 def is_tube_flexion(data: dict) -> bool:
     """An arm in a tube sleeve flexing at the elbow (the sleeve of [Man2006, sec. 5.3]; its routes: ROUTES)."""
-    return (data["garment"].get("builder", "pattern") == "tube" and data["body"]["type"] in ("arm", "default_arm")
+    return (first_garment(data).get("builder", "pattern") == "tube" and data["body"]["type"] in ("arm", "default_arm")
             and data["motion"]["type"] == "elbow_flexion")
 
 
@@ -114,7 +115,8 @@ def _check_self_contact(contact: dict, garment: dict, solver: str) -> None:
 def check_wear(data: dict) -> None:
     """The data checks of a wear scene beyond its tables' keys and types (fabricfem.scenes.schema.check_sections):
     choices, vectors and cross-references, before any meshing."""
-    garment, body, motion = data["garment"], data["body"], data["motion"]
+    check_layers(data)
+    garment, body, motion = first_garment(data), data["body"], data["motion"]
     blend = body.get("blend_width", BLEND_WIDTH)
     if not (isinstance(blend, (int, float)) and math.isfinite(blend) and blend > 0.0):
         raise SceneError(f"body.blend_width: must be a positive length [m], got {blend!r}")
@@ -147,7 +149,8 @@ def check_wear(data: dict) -> None:
     if method is not None and solver in ROUTE_METHODS and method not in ROUTE_METHODS[solver]:
         raise SceneError(f"contact.method: method must be one of {ROUTE_METHODS[solver]} for solver {solver!r}, "
                          f"got {method!r}")
-    _check_self_contact(data.get("contact", {}), garment, solver)
+    for table in garment_tables(data):        # the contact distance against every garment's mesh size
+        _check_self_contact(data.get("contact", {}), table, solver)
     donning = data.get("donning", {})
     _choice("donning.method", donning.get("method", "none"), ("none", "grow"))
     if donning.get("method") == "grow":
@@ -188,8 +191,6 @@ def check_wear(data: dict) -> None:
         raise SceneError(f"accuracy.ratio: a refinement ratio in (1, 4], got {ratio!r}")
 
 
-
-
 COMPRESSION_QUANTITIES = ("peak_pressure_Pa", "mean_pressure_Pa", "hoop_tension_N_per_m")
 
 
@@ -205,7 +206,7 @@ def wear_quantities(data: dict) -> dict[str, str]:
     for name in monitors + [spec["name"] for spec in data.get("torque", [])]:
         out.update({f"torque_{name}_{which}_Nm": f"torque_{name}.{which}_Nm" for which in ("peak", "final")})
         out[f"torque_{name}_window_mean_Nm"] = f"torque_{name}.window_mean_Nm"
-    if data["body"]["type"] == "limb" and data["garment"].get("builder", "pattern") == "tube":   # is_tube_on_limb
+    if data["body"]["type"] == "limb" and first_garment(data).get("builder", "pattern") == "tube":   # is_tube_on_limb
         # the compression report of the final state (fabricfem.wear.compression.compression_report)
         out.update({f"compression_{k}": f"compression.{k}" for k in COMPRESSION_QUANTITIES})
     return {**out, "pressure_peak_Pa": "pressure.peak_Pa", "pressure_mean_Pa": "pressure.mean_Pa",
@@ -573,6 +574,8 @@ def edge_handles(specs, garment) -> list:
 def garment_mesh(wear: WearScene, scene_path: Path | None, comm):
     """(FabricMesh, seams [SeamSpec], hold tags, the GarmentMesh of a pattern or None) of [garment]."""
     g = wear.garment
+    if wear.layered:             # several tube garments, one mesh (fabricfem.scenes.garments)
+        return layered_garment_mesh(wear, comm)
     if g.builder == "tube":
         return tube(g.length, g.radius, g.n_around, g.n_along, cell="quadrilateral", order=g.order, comm=comm), [], \
             list(g.hold), None

@@ -11,7 +11,8 @@ from fabricfem.parameters import param as doc
 @dataclasses.dataclass(frozen=True)
 class GarmentSection:
     """[garment]: a tube along +x (fabricfem.meshes.tube) or the panels of a sewing pattern (fabricfem.meshes.pattern)
-    sewn along its stitches."""
+    sewn along its stitches; [[garment]]: several tube garments worn one over the other, listed from the inside out
+    (fabricfem.scenes.garments)."""
 
     builder: str = doc("tube | pattern", "pattern")
     pattern: str | None = doc("pattern: a shipped pattern name (fabricfem/patterns) or a GarmentCode JSON / TOML file, "
@@ -31,6 +32,22 @@ class GarmentSection:
     n_along: int | None = doc("tube: Q2 cells along", None)
     quadrature: list | None = doc("tube and pattern: (full, reduced) PSRI quadrature degrees", None)
     hold_rotations: bool = doc("tube (quasistatic and implicit sleeve routes): clamp the rotations of end0", False)
+    name: str | None = doc("several garments ([[garment]], inside out): the garment's name in the monitors' columns "
+                           "and the prefix of its edge tags (default garment0, garment1, ...)", None)
+    fabric: str | None = doc("several garments: the stored fabric of this garment; the shell takes one fabric per "
+                             "run, so it must be the scene's [fabric] catalogue (a different one is refused)", None)
+
+
+def garment_tables(data: dict) -> list[dict]:
+    """The garment tables of a wear scene's data, inside out: [garment] as one, [[garment]] as given."""
+    garment = data.get("garment", {})
+    return list(garment) if isinstance(garment, list) else [garment]
+
+
+def first_garment(data: dict) -> dict:
+    """The innermost garment's table of a wear scene's data (the only one of a [garment] scene); {} if none."""
+    tables = garment_tables(data)
+    return tables[0] if tables and isinstance(tables[0], dict) else {}
 
 
 @dataclasses.dataclass(frozen=True)

@@ -50,6 +50,7 @@ class WearStep:
     newton_iterations: int = 0        # Newton iterations since the previous record (Newton routes)
     drag_ratio: float = 0.0           # fictitious drag / contact force left in a relaxed state (quasi-static)
     intersecting_pairs: int | None = None   # pairs of the cloth's triangles that cross (None: not counted)
+    layers: dict[str, float] = field(default_factory=dict)   # per garment of several (fabricfem.wear.layers): N, Pa
 
     @property
     def coordinate(self) -> float:
@@ -139,19 +140,24 @@ class WearHistory:
         return list(self.steps[0].seam_forces) if self.steps else []
 
     @property
+    def layer_columns(self) -> list[str]:
+        """The per-garment columns of several garments (fabricfem.wear.layers), [] for one garment."""
+        return list(getattr(self.steps[0], "layers", {})) if self.steps else []
+
+    @property
     def header(self) -> tuple[str, ...]:
         return ("time_s", "phase", "axis", *(f"{n}_torque_Nm" for n in self.monitors), "peak_pressure_Pa",
                 "peak_pressure_mmHg", "peak_segment", "peak_x_m", "peak_y_m", "peak_z_m", "mean_pressure_Pa",
                 "max_penetration_m", "contact_force_N", "seam_gap_m", *(f"seam_{n}_N_per_m" for n in self.seams),
                 "max_strain", "time_steps", "kinetic_energy_J", "strain_energy_J", "wall_s", "newton_iterations",
-                "drag_ratio", "intersecting_pairs")
+                "drag_ratio", "intersecting_pairs", *self.layer_columns)
 
     def rows(self) -> list[list]:
         return [[s.time, s.phase, s.coordinate, *s.torques.values(), s.peak_pressure, s.peak_pressure / PA_PER_MMHG,
                  s.peak_segment, *s.peak_position, s.mean_pressure, s.max_penetration, s.contact_force, s.seam_gap,
                  *s.seam_forces.values(), s.max_strain, s.time_steps, s.kinetic_energy, s.strain_energy, s.wall,
-                 s.newton_iterations, s.drag_ratio, "" if s.intersecting_pairs is None else s.intersecting_pairs]
-                for s in self.steps]
+                 s.newton_iterations, s.drag_ratio, "" if s.intersecting_pairs is None else s.intersecting_pairs,
+                 *(s.layers[c] for c in self.layer_columns)] for s in self.steps]
 
     def torque_curves(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Resisting torque [N m] per monitor against the record coordinate, over the motion (`motion_curve`)."""
@@ -189,6 +195,8 @@ class WearHistory:
         if counted:     # the independent check of the cloth's state (fabricfem.contact.intersections)
             out["max_intersecting_pairs"] = max(counted)
             out["self_contact"] = bool(getattr(self, "self_contact", False))
+        if self.layer_columns:     # several garments: each column's peak over the motion and its final value
+            out["layers"] = {c: _peak_entry(motion, c) for c in self.layer_columns}
         out.update(self.report)
         if self.verdict:
             out["verdict"] = self.verdict
@@ -211,6 +219,13 @@ def _torque_entry(motion: list[WearStep], name: str) -> dict:
     if motion[k].axis_value is not None:
         entry.update(peak_at=motion[k].axis_value, final_at=motion[-1].axis_value)
     return entry
+
+
+def _peak_entry(motion: list[WearStep], column: str) -> dict:
+    """The largest value of a per-garment column over `motion` with its time, and the final value (N or Pa)."""
+    values = np.array([s.layers[column] for s in motion])
+    k = int(np.argmax(values))
+    return {"peak": float(values[k]), "peak_time_s": motion[k].time, "final": float(values[-1])}
 
 
 def _pressure_entry(motion: list[WearStep]) -> dict:

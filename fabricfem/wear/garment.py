@@ -50,6 +50,7 @@ from fabricfem.materials import Fabric
 from fabricfem.shell import ShellModel
 from fabricfem.wear.contract import WearHistory, WearStep
 from fabricfem.wear.engine import Phase, run_phases
+from fabricfem.wear.layers import LayerMonitor
 
 # the self-contact's penalty spring at most this fraction of the shell's highest frequency: the critical step
 # shrinks by at most 1 / sqrt(1 + 0.5^2), 11 % (with the default k_N = 10 E t / h^2 its spring would set the step:
@@ -193,6 +194,7 @@ class GarmentRun:
     _steps_now: int = 0          # steps per record in use
     self_contact: SelfContact | None = None   # the cloth-cloth contact hook (None: the cloth may pass through itself)
     _surface: ClothSurface | None = None      # the cloth's triangulation of the intersection count
+    layers: LayerMonitor | None = None        # the monitors per garment of several garments (fabricfem.wear.layers)
 
     @property
     def axis_label(self) -> str:
@@ -362,7 +364,8 @@ class GarmentRun:
                 max_strain=self._note_strain(max(strains["max_warp"], strains["max_weft"])), time_steps=steps,
                 kinetic_energy=integ.kinetic_energy(), strain_energy=integ.strain_energy(),
                 wall=time.perf_counter() - t0, axis_value=self.axis_at(integ.t, phase),
-                intersecting_pairs=self.intersections(d))
+                intersecting_pairs=self.intersections(d),
+                layers=self.layers.values(pressure, contact) if self.layers is not None else {})
 
         save = None
         if checkpoint is not None:
