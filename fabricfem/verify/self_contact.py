@@ -7,9 +7,9 @@ Checks:
 
 * fold: a 0.5 m sheet folded in a U (radius 3.2 cm) whose lower leg lies held on a table; the upper leg falls
   onto it under gravity. At every record the independent count of intersecting triangle pairs
-  (fabricfem.contact.intersections: ipctk's broad phase and libigl's triangle test) is 0, and the smallest
-  distance between a vertex and a non-neighbouring triangle (ipctk's candidates, the numpy closest point) is at
-  least half the thickness. The same fold without self-contact must show intersecting pairs (the check bites).
+  (fabricfem.contact.intersections: a k-d tree broad phase, Moller's interval test and libigl's triangle test) is
+  0, and the smallest distance between a vertex and a non-neighbouring triangle (ipctk's candidates, the numpy
+  closest point) is at least half the thickness. The same fold without self-contact must show intersecting pairs (the check bites).
 * press: a 0.2 m sheet pressed by a uniform pressure onto a held 0.3 m sheet: the contact force between them equals
   the applied load (static equilibrium of the upper sheet, time-averaged over the last part of the run).
 * slide: the upper sheet, pressed as before, pulled by a tangential load 2 mu p per area: while it slides, the
