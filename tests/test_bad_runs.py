@@ -4,10 +4,10 @@ garment, a strain beyond the fabric's failure strain) each end "completed with w
 EXIT_WARNINGS (3) and print the failing check's line; the check's value and bound are in summary.json
 (fabricfem.wear.verdict)."""
 import json
-import tomllib
 from pathlib import Path
 
 import pytest
+from shipped_scenes import scene_data
 from toml_text import dumps
 
 from fabricfem import cli
@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def _scene(tmp_path: Path, name: str, **changes) -> dict:
     """scenes/<name> writing into tmp_path/out without renders, with `changes` ({section: {key: value}})."""
-    data = tomllib.loads((ROOT / "scenes" / name).read_text())
+    data = scene_data(name)
     data["output"] = {"dir": str(tmp_path / "out"), "render": False}
     for section, values in changes.items():
         data.setdefault(section, {}).update(values)

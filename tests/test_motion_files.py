@@ -3,11 +3,11 @@ the garment (motion.place) and the check that the garment meets the body, the TO
 points in motion.mapping, and the collinear-marker refusal naming the segment, marker and joints."""
 import math
 import re
-import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
+from shipped_scenes import scene_data
 from toml_text import dumps
 
 from fabricfem import cli
@@ -24,7 +24,7 @@ TIMES = np.array([0.0, 0.1, 0.2])
 
 
 def _scene(name: str) -> dict:
-    return tomllib.loads((ROOT / "scenes" / name).read_text())
+    return scene_data(name)
 
 
 def _standing_file(tmp_path: Path, shift=(0.0, 0.0, 0.0), name: str = "stand.trc") -> dict[str, np.ndarray]:

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mpi4py import MPI
+from shipped_scenes import scene_data
 from toml_text import dumps
 
 from fabricfem import cli
@@ -37,7 +38,7 @@ def test_study_demo_and_scene_give_the_same_torque_history(tmp_path):
     demo_module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(demo_module)
     demo = demo_module.main(tmp_path / "demo", quick=True, comm=MPI.COMM_SELF)
-    data = tomllib.loads((ROOT / "scenes" / "sleeve.toml").read_text())
+    data = scene_data("sleeve.toml")
     data["motion"].update(QUICK)
     data["output"] = {"dir": str(tmp_path / "scene"), "render": False}
     scene = run_scene(scene_module.validate(data), MPI.COMM_SELF).result
@@ -106,7 +107,7 @@ def test_one_schema_table_for_every_kind():
     from fabricfem.scenes.schema import SCHEMA
     assert set(SCHEMA) == {"static", "dynamic", "wear"}
     assert "garment" in SCHEMA["wear"] and "garment" not in SCHEMA["static"]
-    data = tomllib.loads((ROOT / "scenes" / "sleeve.toml").read_text())
+    data = scene_data("sleeve.toml")
     data["garment"]["lenght"] = 0.5
     with pytest.raises(scene_module.SceneError, match=r"garment: unknown key 'lenght' \(did you mean 'length'\?\)"):
         scene_module.validate(data)

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mpi4py import MPI
+from shipped_scenes import TEST_MESH
 
 from fabricfem import scenes as scene_module
 from fabricfem.body.arm import DEFAULT_ARM
@@ -33,8 +34,10 @@ SLEEVE_SCENES = {"explicit": ROOT / "scenes" / "sleeve.toml",                   
 
 
 def sleeve_data(route: str = "explicit") -> dict:
-    """The sleeve as a wear scene (mesh I, mu = 0.1) on `route`: SLEEVE_SCENES."""
-    return tomllib.loads(SLEEVE_SCENES[route].read_text())
+    """The sleeve as a wear scene (mesh I, mu = 0.1) on `route`: SLEEVE_SCENES (the shipped scene on mesh I)."""
+    data = tomllib.loads(SLEEVE_SCENES[route].read_text())
+    data["garment"].update(TEST_MESH)
+    return data
 
 
 @pytest.mark.parametrize("route", SLEEVE_SCENES)

@@ -2,12 +2,12 @@
 peaks beside the raw maxima, in summary.json and statistics.csv; the same on 1 and 2 ranks."""
 import csv
 import json
-import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
 from mpi4py import MPI
+from shipped_scenes import scene_data
 
 from fabricfem import scenes as scene_module
 from fabricfem.scenes.run import run_scene
@@ -46,7 +46,7 @@ def test_percentile_peak_beside_the_raw_maximum():
 
 
 def _short_sleeve(out: Path) -> dict:
-    data = tomllib.loads((ROOT / "scenes" / "sleeve.toml").read_text())
+    data = scene_data("sleeve.toml")
     data["motion"].update(final_angle=4.0, output_angle_step=1.0, settle_time=0.1)
     data["output"] = {"dir": str(out), "render": False, "windows": [[1.0, 4.0], [2.0, 3.0]]}
     return data

@@ -3,12 +3,12 @@ deformation only. Independent checks: a rigid translation of a free sheet has K_
 damping's C v = a M v is the full drag; and the setting reaches the engine's integrator with the critical step of
 [Man2006, eq. 2.86] reduced by the Rayleigh ratio xi = a / (2 omega) + b omega / 2."""
 import math
-import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
 from mpi4py import MPI
+from shipped_scenes import scene_data
 
 from fabricfem import scenes as scene_module
 from fabricfem.dynamics.mass import InertiaDamping
@@ -43,7 +43,7 @@ def test_stiffness_damping_does_not_drag_a_rigid_translation():
 
 
 def test_the_sleeve_takes_its_stiffness_damping_with_a_shorter_step():
-    data = tomllib.loads((ROOT / "scenes" / "sleeve.toml").read_text())
+    data = scene_data("sleeve.toml")
     data["motion"].update(final_angle=3.0, output_angle_step=1.5)
     data["output"] = {"render": False}
     runs = {}

@@ -1,10 +1,10 @@
 """The verdict of a run: plausibility checks with their values and bounds in summary.json, one line per failed
 check, status "completed with warnings" and exit code 3 (fabricfem.wear.verdict, fabricfem.scenes.dynamic)."""
 import json
-import tomllib
 from pathlib import Path
 
 import pytest
+from shipped_scenes import scene_data
 from toml_text import dumps
 
 from fabricfem import cli
@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 def _sleeve(tmp_path: Path, **changes) -> Path:
     """scenes/sleeve.toml to 3 degrees in records of 1.5 degrees after 0.1 s of rest, no renders, with `changes`
     ({section: {key: value}})."""
-    data = tomllib.loads((ROOT / "scenes" / "sleeve.toml").read_text())
+    data = scene_data("sleeve.toml")
     data["motion"].update(final_angle=3.0, output_angle_step=1.5, settle_time=0.1)
     data["output"] = {"dir": str(tmp_path / "out"), "render": False}
     for section, values in changes.items():
@@ -134,7 +134,7 @@ def test_bad_verdict_and_window_keys_are_refused_naming_them(tmp_path, section, 
     import re
 
     from fabricfem import scenes as scene_module
-    data = tomllib.loads((ROOT / "scenes" / "sleeve.toml").read_text())
+    data = scene_data("sleeve.toml")
     data.setdefault(section, {}).update(values)
     with pytest.raises(scene_module.SceneError, match=words if "\\" in words else re.escape(words)):
         scene_module.validate(data)

@@ -6,11 +6,11 @@ import csv
 import importlib.util
 import subprocess
 import sys
-import tomllib
 from pathlib import Path
 
 import numpy as np
 import pytest
+from shipped_scenes import scene_data
 from toml_text import dumps
 
 from fabricfem import scenes as scene_module
@@ -29,7 +29,7 @@ def sleeve_run(tmp_path_factory):
     """(output folder, scene file, history, the Figure of torque.png) of scenes/sleeve.toml flexed to 6 degrees
     (records every 3 degrees, no renders)."""
     folder = tmp_path_factory.mktemp("sleeve")
-    data = tomllib.loads((ROOT / "scenes" / "sleeve.toml").read_text())
+    data = scene_data("sleeve.toml")
     data["motion"].update(final_angle=6.0, output_angle_step=3.0)
     data["output"] = {"dir": str(folder / "out"), "render": False}
     path = folder / "sleeve.toml"

@@ -29,7 +29,7 @@ import numpy as np
 
 from fabricfem.wear.outputs import torque_rms_error
 
-MESHES = ("10x13", "15x20", "20x26", "30x39", "40x52", "60x78", "80x104")
+MESHES = ("10x13", "15x20", "20x26", "30x39", "36x60", "40x52", "44x57", "60x78", "80x104")
 WINDOW_DEG = (20.0, 57.0)
 COLUMNS = ("mesh", "ndofs", "curve_rms_difference", "window_mean_Nm", "window_mean_difference",
            "peak_pressure_Pa", "p99_peak_pressure_Pa", "max_strain", "wall_s", "status")
