@@ -237,7 +237,8 @@ def _kill_and_resume_scene(tmp_path: Path, launcher: list[str]) -> float:
     its ranks) once half its steps are done and a checkpoint exists, then with --resume; returns the largest
     relative difference of the resumed CSV from the whole one."""
     scene = _corner_pinned(tmp_path)
-    command = launcher + [sys.executable, "-m", "fabricfem.cli", "run", str(scene), "--out"]
+    command = launcher + [sys.executable, "-m", "fabricfem.cli", "run", str(scene)] + \
+        (["--all-ranks"] if launcher else []) + ["--out"]     # a small scene would run on rank 0 alone
     whole, part = tmp_path / "whole", tmp_path / "part"
     done = subprocess.run(command + [str(whole)], capture_output=True, text=True, env=MPI_ENV)
     assert done.returncode == 0, done.stderr

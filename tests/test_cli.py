@@ -3,14 +3,20 @@
 short real run."""
 import argparse
 import json
+import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
+from test_checkpoint import MPI_ENV
 
 from fabricfem import cli
+from fabricfem import scenes as scene_module
 from fabricfem.cli import bench as cli_bench
 from fabricfem.cli import study as cli_study
 from fabricfem.scenes import SceneError
+from fabricfem.scenes.ranks import SERIAL_BELOW_DOFS, estimated_scene_dofs
 
 ROOT = Path(__file__).resolve().parents[1]
 COMMANDS = {"run", "plan", "sweep", "scenes", "demo", "verify", "reproduce", "study", "bench"}
@@ -140,3 +146,20 @@ def test_plan_as_json(tmp_path, capsys):
     plan = json.loads(capsys.readouterr().out)
     assert plan["quantity"] == "probe_ux_m" and plan["target"] == 0.1
     assert plan["chosen"] in [level["level"] for level in plan["levels"] if level["solved"]]
+
+
+def test_a_small_scene_under_mpirun_runs_on_rank_0_alone(tmp_path):
+    """`mpirun -n 2 fabricfem run` of a scene below SERIAL_BELOW_DOFS (the vibrating cantilever, about 600 dofs)
+    runs on rank 0 alone and says so (summary.json: 1 rank); with --all-ranks on both."""
+    if shutil.which("mpirun") is None:
+        pytest.skip("needs mpirun")
+    root = Path(__file__).resolve().parents[1]
+    assert estimated_scene_dofs(scene_module.load(root / "scenes" / "cantilever_vibration.toml")) < SERIAL_BELOW_DOFS
+    scene = root / "scenes" / "cantilever_vibration.toml"
+    command = ["mpirun", "-n", "2", sys.executable, "-m", "fabricfem.cli", "run", str(scene)]
+    for extra, ranks in (([], 1), (["--all-ranks"], 2)):
+        out = tmp_path / str(ranks)
+        done = subprocess.run(command + extra + ["--out", str(out)], capture_output=True, text=True, env=MPI_ENV)
+        assert done.returncode == 0, done.stderr
+        assert ("rank 0 runs it alone" in done.stdout) == (ranks == 1)
+        assert json.loads((out / "summary.json").read_text())["ranks"] == ranks

@@ -6,12 +6,15 @@ import argparse
 import sys
 from pathlib import Path
 
+from mpi4py import MPI
+
 from fabricfem import scenes as scene_module
 from fabricfem.cli.common import Subparsers, add_command, json_stdout, print_json, say
 from fabricfem.demo import rollup_demo
 from fabricfem.dynamics.newmark import DynamicsError
 from fabricfem.scenes.accuracy import parse_target, plan, run_accurate, with_window
 from fabricfem.scenes.batch import read_summary
+from fabricfem.scenes.ranks import SERIAL_BELOW_DOFS, runs_alone
 from fabricfem.scenes.run import run_scene, scene_name, with_output_dir
 from fabricfem.scenes.sweep import parse_vary, run_sweep
 from fabricfem.solvers.newton import SolverError
@@ -39,10 +42,28 @@ def _scene_and_target(args: argparse.Namespace) -> tuple[scene_module.Scene, flo
 
 def _run(args: argparse.Namespace) -> int:
     """run: the scene (through the accuracy plan when a target, quantity or window is given, on the command line or
-    in [accuracy]); exit 1 with the reason when it stopped early."""
+    in [accuracy]); exit 1 with the reason when it stopped early. A small scene under mpirun runs on rank 0 alone
+    (fabricfem.scenes.ranks) unless --all-ranks."""
     scene, target = _scene_and_target(args)
     accurate = (target is not None or args.quantity is not None or args.window is not None
                 or scene.get("accuracy", {}).get("target"))
+    world = MPI.COMM_WORLD
+    dofs = None if accurate or args.all_ranks else runs_alone(scene, world.size)
+    if dofs is None:
+        return _run_on(args, scene, target, accurate, world)
+    say(f"{scene_name(scene)}: about {dofs} dofs, fewer than {SERIAL_BELOW_DOFS}: rank 0 runs it alone "
+        f"({world.size} ranks are slower at this size; --all-ranks uses them)")
+    code = 0
+    try:
+        if world.rank == 0:
+            code = _run_on(args, scene, target, accurate, MPI.COMM_SELF)
+    finally:   # also when rank 0 raises: the others get 0 and exit, mpirun reports rank 0's code
+        code = world.bcast(code, root=0)
+    return code
+
+
+def _run_on(args: argparse.Namespace, scene: scene_module.Scene, target: float | None, accurate, comm) -> int:
+    """`_run` on the ranks of `comm` (the others, if any, wait for its exit code)."""
     out = None if args.out is None else Path(args.out)
     try:
         with json_stdout(args.json):
@@ -51,7 +72,7 @@ def _run(args: argparse.Namespace) -> int:
                 accurate_run = run_ladder_accurate if uses_ladder(scene, args.quantity) else run_accurate
                 _, outcome = accurate_run(scene, target, args.quantity)
             else:
-                outcome = run_scene(scene, out=out, resume=args.resume)
+                outcome = run_scene(scene, comm, out=out, resume=args.resume)
     except (SolverError, DynamicsError) as exc:   # the run stopped: summary.json says "failed: ..."
         say(f"fabricfem run: stopped: {' '.join(str(exc).split())}", file=sys.stderr)
         return 1
@@ -119,6 +140,9 @@ def add_scene_commands(sub: Subparsers) -> None:
     _add_scene_options(run)
     run.add_argument("--out", default=None, help="output folder (default: the scene's [output] dir); with --accuracy "
                      "the chosen level's outputs, its pilots under OUT/accuracy/")
+    run.add_argument("--all-ranks", action="store_true",
+                     help="under mpirun, run a small scene on every rank too (by default a scene below "
+                          f"{SERIAL_BELOW_DOFS} estimated dofs runs on rank 0 alone, which is faster)")
     run.add_argument("--resume", action="store_true",
                      help="wear and dynamic scenes: continue from the output folder's checkpoint after a kill or "
                           "Ctrl-C")
