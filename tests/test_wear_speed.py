@@ -1,11 +1,16 @@
 """The speed benchmarks' bookkeeping (fabricfem.benchmarks.wear_speed, fabricfem.benchmarks.commits): the accuracy
 measure against closed forms and the refusals of bad input before any run."""
+import csv
+import shutil
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from fabricfem import io as fio
 from fabricfem.benchmarks.commits import compare_commits
 from fabricfem.benchmarks.internal_force import internal_force_bench
+from fabricfem.benchmarks.parallel_runs import parallel_bench
 from fabricfem.benchmarks.wear_speed import csv_moment, mean_moment_error, pants_moment, wear_bench
 from fabricfem.studies.sleeve import compare_figures
 from fabricfem.wear.garment import WearStep
@@ -103,3 +108,23 @@ def test_knee_moment_of_a_run_csv(tmp_path):
     path.write_text("time_s,phase,knee_r_torque_Nm\n0.1,sew,1.0\n")
     with pytest.raises(ValueError, match="motion"):
         csv_moment(path)
+
+
+def test_parallel_bench_times_one_and_two_ranks_and_refuses_bad_input(tmp_path):
+    """bench parallel on a 6 x 8 sleeve to 1 degree: a row per mesh with both medians, the speed-up as their ratio
+    and the two torque histories equal to round-off (1e-8 of the largest: the same arithmetic summed in another
+    order); parallel.csv has a row per run. Bad input names the option."""
+    if shutil.which("mpirun") is None:
+        pytest.skip("needs mpirun")
+    sleeve = Path(__file__).resolve().parents[1] / "scenes" / "sleeve.toml"
+    rows = parallel_bench(sleeve, ("6x8",), ("motion.final_angle=1.0", "motion.settle_time=0.02"), 1, tmp_path,
+                          say=lambda *a: None)
+    (row,) = rows
+    assert row["dofs"] == 2 * 6 * 17 * 5 and row["speedup"] == pytest.approx(row["serial_s"] / row["two_ranks_s"])
+    assert row["torque_difference"] <= 1e-8
+    assert len(list(csv.DictReader(open(tmp_path / "parallel.csv")))) == 2
+    assert (tmp_path / "parallel.png").exists()
+    with pytest.raises(ValueError, match="meshes"):
+        parallel_bench(sleeve, ("6by8",), repeats=1, out=tmp_path)
+    with pytest.raises(ValueError, match="repeats"):
+        parallel_bench(sleeve, ("6x8",), repeats=0, out=tmp_path)

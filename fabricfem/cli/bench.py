@@ -10,6 +10,7 @@ from fabricfem.benchmarks import stability_map
 from fabricfem.benchmarks.accuracy import accuracy_bench
 from fabricfem.benchmarks.commits import compare_commits
 from fabricfem.benchmarks.internal_force import internal_force_bench
+from fabricfem.benchmarks.parallel_runs import parallel_bench
 from fabricfem.benchmarks.rollup_profile import rollup_profile
 from fabricfem.benchmarks.sleeve_profile import sleeve_profile
 from fabricfem.benchmarks.speed_accuracy import speed_accuracy
@@ -74,8 +75,14 @@ def _commits(args: argparse.Namespace) -> int:
     return 0
 
 
+def _parallel(args: argparse.Namespace) -> int:
+    """bench parallel: a wear scene on 1 and 2 ranks, alternating (fabricfem.benchmarks.parallel_runs)."""
+    parallel_bench(args.scene, split_list(args.meshes), tuple(args.set), args.repeats, args.out)
+    return 0
+
+
 def _add_timed_benches(sub: Subparsers) -> None:
-    """wear, kernel and commits (repeated runs, medians)."""
+    """wear, kernel, commits and parallel (repeated runs, medians)."""
     wear = add_command(sub, "bench wear", _wear, help="the wearer engine's speed against its accuracy")
     kernel = add_command(sub, "bench kernel", _kernel, help="the shell's internal force alone, per implementation")
     for parser in (wear, kernel):
@@ -91,10 +98,15 @@ def _add_timed_benches(sub: Subparsers) -> None:
     commits.add_argument("--old", required=True, help="the baseline commit (e.g. a sha or a tag)")
     commits.add_argument("--new", default="HEAD", help="the commit compared with it (default %(default)s)")
     commits.add_argument("--scene", required=True, help="the wear scene to time")
-    commits.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                         help="replace a dotted scene key (repeatable), e.g. motion.strides=1")
     commits.add_argument("--ranks", type=int, default=1, help="MPI ranks of every run")
-    for parser in (wear, kernel, commits):
+    parallel = add_command(sub, "bench parallel", _parallel, help="a wear scene on 1 and 2 ranks, alternating")
+    parallel.add_argument("--scene", default="scenes/sleeve.toml", help="the wear scene (default %(default)s)")
+    parallel.add_argument("--meshes", default="10x13,20x26,30x39,44x57",
+                          help="tube meshes AxB, comma-separated, or 'scene' (default %(default)s)")
+    for parser in (commits, parallel):
+        parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                            help="replace a dotted scene key (repeatable), e.g. motion.final_angle=20")
+    for parser in (wear, kernel, commits, parallel):
         parser.add_argument("--repeats", type=int, default=3, help="runs of every variant (medians; default 3)")
         parser.add_argument("--out", default=BENCH_OUT, help="output folder (default %(default)s)")
 
