@@ -71,6 +71,7 @@ BAD = [  # (scene kind, mutation, text the one-line error must contain)
     ("quasistatic", _set("route", solver="walking"), "route.solver"),
     ("quasistatic", _set("route", rotary_inertia_scale=0.5), "route.rotary_inertia_scale"),
     ("quasistatic", _set("route", mass_damping=-1.0), "route.mass_damping"),
+    ("quasistatic", _set("route", damping_frame="body"), "route.damping_frame"),   # the explicit engine's only
     ("quasistatic", _set("motion", final_angle=200.0), "motion.final_angle"),
     ("quasistatic", _set("motion", angular_velocity=0.0), "motion.angular_velocity"),
     ("quasistatic", _set("motion", angle_steps=0), "motion.angle_steps"),
@@ -82,6 +83,7 @@ BAD = [  # (scene kind, mutation, text the one-line error must contain)
     ("wear", _set("motion", type="dance"), "motion.type"),
     ("wear", _set("body", blend_width=-1.0), "body.blend_width"),
     ("wear", _set("body", blend_width=0.0), "body.blend_width"),
+    ("wear", _set("route", damping_frame="arm"), "route.damping_frame"),
     ("wear", _set("motion", final_angle=200.0), "final_angle"),
     ("wear", lambda d: (d["route"].update(solver="quasistatic", mass_damping=-1.0),     # the Newton route's
                         d["contact"].update(method="penalty")), "route.mass_damping"),      # contact method

@@ -479,6 +479,7 @@ def plan(wear: WearScene, fabric, scene_path: Path | None = None) -> WearPlan:
     handles = handle_specs(donning, timeline)
     critical_step = route.critical_step or critical_step
     settings = ExplicitSettings(mass_damping=damping, stiffness_damping=route.stiffness_damping,
+                                damping_frame=route.damping_frame,
                                 rotary_inertia_scale=route.rotary_inertia_scale,
                                 time_step_safety=step_safety(route.time_step_safety, critical_step),
                                 mass_scale=route.mass_scale, critical_step=critical_step,

@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass, field, fields, replace
 
 from fabricfem.body.arm import DEFAULT_ARM, ArmDimensions
+from fabricfem.contact.body_frame import DAMPING_FRAMES
 from fabricfem.dynamics.stability import CRITICAL_STEP_METHODS, plane_stress_wave_speed, step_safety
 from fabricfem.fabrics import load_fabric
 from fabricfem.materials import Fabric
@@ -163,9 +164,13 @@ class RouteSpec:
                         " + Newton)", "explicit")
     gravity: bool | None = param("the sleeve's weight along -y (default: on for explicit and implicit, off for"
                                  " quasistatic)", None)
-    mass_damping: float = param("Rayleigh alpha of C = alpha M [1/s] (also a drag on rigid motion)", 10.0)
+    mass_damping: float = param("Rayleigh alpha of C = alpha M [1/s] (a drag on rigid motion too, unless "
+                                "damping_frame = \"body\")", 10.0)
     stiffness_damping: float = param("explicit: Rayleigh beta of C = beta K_M(d) [s], a damping of the deformation "
                                      "only (no drag on rigid motion); shortens the critical step", 0.0)
+    damping_frame: str = param("explicit: the mass damping acts on the velocity relative to the ground (C v, also a "
+                               "drag on rigid motion) or to the body (C (v - v_body), v_body the rigid velocity of "
+                               "the body's segments at each node: deformation and sliding only)", "ground")
     rotary_inertia_scale: float = param("explicit: factor >= 1 on the rotational lumped masses", 100.0)
     time_step_safety: float | None = param(
         "explicit: dt = safety x critical step, in (0, 1); default 0.9 with the eigenvalue step, 0.8 with the "
@@ -197,6 +202,11 @@ class RouteSpec:
             raise ValueError(f"critical_step must be one of {CRITICAL_STEP_METHODS}, got {self.critical_step!r}")
         _non_negative(self, " [1/s]", "mass_damping")
         _non_negative(self, " [s]", "stiffness_damping")
+        if self.damping_frame not in DAMPING_FRAMES:
+            raise ValueError(f"damping_frame must be one of {DAMPING_FRAMES}, got {self.damping_frame!r}")
+        if self.damping_frame == "body" and self.solver != "explicit":
+            raise ValueError(f"damping_frame = 'body' needs the explicit solver (the {self.solver} route damps "
+                             f"against the ground)")
         if isinstance(self.rotary_inertia_scale, bool) or not (isinstance(self.rotary_inertia_scale, (int, float))
                                                               and self.rotary_inertia_scale >= 1.0):
             raise ValueError(f"rotary_inertia_scale must be a number >= 1, got {self.rotary_inertia_scale!r}")
@@ -213,7 +223,7 @@ class RouteSpec:
 # parameter -> default, of the parameters added after study runs were checkpointed (SleeveConfig.key_items)
 # (critical_step: the runs stored before it used the element formula)
 ADDED_LATER = {"mass_scale": 1.0, "critical_step": "estimate", "stiffness_damping": 0.0, "self_contact": False,
-               "self_contact_distance": None, "self_friction": 0.0}
+               "self_contact_distance": None, "self_friction": 0.0, "damping_frame": "ground"}
 
 SECTIONS = {"tube": TubeSpec, "material": FabricSpec, "motion": FlexionSpec, "contact": ContactSpec,
             "route": RouteSpec}

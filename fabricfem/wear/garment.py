@@ -11,9 +11,10 @@ and a timeline of phases on one body clock:
     settle  [.., + T_settle]            the body at rest in its start pose, the garment settles (gravity)
     motion  [.., + T_motion]            the kinematics source runs from its start (delayed by the phases above)
 
-Dynamics: central differences with the lumped mass, mass-proportional damping C = alpha M and rotary-inertia
-scaling (fabricfem.dynamics.explicit; the sleeve's settings [Man2006, ch. 5]), contact by forward-increment
-Lagrange multipliers or penalty against the body (fabricfem.contact.explicit) and the seams as a second
+Dynamics: central differences with the lumped mass, mass-proportional damping C = alpha M (of the velocity
+relative to the ground, or to the body's motion with damping_frame = "body": fabricfem.contact.body_frame) and
+rotary-inertia scaling (fabricfem.dynamics.explicit; the sleeve's settings [Man2006, ch. 5]), contact by
+forward-increment Lagrange multipliers or penalty against the body (fabricfem.contact.explicit) and the seams as a second
 forward-increment constraint. The step is dt = safety x the estimated critical step, shortened so that a
 record interval holds a whole number of steps.
 
@@ -38,6 +39,7 @@ from fabricfem.body.blend import BlendedStart, smoothstep
 from fabricfem.body.blended import BLEND_WIDTH
 from fabricfem.body.pose import Body
 from fabricfem.body.skin import Skin
+from fabricfem.contact.body_frame import DAMPING_FRAMES, BodyFrameDamping
 from fabricfem.contact.cloth_surface import ClothSurface
 from fabricfem.contact.explicit import ExplicitBodyContact
 from fabricfem.contact.intersections import intersecting_pairs
@@ -145,6 +147,9 @@ class ExplicitSettings:
     critical_step: str = "estimate"
     mass_scale: float = 1.0                    # S >= 1 on every lumped mass (CentralDifference), dt x sqrt(S)
     gravity: tuple[float, float, float] | None = (0.0, 0.0, -9.81)   # m/s^2, None: off
+    # what the mass damping's velocity is relative to: "ground" (C v) or "body" (C (v - v_body), the rigid velocity
+    # of the body's segments at each node: no drag on a garment carried along; fabricfem.contact.body_frame)
+    damping_frame: str = "ground"
 
 
 class DelayedKinematics:
@@ -200,6 +205,11 @@ class GarmentRun:
     def axis_label(self) -> str:
         """The label of the records' coordinate: "time [s]" or the axis's (e.g. "elbow angle [deg]")."""
         return "time [s]" if self.axis is None else self.axis[0]
+
+    @property
+    def body_damping(self) -> BodyFrameDamping | None:
+        """The hook of the mass damping relative to the body (damping_frame "body"), None in the ground frame."""
+        return next((h for h in self.integrator.contact if isinstance(h, BodyFrameDamping)), None)
 
     @property
     def motion_start(self) -> float:
@@ -445,8 +455,8 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
     dt_estimate = _critical_step(model, settings, contact, cloth)
     steps_per_record = math.ceil(timeline.record_time / (settings.time_step_safety * dt_estimate))
     dt = timeline.record_time / steps_per_record
-    # the seams first, the body contact last: a seam drawn across the body cannot pull a node into it
-    hooks = ([ties] if ties else []) + list(handles) + ([cloth] if cloth else []) + [contact]
+    # damping frame, seams, handles, then the body contact: a seam drawn across the body cannot pull a node into it
+    hooks = [h for h in (_frame_hook(settings, contact), ties, *handles, cloth) if h is not None] + [contact]
     t_sewn = timeline.start_of("pull")
     # the garment's weight acts once it is sewn (panels would fall while their seams close), ramped on over
     # a tenth of the sewing time
@@ -460,6 +470,17 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
     return GarmentRun(name, model, posed, contact, ties, integrator, timeline, phases, dt, dt_estimate,
                       steps_per_record, tuple(torques), config, strain, axis, tuple(handles),
                       settings.time_step_safety, 0.0, steps_per_record, self_contact=cloth)
+
+
+def _frame_hook(settings: ExplicitSettings, contact: ExplicitBodyContact) -> BodyFrameDamping | None:
+    """The hook that refers the mass damping to the body's motion (damping_frame "body": its model, posed body, blend
+    width and active segments those of the body contact), None in the ground frame; ValueError naming
+    `damping_frame` for another value."""
+    if settings.damping_frame not in DAMPING_FRAMES:
+        raise ValueError(f"damping_frame must be one of {DAMPING_FRAMES}, got {settings.damping_frame!r}")
+    if settings.damping_frame == "ground":
+        return None
+    return BodyFrameDamping(contact.model, contact.body, contact.blend_width, contact.segment_active)
 
 
 def _critical_step(model: ShellModel, settings: ExplicitSettings, contact: ExplicitBodyContact,

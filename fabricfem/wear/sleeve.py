@@ -149,6 +149,7 @@ def flexion_settings(route: RouteSpec, similarity: float) -> ExplicitSettings:
     critical_step = route.critical_step or "eigenvalue"
     return ExplicitSettings(mass_damping=route.mass_damping * similarity,
                             stiffness_damping=route.stiffness_damping / similarity,
+                            damping_frame=route.damping_frame,
                             rotary_inertia_scale=route.rotary_inertia_scale,
                             time_step_safety=step_safety(route.time_step_safety, critical_step),
                             critical_step=critical_step, mass_scale=route.mass_scale,
