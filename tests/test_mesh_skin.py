@@ -4,7 +4,9 @@ import igl
 import numpy as np
 import pytest
 import trimesh
+from mpi4py import MPI
 
+from fabricfem.benchmarks.mesh_skin_contact import sleeve_skin
 from fabricfem.body import (
     Body,
     JointTrajectory,
@@ -16,9 +18,12 @@ from fabricfem.body import (
     winter_walking,
 )
 from fabricfem.body.human import HUMAN_DIMENSIONS, HUMAN_KEYS, HUMAN_PATH, human_rest
+from fabricfem.body.mesh_distance import PosedSurface
 from fabricfem.body.mesh_skin import MeshSkin, ellipsoid_skin, read_skin, skin_mesh
 from fabricfem.body.skin import Skin
 from fabricfem.body.skin_pressure import SkinPressureWriter, skin_pressure, vertex_areas
+from fabricfem.wear.config import SleeveConfig
+from fabricfem.wear.sleeve import tube_flexion_run
 
 needs_human = pytest.mark.skipif(not HUMAN_PATH.is_file(), reason=f"{HUMAN_PATH} absent: the Debian package "
                                  "assimp-testmodels is not installed")
@@ -154,8 +159,8 @@ def test_the_arm_skin_poses_by_elbow_flexion_and_a_reused_tree_stays_within_its_
     assert rigid.sum() > 20 and np.abs(skin.surface(t1)[0][rigid] - expected).max() < 1e-12
     reused = MeshSkin(skin.mesh, body, tree_tolerance=2e-3, joint_tolerance=0.02)
     x = skin.surface(0.5)[0][::7] + 0.004
-    for t in np.linspace(0.5, 0.52, 5):
-        assert np.abs(reused.query(x, t).gap - skin.query(x, t).gap).max() <= 2 * 2e-3
+    for t in np.linspace(0.5, 0.52, 5):      # libigl's tree of `posed`, reused within its tolerance
+        assert np.abs(reused.posed(t).closest(x)[0] - skin.query(x, t).gap).max() <= 2 * 2e-3
     assert reused.tree_builds < 5
 
 
@@ -172,3 +177,97 @@ def test_pressure_on_the_skin_keeps_the_total_force_and_is_written(tmp_path):
         assert np.allclose(writer.write(t, x, force), p)
     writer.close()
     assert (tmp_path / "skin_pressure.xdmf").is_file() and (tmp_path / "skin_pressure_00001.vtp").is_file()
+
+
+def brute_force(skin: MeshSkin, x: np.ndarray, t: float) -> tuple[np.ndarray, ...]:
+    """(gap, foot, normal, weights) of the points x on the skin at t by libigl's AABB tree of all the posed
+    triangles, every point searched (`PosedSurface.closest`, a new tree), the weights interpolated in numpy."""
+    gap, tri, bary, foot, normal = PosedSurface(skin.surface(t)[0], skin.topology).closest(x)
+    return gap, foot, normal, skin.foot_weights(tri, bary)
+
+
+def assert_same_answers(q, reference, where) -> None:
+    """The compiled query's answers equal the brute force's: gaps and feet to 1e-12 m, and away from the surface
+    (|gap| > 1 um, where the normal is the unit offset) normals and weights to 1e-9."""
+    gap, foot, normal, weights = reference
+    away = np.abs(gap) > 1e-6
+    assert np.abs(q.gap - gap).max() < 1e-12 and np.abs(q.foot - foot).max() < 1e-12, where
+    assert np.abs(q.normal - normal)[away].max() < 1e-9 and np.abs(q.weights - weights)[away].max() < 1e-9, where
+    assert np.allclose(q.weights.sum(axis=1), 1.0), where
+
+
+def skin_points(skin: MeshSkin, t: float, n: int, seed: int, spread: float) -> np.ndarray:
+    """n points about the skin posed at t: vertices and triangle centres moved by up to `spread` [m] each way."""
+    rng = np.random.default_rng(seed)
+    vertices, faces = skin.surface(t)
+    around = np.concatenate([vertices, vertices[faces].mean(axis=1)])
+    return around[rng.integers(0, len(around), n)] + rng.uniform(-spread, spread, (n, 3))
+
+
+@pytest.mark.parametrize("growth", [1.0, 0.8])
+def test_the_compiled_query_answers_as_libigl_on_all_points_of_the_flexed_arm(growth):
+    """The compiled query (the tree built once and refitted per pose, rigid parts searched in their segment's
+    frame; growth != 1: maps that are not rotations, every box refitted) against libigl's tree of all the posed
+    triangles on every point, at three angles of the elbow flexion; then the active set (margin 5 mm) over a
+    sequence of times: every gap at or below the margin is the brute force's, every other point lies farther."""
+    body = default_arm(elbow_flexion())
+    skin = ellipsoid_skin(body, spacing=0.01)
+    if growth != 1.0:
+        skin.transverse_scale = lambda t: growth
+    t1 = body.kinematics.time_range[1]
+    for t in (0.0, 0.4 * t1, t1):
+        x = skin_points(skin, t, 3000, 3, 0.01)
+        assert_same_answers(skin.query(x, t), brute_force(skin, x, t), t)
+    active = MeshSkin(skin.mesh, body, margin=5e-3, joint_tolerance=0.02)
+    active.transverse_scale = skin.transverse_scale
+    x = skin_points(skin, 0.5 * t1, 1500, 4, 0.02)
+    rng = np.random.default_rng(5)
+    searched = []
+    for k, t in enumerate(np.linspace(0.5 * t1, 0.5 * t1 + 0.05, 6)):
+        x = x + rng.uniform(-1e-3, 1e-3, x.shape)
+        before = active.exact_points
+        q, (gap, foot, normal, weights) = active.query(x, t), brute_force(skin, x, t)
+        searched.append(active.exact_points - before)
+        near = np.isfinite(q.gap)
+        assert np.all(gap[~near] > 5e-3) and np.all(near[gap <= 5e-3]), t
+        assert np.abs(q.gap[near] - gap[near]).max() < 1e-12 and np.abs(q.foot[near] - foot[near]).max() < 1e-12
+        away = near & (np.abs(gap) > 1e-6)
+        assert np.abs(q.normal - normal)[away].max() < 1e-9 and np.abs(q.weights - weights)[away].max() < 1e-9
+        assert np.all(q.foot[~near] == x[~near])
+    assert searched[0] == len(x) and max(searched[1:]) < len(x)        # the active set skips far points
+
+
+@needs_human
+def test_the_compiled_query_answers_as_libigl_on_the_walking_human():
+    mesh = read_skin(HUMAN_PATH, **HUMAN_KEYS)
+    body = lower_body(HUMAN_DIMENSIONS, winter_walking(HUMAN_DIMENSIONS))
+    skin = MeshSkin(mesh, body, rest_positions=human_rest())
+    for t in (0.3, 0.8):
+        x = skin_points(skin, t, 4000, 6, 0.015)
+        assert_same_answers(skin.query(x, t), brute_force(skin, x, t), t)
+
+
+def test_a_non_finite_point_is_refused():
+    skin = MeshSkin(skin_mesh(*ellipsoid_mesh(body_ellipsoid(), 2)), body_ellipsoid())
+    with pytest.raises(ValueError, match="x must be finite"):
+        skin.query(np.array([[0.2, 0.0, 1.0], [np.nan, 0.0, 1.0]]), 0.0)
+
+
+@pytest.mark.mpi
+def test_the_sleeve_on_a_mesh_skin_is_the_same_on_one_and_two_ranks():
+    """The tube sleeve (10x13, mu = 0.1) flexed to 4 degrees on the arm's triangulated blend (`ellipsoid_skin`,
+    1 cm, active set margin 0): the elbow torque, peak pressure and contact force histories on COMM_WORLD (2 ranks
+    under mpirun) equal the serial ones (COMM_SELF) within 1e-6 of their largest values."""
+    config = SleeveConfig.of(n_around=10, n_along=13, final_angle=4.0)
+
+    def history(comm) -> np.ndarray:
+        run = tube_flexion_run("mesh skin", config.fabric, config.tube, config.arm, config.motion, config.contact,
+                               config.route, comm, skin=sleeve_skin(config, 0.01, 0.0))
+        h = run.run()
+        run.destroy()
+        return np.array([[s.torques["elbow"], s.peak_pressure, s.contact_force] for s in h.steps])
+
+    parallel, serial = history(MPI.COMM_WORLD), history(MPI.COMM_SELF)
+    scale = np.max(np.abs(serial), axis=0)
+    assert serial[-1, 0] > 0.0 and scale[1] > 0.0                     # the forearm touches the sleeve
+    assert np.all(np.abs(parallel - serial) <= 1e-6 * scale + 1e-15), ((parallel - serial) / scale, serial)

@@ -8,7 +8,8 @@ vertex; it is correct for any x of a closed, consistently oriented, non-self-int
 of `igl.signed_distance(..., SIGNED_DISTANCE_TYPE_PSEUDONORMAL)` (tested against it); the pseudonormals are computed
 here with numpy from a topology built once, so that a posed surface costs one tree build and one pass over its
 faces, and a repeated query of the same pose only the tree search (the figures are in
-docs/findings/2026-11-27-mesh-skin.md).
+docs/findings/2026-11-27-mesh-skin.md). The contact's queries of a rigged skin take the same closest points, sign
+and normal in compiled code (`fabricfem.body.mesh_query`); `PosedSurface` is their reference.
 
 The returned normal is the unit gradient of the signed distance, sign (x - C) / |x - C|, continuous in x off the
 medial axis; where |x - C| is below `FOOT_NORMAL_DISTANCE` (x on the surface) it is the feature's pseudonormal.
@@ -168,106 +169,3 @@ def signed_closest(vertices: np.ndarray, topology: Topology, x: np.ndarray, sqrd
     far = distance > FOOT_NORMAL_DISTANCE
     normal = np.where(far[:, None], sign[:, None] * offset / np.where(far, distance, 1.0)[:, None], pseudo)
     return sign * distance, tri, bary, foot, normal
-
-
-def _orthogonal(A: np.ndarray) -> bool:
-    """All maps A (K, 3, 3) rotations (to 1e-9): the segments move rigidly (no transverse growth)."""
-    return bool(np.abs(np.einsum("kji,kjl->kil", A, A) - np.eye(3)).max() < 1e-9)
-
-
-class SegmentTrees:
-    """Closest points on a skin posed by linear blend skinning, searched in trees kept in the segments' frames.
-
-    Every triangle belongs to the segment k of largest summed weight at its corners and is kept in that segment's
-    rest frame, where a posed point v reads A_k^T (v - b_k) (x -> A_k x + b_k the segment's rigid map). A triangle
-    whose three corners have weight 1 on k moves rigidly with it: in its frame it never moves, and the tree of the
-    rigid triangles of each segment is built once. The other, blended, triangles of k (bands around its joints) move
-    in its frame only by the other segments' motion relative to it; their tree is rebuilt when one of their
-    vertices moved more than `tolerance` [m] in that frame since its build (reused within: a gap at most
-    2 tolerance above the exact one, `PosedSurface`; 0: exact, rebuilt whenever they moved). Distances are
-    invariant under the rigid maps, so the closest point is the nearest over the groups' searches; a point is
-    searched first in the group whose box (in its frame) is nearest, then only in the groups whose box is nearer
-    than the distance found. Maps that are not rotations (a body growing across its segments during the donning)
-    search all triangles in one tree of the posed vertices (reused within `tolerance` too).
-
-    Args:
-        rest: (V, 3) rest vertices [m]; topology: their faces; weights: (V, K) skinning weights;
-        tolerance: the blended trees' reuse distance [m].
-    """
-
-    def __init__(self, rest: np.ndarray, topology: Topology, weights: np.ndarray, tolerance: float = 0.0):
-        self.rest, self.topology, self.tolerance = np.ascontiguousarray(rest, dtype=float), topology, float(tolerance)
-        faces = topology.faces
-        single = ((weights > 0.0).sum(axis=1) == 1)[faces].all(axis=1)
-        corner = np.argmax(weights, axis=1)[faces]
-        rigid = single & (corner[:, 0] == corner[:, 1]) & (corner[:, 1] == corner[:, 2])
-        owner = np.argmax(weights[faces].sum(axis=1), axis=1)
-        self.groups: list[dict] = []
-        for k in range(weights.shape[1]):
-            for is_rigid in (True, False):
-                ids = np.flatnonzero((owner == k) & (rigid == is_rigid))
-                if len(ids):
-                    vids, local = np.unique(faces[ids], return_inverse=True)
-                    self.groups.append({"segment": k, "rigid": is_rigid, "faces": ids, "vertices": vids,
-                                        "local": np.ascontiguousarray(local.reshape(-1, 3), dtype=np.int64),
-                                        "tree": None, "built_on": None,
-                                        "rest": np.ascontiguousarray(self.rest[vids]) if is_rigid else None})
-        self.blend_ids = np.flatnonzero(~rigid)
-        self.builds = 0
-        self._full: tuple[igl.AABB, np.ndarray] | None = None
-
-    def _tree(self, vertices: np.ndarray, faces: np.ndarray, cached, tolerance: float):
-        """(tree, the vertices it was built on) on `vertices`, reused from `cached` while no vertex moved more than
-        tolerance."""
-        if cached is not None and cached[1].shape == vertices.shape and (
-                np.linalg.norm(vertices - cached[1], axis=1).max(initial=0.0) <= tolerance):
-            return cached
-        tree = igl.AABB()
-        tree.init(vertices, faces)
-        self.builds += 1
-        return tree, vertices
-
-    def _frame_vertices(self, group: dict, vertices: np.ndarray, A: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """The group's vertices in its segment's frame, its tree (re)built (`_tree`)."""
-        k = group["segment"]
-        if group["rigid"]:
-            local, tolerance = group["rest"], np.inf
-        else:
-            local = np.ascontiguousarray((vertices[group["vertices"]] - b[k]) @ A[k])
-            tolerance = self.tolerance
-        cached = None if group["tree"] is None else (group["tree"], group["built_on"])
-        group["tree"], group["built_on"] = self._tree(local, group["local"], cached, tolerance)
-        return local
-
-    def search(self, vertices: np.ndarray, A: np.ndarray, b: np.ndarray, x: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(squared distance (N,) [m^2], triangle (N,), foot (N, 3) [m]) of the points x (N, 3) [m] on the skin
-        posed as `vertices` (V, 3) [m] by the maps A (K, 3, 3), b (K, 3) [m]."""
-        x = np.ascontiguousarray(x, dtype=float)
-        vertices = np.ascontiguousarray(vertices, dtype=float)
-        if not _orthogonal(A):
-            self._full = self._tree(vertices, self.topology.faces, self._full, self.tolerance)
-            return self._full[0].squared_distance(vertices, self.topology.faces, x)
-        best = np.full(len(x), np.inf)
-        tri = np.zeros(len(x), dtype=np.int64)
-        foot = np.zeros_like(x)
-        frames, bounds = [], []
-        for g in self.groups:
-            local = self._frame_vertices(g, vertices, A, b)
-            xl = np.ascontiguousarray((x - b[g["segment"]]) @ A[g["segment"]])
-            outside = np.maximum(local.min(axis=0) - xl, 0.0) + np.maximum(xl - local.max(axis=0), 0.0)
-            frames.append((local, xl))
-            bounds.append(np.einsum("ij,ij->i", outside, outside))       # squared distance to the group's box
-        first = np.argmin(np.array(bounds), axis=0)
-        for sweep in (0, 1):
-            for j, g in enumerate(self.groups):
-                pick = np.flatnonzero(first == j) if sweep == 0 else np.flatnonzero((first != j) & (bounds[j] < best))
-                if not len(pick):
-                    continue
-                local, xl = frames[j]
-                d2, t, f = g["tree"].squared_distance(local, g["local"], np.ascontiguousarray(xl[pick]))
-                better = d2 < best[pick]
-                at = pick[better]
-                k = g["segment"]
-                best[at], tri[at], foot[at] = d2[better], g["faces"][t[better]], f[better] @ A[k].T + b[k]
-        return best, tri, foot

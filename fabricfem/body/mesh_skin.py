@@ -24,9 +24,11 @@ Rigging and posing (`MeshSkin`): linear blend skinning with bone heat weights (`
 rest pose is given by the joints' and markers' positions in the mesh (`rest_positions`, default the body's own
 pose at the first time of its kinematics), each joint inside the mesh (a joint farther than `joint_tolerance`
 outside is refused naming `rest_positions`). Queries (`MeshSkin.query`, the Skin contract of fabricfem.body.skin):
-the posed mesh's AABB tree, closest point and pseudonormal sign (`fabricfem.body.mesh_distance`), the weights
-interpolated barycentrically at the foot; the posed surfaces of the last few times are cached. The body's segment
-schedule (segments switched off) is not applied to a mesh skin: its surface stays whole.
+compiled (`fabricfem.body.mesh_query.CompiledSkin`): the segments' maps, the posed vertices, a bounding-box tree
+built once and refitted to each pose, the closest point, the pseudonormal sign and normal of
+`fabricfem.body.mesh_distance.signed_closest`, the weights interpolated barycentrically at the foot; the maps and
+posed vertices of the last few times are cached. The body's segment schedule (segments switched off) is not applied
+to a mesh skin: its surface stays whole.
 
 `ellipsoid_skin` triangulates a body's own segments (the blended ellipsoids by default, or any implicit function)
 by marching cubes and rigs it: the default triangulated skin and the tests' reference.
@@ -45,17 +47,16 @@ import trimesh
 from fabricfem.body.blended import BlendedEllipsoids, triangulate
 from fabricfem.body.conventions import to_body, unit_scale, up_rotation
 from fabricfem.body.ellipsoid import _as_points
-from fabricfem.body.mesh_distance import PosedSurface, SegmentTrees, Topology, signed_closest
+from fabricfem.body.mesh_distance import PosedSurface, Topology
+from fabricfem.body.mesh_query import CompiledSkin, Pose, QueryState
 from fabricfem.body.skin import SkinQuery
 from fabricfem.body.skinning import (
                                      HEAT,
                                      WEIGHT_CUTOFF,
-                                     blend_transforms,
                                      bone_heat_weights,
                                      bones,
                                      check_rest_positions,
                                      frames,
-                                     pose_vertices,
 )
 
 HEIGHT_RANGE = (0.5, 2.5)     # m: a body's height outside this is taken for a wrong `units`
@@ -197,15 +198,15 @@ class MeshSkin:
         rest_positions: joint and marker positions [m] in the mesh's rest pose (name -> (3,)); default: the body's
             pose at the first time of its kinematics.
         joint_tolerance: how far [m] a joint may lie outside the mesh (0: inside or on it).
-        tree_tolerance: the AABB tree of an earlier pose is reused while no vertex moved more than this [m] since
-            its build (0: a new tree for every pose); a gap is then at most 2 tree_tolerance above the exact one
-            (`PosedSurface`).
+        tree_tolerance: `posed` (libigl's tree of all triangles, for a caller's own searches) reuses the tree of an
+            earlier pose while no vertex moved more than this [m] since its build (0: a new tree for every pose);
+            a gap is then at most 2 tree_tolerance above the exact one (`PosedSurface`). The queries are exact
+            whatever it is (a refitted tree, `fabricfem.body.mesh_query`).
         heat, cutoff: the bone heat constant and weight cut (`fabricfem.body.skinning.bone_heat_weights`).
         margin: None: every query searches every point; a length [m]: the contact's active set (`query`), the
             points whose gap is certainly above it are not searched (gap = +inf).
-    The queries search the rigid triangles of each segment in trees of the rest pose and the blended ones in a
-    tree of the posed vertices rebuilt beyond `tree_tolerance` (`SegmentTrees`); `transverse_scale` (None or
-    t -> g) grows the skin across the segments' axes as the donning grows the body (`transforms`).
+    `transverse_scale` (None or t -> g) grows the skin across the segments' axes as the donning grows the body
+    (`transforms`).
 
     Raises:
         ValueError naming `rest_positions` (missing names, a joint outside the mesh).
@@ -239,79 +240,60 @@ class MeshSkin:
         self._posed: OrderedDict[float, PosedSurface] = OrderedDict()
         self._maps: OrderedDict[float, list] = OrderedDict()
         segments = list(body.segments.values())
-        self._points = tuple([getattr(g, end) for g in segments] for end in ("proximal", "distal", "marker"))
+        self._point_names = [getattr(g, end) for end in ("proximal", "distal", "marker") for g in segments]
         self._fraction = np.array([g.center_fraction for g in segments], dtype=float)
-        single = (self.weights > 0.0).sum(axis=1) == 1
-        owner = np.argmax(self.weights, axis=1)
-        self._rigid_vertices = [(k, np.flatnonzero(single & (owner == k))) for k in range(len(segments))]
-        self._blended_vertices = np.flatnonzero(~single)
-        self.trees = SegmentTrees(mesh.vertices, self.topology, self.weights, self.tree_tolerance)
         if margin is not None and not (np.isfinite(margin) and margin >= 0.0):
             raise ValueError(f"margin must be a length >= 0 [m] or None, got {margin!r}")
         self.margin = None if margin is None else float(margin)
         self.transverse_scale: Callable[[float], float] | None = None
         self.exact_points = 0
         self._travel, self._last_maps = 0.0, None
-        self._active: dict[int, tuple] = {}
+        self._active: dict[int, QueryState] = {}
         on = self.weights > 0.0
         low = np.array([mesh.vertices[c].min(axis=0) for c in on.T])
         high = np.array([mesh.vertices[c].max(axis=0) for c in on.T])
         self._sphere_center = 0.5 * (low + high)
         self._sphere_radius = np.array([np.linalg.norm(mesh.vertices[c] - m, axis=1).max()
                                         for c, m in zip(on.T, self._sphere_center)])
+        self.compiled = CompiledSkin(mesh.vertices, self.topology, self.weights, self._fraction, self.rest_centers,
+                                     self.rest_rotations, self._sphere_center, self._sphere_radius)
+
+    @property
+    def blended_triangles(self) -> int:
+        """The number of triangles with a corner of weight below 1 (moving with more than one segment)."""
+        return int(((self.weights > 0.0).sum(axis=1) > 1)[self.mesh.faces].any(axis=1).sum())
 
     def transforms(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """The segments' maps rest -> pose at time t [s], (A (K, 3, 3), b (K, 3) [m]) (`blend_transforms`); with a
-        `transverse_scale` g(t) (the donning's growth) A_k = R_k diag(1, g, g) (R_k^0)^T: each segment's part of the
-        skin scaled by g across the segment's axis (its local e1), as the contact grows the segments' radii."""
-        centers, rotations = self._frames(self.body.kinematics.positions(t))
-        if self.transverse_scale is None or float(self.transverse_scale(t)) == 1.0:
-            return blend_transforms(self.rest_centers, self.rest_rotations, centers, rotations)
-        g = float(self.transverse_scale(t))
-        A = np.einsum("kij,klj->kil", rotations * np.array([1.0, g, g]), self.rest_rotations)
-        return A, centers - np.einsum("kij,kj->ki", A, self.rest_centers)
+        """The segments' maps rest -> pose at time t [s], (A (K, 3, 3), b (K, 3) [m]) (`maps`)."""
+        pose = self.maps(t)
+        return pose.A, pose.b
 
-    def _frames(self, positions: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-        """`frames` vectorised over the segments (the formulas of fabricfem.body.pose.segment_frame, without its
-        checks: the first pose, at the rigging, went through them)."""
-        j1, j2, m = (np.array([positions[n] for n in names], dtype=float) for names in self._points)
-        axis = j2 - j1
-        centers = j1 + self._fraction[:, None] * axis
-        e1 = axis / np.linalg.norm(axis, axis=1, keepdims=True)
-        offset = m - centers
-        perpendicular = offset - np.einsum("ki,ki->k", offset, e1)[:, None] * e1
-        e2 = perpendicular / np.linalg.norm(perpendicular, axis=1, keepdims=True)
-        return centers, np.stack([e1, e2, np.cross(e1, e2)], axis=2)
-
-    def maps(self, t: float) -> list:
-        """[A, b, posed vertices (V, 3) [m] or None until `vertices` asks] at time t [s] (`transforms`; the last
-        `CACHE_SIZE` times cached)."""
+    def maps(self, t: float) -> Pose:
+        """The skin's `Pose` at time t [s]: A_k = R_k (R_k^0)^T, b_k = c_k - A_k c_k^0 [m]
+        (`fabricfem.body.skinning.blend_transforms`) with the frames (c_k, R_k) of the joints and markers at t (the
+        formulas of fabricfem.body.pose.segment_frame, without its checks: the first pose, at the rigging, went
+        through them), compiled (`CompiledSkin.pose_at`); with a `transverse_scale` g(t) (the donning's growth)
+        A_k = R_k diag(1, g, g) (R_k^0)^T: each segment's part of the skin scaled by g across the segment's axis
+        (its local e1), as the contact grows the segments' radii. The last `CACHE_SIZE` times are cached."""
         key = float(t)
         if key in self._maps:
             self._maps.move_to_end(key)
             return self._maps[key]
-        A, b = self.transforms(key)
-        out = self._maps[key] = [A, b, None]
+        positions = self.body.kinematics.positions(key)
+        points = np.array([positions[n] for n in self._point_names], dtype=float)
+        g = 1.0 if self.transverse_scale is None else float(self.transverse_scale(key))
+        out = self._maps[key] = self.compiled.pose_at(points, g)
         if len(self._maps) > CACHE_SIZE:
             self._maps.popitem(last=False)
         return out
 
     def vertices(self, t: float) -> np.ndarray:
-        """The posed vertices (V, 3) [m] at time t [s] (linear blend skinning, cached with `maps`)."""
-        entry = self.maps(t)
-        if entry[2] is None:
-            A, b = entry[0], entry[1]
-            out = np.empty_like(self.mesh.vertices)
-            for k, ids in self._rigid_vertices:       # weight 1 on one segment: its rigid map
-                out[ids] = self.mesh.vertices[ids] @ A[k].T + b[k]
-            blended = self._blended_vertices
-            out[blended] = pose_vertices(self.mesh.vertices[blended], self.weights[blended], A, b)
-            entry[2] = out
-        return entry[2]
+        """The posed vertices (V, 3) [m] at time t [s] (linear blend skinning, compiled; cached with `maps`)."""
+        return self.compiled.pose(self.maps(t))
 
     def with_body(self, body) -> MeshSkin:
-        """This skin (mesh, weights, rest frames, trees shared) moved by another Body of the same segments, e.g. the
-        garment run's body on the run's clock (fabricfem.wear.garment); no cached poses."""
+        """This skin (mesh, weights, rest frames, compiled tree shared) moved by another Body of the same segments,
+        e.g. the garment run's body on the run's clock (fabricfem.wear.garment); no cached poses."""
         if tuple(body.segments) != self.segment_names:
             raise ValueError(f"skin: its segments {list(self.segment_names)} are not the body's {list(body.segments)}")
         twin = copy.copy(self)
@@ -321,8 +303,8 @@ class MeshSkin:
         return twin
 
     def posed(self, t: float) -> PosedSurface:
-        """The posed surface at time t [s] with an AABB tree of all its triangles (cached for the last `CACHE_SIZE`
-        times; the contact's queries use `closest` and its segment trees instead)."""
+        """The posed surface at time t [s] with libigl's AABB tree of all its triangles (cached for the last
+        `CACHE_SIZE` times, reused within `tree_tolerance`; the queries use the compiled tree instead)."""
         key = float(t)
         if key in self._posed:
             self._posed.move_to_end(key)
@@ -342,16 +324,12 @@ class MeshSkin:
 
     def closest(self, x, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(gap (N,) [m], triangle (N,), barycentric coordinates (N, 3), foot (N, 3) [m], normal (N, 3)) of the
-        points x (N, 3) [m] on the skin posed at time t [s] (`SegmentTrees.search`, then the sign and normal of
-        `fabricfem.body.mesh_distance.signed_closest`)."""
-        pts, _ = _as_points(x)
-        A, b, _ = self.maps(t)
-        vertices = self.vertices(t)
-        builds = self.trees.builds
-        sqrd, tri, foot = self.trees.search(vertices, A, b, pts)
-        self.tree_builds += self.trees.builds - builds
-        self.exact_points += len(pts)
-        return signed_closest(vertices, self.topology, pts, sqrd, tri, foot)
+        points x (N, 3) [m] on the skin posed at time t [s] (`CompiledSkin.query`, every point searched: the sign
+        and normal of `fabricfem.body.mesh_distance.signed_closest`)."""
+        pts = _points(x)
+        state = QueryState(self.compiled.ffi, len(pts), len(self.segment_names))
+        self.exact_points += self.compiled.query(self.maps(t), pts, state)
+        return state.gap, state.triangle, state.bary, state.foot, state.normal
 
     def foot_weights(self, triangle: np.ndarray, bary: np.ndarray) -> np.ndarray:
         """(N, K) segment weights at feet given by triangle and barycentric coordinates (interpolated linearly)."""
@@ -363,14 +341,11 @@ class MeshSkin:
         """The skin's travel [m] up to time t [s]: the sum over the successive times asked of a bound on the largest
         vertex displacement between them, max_k (|A_k - A'_k|_F R_k + |(A_k - A'_k) c_k + b_k - b'_k|) over the
         segments' bounding spheres (c_k, R_k) of their weighted rest vertices (a vertex moves by a convex combination
-        of its segments' displacements)."""
-        A, b, _ = self.maps(t)
-        if self._last_maps is not None:
-            dA, db = A - self._last_maps[0], b - self._last_maps[1]
-            move = (np.linalg.norm(dA, axis=(1, 2)) * self._sphere_radius
-                    + np.linalg.norm(np.einsum("kij,kj->ki", dA, self._sphere_center) + db, axis=1))
-            self._travel += float(move.max(initial=0.0))
-        self._last_maps = (A, b)
+        of its segments' displacements; `CompiledSkin.travel`)."""
+        pose = self.maps(t)
+        if self._last_maps is not None and self._last_maps is not pose:
+            self._travel += self.compiled.travel(pose, self._last_maps)
+        self._last_maps = pose
         return self._travel
 
     def query(self, x, t: float) -> SkinQuery:
@@ -381,31 +356,30 @@ class MeshSkin:
         and moves by at most the skin's displacement); where that bound exceeds the margin the point is not searched
         and gets gap = +inf, foot = x, and its last normal and weights. Every gap below the margin is exact, so
         contact (gap < 0) is decided exactly. The state is kept per number of points (the contact asks all its
-        nodes each time)."""
-        pts, _ = _as_points(x)
-        if self.margin is None:
-            gap, triangle, bary, foot, normal = self.closest(pts, t)
-            return SkinQuery(gap, foot, normal, self.foot_weights(triangle, bary))
-        travel = self.travel(t)
+        nodes each time). Without a margin every point is searched."""
+        pts = _points(x)
         n = len(pts)
-        state = self._active.get(n)
-        if state is None:
-            state = self._active[n] = (pts.copy(), np.full(n, -np.inf), np.zeros(n), np.zeros((n, 3)),
-                                       np.zeros((n, len(self.segment_names))))
-        x0, g0, s0, normals, weights = state
-        search = np.flatnonzero(g0 - np.linalg.norm(pts - x0, axis=1) - (travel - s0) <= self.margin)
-        gap = np.full(n, np.inf)
-        foot = pts.copy()
-        if len(search):
-            g, triangle, bary, f, nrm = self.closest(pts[search], t)
-            gap[search], foot[search] = g, f
-            x0[search], g0[search], s0[search] = pts[search], g, travel
-            normals[search], weights[search] = nrm, self.foot_weights(triangle, bary)
-        return SkinQuery(gap, foot, normals.copy(), weights.copy())
+        if self.margin is None:
+            state = QueryState(self.compiled.ffi, n, len(self.segment_names))
+            self.exact_points += self.compiled.query(self.maps(t), pts, state)
+        else:
+            travel = self.travel(t)
+            state = self._active.get(n)
+            if state is None:
+                state = self._active[n] = QueryState(self.compiled.ffi, n, len(self.segment_names))
+            self.exact_points += self.compiled.query(self.maps(t), pts, state, travel, self.margin)
+        return SkinQuery(state.gap.copy(), state.foot.copy(), state.normal.copy(), state.weights.copy())
 
     def surface(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """The posed skin at time t [s]: vertices (V, 3) [m], triangles (F, 3), outward oriented."""
         return self.vertices(t), self.mesh.faces
+
+
+def _points(x) -> np.ndarray:
+    """x as a C-contiguous (N, 3) float array (a (3,) point as (1, 3); ValueError naming x for another shape; the
+    compiled query refuses non-finite points)."""
+    pts = np.ascontiguousarray(x, dtype=float)
+    return pts if pts.ndim == 2 and pts.shape[1] == 3 else np.ascontiguousarray(_as_points(x)[0])
 
 
 def union_implicit(body, t: float) -> Callable[[np.ndarray], np.ndarray]:

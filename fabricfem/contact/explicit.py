@@ -443,8 +443,9 @@ class ExplicitBodyContact:
             return
         x_trial = self.reference + d[rows] + dt * v[rows] + dt ** 2 * a[rows]
         if self.skin is not None and COMPILED_CONTACT["enabled"]:   # the skin's query, then the compiled friction
-            self._correct_compiled(integrator, ellipsoids, d, v, a,
-                                   (x_trial, self.project(x_trial, t_next, ellipsoids, SegmentStack(ellipsoids))))
+            # no SegmentStack: `project` asks only the skin (stacking the segments cost 11 us a step)
+            projected = self.project(x_trial, t_next, ellipsoids, None)
+            self._correct_compiled(integrator, ellipsoids, d, v, a, (x_trial, projected))
             return
         stack = SegmentStack(ellipsoids)
         skin = self.project(x_trial, t_next, ellipsoids, stack)

@@ -17,6 +17,7 @@ from mpi4py import MPI
 
 from fabricfem.body.arm import ArmDimensions
 from fabricfem.body.ellipsoid import Ellipsoid
+from fabricfem.body.skin import Skin
 from fabricfem.contact.obstacles import Plane, RoundedBox, table_top
 from fabricfem.dynamics import CentralDifference, NewmarkIntegrator, critical_time_step, node_monitor, stability
 from fabricfem.dynamics.ts import GeneralizedAlphaIntegrator
@@ -513,8 +514,9 @@ def limb_scene_run(scene: Scene, comm) -> GarmentRun:
         raise SceneError(f"body: {exc}") from None
 
 
-def garment_scene_run(scene: Scene, comm) -> GarmentRun:
-    """The explicit engine's GarmentRun of a wear scene (fabricfem.scenes.wear.plan and garment_mesh)."""
+def garment_scene_run(scene: Scene, comm, skin: Skin | None = None) -> GarmentRun:
+    """The explicit engine's GarmentRun of a wear scene (fabricfem.scenes.wear.plan and garment_mesh); `skin`: a
+    Skin of the scene's body (fabricfem.body.skin) instead of the scene's own (a benchmark's variant)."""
     parsed = scene.parsed
     fabric = wear.wear_fabric(parsed, build_fabric)
     plan = wear.plan(parsed, fabric, scene.path)
@@ -528,7 +530,8 @@ def garment_scene_run(scene: Scene, comm) -> GarmentRun:
                             contact_method=plan.contact.method or "lagrange", friction=plan.contact.friction,
                             penalty=plan.contact.penalty,
                             psri_degrees=tuple(garment.quadrature) if garment.quadrature else (4, 2),
-                            axis=plan.axis, handles=handles, blend_width=parsed.body.blend_width, skin=plan.skin,
+                            axis=plan.axis, handles=handles, blend_width=parsed.body.blend_width,
+                            skin=plan.skin if skin is None else skin,
                             self_contact=plan.contact.self_contact,
                             self_contact_distance=plan.contact.self_contact_distance,
                             self_friction=plan.contact.self_friction)

@@ -8,10 +8,10 @@ axis, `HUMAN_KEYS`), `units`, `up`, `repair`, `components` (fabricfem.body.mesh_
 first pose). `check_mesh_keys` makes the checks that need no file (with `check_wear`, before anything is built);
 `scene_skin` reads the file and rigs it in `fabricfem.scenes.wear.plan`, before the garment is meshed: every refusal
 is one SceneError line naming the key, e.g. "body.units: the body is 170 m tall ...". The contact searches the
-skin with the active set (margin 0, fabricfem.body.mesh_skin.MeshSkin.query) and reuses the trees of its blended
-triangles while they moved less than TREE_TOLERANCE in their segment's frame (fabricfem.body.mesh_distance.
-SegmentTrees: a gap at most 2 TREE_TOLERANCE = 1 mm above the exact one; measured on the walking human, a step's
-query of 743 nodes costs 42 ms with exact trees and 23 ms with 0.5 mm).
+skin with the active set (margin 0, fabricfem.body.mesh_skin.MeshSkin.query) in compiled code, exactly (a tree
+refitted to each pose, fabricfem.body.mesh_query); the quick trousers scene on the walking human costs 0.60 ms of
+contact per step against 0.37 ms on the blended ellipsoids of its dimensions
+(docs/findings/2026-11-27-mesh-skin-cost.md).
 """
 from __future__ import annotations
 
@@ -28,7 +28,6 @@ from fabricfem.scenes.errors import SceneError
 SKELETONS = ("lower_body", "arm")
 HUMAN = "human"                   # file and rest_positions: the Debian human and its measured joints
 CONTACT_MARGIN = 0.0              # m: the active set's margin of the scene's skin (MeshSkin.query)
-TREE_TOLERANCE = 5e-4             # m: the blended trees' reuse distance (a gap at most 1 mm above the exact one)
 SKIN_KEYS = ("units", "up", "repair", "components")
 
 
@@ -91,7 +90,7 @@ def scene_skin(body_section, body, scene_path: Path | None) -> MeshSkin:
         rest = {name: np.asarray(p, dtype=float) for name, p in rest.items()}
     try:
         mesh = read_skin(path, height_range=None if section.skeleton == "arm" else HEIGHT_RANGE, **keys)
-        return MeshSkin(mesh, body, rest_positions=rest, margin=CONTACT_MARGIN, tree_tolerance=TREE_TOLERANCE)
+        return MeshSkin(mesh, body, rest_positions=rest, margin=CONTACT_MARGIN)
     except ValueError as exc:
         key, _, rest_of = str(exc).partition(":")
         key = "file" if key == "path" else key
