@@ -1,6 +1,7 @@
-"""Cloth-cloth contact (fabricfem.contact.self_contact): the pair search against brute force and ipctk, the load
-balance of two pressed sheets, the independent intersection counter, the refused contact distances, and 1 against
-2 ranks on a short fold."""
+"""Cloth-cloth contact (fabricfem.contact.self_contact): the pair search against brute force and ipctk, the edge-edge
+search and distances likewise, the load balance of two pressed sheets and of two rails holding a crossing strip by
+their edges alone, the independent intersection counter, the refused contact distances, and 1 against 2 ranks on a
+short fold."""
 from __future__ import annotations
 
 import ipctk
@@ -8,7 +9,7 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
-from fabricfem.contact import proximity
+from fabricfem.contact import edge_contact, proximity
 from fabricfem.contact.cloth_surface import ClothSurface
 from fabricfem.contact.intersections import intersecting_pairs
 from fabricfem.contact.self_contact import SelfContact
@@ -48,6 +49,51 @@ def test_pair_search_matches_brute_force():
         np.testing.assert_array_equal(pairs.triangle, reference.triangle)
         np.testing.assert_allclose(pairs.distance, reference.distance, rtol=0, atol=1e-15)
         np.testing.assert_allclose(pairs.bary, reference.bary, rtol=0, atol=1e-12)
+
+
+def test_edge_pair_search_matches_brute_force():
+    """On the folded sheet of the vertex-triangle test (its upper half shifted 3 mm so that the edges cross), the
+    compiled hash finds exactly the edge pairs of testing every pair of edges, with and without the interior rule;
+    distances and parameters agree to round-off."""
+    x, triangles, _, _ = _grid(11)
+    right = x[:, 0] > 0.05
+    x[right, 0] = 0.103 - x[right, 0]
+    x[right, 2] = 8e-4
+    x += 1e-5 * np.random.default_rng(0).standard_normal(x.shape)
+    edges = edge_contact.surface_edges(triangles)
+    for interior in (True, False):
+        reference = edge_contact.brute_force_pairs(x, edges, 1e-3, 1e-6, interior).sorted()
+        pairs = edge_contact.compiled_pairs(x, edges, 1e-3, 1e-6, MPI.COMM_SELF, interior).sorted()
+        assert len(reference) > 100
+        np.testing.assert_array_equal(pairs.first, reference.first)
+        np.testing.assert_array_equal(pairs.second, reference.second)
+        np.testing.assert_allclose(pairs.distance, reference.distance, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(pairs.s, reference.s, rtol=0, atol=1e-10)
+        np.testing.assert_allclose(pairs.t, reference.t, rtol=0, atol=1e-10)
+
+
+def test_segment_distance_matches_ipctk():
+    """The closest points of two segments: the distance equals ipctk's edge-edge distance for random segments (every
+    clamping branch hit), and the closest points of two crossed segments are their crossing point's parameters."""
+    rng = np.random.default_rng(2)
+    p1, q1, p2, q2 = (rng.standard_normal((300, 3)) for _ in range(4))
+    _, _, distance, _ = edge_contact.closest_segment_points(p1, q1, p2, q2)
+    expected = [np.sqrt(ipctk.edge_edge_distance(*(v[i] for v in (p1, q1, p2, q2)))) for i in range(len(p1))]
+    np.testing.assert_allclose(distance, expected, rtol=1e-12, atol=1e-14)
+    s, t, d, _ = edge_contact.closest_segment_points(np.array([[0.0, 0, 0]]), np.array([[1.0, 0, 0]]),
+                                                     np.array([[0.25, -1.0, 1e-3]]), np.array([[0.25, 3.0, 1e-3]]))
+    np.testing.assert_allclose([s[0], t[0], d[0]], [0.25, 0.25, 1e-3], rtol=1e-12)
+
+
+def test_crossed_strips_held_by_their_edges():
+    """A strip pressed onto two held rails that it crosses with no node within 2.5 mm of the other's triangles: with
+    the edge-edge term the contact force equals the applied load within 1 %, no vertex-triangle pair ever acts and
+    no triangles intersect; without it the strip falls through the rails."""
+    held = case.strips(True)
+    assert held["contact"][2] == pytest.approx(-held["load"][2], rel=0.01)
+    assert held["vertex_pairs"] == 0 and held["edge_pairs"] > 0 and max(held["intersections"]) == 0
+    assert held["lowest"] > 0.0
+    assert case.strips(False, steps=3000)["lowest"] < -case.THICKNESS
 
 
 def test_closest_points_match_ipctk():
@@ -105,9 +151,9 @@ def test_surface_triangulation_and_refused_distances():
             SelfContact(model, contact_distance=bad)
 
 
-def _short_fold(comm, steps: int = 2000) -> tuple[np.ndarray, int]:
+def _short_fold(comm, steps: int = 2000) -> tuple[np.ndarray, int, int]:
     """Positions (N, 3) [m] of all nodes, ordered by their reference coordinates, after `steps` of the fold with
-    self-contact, and the number of contact pairs then."""
+    self-contact, and the numbers of vertex-triangle and of edge-edge contact pairs then."""
     model = case.fold_model(comm)
     contact = SelfContact(model)
     integrator = case._integrator(model, [contact], case.FOLD_RAYLEIGH)
@@ -116,7 +162,7 @@ def _short_fold(comm, steps: int = 2000) -> tuple[np.ndarray, int]:
     x = contact.surface.positions(integrator.d.getArray(readonly=True))
     order = np.lexsort(np.round(contact.surface.reference / 1e-9).T)
     integrator.destroy()
-    return x[order], len(contact.pairs)
+    return x[order], len(contact.pairs), len(contact.edge_pairs)
 
 
 @pytest.mark.mpi
@@ -124,16 +170,17 @@ def test_one_and_two_ranks_agree_on_a_short_fold():
     """The fold's upper leg falling onto the lower one until contact acts: the positions on the ranks of
     COMM_WORLD and on one rank agree within 1e-6 m (the same pairs found across rank boundaries; only the
     summation order differs)."""
-    parallel, pairs = _short_fold(MPI.COMM_WORLD)
-    serial, _ = _short_fold(MPI.COMM_SELF)
-    assert pairs > 0
+    parallel, pairs, edge_pairs = _short_fold(MPI.COMM_WORLD)
+    serial, _, _ = _short_fold(MPI.COMM_SELF)
+    assert pairs > 0 and edge_pairs > 0
     assert np.max(np.abs(parallel - serial)) < 1e-6
 
 
 def test_verlet_list_and_compiled_response_match_the_direct_route():
-    """Along the fold (serial, 3000 steps: contact from step ~1900), the Verlet list's pairs equal a full search's
-    at every 50th step, it searched far fewer times than it stepped (~200 of 3000 steps while the leg falls), and
-    the compiled response equals its numpy twin (forces to 1e-12 of the largest)."""
+    """Along the fold (serial, 3000 steps: contact from step ~1900), the Verlet list's vertex-triangle and edge-edge
+    pairs equal a full search's at every 50th step, it searched far fewer times than it stepped (~200 of 3000 steps
+    while the leg falls), and the compiled response of both kinds equals its numpy twin (forces to 1e-12 of the
+    largest)."""
     model = case.fold_model(MPI.COMM_SELF)
     contact = SelfContact(model, friction=0.3)
     integrator = case._integrator(model, [contact], case.FOLD_RAYLEIGH)
@@ -146,12 +193,16 @@ def test_verlet_list_and_compiled_response_match_the_direct_route():
             np.testing.assert_array_equal(kept.vertex, direct.vertex)
             np.testing.assert_array_equal(kept.triangle, direct.triangle)
             np.testing.assert_allclose(kept.distance, direct.distance, rtol=0, atol=1e-15)
+            direct_edges, kept_edges = contact.contact_edge_pairs(x).sorted(), contact.edge_pairs.sorted()
+            np.testing.assert_array_equal(kept_edges.first, direct_edges.first)
+            np.testing.assert_array_equal(kept_edges.second, direct_edges.second)
+            np.testing.assert_allclose(kept_edges.distance, direct_edges.distance, rtol=0, atol=1e-15)
             compared += len(direct) > 0
     assert compared >= 15 and contact.searches < 300
     pairs = contact.pairs
     compiled = contact.force.copy()
     vel = contact.surface.gather(integrator.velocity_predictor.getArray(readonly=True)[contact.surface.nodes.dofs])
-    contact._respond(x, vel, pairs, contact._masses(integrator)[0], integrator.dt)
-    assert len(pairs) > 0
+    contact._respond(x, vel, pairs, contact._masses(integrator)[0], integrator.dt, contact.edge_pairs)
+    assert len(pairs) > 0 and len(contact.edge_pairs) > 0
     np.testing.assert_allclose(compiled, contact.force, rtol=0, atol=1e-12 * np.abs(compiled).max())
     integrator.destroy()

@@ -7,7 +7,7 @@ steps from rest (the settling under gravity, the start of every sleeve run) afte
 alternate `repeats` times so that the machine's load spreads over both. Reported: the median wall time per step
 [ms] of each, their ratio (the acceptance: at most 1.5), the critical steps dt [s] (the self-contact's penalty
 spring enters the step's frequency), the self-contact's own split (gather, search, response) per step and its
-pair-list rebuilds. Units: seconds, milliseconds where named.
+pair-list rebuilds, the last step's vertex-triangle and edge-edge pairs. Units: seconds, milliseconds where named.
 """
 from __future__ import annotations
 
@@ -42,6 +42,7 @@ def timed_steps(n_around: int, n_along: int, self_contact: bool, steps: int, war
     if cloth is not None:
         out.update({f"{k}_ms": 1e3 * (v - before.get(k, 0.0)) / steps for k, v in cloth.timings.items()})
         out["pairs"] = len(cloth.pairs)
+        out["edge_pairs"] = len(cloth.edge_pairs)
     run.destroy()
     return out
 
@@ -68,7 +69,7 @@ def main(argv: list[str] | None = None) -> None:
         if on:
             parts = {k: statistics.median(r[k] for r in runs[on]) for k in runs[on][0] if k.endswith("_ms")}
             extra = ", " + ", ".join(f"{k[:-3]} {v:.3f} ms" for k, v in parts.items()) + \
-                f", pairs {runs[on][-1]['pairs']}"
+                f", pairs {runs[on][-1]['pairs']} (edge-edge {runs[on][-1]['edge_pairs']})"
         print(f"{args.mesh} {label}: {median[on]:.3f} ms per step (runs {[round(r['ms_per_step'], 3) for r in runs[on]]}),"
               f" dt {runs[on][0]['dt']:.4g} s{extra}", flush=True)
     print(f"ratio {median[True] / median[False]:.3f} ({MPI.COMM_WORLD.size} rank(s))", flush=True)

@@ -34,8 +34,14 @@ Parallel: every rank gathers the positions and velocities of all nodes (ClothSur
 all forces, and adds the forces of its owned nodes to its rows, so the pairs across rank boundaries are treated as
 on one rank. Several garments (fabricfem.scenes.garments): with `layer` set (each node's garment), the pairs
 between two garments a < b are answered by their own call of the response and their normal forces kept in
-`between[(a, b)]` (the per-garment monitors, fabricfem.wear.layers); the forces are the same. Not done: edge-edge
-proximity (two edges crossing with no vertex within d_c of a triangle).
+`between[(a, b)]` (the per-garment monitors, fabricfem.wear.layers); the forces are the same.
+
+Edge-edge pairs (`edges=True`, the default; fabricfem.contact.edge_contact, [Bridson2002, sec. 6]): two edges of the
+triangulation that share no node, closer than d_c with their closest points inside both edges, take the same law
+with the four nodes' barycentric weights; they hold two layers whose edges cross with no vertex within d_c of the
+other's triangles (coarse folds, free edges side by side). Their candidates ride on the same Verlet list (searched
+again together), their neighbours are excluded by the same reference rule, their forces go into the same arrays
+(and `between`), and `edge_pairs` holds the step's active pairs.
 SI units.
 """
 from __future__ import annotations
@@ -45,9 +51,10 @@ import time
 
 import numpy as np
 
-from fabricfem.contact import cloth_kernel, nodal
+from fabricfem.contact import cloth_kernel, edge_contact, nodal
 from fabricfem.contact import friction as friction_law
 from fabricfem.contact.cloth_surface import ClothSurface
+from fabricfem.contact.edge_contact import EdgePairs
 from fabricfem.contact.proximity import Pairs, compiled_pairs
 
 EXCLUSION = 2.0          # reference distance / d_c below which a vertex and a triangle are neighbours
@@ -79,15 +86,17 @@ class SelfContact:
         joined: (k, 2) global node indices (ClothSurface numbering) of node pairs that make two mesh parts one
             (a garment's seams), for the neighbour rule (module docstring).
         skin: s [m] of the Verlet list (module docstring), default d_c; > 0.
+        edges: also the edge-edge pairs (module docstring).
 
     After each step: `force` (N, 3) the contact forces [N] on all nodes (global order of `surface`, every rank),
     `normal_force` / `friction_force` its two parts, `pairs` the active pairs, `timings` [s] accumulated,
-    `searches` the number of pair searches (Verlet list rebuilds).
+    `searches` the number of pair searches (Verlet list rebuilds), `edge_pairs` the active edge-edge pairs (rows of
+    `edges`, the (E, 2) global node indices of the triangulation's edges).
     """
 
     def __init__(self, model, contact_distance: float | None = None, friction: float = 0.0,
                  penalty: float | None = None, damping: float = DEFAULT_DAMPING, joined: np.ndarray | None = None,
-                 skin: float | None = None):
+                 skin: float | None = None, edges: bool = True):
         self.model = model
         self.comm = model.comm
         self.surface = ClothSurface(model)
@@ -104,6 +113,13 @@ class SelfContact:
         near = self.search(s.reference, EXCLUSION * self.distance)
         same = self.part[near.vertex] == self.part[s.triangles[near.triangle, 0]]
         self._excluded = np.sort(self._keys(near.subset(same)))
+        self.use_edges = bool(edges)
+        self.edges = edge_contact.surface_edges(s.triangles)
+        near_edges = self.search_edges(s.reference, EXCLUSION * self.distance, interior=False)
+        same = self.part[self.edges[near_edges.first, 0]] == self.part[self.edges[near_edges.second, 0]]
+        self._excluded_edges = np.sort(near_edges.subset(same).keys(len(self.edges)))
+        self._inverse_area = np.ascontiguousarray(np.where(s.held, 0.0, 1.0 / s.area))
+        self.edge_pairs = self._edge_candidates = edge_contact.no_edge_pairs()
         N = s.count
         self.force, self.normal_force, self.friction_force = np.zeros((N, 3)), np.zeros((N, 3)), np.zeros((N, 3))
         self.pairs = Pairs(*(np.zeros(0, dtype=np.int64),) * 2, np.zeros(0), np.zeros((0, 3)))
@@ -119,7 +135,8 @@ class SelfContact:
 
     def penalty_frequency(self) -> float:
         """omega_p = sqrt(4 k_N / (rho t)) [rad/s]: the pair spring on the reduced mass of two nodes (factor 2), a
-        node both a vertex and a triangle's node (factor 2); add it to the step's frequency as the body contact's."""
+        node both a vertex and a triangle's node (factor 2); add it to the step's frequency as the body contact's.
+        An edge-edge pair's spring has at most half this frequency (fabricfem.contact.edge_contact); not added."""
         return float(np.sqrt(4.0 * self.penalty / self.model.fabric.areal_density))
 
     def limit_frequency(self, omega: float) -> None:
@@ -134,31 +151,44 @@ class SelfContact:
         return compiled_pairs(x, s.triangles, s.triangle_cell, s.cell_nodes,
                               self.distance if radius is None else radius, self.comm)
 
+    def search_edges(self, x: np.ndarray, radius: float | None = None, interior: bool = True) -> EdgePairs:
+        """The edge-edge pairs of the positions x (N, 3) [m] closer than `radius` (default d_c) that share no node;
+        with `interior` only those that take contact (fabricfem.contact.edge_contact.compiled_pairs)."""
+        return edge_contact.compiled_pairs(x, self.edges, self.distance if radius is None else radius,
+                                           FEATURE_TOLERANCE, self.comm, interior)
+
     def _keys(self, pairs: Pairs) -> np.ndarray:
         return pairs.vertex * len(self.surface.triangles) + pairs.triangle
 
     def contact_pairs(self, x: np.ndarray, radius: float | None = None) -> Pairs:
         """`search` without the reference neighbours (module docstring): the pairs that take contact."""
         pairs = self.search(x, radius)
-        keys = self._keys(pairs)
-        where = np.searchsorted(self._excluded, keys)
-        excluded = self._excluded[np.minimum(where, len(self._excluded) - 1)] == keys if len(self._excluded) else \
-            np.zeros(len(keys), dtype=bool)
-        return pairs.subset(~excluded)
+        return pairs.subset(~_member(self._keys(pairs), self._excluded))
+
+    def contact_edge_pairs(self, x: np.ndarray, radius: float | None = None, interior: bool = True) -> EdgePairs:
+        """`search_edges` without the reference neighbours (module docstring)."""
+        pairs = self.search_edges(x, radius, interior)
+        return pairs.subset(~_member(pairs.keys(len(self.edges)), self._excluded_edges))
 
     def near_pairs(self, x: np.ndarray) -> Pairs:
         """The pairs closer than d_c at the positions x (N, 3) [m] that take contact, from the Verlet list
         (module docstring; the same pairs as `contact_pairs(x)`), grouped by vertex."""
         x = np.ascontiguousarray(x, dtype=float)
+        pairs = None
         if self._candidates is not None:
             pairs = cloth_kernel.narrow(x, self._searched_at, 0.5 * self.skin, self._candidates, self._triangles,
                                         self.distance, self.comm)
-            if pairs is not None:
-                return pairs
-        self._candidates = self.contact_pairs(x, self.distance + self.skin)
-        self._searched_at = x.copy()
-        self.searches += 1
-        return cloth_kernel.narrow(x, x, 0.0, self._candidates, self._triangles, self.distance, self.comm)
+        if pairs is None:
+            self._candidates = self.contact_pairs(x, self.distance + self.skin)
+            if self.use_edges:
+                self._edge_candidates = self.contact_edge_pairs(x, self.distance + self.skin, interior=False)
+            self._searched_at = x.copy()
+            self.searches += 1
+            pairs = cloth_kernel.narrow(x, x, 0.0, self._candidates, self._triangles, self.distance, self.comm)
+        if self.use_edges:
+            self.edge_pairs = edge_contact.narrow(x, self._edge_candidates, self.edges, self.distance,
+                                                  FEATURE_TOLERANCE, self.comm)
+        return pairs
 
     def smallest_distance(self, x: np.ndarray, radius: float) -> float:
         """Smallest distance [m] between a vertex and a non-neighbouring triangle at the positions x, `radius` [m]
@@ -186,46 +216,55 @@ class SelfContact:
         rows = s.nodes.dofs
         x = s.gather(s.nodes.reference + integrator.d.getArray(readonly=True)[rows])
         toc = time.perf_counter()
-        had_pairs = len(self.pairs) > 0
+        had_pairs = len(self.pairs) + len(self.edge_pairs) > 0
         self.pairs = pairs = self.near_pairs(x)
+        edge_pairs = self.edge_pairs
         tac = time.perf_counter()
-        if len(pairs) or had_pairs:
+        if len(pairs) or len(edge_pairs) or had_pairs:
             for buffer in (self.force, self.normal_force, self.friction_force):
                 buffer.fill(0.0)
         self.between = {}
-        if len(pairs):      # the same count on every rank (all search the gathered surface)
+        if len(pairs) or len(edge_pairs):      # the same counts on every rank (all search the gathered surface)
             vel = s.gather(integrator.velocity_predictor.getArray(readonly=True)[rows])
             mass, inverse = self._masses(integrator)
             law = (self.penalty, self.distance, self.damping, self.mu, integrator.dt, FEATURE_TOLERANCE)
+            share = edge_contact.shares(edge_pairs, self.edges, self.surface.count)
             if self.layer is None:
                 cloth_kernel.respond(pairs, self._triangles, x, vel, inverse, self.surface.area, law,
                                      self.normal_force, self.friction_force, self.comm)
+                edge_contact.respond(edge_pairs, share, self.edges, x, vel, inverse, self._inverse_area, law[:5],
+                                     self.normal_force, self.friction_force, self.comm)
             else:
-                self._respond_by_layers(pairs, x, vel, inverse, law)
+                self._respond_by_layers(pairs, edge_pairs, share, x, vel, inverse, law)
             np.add(self.normal_force, self.friction_force, out=self.force)
             rhs.getArray()[rows] += s.owned_rows(self.force)
         self.timings["gather"] += toc - tic
         self.timings["search"] += tac - toc
         self.timings["response"] += time.perf_counter() - tac
 
-    def _respond_by_layers(self, pairs: Pairs, x: np.ndarray, vel: np.ndarray, inverse: np.ndarray,
-                           law: tuple) -> None:
-        """The pairs' forces as `cloth_kernel.respond` gives them, those between two garments (node labels
-        `layer`, a < b) also kept apart: their normal forces [N] in `between[(a, b)]` (N, 3). A vertex's pairs on
-        one feature stay together (the feature's nodes belong to one garment), so the feature share is unchanged."""
-        a = self.layer[pairs.vertex]
-        b = self.layer[self._triangles[pairs.triangle, 0]]
-        lo, hi = np.minimum(a, b), np.maximum(a, b)
-        same = lo == hi
-        cloth_kernel.respond(pairs.subset(same), self._triangles, x, vel, inverse, self.surface.area, law,
-                             self.normal_force, self.friction_force, self.comm)
-        for first, second in sorted(set(zip(lo[~same].tolist(), hi[~same].tolist()))):
+    def _respond_by_layers(self, pairs: Pairs, edge_pairs: EdgePairs, share: np.ndarray, x: np.ndarray,
+                           vel: np.ndarray, inverse: np.ndarray, law: tuple) -> None:
+        """The pairs' forces as `cloth_kernel.respond` and `edge_contact.respond` give them, those between two
+        garments (node labels `layer`, a < b) also kept apart: their normal forces [N] in `between[(a, b)]` (N, 3).
+        A vertex's pairs on one feature stay together (the feature's nodes belong to one garment), so the feature
+        share is unchanged; the edge pairs' shares are those of all edge pairs (`share`)."""
+        lo, hi = _layer_pair(self.layer[pairs.vertex], self.layer[self._triangles[pairs.triangle, 0]])
+        edge_lo, edge_hi = _layer_pair(self.layer[self.edges[edge_pairs.first, 0]],
+                                       self.layer[self.edges[edge_pairs.second, 0]])
+        garments = set(zip(lo[lo != hi].tolist(), hi[lo != hi].tolist()))
+        garments |= set(zip(edge_lo[edge_lo != edge_hi].tolist(), edge_hi[edge_lo != edge_hi].tolist()))
+        groups = [((lo == hi), (edge_lo == edge_hi), None)]
+        groups += [((lo == a) & (hi == b), (edge_lo == a) & (edge_hi == b), (a, b)) for a, b in sorted(garments)]
+        for vertex_triangle, edge_edge, key in groups:
             normal, friction = np.zeros_like(self.normal_force), np.zeros_like(self.friction_force)
-            cloth_kernel.respond(pairs.subset((lo == first) & (hi == second)), self._triangles, x, vel, inverse,
-                                 self.surface.area, law, normal, friction, self.comm)
+            cloth_kernel.respond(pairs.subset(vertex_triangle), self._triangles, x, vel, inverse, self.surface.area,
+                                 law, normal, friction, self.comm)
+            edge_contact.respond(edge_pairs.subset(edge_edge), share[edge_edge], self.edges, x, vel, inverse,
+                                 self._inverse_area, law[:5], normal, friction, self.comm)
             self.normal_force += normal
             self.friction_force += friction
-            self.between[(first, second)] = normal
+            if key is not None:
+                self.between[key] = normal
 
     def correct(self, integrator, t: float) -> None:
         """Nothing after the division (a penalty law)."""
@@ -237,11 +276,20 @@ class SelfContact:
     def restore(self, state: dict) -> None:
         """Nothing to restore (`state`)."""
 
-    def _respond(self, x: np.ndarray, vel: np.ndarray, pairs: Pairs, mass: np.ndarray, dt: float) -> None:
-        """The forces of the pairs (module docstring) into force, normal_force, friction_force (N, 3) [N]."""
+    def _respond(self, x: np.ndarray, vel: np.ndarray, pairs: Pairs, mass: np.ndarray, dt: float,
+                 edge_pairs: EdgePairs | None = None) -> None:
+        """The forces of the pairs and the edge pairs (module docstring) into force, normal_force, friction_force
+        (N, 3) [N] (numpy: the compiled response's twin)."""
         N = self.surface.count
         for buffer in (self.force, self.normal_force, self.friction_force):
             buffer.fill(0.0)
+        if edge_pairs is not None and len(edge_pairs):
+            law = (self.penalty, self.distance, self.damping, self.mu, dt)
+            normal, friction = edge_contact.respond_numpy(edge_pairs, edge_contact.shares(edge_pairs, self.edges, N),
+                                                          self.edges, x, vel, 1.0 / mass, self._inverse_area, law)
+            self.normal_force += normal
+            self.friction_force += friction
+            np.add(self.normal_force, self.friction_force, out=self.force)
         if not len(pairs):
             return
         tri = self.surface.triangles[pairs.triangle]
@@ -267,7 +315,7 @@ class SelfContact:
             nodes = np.concatenate([p, tri.ravel()])
             for k in range(3):
                 values = np.concatenate([pair_force[:, k], -(w * pair_force[:, k:k + 1]).ravel()])
-                total[:, k] = np.bincount(nodes, values, minlength=N)
+                total[:, k] += np.bincount(nodes, values, minlength=N)
         np.add(self.normal_force, self.friction_force, out=self.force)
 
     def _normals(self, offset: np.ndarray, distance: np.ndarray, corners: np.ndarray) -> np.ndarray:
@@ -288,3 +336,15 @@ def _feature_share(vertex: np.ndarray, tri: np.ndarray, w: np.ndarray) -> np.nda
     _, inverse, counts = np.unique(np.column_stack([vertex, feature]), axis=0, return_inverse=True,
                                    return_counts=True)
     return 1.0 / counts[inverse.ravel()]
+
+
+def _member(keys: np.ndarray, sorted_keys: np.ndarray) -> np.ndarray:
+    """(n,) True where a key of `keys` is in the sorted array `sorted_keys`."""
+    if not len(sorted_keys):
+        return np.zeros(len(keys), dtype=bool)
+    return sorted_keys[np.minimum(np.searchsorted(sorted_keys, keys), len(sorted_keys) - 1)] == keys
+
+
+def _layer_pair(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(min, max) of two (n,) arrays of garment labels."""
+    return np.minimum(a, b), np.maximum(a, b)

@@ -80,13 +80,20 @@ class NodalLoad:
 
 def _two_rectangles(model, n_bottom: int, n_top: int, gap: float) -> None:
     """gmsh: the lower sheet [-0.15, 0.15]^2 at z = 0, the upper [-0.1, 0.1]^2 at z = gap (structured quads)."""
+    _rectangles(model, [(-0.15, 0.15, -0.15, 0.15, 0.0, n_bottom, n_bottom),
+                        (-0.095, 0.095, -0.095, 0.095, gap, n_top, n_top)])
+
+
+def _rectangles(model, rectangles: list[tuple[float, float, float, float, float, int, int]]) -> None:
+    """gmsh: the rectangles [x0, x1] x [y0, y1] at height z [m] of nx x ny structured quads each, (x0, x1, y0, y1,
+    z, nx, ny)."""
     geo = model.geo
     surfaces, lines = [], []
-    for half, z, n in ((0.15, 0.0, n_bottom), (0.095, gap, n_top)):
-        corners = [geo.addPoint(sx * half, sy * half, z) for sx, sy in ((-1, -1), (1, -1), (1, 1), (-1, 1))]
+    for x0, x1, y0, y1, z, nx, ny in rectangles:
+        corners = [geo.addPoint(x, y, z) for x, y in ((x0, y0), (x1, y0), (x1, y1), (x0, y1))]
         edges = [geo.addLine(corners[i], corners[(i + 1) % 4]) for i in range(4)]
         surface = geo.addPlaneSurface([geo.addCurveLoop(edges)])
-        for e in edges:
+        for e, n in zip(edges, (nx, ny, nx, ny)):
             geo.mesh.setTransfiniteCurve(e, n + 1)
         geo.mesh.setTransfiniteSurface(surface, "Left", corners)
         geo.mesh.setRecombine(2, surface)
@@ -182,6 +189,79 @@ def slide(steps: int = 1500, comm=MPI.COMM_WORLD) -> dict:
            "ndofs": model.W.dofmap.index_map.size_global * 5}
     integrator.destroy()
     return out
+
+
+# ---------------------------------------------------------------------------- crossed strips
+STRIP_WIDTH = 0.005                          # m, one cell across
+STRIP_HALF = 0.02                            # m, half length of every strip (two cells of 0.02 m along)
+RAIL_Y = 0.015                               # m, the rails' centre lines at y = +-RAIL_Y
+STRIP_STEPS, STRIP_RECORDS = 6000, 30
+STRIP_RAYLEIGH = (200.0, 0.0)                # 1/s: about half the critical damping of the strip's bending between the rails
+
+
+def crossed_strips(edges: bool, comm=MPI.COMM_WORLD):
+    """Two held rails along x (x in [-0.02, 0.02] m, y in +-[0.0125, 0.0175] m, z = 0) and a free strip along y across
+    them (x in [0.0025, 0.0075] m, y in [-0.02, 0.02] m, z = 1.05 t), all 1 cell wide and 2 cells long: the Q2 nodes
+    lie every 0.01 m along a strip, so no node of either lies within 2.5 mm (2.5 d_c) of the other's triangles, and
+    only their edges cross (module docstring). Returns (model, contact with or without `edges`, the pressure load
+    on the free strip)."""
+    w, L = STRIP_WIDTH, STRIP_HALF
+    rails = [(-L, L, y - 0.5 * w, y + 0.5 * w, 0.0, 2, 1) for y in (-RAIL_Y, RAIL_Y)]
+    free = (0.5 * w, 1.5 * w, -L, L, 1.05 * THICKNESS, 1, 2)
+    fmesh = mesh_from_gmsh(lambda m: _rectangles(m, rails + [free]), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0), comm,
+                           name="crossed-strips")
+    model = ShellModel(fmesh, cotton())
+    model.constrain(lambda x: x[2] < 0.5 * THICKNESS, u=(0.0, 0.0, 0.0), theta=(0.0, 0.0))
+    model.compile()
+    contact = SelfContact(model, edges=edges)
+    load = NodalLoad(contact.surface, lambda X: X[:, 2] > 0.5 * THICKNESS, (0.0, 0.0, -PRESSURE))
+    return model, contact, load
+
+
+def strips(edges: bool = True, steps: int = STRIP_STEPS, records: int = STRIP_RECORDS, comm=MPI.COMM_WORLD) -> dict:
+    """The free strip pressed onto the rails (`crossed_strips`): the mean contact force [N] on it over the last third
+    of `steps`, the applied load [N], the intersecting triangle pairs at every record (fabricfem.contact.intersections),
+    the most vertex-triangle and edge-edge pairs of a step, the free strip's lowest node height at the end [m]."""
+    model, contact, load = crossed_strips(edges, comm)
+    integrator = _integrator(model, [load, contact], STRIP_RAYLEIGH)
+    upper = contact.surface.reference[:, 2] > 0.5 * THICKNESS
+    mean, counted, counts, most = np.zeros(3), 0, [], [0, 0]
+    for step in range(1, steps + 1):
+        integrator.step()
+        most = [max(most[0], len(contact.pairs)), max(most[1], len(contact.edge_pairs))]
+        if step > 2 * steps // 3:
+            mean += contact.force[upper].sum(axis=0)
+            counted += 1
+        if step % (steps // records) == 0:
+            x = contact.surface.positions(integrator.d.getArray(readonly=True))
+            counts.append(intersecting_pairs(x, contact.surface.triangles))
+    out = {"contact": mean / counted, "load": load.total(), "intersections": counts, "vertex_pairs": most[0],
+           "edge_pairs": most[1], "lowest": float(x[upper, 2].min()),
+           "ndofs": model.W.dofmap.index_map.size_global * 5}
+    integrator.destroy()
+    return out
+
+
+def strip_rows(name: str) -> list[CaseResult]:
+    """The crossed strips' rows of the case: with the edge-edge term the load balance (1 %), no intersecting pair,
+    no vertex-triangle pair at all (only the edges hold); without it the free strip falls through the rails."""
+    with Timer() as timer:
+        held, loose = strips(True), strips(False)
+    wall = timer.elapsed
+    n = held["ndofs"]
+    return [
+        result(name, "crossed strips: contact force on the free strip [N] = the applied pressure load, only edge-edge "
+               f"pairs acting (most vertex-triangle pairs of a step: {held['vertex_pairs']}, edge-edge: "
+               f"{held['edge_pairs']}; mean over the last third; 1 %)", held["contact"][2], -held["load"][2], 0.01, n,
+               wall),
+        CaseResult(name, f"crossed strips: most intersecting triangle pairs over {STRIP_RECORDS} records (0) and no "
+                   "vertex-triangle pair (the edges alone hold)", max(held["intersections"]) + held["vertex_pairs"],
+                   0.0, float("nan"), 0.0, max(held["intersections"]) == 0 and held["vertex_pairs"] == 0, n, wall),
+        CaseResult(name, "crossed strips without the edge-edge term: the free strip's lowest node at the end [m] < "
+                   "-t (it fell through the rails; flat strips crossing flat rails intersect only at the instant "
+                   f"they pass, so the count, {max(loose['intersections'])}, cannot show it)", loose["lowest"],
+                   -THICKNESS, float("nan"), float("nan"), loose["lowest"] < -THICKNESS, n, wall),
+    ]
 
 
 # ---------------------------------------------------------------------------- the fold
@@ -301,7 +381,7 @@ def self_contact_case() -> list[CaseResult]:
                    max(loose["intersections"]), 0.0, float("nan"), float("nan"), max(loose["intersections"]) > 0,
                    loose["ndofs"], wall),
     ]
-    return rows
+    return rows + strip_rows(name)
 
 
 def _fold_radius() -> float:
