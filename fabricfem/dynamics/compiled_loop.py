@@ -33,7 +33,7 @@ from dolfinx import fem
 from mpi4py import MPI
 
 from fabricfem.dynamics.explicit_source import CDEF, SOURCE
-from fabricfem.dynamics.integrator import ENERGY_FLOOR, History, compiled_energy
+from fabricfem.dynamics.integrator import ENERGY_FLOOR, History, compiled_energy, record_and_ask
 from fabricfem.forms.jit import KERNEL_JIT, built_once
 
 FLAGS = ("-O3", "-march=native", "-ffp-contract=off", "-g0")
@@ -246,13 +246,6 @@ class CompiledLoop:
             if self.steps(self._chunk(n_steps, output_every)):
                 integ._check(integ.energy0, integ.max_work)
             k = integ.run_step
-            recorded = k % output_every == 0 or k == n_steps
-            if recorded:
-                record(0)
-            if report:
-                report(k, n_steps, integ.t, time.perf_counter() - start)
-            if recorded and should_stop is not None and k < n_steps:
-                reason = should_stop()
-                if reason:
-                    history.stopped = f"{reason} at t = {integ.t:.6g} s (step {k} of {n_steps})"
-                    break
+            if record_and_ask(integ.t, k, n_steps, output_every, lambda: record(0), report, should_stop, history,
+                              start):
+                break

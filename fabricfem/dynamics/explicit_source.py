@@ -24,7 +24,10 @@ operations of the Python loop do.
 """
 from __future__ import annotations
 
-CDEF = """
+# ff_form: one compiled form over cells: kernel, cells, element vector length (0: a functional), packed coefficient
+# width per cell with the state's block at state_start, the cells' state dofs (ncells x ndofs, or x the state
+# block's length for a functional), the packed coefficients, constants and coordinate dofs (ncells x ncoord)
+TYPES = """
 typedef void (*ff_kernel)(double*, const double*, const double*, const double*, const int*, const uint8_t*);
 typedef struct {
   ff_kernel kernel;
@@ -44,6 +47,9 @@ typedef struct {
   const ff_form* energy;
   double t, lam, external_work, dissipated, max_work;
 } ff_loop;
+"""
+
+CDEF = TYPES + """
 int ff_run(ff_loop* L, int n_steps, const double* lams);
 double ff_strain_energy(const ff_loop* L);
 """
@@ -52,30 +58,7 @@ SOURCE = r"""
 #include <math.h>
 #include <stdint.h>
 #include <string.h>
-
-typedef void (*ff_kernel)(double*, const double*, const double*, const double*, const int*, const uint8_t*);
-/* one compiled form over cells: kernel, cells, element vector length (0: a functional), packed coefficient width
-   per cell with the state's block at state_start, the cells' state dofs (ncells x ndofs, or x the state block's
-   length for a functional), the packed coefficients, constants and coordinate dofs (ncells x ncoord) */
-typedef struct {
-  ff_kernel kernel;
-  int ncells, ndofs, width, state_start, ncoord;
-  const int32_t* dofs;
-  double* coefficients;
-  const double* constants;
-  const double* coordinates;
-} ff_form;
-typedef struct {
-  int n, nbc, nforce, nenergy, has_damping, check_energy;
-  double dt, half_dt, half_dt2, energy_bound, energy_floor, energy0;
-  double *d, *v, *a, *cv, *v_pred, *rhs, *d_old, *cv_old, *d_old_bc, *element;
-  const double *mass, *damping, *denominator, *f_ref, *bc_scaled, *bc_fixed;
-  const int32_t* bc_rows;
-  const ff_form* force;
-  const ff_form* energy;
-  double t, lam, external_work, dissipated, max_work;
-} ff_loop;
-
+""" + TYPES + r"""
 /* copy the state d into the state block of every cell's packed coefficients (nstate values per cell) */
 static void gather(const ff_form* f, const double* d, int nstate)
 {

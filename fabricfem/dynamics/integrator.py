@@ -354,16 +354,9 @@ class TimeIntegrator:
                     self._account(d_old, lam_old, cv_old)
                 self.max_work = max(self.max_work, abs(self.external_work))
                 self._check(self.energy0, self.max_work)
-                recorded = k % output_every == 0 or k == n_steps
-                if recorded:
-                    record(iterations)
-                if report:
-                    report(k, n_steps, self.t, time.perf_counter() - start)
-                if recorded and should_stop is not None and k < n_steps:
-                    reason = should_stop()
-                    if reason:
-                        history.stopped = f"{reason} at t = {self.t:.6g} s (step {k} of {n_steps})"
-                        break
+                if record_and_ask(self.t, k, n_steps, output_every, lambda: record(iterations), report,
+                                  should_stop, history, start):
+                    break
         finally:
             d_old.destroy()
             cv_old.destroy()
@@ -434,3 +427,21 @@ class TimeIntegrator:
         """Free the state vectors."""
         for vec in (self.d, self.v, self.a, self._work, self._cv):
             vec.destroy()
+
+
+def record_and_ask(t: float, k: int, n_steps: int, output_every: int, record: Callable[[], None],
+                   report: Callable | None, should_stop: Callable[[], str] | None, history, start: float) -> bool:
+    """After step k of n_steps (time t [s]): a record every `output_every` steps and at the last, the progress
+    report, and at a record before the last the `should_stop()` question; True when it answers a reason (written
+    to history.stopped)."""
+    recorded = k % output_every == 0 or k == n_steps
+    if recorded:
+        record()
+    if report:
+        report(k, n_steps, t, time.perf_counter() - start)
+    if recorded and should_stop is not None and k < n_steps:
+        reason = should_stop()
+        if reason:
+            history.stopped = f"{reason} at t = {t:.6g} s (step {k} of {n_steps})"
+            return True
+    return False
