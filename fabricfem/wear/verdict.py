@@ -45,8 +45,8 @@ class Bounds:
     max_skin_pressure: float = doc("largest contact pressure on the body during the motion [Pa] (garments press "
                                    "with a few kPa; compression classes reach 6-8 kPa)", 100e3)
     max_kinetic_ratio: float = doc("largest kinetic / strain energy ratio during the motion [-] (a worn garment "
-                                   "moves quasi-statically: the shipped sleeve's whole flexion reaches 0.25 on "
-                                   "10 x 13, at 7 deg, in the start-up of the flexion)", 0.5)
+                                   "moves quasi-statically: the shipped sleeve's whole flexion reaches 0.26 on "
+                                   "44 x 57, in the start-up of the flexion)", 0.5)
     max_start_gap: float = doc("largest garment-body distance at the start [m] (farther: the motion file or the "
                                "garment is misplaced)", 0.05)
     require_contact: bool = doc("warn when the body never touches the garment during the motion", True)
