@@ -27,6 +27,7 @@ from fabricfem import io as fio
 from fabricfem.benchmarks.commits import time_once
 from fabricfem.scenes.build import estimated_dofs
 from fabricfem.scenes.sweep import parse_value, set_key
+from fabricfem.scenes.wear_sections import garment_tables
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402  (after the backend)
@@ -43,15 +44,15 @@ def scene_at(data: dict, mesh: str, settings: tuple[str, ...]) -> tuple[dict, in
         if not sep:
             raise ValueError(f"set: expected key=value, got {item!r}")
         set_key(data, key.strip(), parse_value(value))
-    garment = data.get("garment", {})
+    garments = garment_tables(data)
     if mesh != "scene":
         around, _, along = mesh.partition("x")
-        if not (around.isdigit() and along.isdigit()) or garment.get("builder") != "tube":
-            raise ValueError(f"meshes: {mesh!r} is not 'AxB' cells of a tube garment (or 'scene')")
-        garment.update(n_around=int(around), n_along=int(along))
-    tube = garment.get("builder") == "tube"
-    return data, (estimated_dofs({"type": "tube", "n_around": garment["n_around"], "n_along": garment["n_along"]})
-                  if tube else None)
+        if not (around.isdigit() and along.isdigit()) or len(garments) != 1 or garments[0].get("builder") != "tube":
+            raise ValueError(f"meshes: {mesh!r} is not 'AxB' cells of a scene's one tube garment (or 'scene')")
+        garments[0].update(n_around=int(around), n_along=int(along))
+    tubes = all(g.get("builder") == "tube" for g in garments)
+    return data, (sum(estimated_dofs({"type": "tube", "n_around": g["n_around"], "n_along": g["n_along"]})
+                      for g in garments) if tubes else None)
 
 
 def parallel_bench(scene: str | Path, meshes: tuple[str, ...], settings: tuple[str, ...] = (), repeats: int = 3,
