@@ -7,7 +7,7 @@ outward triangulation rigged by linear blend skinning, in C (`fabricfem.body.ski
 * the segments' maps rest -> pose, A_k = R_k diag(1, g, g) (R_k^0)^T, b_k = c_k - A_k c_k^0, from the joints and
   markers (the frames of fabricfem.body.pose.segment_frame, [Man2006, sec. 5.1]; g the donning's transverse growth);
 * the posed vertices, v = sum_k w_k (A_k v^0 + b_k) ([MagnenatThalmann1988]), A_k v^0 + b_k for a vertex of
-  weight 1 on segment k, computed where a search needs them (and for the whole surface by `pose`);
+  weight 1 on segment k, computed where a search needs them, once per pose (and for the whole surface by `pose`);
 * an axis-aligned bounding-box tree over the triangles, built once on the rest pose (top-down, split at the middle
   of the triangles' centroids along the longest axis, leaves of at most LEAF_SIZE triangles, [Ericson2005,
   sec. 6.2]), never rebuilt nor refitted. A node whose triangles all follow one segment k rigidly keeps its rest
@@ -101,7 +101,8 @@ class CompiledSkin:
         a.update({name: np.zeros(nodes, dtype=np.int64) for name in ("left", "right", "first", "count",
                                                                       "node_segment", "mask", "stamp")})
         a.update({name: np.zeros((nodes, 3)) for name in ("rest_lo", "rest_hi", "lo", "hi")})
-        a["perm"] = np.zeros(max(nf, 1), dtype=np.int64)
+        a.update(perm=np.zeros(max(nf, 1), dtype=np.int64), vstamp=np.zeros(nv, dtype=np.int64),
+                 vposed=np.zeros((nv, 3)))
         # kept alive: the struct points into them
         self.arrays = {name: np.ascontiguousarray(v, dtype=float if np.asarray(v).dtype.kind == "f" else np.int64)
                        for name, v in a.items()}

@@ -5,7 +5,7 @@ Data (`skin_mesh`, arrays owned by `CompiledSkin`): the rest vertices (V, 3) [m]
 topology of `fabricfem.body.mesh_distance.Topology`, the tree (left/right children or -1, first/count of a leaf's
 triangles in perm, node_segment: the segment all of a node's vertices follow rigidly or -1, mask: the bits of the
 segments its vertices follow, rest_lo/rest_hi the rest boxes, lo/hi the boxes at the pose numbered stamp, n_blended
-the nodes without a rigid segment). Units: metres.
+the nodes without a rigid segment) and the posed vertices vposed at the pose numbered vstamp. Units: metres.
 """
 from __future__ import annotations
 
@@ -24,6 +24,7 @@ typedef struct {
     int64_t *face_edges; int64_t *edge_faces; int64_t *ring_start; int64_t *ring_face; int64_t *ring_corner;
     int64_t *left; int64_t *right; int64_t *first; int64_t *count; int64_t *perm; int64_t *node_segment;
     int64_t *mask; int64_t *stamp; double *rest_lo; double *rest_hi; double *lo; double *hi;
+    int64_t *vstamp; double *vposed;
 } skin_mesh;
 """
 
@@ -117,8 +118,14 @@ static double corner_distance(const double *x, const double *p, double *b) {
     return d2;
 }
 
-static void posed_corners(const skin_mesh *m, const double *a, const double *b, int64_t f, double *p) {
-    for (int c = 0; c < 3; ++c) posed_vertex(m, a, b, m->faces[3 * f + c], p + 3 * c);
+/* the corners of triangle f posed at the pose numbered `epoch`: each vertex posed once per pose (vposed, vstamp) */
+static void posed_corners(skin_mesh *m, const double *a, const double *b, int64_t epoch, int64_t f, double *p) {
+    for (int c = 0; c < 3; ++c) {
+        int64_t v = m->faces[3 * f + c];
+        double *q = m->vposed + 3 * v;
+        if (m->vstamp[v] != epoch) { posed_vertex(m, a, b, v, q); m->vstamp[v] = epoch; }
+        for (int i = 0; i < 3; ++i) p[3 * c + i] = q[i];
+    }
 }
 """
 
@@ -174,6 +181,7 @@ int64_t skin_build(skin_mesh *m, double *centroid) {
         }
     }
     if (m->nf > 0) build_node(m, centroid, 0, m->nf, 0);
+    for (int64_t v = 0; v < m->nv; ++v) m->vstamp[v] = -1;
     for (int64_t node = m->nodes - 1; node >= 0; --node) {
         int64_t s;
         if (m->left[node] < 0) {
@@ -283,8 +291,8 @@ void skin_pose(const skin_mesh *m, const double *a, const double *b, double *pos
 
 QUERY = r"""
 /* the angle-weighted pseudonormal [Baerentzen2005] of the feature of triangle f at barycentric coordinates bary */
-static void pseudonormal(const skin_mesh *m, const double *a, const double *b, int64_t f, const double *bary,
-                         double *n) {
+static void pseudonormal(skin_mesh *m, const double *a, const double *b, int64_t epoch, int64_t f,
+                         const double *bary, double *n) {
     int small = 0, corner = 0, big = 0;
     double p[9], q[9], e1[3], e2[3];
     for (int i = 0; i < 3; ++i) {
@@ -295,7 +303,7 @@ static void pseudonormal(const skin_mesh *m, const double *a, const double *b, i
         const int64_t *pair = small ? m->edge_faces + 2 * m->face_edges[3 * f + corner] : &f;
         n[0] = n[1] = n[2] = 0.0;
         for (int side = 0; side < (small ? 2 : 1); ++side) {      /* the face, or the edge's two faces */
-            posed_corners(m, a, b, pair[side], p);
+            posed_corners(m, a, b, epoch, pair[side], p);
             sub(p + 3, p, e1); sub(p + 6, p, e2); cross(e1, e2, q); unit(q);
             for (int i = 0; i < 3; ++i) n[i] += q[i];
         }
@@ -306,7 +314,7 @@ static void pseudonormal(const skin_mesh *m, const double *a, const double *b, i
     for (int64_t r = m->ring_start[vertex]; r < m->ring_start[vertex + 1]; ++r) {
         int64_t k = m->ring_corner[r];
         double x[3];
-        posed_corners(m, a, b, m->ring_face[r], p);
+        posed_corners(m, a, b, epoch, m->ring_face[r], p);
         sub(p + 3 * ((k + 1) % 3), p + 3 * k, e1); sub(p + 3 * ((k + 2) % 3), p + 3 * k, e2);
         cross(e1, e2, x);
         double angle = atan2(sqrt(dot(x, x)), dot(e1, e2));
@@ -329,7 +337,7 @@ static inline double node_distance(skin_mesh *m, const double *a, const double *
     return box_distance(m->lo + 3 * node, m->hi + 3 * node, x);
 }
 
-static double leaf_distance(const skin_mesh *m, const double *a, const double *b, int rigid, int64_t f,
+static double leaf_distance(skin_mesh *m, const double *a, const double *b, int rigid, int64_t epoch, int64_t f,
                             const double *x, const double *xl, double *bary) {
     double p[9];
     int64_t s = rigid ? m->vertex_segment[m->faces[3 * f]] : -1;
@@ -337,7 +345,7 @@ static double leaf_distance(const skin_mesh *m, const double *a, const double *b
         for (int c = 0; c < 3; ++c) for (int i = 0; i < 3; ++i) p[3 * c + i] = m->rest[3 * m->faces[3 * f + c] + i];
         return corner_distance(xl + 3 * s, p, bary);
     }
-    posed_corners(m, a, b, f, p);
+    posed_corners(m, a, b, epoch, f, p);
     return corner_distance(x, p, bary);
 }
 
@@ -355,7 +363,7 @@ static double search(skin_mesh *m, const double *a, const double *b, int rigid, 
             for (int i = 0; i < 3; ++i)
                 xl[3 * s + i] = a[9 * s + i] * d[0] + a[9 * s + 3 + i] * d[1] + a[9 * s + 6 + i] * d[2];
         }
-    if (*tri >= 0 && *tri < m->nf) best = leaf_distance(m, a, b, rigid, *tri, x, xl, bary);
+    if (*tri >= 0 && *tri < m->nf) best = leaf_distance(m, a, b, rigid, epoch, *tri, x, xl, bary);
     else *tri = m->nf;
     stack[top++] = 0;
     while (top > 0) {
@@ -364,7 +372,7 @@ static double search(skin_mesh *m, const double *a, const double *b, int rigid, 
         if (m->left[node] < 0) {
             for (int64_t t = m->first[node]; t < m->first[node] + m->count[node]; ++t) {
                 int64_t f = m->perm[t];
-                double d2 = leaf_distance(m, a, b, rigid, f, x, xl, bb);
+                double d2 = leaf_distance(m, a, b, rigid, epoch, f, x, xl, bb);
                 if (d2 < best || (d2 == best && f < *tri)) {
                     best = d2; *tri = f;
                     for (int i = 0; i < 3; ++i) bary[i] = bb[i];
@@ -401,9 +409,9 @@ int64_t skin_query(skin_mesh *m, const double *a, const double *b, int rigid, in
         }
         ++searched;
         double d2 = search(m, a, b, rigid, epoch, xp, tri + p, bp);
-        posed_corners(m, a, b, tri[p], corners);
+        posed_corners(m, a, b, epoch, tri[p], corners);
         for (int i = 0; i < 3; ++i) fp[i] = bp[0] * corners[i] + bp[1] * corners[3 + i] + bp[2] * corners[6 + i];
-        pseudonormal(m, a, b, tri[p], bp, pseudo);
+        pseudonormal(m, a, b, epoch, tri[p], bp, pseudo);
         sub(xp, fp, off);
         double sign = dot(off, pseudo) >= 0.0 ? 1.0 : -1.0, distance = sqrt(mx(d2, 0.0));
         for (int i = 0; i < 3; ++i) normal[3 * p + i] = distance > FOOT_NORMAL ? sign * off[i] / distance : pseudo[i];
