@@ -301,12 +301,11 @@ def test_active_set_gives_the_plain_penalty_solution_on_the_signorini_plate():
 
 def test_active_set_with_friction_gives_the_return_map_solution():
     """Capstan strip (fabricfem.verify.contact, mu = 0.3, theta = pi/2) pulled at one end into partial slip:
-    the return-map Newton solve and the active-set solve (contact set, slip set and segments fixed per
-    Newton solve) from the same state and friction history agree to 1e-10 of the largest state component
-    (both converged to round-off; see the frictionless test). The pull is chosen so that some but not all
-    contact nodes slide, so the fixed slip set is exercised on both branches (measured: 2e-13; a larger
-    pull, 1e-4 m, makes the plain return-map Newton cycle between two iterates, which the active-set solve
-    does not)."""
+    the return-map Newton solve and the active-set solve (contact set and slip set fixed per Newton solve) from
+    the same state and friction history agree to 1e-10 of the largest state component (both converged to
+    round-off; see the frictionless test). The pull is chosen so that some but not all contact nodes slide, so
+    the fixed slip set is exercised on both branches (measured: 2e-13; a larger pull, 1e-4 m, makes the plain
+    return-map Newton cycle between two iterates, which the active-set solve does not)."""
     from fabricfem.solvers.loadstep import solve_load_path
     from fabricfem.solvers.newton import NewtonSolver
     from fabricfem.verify import contact as cases
@@ -418,8 +417,8 @@ def test_bad_active_set_cap_names_the_parameter():
         type(problem)(problem.model, [cases.sphere()], max_active_set_updates=0)
     with pytest.raises(ValueError, match="tie_tolerance"):
         type(problem)(problem.model, [cases.sphere()], tie_tolerance=-1e-6)
-    with pytest.raises(ValueError, match="crease_width"):
-        type(problem)(problem.model, [cases.sphere()], crease_width=-1e-3)
+    with pytest.raises(ValueError, match="blend_width"):
+        type(problem)(problem.model, [cases.sphere()], blend_width=-1e-3)
     with pytest.raises(ValueError, match="max_rotation_step"):
         SleeveConfig.of(max_rotation_step=0.0)
 

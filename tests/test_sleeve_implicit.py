@@ -164,14 +164,13 @@ def test_implicit_defaults_and_bad_time_step():
 @pytest.mark.mpi
 @pytest.mark.skipif(MPI.COMM_WORLD.size == 1, reason="compares a parallel run with a serial one: run under mpirun")
 def test_implicit_torque_history_same_on_one_and_two_ranks():
-    """Implicit route (backward Euler, augmented Lagrangian, active set with ties, the two segments' smooth union
-    of width CREASE_WIDTH) on mesh I, 0.1 s of rest (the sleeve falls onto the arm: the 4.3 mm clearance takes
-    30 ms of free fall) and 4 degrees of flexion: the torque history on COMM_WORLD
-    equals the serial one (COMM_SELF) within 1e-6 relative. Every contact quantity is per owned node and the
-    decisions that could differ (active-set changes, Uzawa stop, step cuts) are allreduced; only the summation
-    order of the assembly differs (round-off 1e-16, measured: equal to the 8 printed digits). On mesh I at 4 degrees
-    no node lies in the crease band (both segment gaps within 1 cm, measured), so the blend only enters through its
-    exponentially small far-field terms; the blend itself is per-node arithmetic (tests/test_body.py)."""
+    """Implicit route (backward Euler, augmented Lagrangian, active set with ties, the arm's blended skin) on
+    mesh I, 0.1 s of rest (the sleeve falls onto the arm: the 4.3 mm clearance takes 30 ms of free fall) and 4
+    degrees of flexion: the torque history on COMM_WORLD equals the serial one (COMM_SELF) within 1e-6 relative.
+    Every contact quantity is per owned node and the decisions that could differ (active-set changes, Uzawa stop,
+    step cuts) are allreduced; only the summation order of the assembly differs (round-off 1e-16, measured: equal
+    to the 8 printed digits). The skin's query is per-node arithmetic (fabricfem.body.blended), the same on every
+    partition."""
     cfg = SleeveConfig.of(n_around=10, n_along=13, friction=0.1, final_angle=4.0, output_angle_step=2.0,
                        solver="implicit", angle_steps=2, settle_time=0.1)
     cfg = cfg.with_(final_angle=2.0, angle_steps=1)

@@ -185,11 +185,14 @@ def _onto_surface(p: np.ndarray, centers, rotations, radii, widths: np.ndarray) 
 class BlendedEllipsoids:
     """The Skin (fabricfem.body.skin) of a `Body`: its segments' ellipsoids posed at t, joined by the smooth
     minimum of width `width` [m] at the joints (module docstring, `pair_widths`). `segment_names`: the body's
-    segments in order."""
+    segments in order. `strict`: a point whose closest point does not converge (deep inside a concave blend) raises
+    RuntimeError in `query`; not strict, it gets the foot of the last iterate (`closest_points`), as the explicit
+    contact's projection does: the Newton iterates of the implicit contact may pass there."""
 
-    def __init__(self, body, width: float = BLEND_WIDTH):
+    def __init__(self, body, width: float = BLEND_WIDTH, strict: bool = True):
         self.body = body
         self.width = check_width(width)
+        self.strict = bool(strict)
         t0 = body.kinematics.time_range[0]
         self.widths = pair_widths(list(body.segments.values()), self.width, body.kinematics.positions(t0))
         self.segment_names = tuple(body.segments)
@@ -209,7 +212,7 @@ class BlendedEllipsoids:
         return blend(x, *self.posed(t), self.widths)[0]
 
     def query(self, x: np.ndarray, t: float) -> SkinQuery:
-        return closest_points(x, *self.posed(t), self.widths)
+        return closest_points(x, *self.posed(t), self.widths, strict=self.strict)
 
     def surface(self, t: float, spacing: float = 0.005) -> tuple[np.ndarray, np.ndarray]:
         """Marching-cubes triangulation (scikit-image) of phi = 0 at time t [s] on a grid of `spacing` [m]:

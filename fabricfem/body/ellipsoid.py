@@ -309,28 +309,3 @@ def nearest_gap(x: np.ndarray, obstacles, segment: np.ndarray | None = None
     nearest = np.argmin(gaps, axis=0) if segment is None else np.asarray(segment, dtype=np.int64)
     cols = np.arange(len(x))
     return gaps[nearest, cols], normals[nearest, cols], nearest
-
-
-def blended_gap(x: np.ndarray, obstacles, width: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Gap [m] of the points x (N, 3) to the smooth union of `obstacles`: a soft minimum of their gaps g_k
-    of width rho = `width` [m] (> 0),
-
-        g = -rho log sum_k exp(-g_k / rho),   grad g = sum_k w_k n_k,   w_k = exp(-g_k / rho) / sum_j exp(-g_j / rho),
-
-    with min_k g_k - rho log K <= g <= min_k g_k (K obstacles: never less conservative than the nearest one,
-    and equal to it up to rho exp(-|g_1 - g_2| / rho) away from where two obstacles are equally near).
-    Returned: g, the unit normal grad g / |grad g| and the nearest obstacle's index. Unlike the nearest
-    obstacle's normal, this normal is continuous across the concave crease where two obstacles meet (the
-    inner elbow): a point there is pushed out of both along the blend instead of out of one into the other."""
-    if not (np.isfinite(width) and width > 0.0):
-        raise ValueError(f"width must be a positive length [m], got {width!r}")
-    gaps, normals = _all_gaps(x, obstacles)
-    if gaps.shape[1] == 0:
-        return np.zeros(0), np.zeros((0, 3)), np.zeros(0, dtype=np.int64)
-    nearest = np.argmin(gaps, axis=0)
-    g_min = gaps[nearest, np.arange(gaps.shape[1])]
-    weights = np.exp(-(gaps - g_min) / width)                 # (K, N), the nearest one has weight 1
-    total = weights.sum(axis=0)
-    g = g_min - width * np.log(total)                          # soft minimum, shifted for stability
-    gradient = np.einsum("kn,kni->ni", weights / total, normals)
-    return g, gradient / np.linalg.norm(gradient, axis=1)[:, None], nearest

@@ -193,16 +193,6 @@ def nearest_gap(x: np.ndarray, ellipsoids: Sequence[Ellipsoid],
     return g, n, nearest
 
 
-def blended_gap(x: np.ndarray, ellipsoids: Sequence[Ellipsoid], width: float
-                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Gap [m], unit normal and nearest segment of the smooth union of the ellipsoids (soft minimum of width
-    `width` [m], fabricfem.body.ellipsoid.blended_gap); ValueError for non-finite positions as nearest_gap."""
-    g, n, nearest = ellipsoid_module.blended_gap(x, ellipsoids, width)
-    if not (np.all(np.isfinite(g)) and np.all(np.isfinite(n))):
-        raise ValueError("x: the contact gap is not finite (positions contain NaN/inf: the solve diverged)")
-    return g, n, nearest
-
-
 def normal_pressure(gap: np.ndarray, multiplier: np.ndarray, penalty: float,
                     active: np.ndarray | None = None) -> np.ndarray:
     """p = < lambda - k_N g > [Pa] (eq. 3.69 with g positive outside; lambda = 0 is the penalty law).

@@ -10,6 +10,9 @@ They duck-type `fabricfem.body.Ellipsoid` as used by `fabricfem.contact.problem.
 
 all vectorised over (N, 3) point arrays.
 
+`ObstacleSkin(obstacles)` is what the implicit contact (ContactProblem) asks of a set of fixed obstacles: the query of
+the wearer's surface contract (fabricfem.body.skin) for their union, seen through the nearest obstacle.
+
 `RoundedBox(lower, upper, radius)` is the set of points within `radius` of the axis-aligned box
 [lower, upper] (bounds may be infinite). Its signed distance is exact:
 
@@ -32,6 +35,9 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
+
+from fabricfem.body.ellipsoid import nearest_gap
+from fabricfem.body.skin import SkinQuery
 
 
 def _points(x) -> np.ndarray:
@@ -189,3 +195,25 @@ def table_edge(edge_x: float, height: float, fillet_radius: float) -> RoundedBox
         raise ValueError(f"edge_x and height must be finite, got {edge_x!r}, {height!r}")
     r = float(fillet_radius)
     return RoundedBox((-np.inf, -np.inf, -np.inf), (edge_x, np.inf, height - r), r)
+
+
+class ObstacleSkin:
+    """The skin (the `query` of the wearer's surface contract, fabricfem.body.skin) of fixed rigid obstacles (Plane,
+    RoundedBox, posed Ellipsoids: anything with gap(x) -> (g, n)): their union, seen from each point x through the
+    nearest obstacle k. gap = g_k(x) [m] (the obstacle's own `gap`: exact for planes and rounded boxes, the ray-cast
+    estimate of Ellipsoid.gap), normal n_k, foot x - g n [m], weight 1 on obstacle k. No blend: where two obstacles
+    are equally near the normal switches from one to the other, as it does on their union. The obstacles do not
+    move: `query(x, t)` is the same at every time t [s]. `segment_names`: "obstacle0", "obstacle1", ... in order;
+    `obstacles`: the frames of the friction's stick points."""
+
+    def __init__(self, obstacles: Sequence):
+        self.obstacles = list(obstacles)
+        self.segment_names = tuple(f"obstacle{k}" for k in range(len(self.obstacles)))
+
+    def query(self, x: np.ndarray, t: float = 0.0) -> SkinQuery:
+        """The union seen from the points x (N, 3) [m] (at any time t [s])."""
+        x = np.asarray(x, dtype=float).reshape(-1, 3)
+        g, n, nearest = nearest_gap(x, self.obstacles)
+        weights = np.zeros((len(x), len(self.obstacles)))
+        weights[np.arange(len(x)), nearest] = 1.0
+        return SkinQuery(g, x - g[:, None] * n, n, weights)

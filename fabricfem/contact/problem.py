@@ -1,4 +1,4 @@
-"""Frictional contact of a ShellModel against rigid ellipsoids, as a ResidualTerm for the implicit solvers.
+"""Frictional contact of a ShellModel against a rigid body's skin, as a ResidualTerm for the implicit solvers.
 
 `ContactProblem(model, obstacles, ...)` holds the contact state of a `fabricfem.shell.ShellModel` and is a
 ResidualTerm (fabricfem.solvers.system): `add_residual` subtracts the nodal contact forces f_contact(x) of
@@ -7,6 +7,19 @@ counted twice under MPI), `add_jacobian` adds the 3x3 nodal blocks, `commit` sto
 `problem.system` is `CompositeSystem(model, [problem])`, R_shell(x) - f_contact(x), which
 `NewtonSolver(problem.system)` and `solve_load_path(problem.system, ...)` drive; the model's data (w, comm,
 F_ref, load_factor, ...) read through the problem as well.
+
+The geometry is the wearer's surface contract (fabricfem.body.skin) and nothing else: at the nodes x and the
+contact's body time t [s] the skin's `query(x, t)` gives the signed gap g [m], the outward normal n and the segment
+weights W (N, K). Against a `Body` the skin is the one the explicit engine uses, its segments joined by the smooth
+blend of width `blend_width` [m] at the joints (fabricfem.body.blended.BlendedEllipsoids; not strict: a Newton
+iterate deep inside a concave blend, where the closest point does not converge, gets the last iterate's foot, as
+in the explicit projection, instead of stopping the solve), or any `skin` of the body (a rigged surface mesh,
+fabricfem.body.mesh_skin); against fixed obstacles (planes, rounded boxes, ellipsoids) it is their union
+(fabricfem.contact.obstacles.ObstacleSkin). The problem keeps the body time and asks the skin at it (the skin
+poses the body itself): so every skin of the contract serves, and the contact's time is the one at which the torque
+monitors pose the joints. A node's friction stick point is kept in the frame of the segment of largest weight (as
+the explicit engine keeps it), and a node carries the share W_ik of its moment into a joint torque of segment k
+(fabricfem.contact.torque.local_torques).
 
 Normal methods: "penalty" ([Man2006, Box 3]: p = k_N <-g>) and "augmented" (eq. 3.69: p = <lambda - k_N g>, Uzawa
 update lambda <- p between Newton solves, `solve_augmented`). Friction: Coulomb with coefficient
@@ -19,21 +32,16 @@ and re-enter contact from one iterate to the next. `solve` therefore fixes the s
 during one Newton solve (nodes in A carry the bilateral spring p = lambda - k_N g, the others p = 0: a
 smooth problem; with friction the set S of sliding nodes is fixed as well: a node of S takes the slip
 branch, the others the stick branch of the return map, because the switch between the two branches
-cycles the same way; and each node keeps its body segment, because where two segments meet the
-nearest one -- hence the normal and the stick point -- switches discontinuously), then recomputes A
-from the sign of lambda - k_N g, S from Phi* > 0 and the nearest segments at the converged state and
-repeats until none changes (at most `max_active_set_updates` updates, else SolverError naming the nodes
-that flip). When A is stable the converged state satisfies the unilateral law exactly, so the solution
-is the plain penalty / augmented solution (tests/test_sleeve.py checks this to 1e-10).
+cycles the same way), then recomputes A from the sign of lambda - k_N g and S from Phi* > 0 at the converged
+state and repeats until neither changes (at most `max_active_set_updates` updates, else SolverError naming the
+nodes that flip). When A is stable the converged state satisfies the unilateral law exactly, so the solution
+is the plain penalty / augmented solution (tests/test_sleeve.py checks this to 1e-10). No segment is fixed: the
+skin's gap and normal are continuous across the joints (the weights turn over the blend instead of the nearest
+segment switching), so a node in a crease is pushed out of the skin, not out of one segment into the other.
 With `tie_tolerance` = delta > 0 [m] a node whose trial pressure lambda - k_N g lies within k_N delta of
 zero keeps its status in an update (`nodal.keep_ties`): a node on the switch can otherwise leave and
 re-enter A at every update without end. The converged state then satisfies the law within a gap of delta:
 a kept contact node carries a tension below k_N delta, a kept free node penetrates less than delta.
-With `crease_width` = rho > 0 [m] and several segments the gap is that of their smooth union
-(`nodal.blended_gap`, a soft minimum of width rho): the normal is continuous across the concave crease where
-two segments meet, so a node there is pushed out of both and the segments are not frozen (the nearest
-segment still carries the node's friction and its share of the joint torque). It rounds the crease by at
-most rho log 2 and leaves the surface unchanged where one segment is nearer by many rho.
 """
 from __future__ import annotations
 
@@ -45,11 +53,14 @@ from dolfinx import fem
 from mpi4py import MPI
 from petsc4py import PETSc
 
+from fabricfem.body.blended import BLEND_WIDTH, BlendedEllipsoids, check_width
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.body.pose import Body
+from fabricfem.body.skin import Skin, SkinQuery
 from fabricfem.contact import friction as friction_law
 from fabricfem.contact import nodal
-from fabricfem.contact.torque import TorqueMonitor, adjacent_segments
+from fabricfem.contact.obstacles import ObstacleSkin
+from fabricfem.contact.torque import TorqueMonitor, adjacent_segments, local_torques
 from fabricfem.meshes._validate import non_negative
 from fabricfem.solvers.newton import NewtonResult, NewtonSolver, SolverError
 from fabricfem.solvers.system import CompositeSystem
@@ -67,7 +78,8 @@ class ContactState:
     position: np.ndarray      # (N, 3) deformed node positions x [m]
     gap: np.ndarray           # (N,) signed gaps g [m], positive outside
     normal: np.ndarray        # (N, 3) unit outward body normals
-    segment: np.ndarray       # (N,) index of the nearest segment
+    segment: np.ndarray       # (N,) index of the segment of largest skin weight
+    weights: np.ndarray       # (N, K) the skin's segment weights (fabricfem.body.skin)
     pressure: np.ndarray      # (N,) p of the contact law [Pa], per unit reference area
     traction: np.ndarray      # (N, 3) friction traction t_T [Pa]
     slip: np.ndarray          # (N,) sliding nodes
@@ -83,12 +95,12 @@ class AugmentationReport:
 
 
 class ContactProblem:
-    """Frictional node-to-ellipsoid contact added to a ShellModel.
+    """Frictional node-to-skin contact added to a ShellModel (module docstring).
 
     Args:
         model: the ShellModel (quadrilateral mesh); add its loads and constraints before wrapping.
-        obstacles: a sequence of Ellipsoid (or of fabricfem.contact.obstacles Plane / RoundedBox, which
-            duck-type it), or a Body (posed at `time`).
+        obstacles: a Body (its skin queried at `time`), or a sequence of fixed Ellipsoid (or of
+            fabricfem.contact.obstacles Plane / RoundedBox, which duck-type it): their union (ObstacleSkin).
         method: "penalty" or "augmented".
         penalty: k_N [Pa/m] (default nodal.default_penalty: 10 E t / h^2).
         friction: Coulomb coefficient mu >= 0.
@@ -96,12 +108,16 @@ class ContactProblem:
         time: body time t [s] when `obstacles` is a Body.
         active_set: solve with the active-set strategy (module docstring) in `solve` / `solve_augmented`.
         max_active_set_updates: cap on the active-set updates of one `solve`.
+        tie_tolerance: delta [m] of the active-set ties (module docstring).
+        skin: the Body's skin (anything with `query(x, t) -> SkinQuery` and the body's `segment_names`, e.g.
+            fabricfem.body.mesh_skin.MeshSkin); default BlendedEllipsoids(body, blend_width). Body only.
+        blend_width: w [m] of the default skin's blend at the joints (fabricfem.body.blended).
     """
 
     def __init__(self, model, obstacles: Sequence[Ellipsoid] | Body, method: str = "penalty",
                  penalty: float | None = None, friction: float = 0.0, tangential_penalty: float | None = None,
                  time: float = 0.0, active_set: bool = False, max_active_set_updates: int = 30,
-                 tie_tolerance: float = 0.0, crease_width: float = 0.0):
+                 tie_tolerance: float = 0.0, skin: Skin | None = None, blend_width: float = BLEND_WIDTH):
         if method not in METHODS:
             raise ValueError(f"method must be one of {METHODS}, got {method!r}")
         if not (isinstance(max_active_set_updates, int) and max_active_set_updates >= 1):
@@ -109,25 +125,24 @@ class ContactProblem:
         self.active_set = bool(active_set)
         self.max_active_set_updates = max_active_set_updates
         self.tie_tolerance = non_negative("tie_tolerance", tie_tolerance)   # m
-        self.crease_width = non_negative("crease_width", crease_width)      # m, 0: nearest segment
+        self.blend_width = check_width(blend_width)                         # m
         # the fixed contact and slip sets during a solve with the active-set strategy (None: unilateral law
         # and return map)
         self.active: np.ndarray | None = None
         self.sliding: np.ndarray | None = None
-        self.segment: np.ndarray | None = None
         self.active_set_updates: list[int] = []   # set changes per update in the last `solve`
         self.model = model
         self.method = method
         self.torque_monitors: dict[str, TorqueMonitor] = {}
         self.mu = friction_law.friction_coefficient(friction)
-        self.body: Body | None = obstacles if isinstance(obstacles, Body) else None
         self.time = float(time)
+        self._last_query: tuple | None = None   # (time, skin, x, SkinQuery) of the last skin query
         self.nodes = nodal.contact_nodes(model)
         self.penalty = (nodal.default_penalty(model, self.nodes.element_size) if penalty is None
                         else nodal.positive_parameter("penalty", penalty))
         self.tangential_penalty = (self.penalty if tangential_penalty is None
                                    else nodal.positive_parameter("tangential_penalty", tangential_penalty))
-        self.set_obstacles(obstacles)
+        self.set_obstacles(obstacles, skin)
         N = self.nodes.count
         self.multiplier = np.zeros(N)                        # lambda_i [Pa]
         # Stick points (segment frame) and their segment: the last converged node position where the node
@@ -152,12 +167,20 @@ class ContactProblem:
         return getattr(model, name)
 
     # ------------------------------------------------------------------ obstacles
-    def set_obstacles(self, obstacles: Sequence[Ellipsoid] | Body):
-        """Replace the obstacles (e.g. the posed segments at a new time)."""
+    def set_obstacles(self, obstacles: Sequence[Ellipsoid] | Body, skin: Skin | None = None):
+        """Replace the obstacles: a Body and its `skin` (default: its blended ellipsoids, BlendedEllipsoids of
+        `blend_width`), or fixed obstacles (their union, ObstacleSkin; no `skin`)."""
+        self._last_query = None
         if isinstance(obstacles, Body):
-            self.body = obstacles
-            self.ellipsoids = list(obstacles.pose(self.time).values())
+            skin = BlendedEllipsoids(obstacles, self.blend_width, strict=False) if skin is None else skin
+            if tuple(skin.segment_names) != tuple(obstacles.segments) or not callable(getattr(skin, "query", None)):
+                raise ValueError(f"skin: a skin with a query(x, t) of the body's segments {list(obstacles.segments)} "
+                                 f"is needed, got {getattr(skin, 'segment_names', skin)!r}")
+            self.body, self.skin = obstacles, skin
+            self.ellipsoids = list(obstacles.pose(self.time).values())   # the stick points' frames
             return
+        if skin is not None:
+            raise ValueError("skin: a skin needs a Body as obstacles (its segments carry the stick points and torques)")
         ellipsoids = list(obstacles)
         # any rigid obstacle with the Ellipsoid interface used here (gap, to_local, to_global), e.g. the
         # planes and rounded boxes of fabricfem.contact.obstacles
@@ -165,19 +188,32 @@ class ContactProblem:
                                      ("gap", "to_local", "to_global")) for e in ellipsoids):
             raise ValueError("obstacles must be a Body or a non-empty sequence of Ellipsoid (or obstacles with "
                              "gap, to_local and to_global, fabricfem.contact.obstacles)")
-        self.ellipsoids = ellipsoids
+        self.body, self.skin, self.ellipsoids = None, ObstacleSkin(ellipsoids), ellipsoids
 
     def set_time(self, t: float):
-        """Pose the Body at time t [s] (stick points follow their segments)."""
+        """Pose the Body at time t [s]: the skin is asked at t, the stick points follow their segments."""
         if self.body is None:
             raise ValueError("set_time needs a Body as obstacles")
         self.time = float(t)
         self.ellipsoids = list(self.body.pose(self.time).values())
 
+    def query(self, x: np.ndarray) -> SkinQuery:
+        """The skin's SkinQuery (fabricfem.body.skin) of the points x (N, 3) [m] at the contact's time. The last
+        query is kept: the residual and the Jacobian of a Newton iterate, the active-set update and the monitors
+        ask at the same state. ValueError for non-finite positions (a diverged solve)."""
+        last = self._last_query
+        if last is not None and last[0] == self.time and last[1] is self.skin and np.array_equal(last[2], x):
+            return last[3]
+        if not np.all(np.isfinite(x)):
+            raise ValueError("x: the contact gap is not finite (positions contain NaN/inf: the solve diverged)")
+        q = self.skin.query(x, self.time)
+        self._last_query = (self.time, self.skin, np.array(x, copy=True), q)
+        return q
+
     # ------------------------------------------------------------------ contact evaluation
     def _stick_points(self, x: np.ndarray, segment: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Stick points at the current pose and a mask of the nodes that have one on their current
-        segment (the others -- nearest segment changed during the step -- get the node itself)."""
+        """Stick points at the current pose and a mask of the nodes that have one on their current segment of
+        largest weight (the others -- that segment changed during the step -- get the node itself)."""
         points = x.copy()
         known = np.zeros(len(x), dtype=bool)
         for k, e in enumerate(self.ellipsoids):  # loop over the few segments
@@ -187,8 +223,9 @@ class ContactProblem:
         return points, known
 
     def _store_stick_points(self, x: np.ndarray, traction: np.ndarray):
-        """a = x + t_T / eps_T on the nearest segment, in its frame (out of contact: t_T = 0, a = x)."""
-        _, _, segment = nodal.nearest_gap(x, self.ellipsoids)
+        """a = x + t_T / eps_T on the skin's segment of largest weight, in its frame (out of contact: t_T = 0,
+        a = x)."""
+        segment = self.query(x).segment
         stick = friction_law.updated_stick_point(x, traction, self.tangential_penalty)
         self._stick_segment = segment
         for k, e in enumerate(self.ellipsoids):
@@ -199,10 +236,8 @@ class ContactProblem:
         """Contact state at the owned nodes for the local state array of model.w (owned + ghosts)."""
         arr = self.model.w.x.array if state_array is None else state_array
         x = self.nodes.reference + arr[self.nodes.dofs]
-        if self.crease_width > 0.0 and len(self.ellipsoids) > 1:   # smooth union: no segment to freeze
-            g, n, seg = nodal.blended_gap(x, self.ellipsoids, self.crease_width)
-        else:
-            g, n, seg = nodal.nearest_gap(x, self.ellipsoids, self.segment)
+        skin = self.query(x)
+        g, n, seg = skin.gap, skin.normal, skin.segment
         active = self.active
         p = nodal.normal_pressure(g, self.multiplier, self.penalty, active)
         force, stiffness = nodal.normal_force_and_tangent(self.nodes.area, p, n, self.penalty, active)
@@ -220,7 +255,7 @@ class ContactProblem:
         # components with a Dirichlet condition take no contact force (the support carries it): the force
         # reported (totals, torque) is the one that enters the residual
         force = np.where(self._free, force, 0.0)
-        self.state = ContactState(x, g, n, seg, p, traction, slip, force, stiffness)
+        self.state = ContactState(x, g, n, seg, skin.weights, p, traction, slip, force, stiffness)
         return self.state
 
     # ------------------------------------------------------------------ ResidualTerm
@@ -248,20 +283,20 @@ class ContactProblem:
             self._store_stick_points(s.position, s.traction)
 
     # ------------------------------------------------------------------ active-set strategy
-    def contact_set(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """(contact, sliding, segment): (N,) masks of the owned nodes that the unilateral law puts in contact
-        and that the return map lets slide, and their nearest segments, at the current state."""
-        fixed = self.active, self.sliding, self.segment
-        self.active = self.sliding = self.segment = None
+    def contact_set(self) -> tuple[np.ndarray, np.ndarray]:
+        """(contact, sliding): (N,) masks of the owned nodes that the unilateral law puts in contact and that the
+        return map lets slide, at the current state."""
+        fixed = self.active, self.sliding
+        self.active = self.sliding = None
         try:
             s = self.evaluate()
         finally:
-            self.active, self.sliding, self.segment = fixed
-        return s.pressure > 0.0, s.slip, s.segment
+            self.active, self.sliding = fixed
+        return s.pressure > 0.0, s.slip
 
     def solve(self, solver: NewtonSolver) -> NewtonResult:
         """Equilibrium at the current pose and multipliers from the current state: one Newton solve, or,
-        with the active-set strategy, Newton solves on fixed contact / slip sets and segments repeated
+        with the active-set strategy, Newton solves on fixed contact / slip sets repeated
         until they are stable (module docstring). Returns the NewtonResult with the iterations of all
         solves; a failed Newton solve returns an unconverged result (state left as SNES left it), sets that
         keep changing after `max_active_set_updates` updates raise SolverError.
@@ -285,7 +320,7 @@ class ContactProblem:
         return NewtonResult(False, total, reason, norms)
 
     def _solve_fixed_sets(self, solver: NewtonSolver, sticking: bool) -> NewtonResult:
-        self.active, self.sliding, self.segment = self.contact_set()
+        self.active, self.sliding = self.contact_set()
         if sticking:
             self.sliding = np.zeros_like(self.sliding)
         self.active_set_updates = []
@@ -297,21 +332,18 @@ class ContactProblem:
                 norms += result.residual_norms
                 if not result.converged:
                     return NewtonResult(False, total, result.reason, norms)
-                active, sliding, segment = self.contact_set()
+                active, sliding = self.contact_set()
                 if self.tie_tolerance > 0.0:    # nodes on the switch within the tie keep their status
                     active = nodal.keep_ties(self.active, self.state.gap, self.multiplier, self.penalty,
                                              self.tie_tolerance)
-                # a segment change matters only where a contact force acts (before or after), and not at all
-                # on the smooth union (crease_width > 0), whose normal is continuous across segments
-                moved = (segment != self.segment) & (active | self.active) & (self.crease_width == 0.0)
-                changed = self.comm.allreduce(int(np.count_nonzero((active != self.active) | (sliding != self.sliding)
-                                                                   | moved)), op=MPI.SUM)
+                flips = (active != self.active) | (sliding != self.sliding)
+                changed = self.comm.allreduce(int(np.count_nonzero(flips)), op=MPI.SUM)
                 if changed == 0:
                     return NewtonResult(True, total, result.reason, norms)
                 self.active_set_updates.append(changed)
-                self.active, self.sliding, self.segment = active, sliding, segment
+                self.active, self.sliding = active, sliding
         finally:
-            self.active = self.sliding = self.segment = None
+            self.active = self.sliding = None
         raise SolverError(f"active set: the contact set still changed ({self.active_set_updates[-1]} nodes) after "
                           f"{self.max_active_set_updates} updates (changes per update: {self.active_set_updates})",
                           reason="ACTIVE_SET_NOT_STABLE")
@@ -389,6 +421,9 @@ class ContactProblem:
         return self._torque(self.torque_monitors[name])
 
     def _torque(self, monitor: TorqueMonitor) -> float:
+        """The monitor's torque [N m] at the current state, all ranks: each node's moment shared among the segments
+        by the skin's weights (fabricfem.contact.torque.local_torques)."""
         s = self.evaluate()
-        return monitor.value(s.position, s.force, s.segment,
-                             lambda: self.body.joint_position(monitor.joint, self.time), self.comm)
+        local = local_torques([monitor], s.position, s.force, s.segment,
+                              lambda joint: self.body.joint_position(joint, self.time), s.weights)[0]
+        return float(self.comm.allreduce(local, op=MPI.SUM))

@@ -483,10 +483,11 @@ def build_wear_run(scene: Scene, comm=MPI.COMM_WORLD):
 
 def tube_scene_run(scene: Scene, comm):
     """The arm-in-tube sleeve of a wear scene by its [route] solver: the explicit engine's run of the scene's
-    sections (any fabric) or a Newton route of its SleeveConfig (E1 = E2)."""
+    sections (any fabric) or a Newton route of its SleeveConfig (E1 = E2); both on the arm's blended skin of the
+    scene's [body] blend_width [m]."""
     parsed = scene.parsed
     if parsed.route.solver != "explicit":
-        return ROUTES[parsed.route.solver](sleeve_config(parsed), comm)
+        return ROUTES[parsed.route.solver](sleeve_config(parsed), comm, blend_width=parsed.body.blend_width)
     return tube_flexion_run(scene_name(scene), wear.wear_fabric(parsed, build_fabric), fitting_tube(parsed), parsed.arm,
                             parsed.flexion, parsed.contact, parsed.route, comm, blend_width=parsed.body.blend_width)
 

@@ -9,15 +9,17 @@ tube buckles (20.25 deg at mu = 0.1, 17 deg at mu = 0.5 on mesh I, 10 x 13) and 
 of the explicit route at small angles and for the moment-balance test. Gravity is off by default on this route.
 
 Newton at one angle uses two devices, neither of which changes the converged solution:
-* the active-set strategy of ContactProblem (`active_set`, default on): contact set, slip set and body
-  segment of every node are fixed during one Newton solve and updated from the converged state until
-  they no longer change, which removes the leave / re-enter cycling of the non-smooth contact law;
+* the active-set strategy of ContactProblem (`active_set`, default on): contact set and slip set are fixed
+  during one Newton solve and updated from the converged state until they no longer change, which removes the
+  leave / re-enter cycling of the non-smooth contact law;
 * a damped Newton step (`StepLimiter`): each update is scaled so that no director angle changes by more than
   `max_rotation_step` and no displacement by more than `max_displacement_step` per iteration.
 The viscous drag of `Stabilized` remains the fallback of a failed solve.
 
 Both routes are WearRuns (fabricfem.wear.contract) built from the same garment (`sleeve_shell`), body
-(`default_arm` with `elbow_flexion`) and torque monitors (ARM_MONITORS) as the explicit engine's sleeve
+(`default_arm` with `elbow_flexion`), skin (the arm's segments joined by the blend of width `blend_width` at the
+elbow, fabricfem.body.blended.BlendedEllipsoids, asked through the skin contract by ContactProblem) and torque
+monitors (ARM_MONITORS, the nodes' moments shared by the skin's segment weights) as the explicit engine's sleeve
 (fabricfem.wear.sleeve.build_explicit); their records are WearSteps with the elbow angle as axis.
 """
 from __future__ import annotations
@@ -32,6 +34,7 @@ from mpi4py import MPI
 from petsc4py import PETSc
 
 from fabricfem.body.arm import default_arm, elbow_flexion
+from fabricfem.body.blended import BLEND_WIDTH
 from fabricfem.body.motion import ElbowFlexion, rotation_about
 from fabricfem.body.pose import Body
 from fabricfem.contact.problem import ContactProblem
@@ -233,15 +236,16 @@ class SleeveProblem(ArmOutputs):
 
 
 def build_sleeve(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
-                 petsc_options: dict | None = None) -> SleeveProblem:
-    """Mesh, fabric, shoulder support, arm body and contact of a sleeve computation."""
+                 petsc_options: dict | None = None, blend_width: float = BLEND_WIDTH) -> SleeveProblem:
+    """Mesh, fabric, shoulder support, arm body and contact of a sleeve computation; the contact against the arm's
+    blended skin of width `blend_width` [m] (the scene's [body] blend_width, fabricfem.body.blended)."""
     model = sleeve_shell(config, comm)
     flexion = elbow_flexion(config.arm, angular_velocity=math.radians(config.motion.angular_velocity),
                             final_angle=math.radians(config.motion.final_angle))
     body = default_arm(flexion, config.arm)
     contact = ContactProblem(model, body, method=config.contact.method, penalty=config.contact.penalty,
                              friction=config.contact.friction, time=flexion.t_start,
-                             active_set=config.contact.active_set)
+                             active_set=config.contact.active_set, blend_width=blend_width)
     track_elbow_torques(contact, body)
     system = CompositeSystem(model, [contact, Stabilized(contact, 0.0)])
     options = {"snes_max_it": config.route.newton_max_iterations}
@@ -333,18 +337,20 @@ def _equilibrate(problem: SleeveProblem) -> tuple[bool, int, str, float]:
 
 
 def _predict(problem: SleeveProblem, angle_from: float, angle_to: float, touching: float = 1e-3):
-    """Predictor for the step angle_from -> angle_to [deg]: the nodes on the forearm (nearest segment,
-    gap below `touching` [m]) follow its rigid rotation about the elbow, x <- J + R (x - J), so that the
-    step starts without the penetration the moving body would otherwise cause."""
+    """Predictor for the step angle_from -> angle_to [deg]: the nodes near the forearm (the skin's forearm weight
+    w > 0, gap below `touching` [m]) follow its rigid rotation about the elbow by their weight,
+    x <- x + w (J + R (x - J) - x), as the skin's material points move (fabricfem.body.skin.skin_velocity), so
+    that the step starts without the penetration the moving body would otherwise cause."""
     contact = problem.contact
     s = contact.evaluate()
-    names = list(problem.body.segments)
-    moving = (s.segment == names.index("forearm")) & (s.gap < touching) & ~contact.nodes.constrained.any(axis=1)
+    share = s.weights[:, list(problem.body.segments).index("forearm")]
+    moving = (share > 0.0) & (s.gap < touching) & ~contact.nodes.constrained.any(axis=1)
     if not moving.any():
         return
     elbow = problem.body.joint_position("elbow", contact.time)
     rotation = rotation_about(ELBOW_AXIS, math.radians(angle_to - angle_from))
-    x_new = elbow + (s.position[moving] - elbow) @ rotation.T
+    x = s.position[moving]
+    x_new = x + share[moving, None] * (elbow + (x - elbow) @ rotation.T - x)
     dofs = contact.nodes.dofs[moving]
     contact.w.x.array[dofs] = x_new - contact.nodes.reference[moving]
     contact.w.x.scatter_forward()

@@ -23,8 +23,9 @@ from fabricfem.wear.verdict import DEFAULT_FAILURE_STRAIN, Bounds, verdict, wear
 
 _RUNS_MADE: list[str] = []   # the wear runs of this process so far (the first one's setup includes the imports)
 
-# route name ([route] solver) -> builder of the sleeve's WearRun from its configuration
-ROUTES: dict[str, Callable[[SleeveConfig, MPI.Comm], WearRun]] = {
+# route name ([route] solver) -> builder of the sleeve's WearRun from its configuration; the Newton routes' builders
+# also take the skin's blend_width [m] (the explicit one has it from the scene: fabricfem.scenes.build.tube_scene_run)
+ROUTES: dict[str, Callable[..., WearRun]] = {
     "explicit": build_explicit, "implicit": build_implicit, "quasistatic": build_sleeve}
 
 

@@ -28,8 +28,9 @@ static tube buckles (the quasi-static route stalled at 16-20 degrees).
 
 Each step: predictor x = x^n + dt v^n, the body posed at t^{n+1}, Newton (ContactProblem.solve with the
 active-set strategy on the contact set only, `ReturnMapContact`, nodes on the contact switch within
-TIE_FRACTION x augmentation_tolerance keeping their status, the two segments' smooth union of width CREASE_WIDTH
-as the obstacle; StepLimiter; backtracking line search; a plain
+TIE_FRACTION x augmentation_tolerance keeping their status, the arm's skin as the obstacle: the explicit engine's,
+the two segments joined by the blend of width `blend_width` at the elbow (fabricfem.body.blended); StepLimiter;
+backtracking line search; a plain
 semi-smooth Newton solve as fallback, `_solve_step`) and, for method "augmented", Uzawa updates of eq. 3.69 until
 the largest penetration is below `augmentation_tolerance` (ContactProblem.solve_augmented); the multipliers
 carry over to the next step. Coulomb friction: the stick points are committed after every converged step
@@ -54,6 +55,7 @@ from dolfinx import fem
 from mpi4py import MPI
 
 from fabricfem.body.arm import default_arm, elbow_flexion
+from fabricfem.body.blended import BLEND_WIDTH
 from fabricfem.contact.problem import ContactProblem
 from fabricfem.dynamics.backward_euler import BackwardEulerInertia
 from fabricfem.dynamics.mass import lumped_mass
@@ -68,20 +70,13 @@ from fabricfem.wear.sleeve import sleeve_shell, track_elbow_torques
 # active-set ties (ContactProblem.tie_tolerance) = this x augmentation_tolerance: a node on the contact switch keeps
 # its status within a gap of 1e-6 m (default tolerance 1e-5 m), an order below what the Uzawa loop accepts
 TIE_FRACTION = 0.1
-# smooth union of the two arm segments (ContactProblem.crease_width) [m]: with the nearest segment alone a node in
-# the inner-elbow crease cycled between them at every active-set update (mesh III, 51.87 deg: held on the upper arm
-# it penetrated the forearm by 12 um, held on the forearm the upper arm by 0.32 mm). Measured on mesh III, mu = 0.1,
-# gravity: 0.5 mm ended the cycling but Newton still diverged at 51.91 deg; 2 mm reaches 57 deg (304 steps). It
-# rounds the crease by at most rho log 2 = 1.4 mm (the sleeve's clearance is 4.3 mm) and changes the gap by less
-# than rho exp(-|g_1 - g_2| / rho) elsewhere (< 1 um once one segment is 14 mm nearer)
-CREASE_WIDTH = 2e-3
 ACTIVE_SET_MAX_ITERATIONS = 30   # Newton iterations of one active-set solve before the plain fallback (_solve_step)
 TRACE_COLUMNS = ("t_s", "angle_deg", "torque_Nm", "max_penetration_m", "newton_iterations", "dt_s")
 
 
 class ReturnMapContact(ContactProblem):
-    """ContactProblem whose active-set strategy freezes the contact set and the body segments during a Newton
-    solve but not the slip set: friction takes the return map (eqs. 3.51-3.52) at every iterate.
+    """ContactProblem whose active-set strategy freezes the contact set during a Newton solve but not the slip
+    set: friction takes the return map (eqs. 3.51-3.52) at every iterate.
 
     Why: on a frozen slip branch the traction mu p t* / |t*| is discontinuous at x = a, and a node at the Coulomb
     limit whose slip |x - a| is of the order of mu p / eps_T (~1e-6 m, below one Newton update) flips its
@@ -99,11 +94,11 @@ class ReturnMapContact(ContactProblem):
         finally:
             self.sliding = sliding
 
-    def contact_set(self):
-        """(contact, sliding, segment) as ContactProblem's, with no slip set (`sliding` all False: never frozen,
-        so slip changes do not count as set changes)."""
-        active, sliding, segment = super().contact_set()
-        return active, np.zeros_like(sliding), segment
+    def contact_set(self) -> tuple[np.ndarray, np.ndarray]:
+        """(contact, sliding) as ContactProblem's, with no slip set (`sliding` all False: never frozen, so slip
+        changes do not count as set changes)."""
+        active, sliding = super().contact_set()
+        return active, np.zeros_like(sliding)
 
 
 @dataclass
@@ -139,8 +134,9 @@ class ImplicitSleeve(SleeveProblem):
 
 
 def build_implicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
-                   petsc_options: dict | None = None) -> ImplicitSleeve:
-    """Sleeve, arm, contact, lumped masses and Newton solver of the backward-Euler route (module docstring).
+                   petsc_options: dict | None = None, blend_width: float = BLEND_WIDTH) -> ImplicitSleeve:
+    """Sleeve, arm, contact, lumped masses and Newton solver of the backward-Euler route (module docstring); the
+    contact against the arm's blended skin of width `blend_width` [m] (the scene's [body] blend_width).
 
     Raises ValueError naming the parameter: solver not "implicit", density not positive, final_angle /
     angle_steps / angular_velocity giving a non-positive step."""
@@ -163,7 +159,7 @@ def build_implicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
                                friction=config.contact.friction,
                                time=0.0, active_set=config.contact.active_set,
                                tie_tolerance=TIE_FRACTION * config.contact.augmentation_tolerance,
-                               crease_width=CREASE_WIDTH)
+                               blend_width=blend_width)
     track_elbow_torques(contact, body)
     model.compile()
     inertia = BackwardEulerInertia(model, lumped_mass(model, rotational=False), config.damping, dt)
@@ -185,10 +181,10 @@ def build_implicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD,
 
 
 def _solve_step(problem: ImplicitSleeve) -> tuple[bool, int, str]:
-    """One step's equilibrium: Newton with the active-set strategy of ReturnMapContact (frozen contact set and
-    segments) and, if that fails (sets that keep changing, or a stalled solve, cut at ACTIVE_SET_MAX_ITERATIONS),
-    once more from the same start with the plain semi-smooth Newton on the unilateral law and return map (the
-    contact set may then change between iterates). Both solve the same equations; (converged, its, reason)."""
+    """One step's equilibrium: Newton with the active-set strategy of ReturnMapContact (frozen contact set) and, if
+    that fails (sets that keep changing, or a stalled solve, cut at ACTIVE_SET_MAX_ITERATIONS), once more from the
+    same start with the plain semi-smooth Newton on the unilateral law and return map (the contact set may then
+    change between iterates). Both solve the same equations; (converged, its, reason)."""
     contact, snes = problem.contact, problem.solver.snes
     if not contact.active_set:
         return solve_once(problem)
