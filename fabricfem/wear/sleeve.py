@@ -41,9 +41,9 @@ Solution routes (SleeveConfig.solver, scene key motion.solver):
 
 Newton at one angle (the plain solve stalled at 20.2 deg, mu = 0.1, and 12.6 deg, mu = 0.5, on
 mesh I) uses two devices, neither of which changes the converged solution:
-* the active-set strategy of ContactProblem (`active_set`, default on): contact set, slip set and body
-  segment of every node are fixed during one Newton solve and updated from the converged state until
-  they no longer change, which removes the leave / re-enter cycling of the non-smooth contact law;
+* the active-set strategy of ContactProblem (`active_set`, default on): contact set and slip set are fixed
+  during one Newton solve and updated from the converged state until they no longer change, which removes the
+  leave / re-enter cycling of the non-smooth contact law (the contact asks the arm's skin, fabricfem.body.skin);
 * a damped Newton step (`StepLimiter`): the linearised step of the nearly free director rotations is
   radians long from an out-of-balance start and the iterates ran away (residual 1e1 -> 1e10 N) even on a
   fixed contact set; each update is scaled so that no director angle changes by more than
