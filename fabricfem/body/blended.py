@@ -30,7 +30,7 @@ until x - p is parallel to grad phi(p) (`closest_points`). Units: metres through
 
 `blend` evaluates phi, grad phi and the weights; `closest_points` the contract's SkinQuery; `BlendedEllipsoids` is
 the Skin of a Body (posed at any t), and its `widths` are the ones the explicit contact uses. The same arithmetic
-is compiled for the explicit contact in fabricfem.contact.blend_kernel (BLEND_SOURCE, part of
+is compiled for the explicit contact in fabricfem.body.blend_kernel (BLEND_SOURCE, part of
 fabricfem.contact.compiled's loops).
 """
 from __future__ import annotations
@@ -41,6 +41,7 @@ from typing import Sequence
 import numpy as np
 from skimage.measure import marching_cubes
 
+from fabricfem.body.blend_kernel import closest_points as compiled_closest_points
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.body.skin import SkinQuery
 
@@ -212,7 +213,9 @@ class BlendedEllipsoids:
         return blend(x, *self.posed(t), self.widths)[0]
 
     def query(self, x: np.ndarray, t: float) -> SkinQuery:
-        return closest_points(x, *self.posed(t), self.widths, strict=self.strict)
+        """The contract's SkinQuery of the points x (N, 3) [m] at time t [s] (`closest_points`, compiled:
+        fabricfem.body.blend_kernel)."""
+        return compiled_closest_points(x, *self.posed(t), self.widths, strict=self.strict)
 
     def surface(self, t: float, spacing: float = 0.005) -> tuple[np.ndarray, np.ndarray]:
         """Marching-cubes triangulation (scikit-image) of phi = 0 at time t [s] on a grid of `spacing` [m]:

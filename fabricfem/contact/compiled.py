@@ -8,7 +8,7 @@ multiply-adds, `-ffp-contract=off`, so that the products and sums round as numpy
 * `project`: the trial positions x* = X + d + dt v~ + dt^2 a, the normalised radius q = f + 1 of each segment
   [Man2006, eq. 3.61]; a point within the blend of two segments (the lower bound (sqrt(q) - 1) r_min of its
   distance below the blend width w for two of them, `projection.crease_points`) inside the blended skin goes to its
-  closest point on it (fabricfem.contact.blend_kernel, with the skin's normal and segment weights there; one
+  closest point on it (fabricfem.body.blend_kernel, with the skin's normal and segment weights there; one
   that `blend_lower_bound` puts outside is left where it is without an exact distance); the
   others, near one segment only, take the passes of `project_onto_skin` (ray cast along grad f / |grad f|, the
   move onto the surface, [Man2006, Box 5] step i).
@@ -27,7 +27,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fabricfem.contact.blend_kernel import BLEND_CDEF, BLEND_SOURCE
+from fabricfem.body.blend_kernel import BLEND_CDEF, BLEND_SOURCE
 from fabricfem.forms.jit import built_once
 
 FLAGS = ("-O3", "-march=native", "-ffp-contract=off", "-g0")

@@ -15,6 +15,7 @@ from typing import Callable, Sequence
 import numpy as np
 from mpi4py import MPI
 
+from fabricfem.body.blend_kernel import closest_points as blend_closest_points
 from fabricfem.body.blended import BLEND_WIDTH, blend, closest_points
 from fabricfem.body.ellipsoid import Ellipsoid, _ray_to_surface
 from fabricfem.body.skin import SkinQuery
@@ -258,19 +259,10 @@ def skin_gap(x, ellipsoids: Sequence[Ellipsoid], widths: np.ndarray | None = Non
 
 
 def compiled_closest_points(x: np.ndarray, stack: SegmentStack, widths: np.ndarray) -> SkinQuery:
-    """fabricfem.body.blended.closest_points of the points x (N, 3) [m] by the compiled kernel
-    (fabricfem.contact.blend_kernel `blend_query`, the same iteration; not strict: a point whose iteration does not
-    converge keeps the foot of its last iterate)."""
-    lib, ffi = compiled.module(MPI.COMM_SELF)
-    p = functools.partial(compiled.pointer, ffi)
-    x = np.ascontiguousarray(x, dtype=float)
-    N, K = len(x), stack.count
-    gap, foot, normal, weights = np.empty(N), np.empty((N, 3)), np.empty((N, 3)), np.empty((N, K))
-    converged = np.empty(N, dtype=np.uint8)
-    arrays = (np.ascontiguousarray(a, dtype=float) for a in (stack.center, stack.rotation, stack.radii, widths))
-    lib.blend_query(N, p(x, "double"), K, *(p(a, "double") for a in arrays), p(gap, "double"), p(foot, "double"),
-                    p(normal, "double"), p(weights, "double"), p(converged, "uint8_t"))
-    return SkinQuery(gap, foot, normal, weights)
+    """fabricfem.body.blended.closest_points of the points x (N, 3) [m] against the stacked segments by the compiled
+    kernel (fabricfem.body.blend_kernel, not strict: a point whose iteration does not converge keeps the foot of
+    its last iterate)."""
+    return blend_closest_points(x, stack.center, stack.rotation, stack.radii, widths, strict=False)
 
 
 def project_with_segment(x, ellipsoids: Sequence[Ellipsoid], segments: SegmentStack | None = None,

@@ -14,9 +14,18 @@ the same formulas node by node.
   being non-decreasing in each distance): a point it puts outside needs no exact distance at all.
 * `blend_closest`: the foot of a point on phi = 0 by the orthogonal projection iteration ([Hartmann1999],
   `fabricfem.body.blended.closest_points`), with the gap, the normal and the weights at the foot.
-* `blend_query`: `blend_closest` over N points (the tests compare it with the numpy functions).
+* `blend_query`: `blend_closest` over N points (the tests compare it with the numpy functions); from Python,
+  `closest_points` (the contract's SkinQuery, as fabricfem.body.blended.closest_points computes it in numpy).
 """
 from __future__ import annotations
+
+import numpy as np
+from mpi4py import MPI
+
+from fabricfem.body.skin import SkinQuery
+from fabricfem.forms.jit import built_once
+
+FLAGS = ("-O3", "-march=native", "-ffp-contract=off", "-g0")
 
 BLEND_CDEF = """
 void blend_query(int N, const double* x, int K, const double* center, const double* rotation, const double* radii,
@@ -276,3 +285,26 @@ void blend_query(int N, const double* x, int K, const double* center, const doub
   }
 }
 """
+
+
+def closest_points(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, radii: np.ndarray, widths: np.ndarray,
+                   strict: bool = True) -> SkinQuery:
+    """fabricfem.body.blended.closest_points of the points x (N, 3) [m] by `blend_query` (the same iteration, its
+    tolerance 1e-9 m; built once per process on its own, MPI.COMM_SELF). A point whose iteration does not converge
+    raises RuntimeError (`strict`) or keeps the foot of its last iterate."""
+    lib, ffi = built_once("fabricfem_blend", BLEND_CDEF, "#include <math.h>\n#include <stdint.h>\n" + BLEND_SOURCE,
+                          MPI.COMM_SELF, FLAGS)
+    x = np.ascontiguousarray(np.asarray(x, dtype=float).reshape(-1, 3))
+    n, k = len(x), len(radii)
+    gap, foot, normal, weights = np.empty(n), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, k))
+    converged = np.empty(n, dtype=np.uint8)
+    arrays = [np.ascontiguousarray(a, dtype=float) for a in (centers, rotations, radii, widths)]
+
+    def ptr(array: np.ndarray, kind: str):
+        return ffi.from_buffer(f"{kind}[]", array)
+    lib.blend_query(n, ptr(x, "double"), k, *(ptr(a, "double") for a in arrays), ptr(gap, "double"),
+                    ptr(foot, "double"), ptr(normal, "double"), ptr(weights, "double"), ptr(converged, "uint8_t"))
+    if strict and not converged.all():
+        raise RuntimeError(f"blended skin: the closest point of {int(n - converged.sum())} points did not converge "
+                           f"(farther from the skin than its curvature radius?)")
+    return SkinQuery(gap, foot, normal, weights)
