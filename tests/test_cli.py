@@ -22,7 +22,7 @@ ROOT = Path(__file__).resolve().parents[1]
 COMMANDS = {"run", "plan", "sweep", "scenes", "demo", "verify", "reproduce", "study", "bench"}
 STUDIES = {"sleeve", "sleeve-fit", "sleeve-methods", "unit-cell", "fabric-link", "pants", "convergence"}
 BENCHES = {"rollup-profile", "stability-map", "speed-accuracy", "sleeve-profile", "accuracy", "unit-cell", "wear",
-           "kernel", "commits"}
+           "kernel", "commits", "parallel"}
 
 
 def _subcommands(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:

@@ -73,7 +73,8 @@ def time_once(tree: Path, scene: Path, data: dict, ranks: int) -> dict:
     """One timed run of the scene at the commit checked out in `tree`."""
     env = {**os.environ, "PYTHONPATH": str(tree), "OMP_NUM_THREADS": "1"}
     cmd = [sys.executable, "-c", TIMER, str(scene.resolve()), json.dumps(data)]
-    if ranks > 1:
+    if ranks > 1:      # without this process's own (singleton) MPI variables, which mpirun would take for its own
+        env = {k: v for k, v in env.items() if not k.startswith(("OMPI_", "PMIX_", "OPAL_", "PRTE_"))}
         env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
                    OMPI_MCA_rmaps_base_oversubscribe="1")
         cmd = ["mpirun", "-n", str(ranks), *cmd]
