@@ -11,7 +11,7 @@ import igl
 import numpy as np
 import pytest
 
-from fabricfem.contact.intersections import intersecting_pairs
+from fabricfem.contact.intersections import candidate_pairs, intersecting_pairs
 
 
 def brute_force(points: np.ndarray, triangles: np.ndarray) -> int:
@@ -66,3 +66,15 @@ def test_a_flat_sheet_has_no_intersecting_pairs():
     points, triangles = folded_sheet(20, 20, 0.0, seed=1)
     keep = points[:, 0] <= 0.5       # the half before the fold: one layer
     assert intersecting_pairs(points, triangles[keep[triangles].all(axis=1)]) == 0
+
+
+@pytest.mark.parametrize("parts", [2, 3])
+def test_the_parts_of_the_count_list_every_pair_once(parts):
+    """The ranks of a run count one part each (candidate_pairs' part k: first triangle i % parts == k): the parts'
+    candidate pairs are the whole list, each once, and their counts sum to the whole count."""
+    points, triangles = folded_sheet(24, 16, 0.3, seed=5)
+    whole = candidate_pairs(points, triangles)
+    pieces = np.concatenate([candidate_pairs(points, triangles, (k, parts)) for k in range(parts)])
+    assert len(pieces) == len(whole) and set(map(tuple, pieces.tolist())) == set(map(tuple, whole.tolist()))
+    counts = [intersecting_pairs(points, triangles, (k, parts)) for k in range(parts)]
+    assert sum(counts) == intersecting_pairs(points, triangles) > 0

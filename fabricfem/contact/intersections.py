@@ -25,12 +25,21 @@ from scipy.spatial import cKDTree
 DEGENERATE = 1e-9     # a node's distance to the other's plane below DEGENERATE x the pair's size: libigl decides
 
 
-def candidate_pairs(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
-    """(n, 2) triangle pairs (i < j) whose bounding boxes overlap and that share no node."""
+def candidate_pairs(points: np.ndarray, triangles: np.ndarray, part: tuple[int, int] = (0, 1)) -> np.ndarray:
+    """(n, 2) triangle pairs (i < j) whose bounding boxes overlap and that share no node; `part` = (k, parts): only
+    the pairs whose first triangle i has i % parts == k (the parts together list every pair once)."""
     corners = points[triangles]                                   # (T, 3, 3)
     centroid = corners.mean(axis=1)
     radius = np.linalg.norm(corners - centroid[:, None], axis=2).max(axis=1)
-    pairs = cKDTree(centroid).query_pairs(2.0 * float(radius.max(initial=0.0)), output_type="ndarray")
+    reach = 2.0 * float(radius.max(initial=0.0))
+    k, parts = part
+    if parts == 1:
+        pairs = cKDTree(centroid).query_pairs(reach, output_type="ndarray")
+    else:
+        mine = np.arange(k, len(triangles), parts)
+        near = cKDTree(centroid[mine]).sparse_distance_matrix(cKDTree(centroid), reach, output_type="ndarray")
+        pairs = np.column_stack([mine[near["i"]], near["j"]]).astype(np.int64).reshape(-1, 2)
+        pairs = pairs[pairs[:, 0] < pairs[:, 1]]
     pairs = pairs[np.linalg.norm(centroid[pairs[:, 0]] - centroid[pairs[:, 1]], axis=1)
                   <= radius[pairs[:, 0]] + radius[pairs[:, 1]]]
     low, high = corners.min(axis=1), corners.max(axis=1)
@@ -41,14 +50,15 @@ def candidate_pairs(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
     return pairs[~shared].astype(np.int64).reshape(-1, 2)
 
 
-def intersecting_pairs(points: np.ndarray, triangles: np.ndarray) -> int:
+def intersecting_pairs(points: np.ndarray, triangles: np.ndarray, part: tuple[int, int] = (0, 1)) -> int:
     """Number of pairs of triangles (rows of `triangles` (T, 3), node indices into `points` (N, 3) [m]) that
-    intersect and share no node (module docstring)."""
+    intersect and share no node (module docstring); `part` = (k, parts): the pairs of `candidate_pairs`' part k
+    only (the counts of the parts sum to the whole count: each rank of a run counts one part)."""
     points = np.asarray(points, dtype=float)
     triangles = np.asarray(triangles, dtype=np.int64)
     if points.ndim != 2 or points.shape[1] != 3 or triangles.ndim != 2 or triangles.shape[1] != 3:
         raise ValueError(f"points must be (N, 3) and triangles (T, 3), got {points.shape} and {triangles.shape}")
-    pairs = candidate_pairs(points, triangles)
+    pairs = candidate_pairs(points, triangles, part)
     a, b = points[triangles[pairs[:, 0]]], points[triangles[pairs[:, 1]]]
     side_b, normal_a = _sides(a, b)          # nodes of b against the plane of a
     side_a, normal_b = _sides(b, a)

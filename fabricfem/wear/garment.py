@@ -311,12 +311,13 @@ class GarmentRun:
 
     def intersections(self, d: np.ndarray) -> int:
         """The number of intersecting triangle pairs of the cloth at the displacements `d` (local array of W):
-        the independent check of fabricfem.contact.intersections on the whole surface, counted on rank 0 and sent
-        to every rank (all ranks call this)."""
+        the independent check of fabricfem.contact.intersections on the whole surface, each rank counting its part
+        of the pairs, summed over the ranks (all ranks call this)."""
         if self._surface is None:
             self._surface = self.self_contact.surface if self.self_contact is not None else ClothSurface(self.model)
         x = self._surface.positions(d)
-        return self.comm.bcast(intersecting_pairs(x, self._surface.triangles) if self.comm.rank == 0 else None, root=0)
+        part = (self.comm.rank, self.comm.size)
+        return int(self.comm.allreduce(intersecting_pairs(x, self._surface.triangles, part), op=MPI.SUM))
 
     def _peak(self, pressure: np.ndarray) -> tuple[float, str, tuple, float]:
         """(peak [Pa], segment, position, area-weighted mean over the contact [Pa]) over all ranks."""
