@@ -19,7 +19,7 @@ from fabricfem.scenes.schema import Scene
 from fabricfem.scenes.wear import read_pattern
 from fabricfem.scenes.wear_sections import garment_tables
 
-SERIAL_BELOW_DOFS = 20000     # estimated dofs below which one rank is faster than two (docs/benchmarks.md)
+SERIAL_BELOW_DOFS = 2000      # estimated dofs below which one rank is as fast as two or faster (docs/benchmarks.md)
 SHELL_DOFS_PER_NODE = 5
 
 
