@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mpi4py import MPI
-from toml_text import dumps
+from toml_text import dumps, refused_in_one_line
 
 from fabricfem import cli
 from fabricfem.meshes.layers import TubeLayer, concentric_tubes
@@ -103,9 +103,4 @@ def test_bad_layers_exit_2_with_one_line_naming_the_key(mutate, key, tmp_path, c
     data = _data()
     data["output"]["dir"] = str(tmp_path / "out")
     mutate(data)
-    path = tmp_path / "bad.toml"
-    path.write_text(dumps(data))
-    code = cli.main(["run", str(path)])
-    lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
-    assert code == 2 and len(lines) == 1, lines
-    assert key in lines[0] and "Traceback" not in lines[0], lines[0]
+    refused_in_one_line(tmp_path / "bad.toml", data, key, capsys)

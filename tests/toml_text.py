@@ -1,6 +1,8 @@
 """TOML text of scene data, for tests that write scene files (the standard library reads TOML, writes none)."""
 import math
 
+from fabricfem import cli
+
 
 def _value(v) -> str:
     if isinstance(v, bool):
@@ -32,3 +34,14 @@ def dumps(data: dict) -> str:
                     lines.append(f"[[{section}.{key}]]")
                     lines += [f"{k} = {_value(v)}" for k, v in item.items()]
     return "\n".join(lines) + "\n"
+
+
+def refused_in_one_line(path, data: dict, key: str, capsys) -> str:
+    """Write `data` to `path`, run `fabricfem run` on it: asserts exit 2 and one line on stderr naming `key`
+    (no traceback); returns the line."""
+    path.write_text(dumps(data))
+    code = cli.main(["run", str(path)])
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert code == 2 and len(lines) == 1, lines
+    assert key in lines[0] and "Traceback" not in lines[0], lines[0]
+    return lines[0]

@@ -101,27 +101,15 @@ void respond_pairs(int64_t n, const int64_t* pair_p, const int64_t* pair_t, cons
         feature(tri + 3 * pair_t[j], bary + 3 * j, tolerance, other);
         count += key[0] == other[0] && key[1] == other[1] && key[2] == other[2];
       }
-      double xc[3], vr[3], normal[3];
+      double xc[3], vr[3], normal[3], offset[3], e1[3], e2[3];
       for (int k = 0; k < 3; ++k)
       {
         xc[k] = w[0] * x[3 * nodes[0] + k] + w[1] * x[3 * nodes[1] + k] + w[2] * x[3 * nodes[2] + k];
         vr[k] = v[3 * p + k] - (w[0] * v[3 * nodes[0] + k] + w[1] * v[3 * nodes[1] + k] + w[2] * v[3 * nodes[2] + k]);
+        offset[k] = x[3 * p + k] - xc[k];
+        e1[k] = x[3 * nodes[1] + k] - x[3 * nodes[0] + k], e2[k] = x[3 * nodes[2] + k] - x[3 * nodes[0] + k];
       }
-      if (distance[i] < 1e-9 * contact_distance)
-      {
-        double e1[3], e2[3];
-        for (int k = 0; k < 3; ++k)
-          e1[k] = x[3 * nodes[1] + k] - x[3 * nodes[0] + k], e2[k] = x[3 * nodes[2] + k] - x[3 * nodes[0] + k];
-        normal[0] = e1[1] * e2[2] - e1[2] * e2[1];
-        normal[1] = e1[2] * e2[0] - e1[0] * e2[2];
-        normal[2] = e1[0] * e2[1] - e1[1] * e2[0];
-        const double length = sqrt(dot3(normal, normal));
-        for (int k = 0; k < 3; ++k)
-          normal[k] /= length;
-      }
-      else
-        for (int k = 0; k < 3; ++k)
-          normal[k] = (x[3 * p + k] - xc[k]) / distance[i];
+      contact_normal(e1, e2, offset, distance[i], 1e-9 * contact_distance, normal);
       const double vn = dot3(vr, normal);
       const double im = inverse_mass[p] + w[0] * w[0] * inverse_mass[nodes[0]]
                         + w[1] * w[1] * inverse_mass[nodes[1]] + w[2] * w[2] * inverse_mass[nodes[2]];

@@ -254,21 +254,10 @@ void respond_edges(int64_t n, const int64_t* first, const int64_t* second, const
         offset[k] += w[q] * x[3 * node[q] + k], vr[k] += w[q] * v[3 * node[q] + k];
       im += w[q] * w[q] * inverse_mass[node[q]], ia += w[q] * w[q] * inverse_area[node[q]];
     }
-    if (distance[i] < 1e-9 * contact_distance)
-    {
-      double e1[3], e2[3];
-      for (int k = 0; k < 3; ++k)
-        e1[k] = x[3 * node[1] + k] - x[3 * node[0] + k], e2[k] = x[3 * node[3] + k] - x[3 * node[2] + k];
-      normal[0] = e1[1] * e2[2] - e1[2] * e2[1];
-      normal[1] = e1[2] * e2[0] - e1[0] * e2[2];
-      normal[2] = e1[0] * e2[1] - e1[1] * e2[0];
-      const double length = sqrt(dot3(normal, normal));
-      for (int k = 0; k < 3; ++k)
-        normal[k] /= length;
-    }
-    else
-      for (int k = 0; k < 3; ++k)
-        normal[k] = offset[k] / distance[i];
+    double e1[3], e2[3];
+    for (int k = 0; k < 3; ++k)
+      e1[k] = x[3 * node[1] + k] - x[3 * node[0] + k], e2[k] = x[3 * node[3] + k] - x[3 * node[2] + k];
+    contact_normal(e1, e2, offset, distance[i], 1e-9 * contact_distance, normal);
     if (!(im > 0.0) || !(ia > 0.0))      /* all four nodes held */
       continue;
     const double m_eff = 1.0 / im;

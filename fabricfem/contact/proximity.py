@@ -51,6 +51,25 @@ static inline uint64_t bucket(int64_t i, int64_t j, int64_t k, uint64_t mask)
 
 static inline double dot3(const double* u, const double* v) { return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]; }
 
+/* the unit contact normal of a pair: offset / distance, or, for two points closer than `tiny`, the unit normal
+   e1 x e2 of the plane of the pair's edges e1, e2 */
+static inline void contact_normal(const double* e1, const double* e2, const double* offset, double distance,
+                                  double tiny, double* normal)
+{
+  if (distance < tiny)
+  {
+    normal[0] = e1[1] * e2[2] - e1[2] * e2[1];
+    normal[1] = e1[2] * e2[0] - e1[0] * e2[2];
+    normal[2] = e1[0] * e2[1] - e1[1] * e2[0];
+    const double length = sqrt(dot3(normal, normal));
+    for (int k = 0; k < 3; ++k)
+      normal[k] /= length;
+  }
+  else
+    for (int k = 0; k < 3; ++k)
+      normal[k] = offset[k] / distance;
+}
+
 /* closest point of triangle abc to p [Ericson2005, sec. 5.1.5]: barycentric coordinates w, squared distance */
 static double closest(const double* p, const double* a, const double* b, const double* c, double* w)
 {
