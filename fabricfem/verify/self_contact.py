@@ -361,7 +361,7 @@ def self_contact_case() -> list[CaseResult]:
         pressed, slid = press(), slide()
     wall = timer.elapsed
     rows = [
-        CaseResult(name, f"fold: most intersecting triangle pairs over {FOLD_RECORDS} records (ipctk + libigl; a "
+        CaseResult(name, f"fold: most intersecting triangle pairs over {FOLD_RECORDS} records (k-d tree, Moller, libigl; a "
                    f"contact that holds the layers apart leaves none)", max(folded["intersections"]), 0.0,
                    float(max(folded["intersections"])), 0.0, max(folded["intersections"]) == 0, folded["ndofs"],
                    wall),
