@@ -117,18 +117,8 @@ void respond_pairs(int64_t n, const int64_t* pair_p, const int64_t* pair_t, cons
       const double spring = penalty * area[p] / count;
       const double damper = 2.0 * zeta * sqrt(spring * (isfinite(m_eff) ? m_eff : 0.0));
       const double fn = fmax(spring * (contact_distance - distance[i]) - damper * vn, 0.0);
-      double ff[3] = {0.0, 0.0, 0.0};
-      if (mu > 0.0)
-      {
-        double vt[3];
-        for (int k = 0; k < 3; ++k)
-          vt[k] = vr[k] - vn * normal[k];
-        const double speed = sqrt(dot3(vt, vt));
-        const double magnitude = fmin(mu * fn, m_eff * speed / dt);
-        const double scale = magnitude / (speed > 0.0 ? speed : 1.0);
-        for (int k = 0; k < 3; ++k)
-          ff[k] = -scale * vt[k];
-      }
+      double ff[3];
+      coulomb_friction(vr, vn, normal, mu, fn, m_eff, dt, ff);
       for (int k = 0; k < 3; ++k)
       {
         const double f = fn * normal[k];

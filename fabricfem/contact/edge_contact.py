@@ -265,17 +265,8 @@ void respond_edges(int64_t n, const int64_t* first, const int64_t* second, const
     const double vn = dot3(vr, normal);
     const double elastic = spring * (contact_distance - distance[i]);
     const double fn = elastic + fmax(-elastic, fmin(-2.0 * zeta * sqrt(spring * m_eff) * vn, elastic));
-    double ff[3] = {0.0, 0.0, 0.0};
-    if (mu > 0.0)
-    {
-      double vt[3];
-      for (int k = 0; k < 3; ++k)
-        vt[k] = vr[k] - vn * normal[k];
-      const double speed = sqrt(dot3(vt, vt));
-      const double scale = fmin(mu * fn, m_eff * speed / dt) / (speed > 0.0 ? speed : 1.0);
-      for (int k = 0; k < 3; ++k)
-        ff[k] = -scale * vt[k];
-    }
+    double ff[3];
+    coulomb_friction(vr, vn, normal, mu, fn, m_eff, dt, ff);
     for (int q = 0; q < 4; ++q)
       for (int k = 0; k < 3; ++k)
       {

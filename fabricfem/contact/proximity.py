@@ -51,6 +51,23 @@ static inline uint64_t bucket(int64_t i, int64_t j, int64_t k, uint64_t mask)
 
 static inline double dot3(const double* u, const double* v) { return u[0] * v[0] + u[1] * v[1] + u[2] * v[2]; }
 
+/* the Coulomb friction force ff of a pair [Bridson2002, sec. 7]: the tangential relative velocity vt = vr - vn n
+   opposed by min(mu fn, m_eff |vt| / dt) (at most the force that stops the slip in one step); 0 for mu = 0 */
+static inline void coulomb_friction(const double* vr, double vn, const double* normal, double mu, double fn,
+                                    double m_eff, double dt, double* ff)
+{
+  ff[0] = ff[1] = ff[2] = 0.0;
+  if (!(mu > 0.0))
+    return;
+  double vt[3];
+  for (int k = 0; k < 3; ++k)
+    vt[k] = vr[k] - vn * normal[k];
+  const double speed = sqrt(dot3(vt, vt));
+  const double scale = fmin(mu * fn, m_eff * speed / dt) / (speed > 0.0 ? speed : 1.0);
+  for (int k = 0; k < 3; ++k)
+    ff[k] = -scale * vt[k];
+}
+
 /* the unit contact normal of a pair: offset / distance, or, for two points closer than `tiny`, the unit normal
    e1 x e2 of the plane of the pair's edges e1, e2 */
 static inline void contact_normal(const double* e1, const double* e2, const double* offset, double distance,
