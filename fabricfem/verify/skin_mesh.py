@@ -12,8 +12,8 @@ cylinder (trimesh.creation.cylinder) rigged to the one segment (every weight 1).
 
 skin-mesh-vs-ellipsoids-sleeve: the default sleeve flexed on the default arm with the skin a 2 mm marching-cubes
 triangulation of the blended arm (fabricfem.body.mesh_skin.ellipsoid_skin) against the analytic blended arm: the
-elbow-torque curves over 10-57 deg (mesh 30x39) agree within 3 % RMS. Long (about an hour serial, estimated): only
-`fabricfem verify` runs it.
+elbow-torque curves over 10-57 deg (mesh 30x39) agree within 3 % RMS. Not a registered case: it does not pass
+(docs/findings/2026-11-27-mesh-skin-cost.md); run on demand by `python -m fabricfem.verify.skin_mesh`.
 """
 from __future__ import annotations
 
@@ -300,11 +300,9 @@ def skin_mesh_vs_ellipsoids_sleeve() -> list[CaseResult]:
     (1.7e-5 m in the 3 cm crease blend), 0.4 % of the sleeve's 4.3 mm clearance, and its facets turn the normal by
     h / R ~ 0.05 rad between neighbours; both skins carry the friction's stick points in the segments' frames and
     the records are time averages of the same explicit steps, so what differs is the geometry alone. Measured on
-    mesh 10x13 (not the acceptance's mesh): 0.04 % RMS over 0-8 deg, 0.15 % over 0-12 deg.
-    Cost (estimate from 10x13 to 8 deg: mesh-skin contact 24.5 ms per step against 0.18 ms on the blended arm,
-    the skin's build 51 s, on a loaded two-core machine): 30x39 has 8.5x the nodes and a 3x shorter step, about
-    15000 steps to 57 deg at ~0.2 s each, so about an hour serial: not a registered case (`fabricfem verify` would
-    take the hour), run on demand by `python -m fabricfem.verify.skin_mesh` (prints its row)."""
+    mesh 10x13 (not the acceptance's mesh): 0.04 % RMS over 0-8 deg, 0.15 % over 0-12 deg; its measurement on
+    30x39 (about 2 minutes serial, 8 GB) is in docs/findings/2026-11-27-mesh-skin-cost.md. Run on demand by
+    `python -m fabricfem.verify.skin_mesh` (prints its row)."""
     name = "skin-mesh-vs-ellipsoids-sleeve"
     config = SleeveConfig.of(n_around=30, n_along=39, final_angle=SLEEVE_RANGE[1])
     with Timer() as timer:
