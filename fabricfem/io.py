@@ -88,16 +88,20 @@ def copy_xdmf(path: str | Path, folder: Path, tag: str, comm=MPI.COMM_WORLD) -> 
 class Checkpoint:
     """Per-rank checkpoint files of one run under `<folder>/checkpoint/` (what a state holds is the caller's).
 
-    `write(state)` pickles the rank's `state` dict with the scene's SHA-256 and the rank count to
-    rank<r>.pkl through a temporary name and a rename, so a kill leaves the previous checkpoint whole; `read()`
-    returns it, refusing (ValueError naming the folder) a checkpoint of another scene (hash) or rank count.
-    `every` [records] between writes (positive integer)."""
+    `write(state)` pickles the rank's `state` dict with the scene's SHA-256, the rank count and the checkpoint's
+    generation (its number in this folder) to rank<r>.pkl through a temporary name; once every rank has written,
+    each moves its current file to rank<r>.prev.pkl and the new one into place. A kill between the ranks' renames
+    leaves some ranks one generation ahead: `read()` takes the generation every rank holds (the newest of them, in
+    rank<r>.pkl or rank<r>.prev.pkl), so the ranks restore the same record. It refuses (ValueError naming the folder)
+    a checkpoint of another scene (hash) or rank count, or ranks with no common generation. `every` [records] between
+    writes (positive integer)."""
 
     def __init__(self, folder: str | Path, comm, scene_sha256: str, every: int = 10):
         if isinstance(every, bool) or not (isinstance(every, int) and every >= 1):
             raise ValueError(f"checkpoint_every must be a positive number of records, got {every!r}")
         self.folder = Path(folder) / "checkpoint"
         self.comm, self.sha, self.every = comm, scene_sha256, every
+        self.generation = 0
         if comm.rank == 0:
             self.folder.mkdir(parents=True, exist_ok=True)
         comm.barrier()
@@ -106,29 +110,50 @@ class Checkpoint:
     def path(self) -> Path:
         return self.folder / f"rank{self.comm.rank}.pkl"
 
+    @property
+    def previous(self) -> Path:
+        return self.folder / f"rank{self.comm.rank}.prev.pkl"
+
     def exists(self) -> bool:
-        """Whether every rank finds its checkpoint file."""
-        return bool(self.comm.allreduce(int(self.path.is_file()), op=MPI.MIN))
+        """Whether every rank finds a checkpoint file."""
+        found = self.path.is_file() or self.previous.is_file()
+        return bool(self.comm.allreduce(int(found), op=MPI.MIN))
 
     def write(self, state: dict) -> None:
         """Write this rank's `state` (all ranks call it; returns when every rank has written)."""
-        state = {**state, "sha": self.sha, "ranks": self.comm.size}
+        self.generation += 1
+        state = {**state, "sha": self.sha, "ranks": self.comm.size, "generation": self.generation}
         tmp = self.path.with_suffix(".tmp")
         with open(tmp, "wb") as f:
             pickle.dump(state, f)
+        self.comm.barrier()               # every rank's new file is whole before any rank replaces its current one
+        if self.path.is_file():
+            os.replace(self.path, self.previous)
         os.replace(tmp, self.path)
         self.comm.barrier()
 
     def read(self) -> dict:
-        """This rank's saved state, after the checks of the class docstring."""
-        with open(self.path, "rb") as f:
-            state = pickle.load(f)
+        """This rank's saved state of the generation every rank holds, after the checks of the class docstring."""
+        states = {}
+        for path in (self.path, self.previous):
+            if path.is_file():
+                with open(path, "rb") as f:
+                    state = pickle.load(f)
+                states[state.get("generation", 0)] = state
+        common = set(states)
+        for others in self.comm.allgather(sorted(states)):
+            common &= set(others)
+        if not common:
+            raise ValueError(f"resume: the ranks' checkpoints in {self.folder} hold no common record; run without "
+                             f"--resume")
+        state = states[max(common)]
         if state["sha"] != self.sha:
             raise ValueError(f"resume: the checkpoint in {self.folder} belongs to another scene (hash "
                              f"{state['sha'][:12]}..., this scene {self.sha[:12]}...); run without --resume")
         if state["ranks"] != self.comm.size:
             raise ValueError(f"resume: the checkpoint in {self.folder} was written by {state['ranks']} rank(s), this "
                              f"run has {self.comm.size}")
+        self.generation = max(common)
         return state
 
 

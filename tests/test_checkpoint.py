@@ -356,3 +356,21 @@ def test_newmark_scene_resumes_and_bad_resumes_are_refused(tmp_path, monkeypatch
     assert again.result is None and again.status.startswith("completed")
     with pytest.raises(SceneError, match="GeneralizedAlphaIntegrator integrator cannot resume"):
         run_scene(scene(tmp_path / "part", integrator="generalized-alpha"), comm, resume=True)
+
+
+@pytest.mark.mpi
+def test_a_kill_between_the_ranks_renames_resumes_from_the_common_record(tmp_path_factory):
+    """io.Checkpoint: after two checkpoints, rank 0 alone gets a third (a kill after its rename, before the
+    others'): every rank reads the second, the newest all ranks hold; one rank alone reads its newest."""
+    comm = MPI.COMM_WORLD
+    folder = comm.bcast(str(tmp_path_factory.mktemp("ckpt")) if comm.rank == 0 else None, root=0)
+    files = fio.Checkpoint(folder, comm, "sha", every=1)
+    for record in (1, 2):
+        files.write({"record": record})
+    if comm.rank == 0:                 # rank 0 one generation ahead, as a kill between the renames leaves it
+        os.replace(files.path, files.previous)
+        with open(files.path, "wb") as f:
+            pickle.dump({"record": 3, "sha": "sha", "ranks": comm.size, "generation": 3}, f)
+    comm.barrier()
+    state = fio.Checkpoint(folder, comm, "sha", every=1).read()
+    assert state["record"] == (2 if comm.size > 1 else 3)
