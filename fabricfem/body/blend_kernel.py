@@ -19,11 +19,13 @@ the same formulas node by node.
 """
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 from mpi4py import MPI
 
 from fabricfem.body.skin import SkinQuery
-from fabricfem.forms.jit import built_once
+from fabricfem.forms.jit import built_once, pointer
 
 FLAGS = ("-O3", "-march=native", "-ffp-contract=off", "-g0")
 
@@ -299,11 +301,9 @@ def closest_points(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, ra
     gap, foot, normal, weights = np.empty(n), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, k))
     converged = np.empty(n, dtype=np.uint8)
     arrays = [np.ascontiguousarray(a, dtype=float) for a in (centers, rotations, radii, widths)]
-
-    def ptr(array: np.ndarray, kind: str):
-        return ffi.from_buffer(f"{kind}[]", array)
-    lib.blend_query(n, ptr(x, "double"), k, *(ptr(a, "double") for a in arrays), ptr(gap, "double"),
-                    ptr(foot, "double"), ptr(normal, "double"), ptr(weights, "double"), ptr(converged, "uint8_t"))
+    p = functools.partial(pointer, ffi)
+    lib.blend_query(n, p(x, "double"), k, *(p(a, "double") for a in arrays), p(gap, "double"), p(foot, "double"),
+                    p(normal, "double"), p(weights, "double"), p(converged, "uint8_t"))
     if strict and not converged.all():
         raise RuntimeError(f"blended skin: the closest point of {int(n - converged.sum())} points did not converge "
                            f"(farther from the skin than its curvature radius?)")

@@ -39,7 +39,7 @@ from mpi4py import MPI
 
 from fabricfem.body.mesh_distance import Topology
 from fabricfem.body.skin_kernel import CDEF, MAX_SEGMENTS, SOURCE
-from fabricfem.forms.jit import KERNEL_FLAGS, built_once
+from fabricfem.forms.jit import KERNEL_FLAGS, built_once, pointer
 
 RIGID_MAPS = 1e-9        # max |A^T A - I| below which the maps are taken for rotations (the rest-frame search)
 
@@ -117,7 +117,7 @@ class CompiledSkin:
         self.epochs = 0          # poses made (each its own number for the nodes' box cache)
 
     def _p(self, array: np.ndarray):
-        return self.ffi.from_buffer("int64_t[]" if array.dtype == np.int64 else "double[]", array)
+        return pointer(self.ffi, array, "int64_t" if array.dtype == np.int64 else "double")
 
     @property
     def blended_nodes(self) -> int:

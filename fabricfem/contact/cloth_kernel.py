@@ -21,9 +21,8 @@ import functools
 
 import numpy as np
 
-from fabricfem.contact.compiled import pointer
 from fabricfem.contact.proximity import CLOSEST_C, FLAGS, Pairs
-from fabricfem.forms.jit import built_once
+from fabricfem.forms.jit import built_once, pointer
 
 CDEF = """
 int64_t narrow_candidates(int64_t N, const double* x, const double* x0, double limit, int64_t M, const int64_t* cand_p,

@@ -346,13 +346,6 @@ def module(comm):
     return built_once("fabricfem_contact", CDEF, SOURCE, comm, FLAGS)
 
 
-def pointer(ffi, array: np.ndarray, ctype: str):
-    """cffi pointer into a C-contiguous numpy array of the matching dtype (no copy)."""
-    if not array.flags.c_contiguous:
-        raise ValueError("compiled contact: arrays must be C-contiguous")
-    return ffi.from_buffer(ctype + "[]", array)
-
-
 def stacked(ellipsoids) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(centres (K, 3), rotations (K, 3, 3), radii (K, 3)) [m] of the posed segments, C-contiguous, for the loops;
     ValueError beyond MAX_SEGMENTS."""

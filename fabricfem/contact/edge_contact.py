@@ -57,9 +57,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fabricfem.contact.compiled import pointer
 from fabricfem.contact.proximity import CLOSEST_C, FLAGS
-from fabricfem.forms.jit import built_once
+from fabricfem.forms.jit import built_once, pointer
 
 PARALLEL = 1e-12          # sin^2 of the angle of two edges below which they count as parallel (no edge-edge pair)
 TAPER = 0.1               # tau: the spring fades linearly over the last tau of an edge's length at either end

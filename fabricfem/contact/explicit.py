@@ -63,6 +63,7 @@ from fabricfem.contact.projection import (  # noqa: F401 (the projections are pu
     skin_gap,
 )
 from fabricfem.contact.torque import TorqueMonitor, local_torques
+from fabricfem.forms.jit import pointer
 
 # Whether ExplicitBodyContacts created now take the Lagrange step by the compiled loops (fabricfem.contact.compiled)
 # or by numpy (`numpy_contact`: a benchmark's baseline, and the reference the compiled loops are tested against)
@@ -506,7 +507,7 @@ class ExplicitBodyContact:
         index = np.flatnonzero(moved)
         for buffer in (self.force, self.normal_force, self.slip):
             buffer.fill(0)
-        p = functools.partial(compiled.pointer, ffi)
+        p = functools.partial(pointer, ffi)
         monitors = list(self._monitors.values())
         if self._monitor_arrays is None:
             if len(monitors) > compiled.MAX_MONITORS:

@@ -21,6 +21,7 @@ from fabricfem.body.ellipsoid import Ellipsoid, _ray_to_surface
 from fabricfem.body.skin import SkinQuery
 from fabricfem.contact import compiled
 from fabricfem.contact.nodal import nearest_gap, positive_parameter
+from fabricfem.forms.jit import pointer
 
 MAX_PROJECTION_PASSES = 8
 INSIDE_TOLERANCE = 1e-12   # relative to the smallest radius: rounding of a projected point is not "inside"
@@ -319,7 +320,7 @@ def project_compiled(reference: np.ndarray, rows: np.ndarray, d: np.ndarray, v: 
     blend widths `widths` (K, K) [m], C-contiguous); `comm`: the ranks that build the loops on first use
     (compiled.module). Returns (trial points (M, 3), the SkinProjection of them)."""
     lib, ffi = compiled.module(comm)
-    p = functools.partial(compiled.pointer, ffi)
+    p = functools.partial(pointer, ffi)
     M, K = len(reference), len(segments[0])
     trial, position = np.empty((M, 3)), np.empty((M, 3))
     segment, trapped = np.empty(M, dtype=np.int64), np.empty(M, dtype=np.int64)

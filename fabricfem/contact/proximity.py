@@ -26,8 +26,7 @@ from dataclasses import dataclass
 import ipctk
 import numpy as np
 
-from fabricfem.contact.compiled import pointer
-from fabricfem.forms.jit import built_once
+from fabricfem.forms.jit import built_once, pointer
 
 FLAGS = ("-O3", "-march=native", "-g0")
 

@@ -81,3 +81,10 @@ def built_once(prefix: str, cdef: str, source: str, comm, flags: Sequence[str]) 
         _BUILT[prefix] = compile_c(prefix, cdef, source, comm, flags)
     module = _BUILT[prefix]
     return module.lib, module.ffi
+
+
+def pointer(ffi, array, ctype: str):
+    """cffi pointer of `ctype` into a C-contiguous numpy array of the matching dtype (no copy)."""
+    if not array.flags.c_contiguous:
+        raise ValueError("compiled kernels: arrays must be C-contiguous")
+    return ffi.from_buffer(ctype + "[]", array)
