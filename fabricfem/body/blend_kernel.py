@@ -25,9 +25,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fabricfem.body.skin import SkinQuery
-from fabricfem.forms.jit import built_once, pointer
-
-FLAGS = ("-O3", "-march=native", "-ffp-contract=off", "-g0")
+from fabricfem.forms.jit import ROUNDING_FLAGS, built_once, pointer
 
 BLEND_CDEF = """
 void blend_query(int N, const double* x, int K, const double* center, const double* rotation, const double* radii,
@@ -295,7 +293,7 @@ def closest_points(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, ra
     tolerance 1e-9 m; built once per process on its own, MPI.COMM_SELF). A point whose iteration does not converge
     raises RuntimeError (`strict`) or keeps the foot of its last iterate."""
     lib, ffi = built_once("fabricfem_blend", BLEND_CDEF, "#include <math.h>\n#include <stdint.h>\n" + BLEND_SOURCE,
-                          MPI.COMM_SELF, FLAGS)
+                          MPI.COMM_SELF, ROUNDING_FLAGS)
     x = np.ascontiguousarray(np.asarray(x, dtype=float).reshape(-1, 3))
     n, k = len(x), len(radii)
     gap, foot, normal, weights = np.empty(n), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, k))

@@ -21,8 +21,8 @@ import functools
 
 import numpy as np
 
-from fabricfem.contact.proximity import CLOSEST_C, FLAGS, Pairs
-from fabricfem.forms.jit import built_once, pointer
+from fabricfem.contact.proximity import CLOSEST_C, Pairs
+from fabricfem.forms.jit import KERNEL_FLAGS, built_once, pointer
 
 CDEF = """
 int64_t narrow_candidates(int64_t N, const double* x, const double* x0, double limit, int64_t M, const int64_t* cand_p,
@@ -136,7 +136,7 @@ void respond_pairs(int64_t n, const int64_t* pair_p, const int64_t* pair_t, cons
 
 def _module(comm):
     """(lib, ffi) of the compiled loops, built on first use (rank 0 of `comm` builds, the others wait)."""
-    return built_once("fabricfem_cloth_kernel", CDEF, SOURCE, comm, FLAGS)
+    return built_once("fabricfem_cloth_kernel", CDEF, SOURCE, comm, KERNEL_FLAGS)
 
 
 def narrow(x: np.ndarray, x0: np.ndarray, limit: float, candidates: Pairs, triangles: np.ndarray, radius: float,

@@ -28,9 +28,8 @@ from __future__ import annotations
 import numpy as np
 
 from fabricfem.body.blend_kernel import BLEND_CDEF, BLEND_SOURCE
-from fabricfem.forms.jit import built_once
+from fabricfem.forms.jit import ROUNDING_FLAGS, built_once
 
-FLAGS = ("-O3", "-march=native", "-ffp-contract=off", "-g0")
 MAX_SEGMENTS = 64          # the body segments a point is checked against (a stack array in `project`)
 MAX_MONITORS = 64          # the torque monitors summed in `friction` (a stack array)
 
@@ -343,7 +342,7 @@ void friction(int n, const int64_t* index, const int64_t* rows, const double* tr
 def module(comm):
     """The compiled module: (lib, ffi), built on first use by rank 0 of `comm` while the others wait
     (fabricfem.forms.jit.built_once)."""
-    return built_once("fabricfem_contact", CDEF, SOURCE, comm, FLAGS)
+    return built_once("fabricfem_contact", CDEF, SOURCE, comm, ROUNDING_FLAGS)
 
 
 def stacked(ellipsoids) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

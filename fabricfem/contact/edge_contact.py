@@ -57,8 +57,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fabricfem.contact.proximity import CLOSEST_C, FLAGS
-from fabricfem.forms.jit import built_once, pointer
+from fabricfem.contact.proximity import CLOSEST_C
+from fabricfem.forms.jit import KERNEL_FLAGS, built_once, pointer
 
 PARALLEL = 1e-12          # sin^2 of the angle of two edges below which they count as parallel (no edge-edge pair)
 TAPER = 0.1               # tau: the spring fades linearly over the last tau of an edge's length at either end
@@ -279,7 +279,8 @@ void respond_edges(int64_t n, const int64_t* first, const int64_t* second, const
 
 def _module(comm):
     """(lib, ffi) of the compiled loops, built on first use (rank 0 of `comm` builds, the others wait)."""
-    return built_once("fabricfem_edge_contact", CDEF, SOURCE.replace("PARALLEL_SINE2", repr(PARALLEL)), comm, FLAGS)
+    source = SOURCE.replace("PARALLEL_SINE2", repr(PARALLEL))
+    return built_once("fabricfem_edge_contact", CDEF, source, comm, KERNEL_FLAGS)
 
 
 @dataclass

@@ -26,9 +26,7 @@ from dataclasses import dataclass
 import ipctk
 import numpy as np
 
-from fabricfem.forms.jit import built_once, pointer
-
-FLAGS = ("-O3", "-march=native", "-g0")
+from fabricfem.forms.jit import KERNEL_FLAGS, built_once, pointer
 
 CDEF = """
 int64_t vertex_triangle_pairs(int64_t N, const double* x, int64_t T, const int64_t* tri, const int64_t* tri_cell,
@@ -234,7 +232,7 @@ int64_t vertex_triangle_pairs(int64_t N, const double* x, int64_t T, const int64
 
 def _module(comm):
     """(lib, ffi) of the compiled loops, built on first use (rank 0 of `comm` builds, the others wait)."""
-    return built_once("fabricfem_proximity", CDEF, SOURCE, comm, FLAGS)
+    return built_once("fabricfem_proximity", CDEF, SOURCE, comm, KERNEL_FLAGS)
 
 
 @dataclass

@@ -34,14 +34,12 @@ from mpi4py import MPI
 
 from fabricfem.dynamics.explicit_source import CDEF, SOURCE
 from fabricfem.dynamics.integrator import ENERGY_FLOOR, History, compiled_energy, record_and_ask
-from fabricfem.forms.jit import KERNEL_JIT, built_once
-
-FLAGS = ("-O3", "-march=native", "-ffp-contract=off", "-g0")
+from fabricfem.forms.jit import KERNEL_JIT, ROUNDING_FLAGS, built_once
 
 
 def _module(comm):
     """(lib, ffi) of the compiled loop, built once per process (fabricfem.forms.jit.built_once)."""
-    return built_once("fabricfem_explicit_loop", CDEF, SOURCE, comm, FLAGS)
+    return built_once("fabricfem_explicit_loop", CDEF, SOURCE, comm, ROUNDING_FLAGS)
 
 
 def _cell_kernels(form) -> list[tuple[int, int, np.ndarray]] | None:

@@ -24,6 +24,8 @@ import cffi
 
 DOLFINX_DEFAULT_FLAGS = ("-O2", "-g0")           # dolfinx.jit's default cffi_extra_compile_args
 KERNEL_FLAGS = ("-O3", "-march=native", "-g0")
+# the loops that must round as numpy does: no contraction of multiply-adds into fused ones
+ROUNDING_FLAGS = ("-O3", "-march=native", "-ffp-contract=off", "-g0")
 KERNEL_JIT: dict = {"cffi_extra_compile_args": list(KERNEL_FLAGS)}
 
 
