@@ -18,7 +18,6 @@ from mpi4py import MPI
 from fabricfem.body.blend_kernel import closest_points as blend_closest_points
 from fabricfem.body.blended import BLEND_WIDTH, blend, closest_points
 from fabricfem.body.ellipsoid import Ellipsoid, _ray_to_surface
-from fabricfem.body.skin import SkinQuery
 from fabricfem.contact import compiled
 from fabricfem.contact.nodal import nearest_gap, positive_parameter
 from fabricfem.forms.jit import pointer
@@ -243,7 +242,7 @@ def skin_gap(x, ellipsoids: Sequence[Ellipsoid], widths: np.ndarray | None = Non
     """Signed gap [m] of the points x (N, 3) to the blended skin of the segments (negative inside), the unit outward
     normal, the segment index (of largest weight in a crease) and the segment weights (N, K) (fabricfem.body.skin):
     the nearest segment's gap (`nodal.nearest_gap`) away from the creases, the blended skin's closest point within
-    them (`project_onto_skin`)."""
+    them (fabricfem.body.blend_kernel.closest_points, not strict)."""
     x = as_points("x", x)
     g, n, segment = nearest_gap(x, ellipsoids)
     weights = np.zeros((len(x), len(ellipsoids)))
@@ -254,16 +253,9 @@ def skin_gap(x, ellipsoids: Sequence[Ellipsoid], widths: np.ndarray | None = Non
     widths = resolve_widths(widths, len(ellipsoids))
     crease = crease_points(stack.normalised_radii(x), stack.scale, widths)
     if crease.any():
-        skin = compiled_closest_points(x[crease], stack, widths)
+        skin = blend_closest_points(x[crease], stack.center, stack.rotation, stack.radii, widths, strict=False)
         g[crease], n[crease], segment[crease], weights[crease] = skin.gap, skin.normal, skin.segment, skin.weights
     return g, n, segment, weights
-
-
-def compiled_closest_points(x: np.ndarray, stack: SegmentStack, widths: np.ndarray) -> SkinQuery:
-    """fabricfem.body.blended.closest_points of the points x (N, 3) [m] against the stacked segments by the compiled
-    kernel (fabricfem.body.blend_kernel, not strict: a point whose iteration does not converge keeps the foot of
-    its last iterate)."""
-    return blend_closest_points(x, stack.center, stack.rotation, stack.radii, widths, strict=False)
 
 
 def project_with_segment(x, ellipsoids: Sequence[Ellipsoid], segments: SegmentStack | None = None,
