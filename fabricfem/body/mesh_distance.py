@@ -71,17 +71,6 @@ def face_normals_areas(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndar
     return cross / np.maximum(double, 1e-300)[:, None], 0.5 * double
 
 
-def corner_angles(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(F, 3) interior angles [rad] of the triangles at their corners."""
-    p = vertices[faces]
-    out = np.empty(faces.shape)
-    for i in range(3):      # the three corners, vectorised over the faces
-        u = p[:, (i + 1) % 3] - p[:, i]
-        v = p[:, (i + 2) % 3] - p[:, i]
-        out[:, i] = np.arctan2(np.linalg.norm(np.cross(u, v), axis=1), np.einsum("ij,ij->i", u, v))
-    return out
-
-
 def _unit(v: np.ndarray) -> np.ndarray:
     return v / np.maximum(np.linalg.norm(v, axis=1, keepdims=True), 1e-300)
 

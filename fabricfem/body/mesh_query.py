@@ -119,11 +119,6 @@ class CompiledSkin:
     def _p(self, array: np.ndarray):
         return pointer(self.ffi, array, "int64_t" if array.dtype == np.int64 else "double")
 
-    @property
-    def blended_nodes(self) -> int:
-        """The nodes whose triangles do not all follow one segment rigidly (boxed per pose, `mapped_box`)."""
-        return int(self.mesh.n_blended)
-
     def pose_at(self, points: np.ndarray, growth: float = 1.0) -> Pose:
         """The Pose (maps only) from the segments' joints and markers `points` (3K, 3) [m] (the proximal joints,
         the distal joints, the markers; module docstring) and the transverse `growth` g."""

@@ -190,12 +190,6 @@ class SelfContact:
                                                   FEATURE_TOLERANCE, self.comm)
         return pairs
 
-    def smallest_distance(self, x: np.ndarray, radius: float) -> float:
-        """Smallest distance [m] between a vertex and a non-neighbouring triangle at the positions x, `radius` [m]
-        if none is closer than that."""
-        pairs = self.contact_pairs(x, radius)
-        return float(pairs.distance.min()) if len(pairs) else float(radius)
-
     def _masses(self, integrator) -> tuple[np.ndarray, np.ndarray]:
         """(N,) lumped translational mass (M + dt/2 C) [kg] of all nodes, inf for a node with a held component, and
         its inverse [1/kg] (0 there)."""
