@@ -13,10 +13,12 @@ import numpy as np
 import pytest
 from mpi4py import MPI
 
+from fabricfem.body.blend_kernel import implicit_values
+from fabricfem.body.blended import blend, stacked
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.contact import compiled
 from fabricfem.contact.explicit import numpy_contact, project_compiled, project_onto_skin
-from fabricfem.contact.projection import resolve_widths
+from fabricfem.contact.projection import resolve_widths, skin_gap
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.run import run_sleeve
 
@@ -62,6 +64,23 @@ def test_projection_matches_numpy_including_the_crease():
     assert np.abs(skin.position[inside] - expected.position[inside]).max() <= 1e-8
     assert np.abs(skin.normal[inside] - expected.normal[inside]).max() <= 1e-6
     assert np.abs(skin.weights[inside] - expected.weights[inside]).max() <= 1e-6
+
+
+def test_implicit_values_give_the_sign_of_the_gap():
+    """The compiled phi (`implicit_values`, which `max_penetration` uses to skip the points outside) equals the
+    numpy blend's phi to 1e-14 m (the same Newton iteration per segment, [Eberly2013]; its stopping differs by
+    round-off) and has the sign of skin_gap's gap at every point of the inner elbow and around it, so that the
+    penetration of the points with phi < 0 is the penetration of all."""
+    rng = np.random.default_rng(5)
+    ellipsoids = elbow()
+    x = np.vstack([rng.uniform([-0.1, -0.05, -0.03], [0.05, 0.1, 0.03], size=(3000, 3)),
+                   rng.uniform([-0.3, -0.1, -0.1], [0.6, 0.2, 0.1], size=(2000, 3))])
+    widths = resolve_widths(None, len(ellipsoids))
+    phi = implicit_values(x, *stacked(ellipsoids), widths)
+    expected, _, _ = blend(x, *stacked(ellipsoids), widths)
+    gap, *_ = skin_gap(x, ellipsoids, widths)
+    assert np.abs(phi - expected).max() <= 1e-14
+    assert (phi < 0).sum() > 1000 and np.array_equal(phi < 0.0, gap < 0.0)
 
 
 def test_too_many_segments_rejected():

@@ -16,6 +16,8 @@ the same formulas node by node.
   `fabricfem.body.blended.closest_points`), with the gap, the normal and the weights at the foot.
 * `blend_query`: `blend_closest` over N points (the tests compare it with the numpy functions); from Python,
   `closest_points` (the contract's SkinQuery, as fabricfem.body.blended.closest_points computes it in numpy).
+* `blend_values`: phi over N points; from Python, `implicit_values` (whose sign is the gap's: the points that
+  can penetrate, found without a closest-point iteration).
 """
 from __future__ import annotations
 
@@ -286,14 +288,51 @@ void blend_query(int N, const double* x, int K, const double* center, const doub
 }
 """
 
+# phi alone (`implicit_values`)
+VALUES_CDEF = """
+void blend_values(int N, const double* x, int K, const double* center, const double* rotation, const double* radii,
+                  const double* widths, double* phi);
+"""
+
+VALUES_SOURCE = r"""
+void blend_values(int N, const double* x, int K, const double* center, const double* rotation, const double* radii,
+                  const double* widths, double* phi)
+{
+  double grad[3], W[BLEND_MAX_SEGMENTS];
+  for (int p = 0; p < N; ++p)
+    phi[p] = blend_eval(x + 3 * p, K, center, rotation, radii, widths, grad, W);
+}
+"""
+
+
+def _library(values: bool = False):
+    """The compiled blend loops, `blend_query` or (`values`) `blend_values` in a module of its own, so that the
+    query's machine code stays the same (each built once per process on its own, MPI.COMM_SELF)."""
+    name, cdef, extra = ("fabricfem_blend_values", VALUES_CDEF, VALUES_SOURCE) if values else \
+        ("fabricfem_blend", BLEND_CDEF, "")
+    return built_once(name, cdef, "#include <math.h>\n#include <stdint.h>\n" + BLEND_SOURCE + extra, MPI.COMM_SELF,
+                      ROUNDING_FLAGS)
+
+
+def implicit_values(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, radii: np.ndarray,
+                    widths: np.ndarray) -> np.ndarray:
+    """phi (N,) [m] of the blended body at the points x (N, 3) [m] by `blend_values` (fabricfem.body.blended.blend's
+    phi): negative inside the skin, with the sign of the gap."""
+    lib, ffi = _library(values=True)
+    x = np.ascontiguousarray(np.asarray(x, dtype=float).reshape(-1, 3))
+    phi = np.empty(len(x))
+    arrays = [np.ascontiguousarray(a, dtype=float) for a in (centers, rotations, radii, widths)]
+    p = functools.partial(pointer, ffi)
+    lib.blend_values(len(x), p(x, "double"), len(radii), *(p(a, "double") for a in arrays), p(phi, "double"))
+    return phi
+
 
 def closest_points(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, radii: np.ndarray, widths: np.ndarray,
                    strict: bool = True) -> SkinQuery:
     """fabricfem.body.blended.closest_points of the points x (N, 3) [m] by `blend_query` (the same iteration, its
     tolerance 1e-9 m; built once per process on its own, MPI.COMM_SELF). A point whose iteration does not converge
     raises RuntimeError (`strict`) or keeps the foot of its last iterate."""
-    lib, ffi = built_once("fabricfem_blend", BLEND_CDEF, "#include <math.h>\n#include <stdint.h>\n" + BLEND_SOURCE,
-                          MPI.COMM_SELF, ROUNDING_FLAGS)
+    lib, ffi = _library()
     x = np.ascontiguousarray(np.asarray(x, dtype=float).reshape(-1, 3))
     n, k = len(x), len(radii)
     gap, foot, normal, weights = np.empty(n), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, k))

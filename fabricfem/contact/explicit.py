@@ -27,6 +27,7 @@ from typing import Callable, Iterator, Sequence
 import numpy as np
 from mpi4py import MPI
 
+from fabricfem.body.blend_kernel import implicit_values
 from fabricfem.body.blended import BLEND_WIDTH, BlendedEllipsoids
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.body.skin import Skin
@@ -263,8 +264,17 @@ class ExplicitBodyContact:
 
     def max_penetration(self, d: np.ndarray, t: float) -> float:
         """max(0, -min g) [m] of the nodes at displacements `d` (local array of W) against the body at t, all ranks."""
-        g, *_ = self.gaps(self.reference + d[self.dofs], t, self.body_at(t))
-        return float(self.comm.allreduce(float(np.max(-g, initial=0.0)), op=MPI.MAX))
+        return float(self.comm.allreduce(self._penetration(self.reference + d[self.dofs], t, self.body_at(t)),
+                                         op=MPI.MAX))
+
+    def _penetration(self, x: np.ndarray, t: float, ellipsoids: list[Ellipsoid]) -> float:
+        """max(0, -min g) [m] of the points x (N, 3) against the skin at t: on the blended segments the gaps of
+        the points inside only (phi < 0, `implicit_values`, whose sign is the gap's), the skin's query else."""
+        if self.skin is None and len(x) and len(ellipsoids):
+            inside = implicit_values(x, *compiled.stacked(ellipsoids), self.widths) < 0.0
+            x = x[inside]
+        g, *_ = self.gaps(x, t, ellipsoids)
+        return float(np.max(-g, initial=0.0))
 
     def min_gap(self, d: np.ndarray, t: float) -> float:
         """Smallest signed gap [m] of the nodes against the body at t (all ranks)."""
@@ -311,8 +321,7 @@ class ExplicitBodyContact:
 
     def _monitor_penetration(self, x: np.ndarray, ellipsoids):
         """max(0, -g) of the points x against the skin at the time of the last step."""
-        g, *_ = self.gaps(x, self.time, ellipsoids)
-        self.max_penetration_seen = max(self.max_penetration_seen, float(np.max(-g, initial=0.0)))
+        self.max_penetration_seen = max(self.max_penetration_seen, self._penetration(x, self.time, ellipsoids))
 
     def total_force(self) -> np.ndarray:
         """Sum of the last step's contact forces on the cloth [N] (3,), all ranks."""
