@@ -129,6 +129,9 @@ def test_a_garment_sewn_around_the_body_is_not_judged_by_its_start_distance():
     ("fabric", {"failure_strain": 0.0}, "fabric.failure_strain: must be > 0"),
     ("output", {"windows": [[57.0, 20.0]]}, r"output.windows\[0\]: a window \[a, b\] needs a < b"),
     ("output", {"windows": [[20.0]]}, r"output.windows\[0\]: expected a list of 2 numbers"),
+    ("output", {"sensor_diameter": 0.0}, "output.sensor_diameter: must be > 0"),
+    ("output", {"sensor_diameter": float("nan")}, "output.sensor_diameter: must be finite"),
+    ("output", {"sensor_diameter": "3 cm"}, "output.sensor_diameter: expected"),
 ])
 def test_bad_verdict_and_window_keys_are_refused_naming_them(tmp_path, section, values, words):
     import re

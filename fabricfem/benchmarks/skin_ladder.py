@@ -10,6 +10,8 @@ runs each level under `mpirun -n 2`). Per level, against the finest:
     window mean          the mean elbow torque over the records from 20 to 57 deg and its relative difference
     peak pressure        the largest record's peak skin pressure of the motion [Pa] (each record's pressure is the
                          time average over its interval) and the 99th percentile of the records' peaks
+    sensor pressure      the largest record's sensor pressure (the mean over a disc of the scene's
+                         [output] sensor_diameter, fabricfem.wear.sensor) [Pa]
 
 Writes DIR/skin_ladder.csv and DIR/skin_ladder.png (every level's torque curve and the peak pressure against the
 mesh size). SI units.
@@ -32,7 +34,7 @@ from fabricfem.wear.outputs import torque_rms_error
 MESHES = ("10x13", "15x20", "20x26", "30x39", "36x60", "40x52", "44x57", "60x78", "80x104")
 WINDOW_DEG = (20.0, 57.0)
 COLUMNS = ("mesh", "ndofs", "curve_rms_difference", "window_mean_Nm", "window_mean_difference",
-           "peak_pressure_Pa", "p99_peak_pressure_Pa", "max_strain", "wall_s", "status")
+           "peak_pressure_Pa", "p99_peak_pressure_Pa", "sensor_pressure_Pa", "max_strain", "wall_s", "status")
 
 
 def level_scene(scene: Path, mesh: str, folder: Path) -> Path:
@@ -73,6 +75,7 @@ def read_level(folder: Path) -> dict:
     return {"angle": np.array([float(r["axis"]) for r in rows]),
             "torque": np.array([float(r["elbow_torque_Nm"]) for r in rows]),
             "peak": np.array([float(r["peak_pressure_Pa"]) for r in rows]),
+            "sensor": np.array([float(r.get("sensor_pressure_Pa") or "nan") for r in rows]),
             "strain": np.array([float(r["max_strain"]) for r in rows]),
             "summary": json.loads((folder / "summary.json").read_text())}
 
@@ -92,6 +95,7 @@ def ladder_rows(levels: dict[str, dict]) -> list[dict]:
                      "window_mean_Nm": mean, "window_mean_difference": mean / reference_mean - 1.0,
                      "peak_pressure_Pa": float(level["peak"].max()),
                      "p99_peak_pressure_Pa": float(np.percentile(level["peak"], 99)),
+                     "sensor_pressure_Pa": float(level["sensor"].max()),
                      "max_strain": float(level["strain"].max()), "wall_s": level["summary"].get("wall_s"),
                      "status": level["summary"].get("status")})
     return rows
@@ -112,7 +116,8 @@ def plot(levels: dict[str, dict], rows: list[dict], path: Path) -> None:
     around = [int(r["mesh"].split("x")[0]) for r in rows]
     right.plot(around, [r["peak_pressure_Pa"] / 1e3 for r in rows], "o-", label="largest record")
     right.plot(around, [r["p99_peak_pressure_Pa"] / 1e3 for r in rows], "s--", label="99th percentile")
-    right.set(xlabel="cells around", ylabel="peak skin pressure [kPa]")
+    right.plot(around, [r["sensor_pressure_Pa"] / 1e3 for r in rows], "^-", label="sensor disc, largest record")
+    right.set(xlabel="cells around", ylabel="peak skin pressure [kPa]", yscale="log")
     right.legend()
     fig.tight_layout()
     fig.savefig(path, dpi=120)
@@ -137,7 +142,8 @@ def main(argv: list[str] | None = None) -> None:
     for r in rows:
         print(f"{r['mesh']:>7}  curve {100 * r['curve_rms_difference']:6.2f} %  mean {r['window_mean_Nm']:.5f} N m "
               f"({100 * r['window_mean_difference']:+6.2f} %)  peak {r['peak_pressure_Pa'] / 1e3:7.2f} kPa  "
-              f"p99 {r['p99_peak_pressure_Pa'] / 1e3:7.2f} kPa  strain {r['max_strain']:.3f}")
+              f"p99 {r['p99_peak_pressure_Pa'] / 1e3:7.2f} kPa  sensor {r['sensor_pressure_Pa'] / 1e3:7.3f} kPa  "
+              f"strain {r['max_strain']:.3f}")
 
 
 if __name__ == "__main__":

@@ -469,6 +469,8 @@ def build_wear_run(scene: Scene, comm=MPI.COMM_WORLD):
         run = limb_scene_run(scene, comm)
     else:
         run = garment_scene_run(scene, comm)
+    if isinstance(run, GarmentRun):
+        run.sensor_diameter = parsed.output.sensor_diameter
     render_at = parsed.output.render_at
     if render_at is None and isinstance(run, GarmentRun):
         start, end = run.motion_start, run.duration

@@ -415,10 +415,12 @@ def _numbers(where: str, values, n: int | None = None, allow_inf: bool = False) 
 
 
 def _check_verdict_keys(data: dict) -> None:
-    """[fabric] failure_strain (a positive finite Green strain) and [output] windows ([[a, b], ...] with a < b):
-    the bounds and windows of a run's verdict and statistics."""
+    """[fabric] failure_strain (a positive finite Green strain), [output] windows ([[a, b], ...] with a < b) and
+    sensor_diameter (a positive length [m]): the bounds, windows and sensor of a run's verdict and statistics."""
     if "failure_strain" in data.get("fabric", {}):
         _finite("fabric.failure_strain", data["fabric"]["failure_strain"], 0.0)
+    if "sensor_diameter" in data.get("output", {}):
+        _finite("output.sensor_diameter", data["output"]["sensor_diameter"], 0.0)
     for i, window in enumerate(data.get("output", {}).get("windows") or []):
         a, b = _numbers(f"output.windows[{i}]", window, 2)
         if not a < b:

@@ -174,6 +174,8 @@ class OutputSection:
                                "axis 20 deg to the end, else the whole motion)", None)
     render_at: list | None = doc("wear: record coordinates (angle [deg] or time [s]) of the pressure renders "
                                  "(default: the thirds of the motion)", None)
+    sensor_diameter: float = doc("wear: diameter [m] of the disc over which the records' sensor pressure is the "
+                                 "mean contact pressure (fabricfem.wear.sensor)", 0.03)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -51,6 +51,7 @@ class WearStep:
     drag_ratio: float = 0.0           # fictitious drag / contact force left in a relaxed state (quasi-static)
     intersecting_pairs: int | None = None   # pairs of the cloth's triangles that cross (None: not counted)
     layers: dict[str, float] = field(default_factory=dict)   # per garment of several (fabricfem.wear.layers): N, Pa
+    sensor_pressure: float = math.nan  # Pa, the largest mean over a sensor's disc (fabricfem.wear.sensor; nan: none)
 
     @property
     def coordinate(self) -> float:
@@ -94,6 +95,7 @@ class WearHistory:
     statistics: dict = field(default_factory=dict, kw_only=True)  # windowed means, percentile peaks (wear.statistics)
     wall_split: dict = field(default_factory=dict, kw_only=True)  # the process's wall time by phase (wear.run)
     self_contact: bool = field(default=False, kw_only=True)     # the cloth's contact with itself was on
+    sensor_diameter: float | None = field(default=None, kw_only=True)   # m, of the records' sensor_pressure
 
     @property
     def completed(self) -> bool:
@@ -150,14 +152,14 @@ class WearHistory:
                 "peak_pressure_mmHg", "peak_segment", "peak_x_m", "peak_y_m", "peak_z_m", "mean_pressure_Pa",
                 "max_penetration_m", "contact_force_N", "seam_gap_m", *(f"seam_{n}_N_per_m" for n in self.seams),
                 "max_strain", "time_steps", "kinetic_energy_J", "strain_energy_J", "wall_s", "newton_iterations",
-                "drag_ratio", "intersecting_pairs", *self.layer_columns)
+                "drag_ratio", "intersecting_pairs", "sensor_pressure_Pa", *self.layer_columns)
 
     def rows(self) -> list[list]:
         return [[s.time, s.phase, s.coordinate, *s.torques.values(), s.peak_pressure, s.peak_pressure / PA_PER_MMHG,
                  s.peak_segment, *s.peak_position, s.mean_pressure, s.max_penetration, s.contact_force, s.seam_gap,
                  *s.seam_forces.values(), s.max_strain, s.time_steps, s.kinetic_energy, s.strain_energy, s.wall,
                  s.newton_iterations, s.drag_ratio, "" if s.intersecting_pairs is None else s.intersecting_pairs,
-                 *(s.layers[c] for c in self.layer_columns)] for s in self.steps]
+                 s.sensor_pressure, *(s.layers[c] for c in self.layer_columns)] for s in self.steps]
 
     def torque_curves(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Resisting torque [N m] per monitor against the record coordinate, over the motion (`motion_curve`)."""
@@ -185,7 +187,7 @@ class WearHistory:
         motion = [s for s in self.steps if s.phase == "motion"] or self.steps
         for name in self.monitors:
             out[f"torque_{name}"] = _torque_entry(motion, name)
-        out["pressure"] = _pressure_entry(motion)
+        out["pressure"] = _pressure_entry(motion, getattr(self, "sensor_diameter", None))
         # strain and penetration once the seams are sewn (sewing draws the panels across the body)
         sewn = [s for s in self.steps if s.phase != "sew"] or self.steps
         out["max_strain"] = max(s.max_strain for s in sewn)
@@ -228,15 +230,20 @@ def _peak_entry(motion: list[WearStep], column: str) -> dict:
     return {"peak": float(values[k]), "peak_time_s": motion[k].time, "final": float(values[-1])}
 
 
-def _pressure_entry(motion: list[WearStep]) -> dict:
-    """Peak pressure over `motion` with its time, segment and position, and the mean over the contact [Pa]."""
+def _pressure_entry(motion: list[WearStep], sensor_diameter: float | None) -> dict:
+    """Peak pressure over `motion` with its time, segment and position, the mean over the contact and the largest
+    sensor pressure (fabricfem.wear.sensor; None when not measured) [Pa]."""
     peak = motion[int(np.argmax([s.peak_pressure for s in motion]))]
     contact = [s.mean_pressure for s in motion if s.mean_pressure > 0.0]
     mean = float(np.mean(contact)) if contact else 0.0
+    sensor = [s.sensor_pressure for s in motion if math.isfinite(s.sensor_pressure)]
+    sensor_peak = max(sensor) if sensor else None
     return {"peak_Pa": peak.peak_pressure, "peak_kPa": peak.peak_pressure / 1e3,
             "peak_mmHg": peak.peak_pressure / PA_PER_MMHG, "peak_time_s": peak.time,
             "peak_segment": peak.peak_segment, "peak_position_m": list(peak.peak_position),
-            "mean_Pa": mean, "mean_kPa": mean / 1e3, "mean_mmHg": mean / PA_PER_MMHG}
+            "mean_Pa": mean, "mean_kPa": mean / 1e3, "mean_mmHg": mean / PA_PER_MMHG,
+            "sensor_peak_Pa": sensor_peak, "sensor_peak_kPa": None if sensor_peak is None else sensor_peak / 1e3,
+            "sensor_diameter_m": sensor_diameter}
 
 
 class WearRun(Protocol):

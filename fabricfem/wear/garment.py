@@ -53,6 +53,7 @@ from fabricfem.shell import ShellModel
 from fabricfem.wear.contract import WearHistory, WearStep
 from fabricfem.wear.engine import Phase, run_phases
 from fabricfem.wear.layers import LayerMonitor
+from fabricfem.wear.sensor import SENSOR_DIAMETER, sensor_pressure
 
 # the self-contact's penalty spring at most this fraction of the shell's highest frequency: the critical step
 # shrinks by at most 1 / sqrt(1 + 0.5^2), 11 % (with the default k_N = 10 E t / h^2 its spring would set the step:
@@ -200,6 +201,7 @@ class GarmentRun:
     self_contact: SelfContact | None = None   # the cloth-cloth contact hook (None: the cloth may pass through itself)
     _surface: ClothSurface | None = None      # the cloth's triangulation of the intersection count
     layers: LayerMonitor | None = None        # the monitors per garment of several garments (fabricfem.wear.layers)
+    sensor_diameter: float = SENSOR_DIAMETER  # m, the disc of the records' sensor pressure (fabricfem.wear.sensor)
 
     @property
     def axis_label(self) -> str:
@@ -358,12 +360,15 @@ class GarmentRun:
                                  f"(donning grow_from < 1)")
         history.timings = {"dt": self.dt, "dt_estimate": self.dt_estimate}
         history.self_contact = self.self_contact is not None
+        history.sensor_diameter = self.sensor_diameter
 
         def record(phase: Phase, k: int, steps: int) -> WearStep:
             means = contact.mean_torques()
             d = integ.d.getArray(readonly=True)
             pressure = self.pressure_field().x.array[contact.nodes.node_index[contact.moving]]
             peak, segment, position, mean = self._peak(pressure)
+            sensor = sensor_pressure(contact.reference + d[contact.dofs], pressure, contact.current_areas(),
+                                     self.sensor_diameter, self.comm)
             strains = self.strain.strain_summary() if self.strain is not None else {"max_warp": 0.0, "max_weft": 0.0}
             return WearStep(
                 phase=phase.name, time=integ.t, torques={s.name: -means[s.name] for s in self.torques},
@@ -376,7 +381,8 @@ class GarmentRun:
                 kinetic_energy=integ.kinetic_energy(), strain_energy=integ.strain_energy(),
                 wall=time.perf_counter() - t0, axis_value=self.axis_at(integ.t, phase),
                 intersecting_pairs=self.intersections(d),
-                layers=self.layers.values(pressure, contact) if self.layers is not None else {})
+                layers=self.layers.values(pressure, contact) if self.layers is not None else {},
+                sensor_pressure=sensor)
 
         save = None
         if checkpoint is not None:

@@ -12,7 +12,7 @@ from mpi4py import MPI
 
 from fabricfem import io as fio
 from fabricfem.wear.config import SleeveConfig
-from fabricfem.wear.contract import WearHistory, WearRun, WearStep
+from fabricfem.wear.contract import PA_PER_MMHG, WearHistory, WearRun, WearStep
 from fabricfem.wear.engine import format_breakdown
 from fabricfem.wear.quasistatic import build_sleeve
 from fabricfem.wear.recorder import WearRecorder
@@ -197,6 +197,9 @@ def format_summary(summary: dict) -> list[str]:
                      f"{p['peak_mmHg']:.4g} mmHg on {p['peak_segment'] or '-'} at ({position}) m, t = "
                      f"{p['peak_time_s']:.3g} s; mean over the contact {p['mean_Pa']:.4g} Pa = {p['mean_kPa']:.4g} kPa = "
                      f"{p['mean_mmHg']:.4g} mmHg")
+        if p.get("sensor_peak_Pa") is not None and p.get("sensor_diameter_m"):
+            lines.append(f"contact pressure on a sensor's disc (diameter {p['sensor_diameter_m'] * 100:.3g} cm): peak "
+                         f"{p['sensor_peak_kPa']:.4g} kPa = {p['sensor_peak_Pa'] / PA_PER_MMHG:.4g} mmHg")
     if "max_strain" in summary:
         lines.append(f"largest fabric strain {summary['max_strain']:.3e}, largest penetration "
                      f"{summary['max_penetration_m']:.2e} m, largest seam gap after sewing "
