@@ -63,15 +63,22 @@ def naghdi_kernel_form(model, reference: ReferenceAtQuadrature, flags: tuple[str
     """dolfinx Form (cpp) of the Naghdi shell's internal force by the hand-written kernel
     (fabricfem.forms.naghdi_kernel) on the state space of `model`, with `reference` in the kernel's layout;
     compiled with the C flags `flags`. The model's A, D, shear stiffness Constants are read at every assembly."""
+    source, parameters = naghdi_source(model)
+    law_constant = fem.Constant(model.mesh, np.asarray(parameters, dtype=float))
+    address = naghdi_kernel.compile_kernel(source, model.comm, tuple(flags))
+    return cell_kernel_form(model, reference, address, [model.A, model.D, model.shear_stiffness, law_constant])
+
+
+def naghdi_source(model) -> tuple[str, np.ndarray]:
+    """(C source of the hand-written kernel for `model`'s elements, PSRI degrees and bending law, the law's
+    parameters) (fabricfem.forms.naghdi_kernel.kernel_source)."""
     args = model.energy_options
     law, parameters = naghdi_kernel.law_parameters(args["law"], args["law_eps"])
-    law_constant = fem.Constant(model.mesh, np.asarray(parameters, dtype=float))
     u_element = model.W.ufl_element().sub_elements()[0].sub_elements()[0]
     theta_element = model.W.ufl_element().sub_elements()[1].sub_elements()[0]
     source = naghdi_kernel.kernel_source(u_element, theta_element, model.mesh.ufl_cell().cellname(),
                                          args["degrees"], law, len(parameters))
-    address = naghdi_kernel.compile_kernel(source, model.comm, tuple(flags))
-    return cell_kernel_form(model, reference, address, [model.A, model.D, model.shear_stiffness, law_constant])
+    return source, parameters
 
 
 def cell_kernel_form(model, reference: ReferenceAtQuadrature, address: int, constants: list):

@@ -40,7 +40,7 @@ EMPTY_KERNEL = ("#include <stdint.h>\nvoid naghdi_force(double* restrict A, cons
 COLUMNS = ("mesh", "implementation", "cells", "dofs", "ms_per_evaluation", "speedup", "max_relative_difference")
 
 
-def _floor_evaluation(model):
+def floor_evaluation(model):
     """An evaluation of the empty kernel on the hand kernel's space and coefficients (model: its internal force
     already built)."""
     address = naghdi_kernel.compile_kernel(EMPTY_KERNEL, model.comm, KERNEL_FLAGS)
@@ -87,7 +87,7 @@ def _mesh_rows(mesh: str, evaluations: int, repeats: int, comm: MPI.Comm) -> lis
         forces[name] = b.copy()
         evaluate[name] = (lambda m=model, x=x, b=b: m.internal_force(x, b))
         if name == "hand kernel":
-            evaluate[FLOOR] = _floor_evaluation(model)
+            evaluate[FLOOR] = floor_evaluation(model)
         cells = comm.allreduce(model.mesh.topology.index_map(2).size_local, op=MPI.SUM)
         dofs = x.getSize()
     times: dict[str, list[float]] = {name: [] for name in evaluate}
