@@ -11,21 +11,27 @@ import igl
 import numpy as np
 import pytest
 
-from fabricfem.contact.intersections import candidate_pairs, intersecting_pairs
+from fabricfem.contact.intersections import candidate_pairs, intersecting, intersecting_pairs
 
 
 def brute_force(points: np.ndarray, triangles: np.ndarray) -> int:
     """libigl's test on every pair of triangles sharing no node whose bounding boxes overlap (a necessary
-    condition)."""
+    condition): the number of intersecting pairs."""
+    return len(brute_force_pairs(points, triangles))
+
+
+def brute_force_pairs(points: np.ndarray, triangles: np.ndarray) -> set[tuple[int, int]]:
+    """The pairs (i < j) of `brute_force`."""
     corners = points[triangles]
     low, high = corners.min(axis=1), corners.max(axis=1)
-    count = 0
+    found = set()
     for i, j in itertools.combinations(range(len(triangles)), 2):
         if set(triangles[i]) & set(triangles[j]) or (low[i] > high[j]).any() or (low[j] > high[i]).any():
             continue
         p, q = points[triangles[i]], points[triangles[j]]
-        count += bool(igl.tri_tri_intersection_test_3d(p[0:1], p[1:2], p[2:3], q[0:1], q[1:2], q[2:3])[0])
-    return count
+        if igl.tri_tri_intersection_test_3d(p[0:1], p[1:2], p[2:3], q[0:1], q[1:2], q[2:3])[0]:
+            found.add((i, j))
+    return found
 
 
 def folded_sheet(nx: int, ny: int, fold: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -52,6 +58,7 @@ def test_count_of_a_triangle_soup_is_the_brute_force_count(spread):
     expected = brute_force(points, triangles)
     assert expected > 0
     assert intersecting_pairs(points, triangles) == expected
+    assert {tuple(p) for p in intersecting(points, triangles).tolist()} == brute_force_pairs(points, triangles)
 
 
 @pytest.mark.parametrize("fold", [0.0, 0.05, 0.3])

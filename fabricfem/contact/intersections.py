@@ -54,6 +54,11 @@ def intersecting_pairs(points: np.ndarray, triangles: np.ndarray, part: tuple[in
     """Number of pairs of triangles (rows of `triangles` (T, 3), node indices into `points` (N, 3) [m]) that
     intersect and share no node (module docstring); `part` = (k, parts): the pairs of `candidate_pairs`' part k
     only (the counts of the parts sum to the whole count: each rank of a run counts one part)."""
+    return len(intersecting(points, triangles, part))
+
+
+def intersecting(points: np.ndarray, triangles: np.ndarray, part: tuple[int, int] = (0, 1)) -> np.ndarray:
+    """The (n, 2) pairs (i < j) counted by `intersecting_pairs`."""
     points = np.asarray(points, dtype=float)
     triangles = np.asarray(triangles, dtype=np.int64)
     if points.ndim != 2 or points.shape[1] != 3 or triangles.ndim != 2 or triangles.shape[1] != 3:
@@ -63,6 +68,7 @@ def intersecting_pairs(points: np.ndarray, triangles: np.ndarray, part: tuple[in
     side_b, normal_a = _sides(a, b)          # nodes of b against the plane of a
     side_a, normal_b = _sides(b, a)
     keep = _straddles(side_b) & _straddles(side_a)
+    pairs = pairs[keep]
     a, b, side_a, side_b, normal_a, normal_b = (v[keep] for v in (a, b, side_a, side_b, normal_a, normal_b))
     size = np.maximum(np.ptp(a, axis=1).max(axis=1), np.ptp(b, axis=1).max(axis=1))
     general = ((np.abs(side_a).min(axis=1) > DEGENERATE * size * np.linalg.norm(normal_b, axis=1))
@@ -73,11 +79,12 @@ def intersecting_pairs(points: np.ndarray, triangles: np.ndarray, part: tuple[in
     direction = np.cross(normal_a[general], normal_b[general])
     low_a, high_a = _interval(a[general], side_a[general], direction)
     low_b, high_b = _interval(b[general], side_b[general], direction)
-    count = int(np.count_nonzero(np.maximum(low_a, low_b) <= np.minimum(high_a, high_b)))
-    for p, q in zip(a[~general], b[~general]):
-        hit, *_ = igl.tri_tri_intersection_test_3d(p[0:1], p[1:2], p[2:3], q[0:1], q[1:2], q[2:3])
-        count += bool(hit)
-    return count
+    hits = np.zeros(len(pairs), dtype=bool)
+    hits[general] = np.maximum(low_a, low_b) <= np.minimum(high_a, high_b)
+    for k in np.flatnonzero(~general):
+        p, q = a[k], b[k]
+        hits[k] = bool(igl.tri_tri_intersection_test_3d(p[0:1], p[1:2], p[2:3], q[0:1], q[1:2], q[2:3])[0])
+    return pairs[hits]
 
 
 def _sides(u: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

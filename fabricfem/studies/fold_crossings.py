@@ -1,0 +1,72 @@
+"""Where a wear run's cloth crosses itself: `python -m fabricfem.studies.fold_crossings RUN_DIR SCENE [--record K]`.
+
+Reads the cloth of record K (default the last) from RUN_DIR/cloth.xdmf (Q2 cells, each split into 8 triangles on
+its 3 x 3 nodes), lists the intersecting triangle pairs (fabricfem.contact.intersections.intersecting) and, for the
+two triangles of each pair, the gap of their centroids to the body's skin, the skin's segment and normal there
+(the scene's body posed at that record, the blended skin of fabricfem.contact.projection.skin_gap). It tells a
+fold stacked on one side of the skin (both triangles' skin normals alike) from cloth pinched between two facing
+sheets of skin (opposed normals), and prints the counts. Metres, degrees.
+"""
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import meshio
+import numpy as np
+from mpi4py import MPI
+
+from fabricfem.contact.intersections import intersecting
+from fabricfem.contact.projection import skin_gap
+from fabricfem.scenes import load
+from fabricfem.scenes.build import build_wear_run
+
+OPPOSED = -0.5   # cosine of the angle between the two skin normals below which the skin faces itself
+
+
+def cloth_triangles(folder: Path, record: int) -> tuple[np.ndarray, np.ndarray, float]:
+    """(deformed points (N, 3) [m], triangles (T, 3), the record's time) of record `record` of cloth.xdmf."""
+    with meshio.xdmf.TimeSeriesReader(str(folder / "cloth.xdmf")) as reader:
+        points, cells = reader.read_points_cells()
+        index = record if record >= 0 else reader.num_steps + record
+        time, point_data, _ = reader.read_data(index)
+    q = cells[0].data                            # quad9: corners, mid-edges, centre
+    quads = np.vstack([q[:, [0, 4, 8, 7]], q[:, [4, 1, 5, 8]], q[:, [8, 5, 2, 6]], q[:, [7, 8, 6, 3]]])
+    triangles = np.vstack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    return points + next(iter(point_data.values()))[:, :3], triangles, float(time)
+
+
+def crossing_report(folder: Path, scene_path: Path, record: int = -1) -> dict:
+    """Counts of the intersecting pairs of the record by the skin's segments under their triangles and by the
+    relative direction of the skin normals, and the gaps [m] of their centroids to the skin."""
+    x, triangles, time = cloth_triangles(folder, record)
+    pairs = intersecting(x, triangles)
+    run, *_ = build_wear_run(load(scene_path), MPI.COMM_SELF)
+    coordinate = run.axis_at(time) if run.axis is not None else time
+    bodies = run.posed_bodies(coordinate)
+    names = list(run.body.segments)
+    centroid = x[triangles].mean(axis=1)
+    first = skin_gap(centroid[pairs[:, 0]], bodies, run.contact.widths)
+    second = skin_gap(centroid[pairs[:, 1]], bodies, run.contact.widths)
+    cosine = np.sum(first[1] * second[1], axis=1)
+    segments = {f"{names[a]}-{names[b]}": int(np.sum((first[2] == a) & (second[2] == b)))
+                for a in range(len(names)) for b in range(len(names))}
+    gaps = np.concatenate([first[0], second[0]])
+    return {"time_s": time, "coordinate": coordinate, "pairs": len(pairs), "segments": segments,
+            "opposed_normals": int(np.sum(cosine < OPPOSED)), "same_side": int(np.sum(cosine > -OPPOSED)),
+            "gap_median_m": float(np.median(gaps)) if len(gaps) else float("nan"),
+            "gap_max_m": float(gaps.max()) if len(gaps) else float("nan")}
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("run_dir")
+    parser.add_argument("scene")
+    parser.add_argument("--record", type=int, default=-1, help="record index (default: the last)")
+    args = parser.parse_args(argv)
+    for key, value in crossing_report(Path(args.run_dir), Path(args.scene), args.record).items():
+        print(f"{key:>16}  {value}")
+
+
+if __name__ == "__main__":
+    main()
