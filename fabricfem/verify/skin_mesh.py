@@ -12,8 +12,10 @@ cylinder (trimesh.creation.cylinder) rigged to the one segment (every weight 1).
 
 skin-mesh-vs-ellipsoids-sleeve: the default sleeve flexed on the default arm with the skin a 2 mm marching-cubes
 triangulation of the blended arm (fabricfem.body.mesh_skin.ellipsoid_skin) against the analytic blended arm: the
-elbow-torque curves over 10-57 deg (mesh 30x39) agree within 3 % RMS. Not a registered case: it does not pass
-(docs/findings/2026-11-27-mesh-skin-cost.md); run on demand by `python -m fabricfem.verify.skin_mesh`.
+elbow-torque curves over 10-57 deg (mesh 30x39) agree within 3 % RMS. Not a registered case: it does not pass, and
+cannot as posed: the mesh skin is the blended arm triangulated at rest and posed by linear blend skinning, which
+does not follow the blended arm's smooth minimum at the flexed elbow (docs/findings/2026-11-28-mesh-skin-normals.md);
+run on demand by `python -m fabricfem.verify.skin_mesh`.
 """
 from __future__ import annotations
 
@@ -296,13 +298,14 @@ def skin_mesh_vs_ellipsoids_sleeve() -> list[CaseResult]:
     """The default sleeve (mu = 0.1, explicit, gravity) on mesh 30x39 flexed to 57 deg, on a 2 mm triangulation
     of the blended arm (`ellipsoid_skin`, rigged by bone heat) and on the analytic blended arm: the elbow-torque
     curves over 10-57 deg differ by at most 3 % RMS (relative to the RMS of the analytic curve; the acceptance).
-    The triangulation's chords cut the skin by at most h^2 / (8 R) = 1.3e-5 m at the forearm's 4 cm radius
+    At rest the triangulation's chords cut the skin by at most h^2 / (8 R) = 1.3e-5 m at the forearm's 4 cm radius
     (1.7e-5 m in the 3 cm crease blend), 0.4 % of the sleeve's 4.3 mm clearance, and its facets turn the normal by
-    h / R ~ 0.05 rad between neighbours; both skins carry the friction's stick points in the segments' frames and
-    the records are time averages of the same explicit steps, so what differs is the geometry alone. Measured on
-    mesh 10x13 (not the acceptance's mesh): 0.04 % RMS over 0-8 deg, 0.15 % over 0-12 deg; its measurement on
-    30x39 (about 2 minutes serial, 8 GB) is in docs/findings/2026-11-27-mesh-skin-cost.md. Run on demand by
-    `python -m fabricfem.verify.skin_mesh` (prints its row)."""
+    h / R ~ 0.05 rad between neighbours. Flexed, the two skins differ by more than that whatever h: the mesh skin is
+    posed by linear blend skinning (bone heat weights), the analytic arm re-blended at every pose, and around the
+    elbow they part by millimetres (5.5 mm outwards on the outer side, 24 mm inwards in the crease at 57 deg; 2 mm
+    at 10 deg). Measured on 30x39: 5.8-6.7 % RMS at 4, 3, 2 and 1 mm, no convergence with h; on mesh 10x13: 0.04 %
+    RMS over 0-8 deg, 0.15 % over 0-12 deg (docs/findings/2026-11-28-mesh-skin-normals.md; about 2 minutes serial,
+    0.6 GB). Run on demand by `python -m fabricfem.verify.skin_mesh` (prints its row)."""
     name = "skin-mesh-vs-ellipsoids-sleeve"
     config = SleeveConfig.of(n_around=30, n_along=39, final_angle=SLEEVE_RANGE[1])
     with Timer() as timer:
