@@ -20,6 +20,7 @@ run on demand by `python -m fabricfem.verify.skin_mesh`.
 from __future__ import annotations
 
 import math
+import sys
 import time
 
 import numpy as np
@@ -29,6 +30,7 @@ from mpi4py import MPI
 from scipy.spatial import cKDTree
 
 from fabricfem.body.blend import smoothstep
+from fabricfem.body.blended import BlendedEllipsoids
 from fabricfem.body.mesh_skin import MeshSkin, ellipsoid_skin, skin_mesh
 from fabricfem.body.pose import Body, Segment
 from fabricfem.contact.explicit import ExplicitBodyContact
@@ -294,7 +296,7 @@ def torque_rms(histories: dict, angles: tuple[float, float] = SLEEVE_RANGE) -> t
     return float(np.sqrt(np.mean(difference ** 2)) / np.sqrt(np.mean(reference[on] ** 2))), int(on.sum())
 
 
-def skin_mesh_vs_ellipsoids_sleeve() -> list[CaseResult]:
+def skin_mesh_vs_ellipsoids_sleeve(spacing: float = SLEEVE_SPACING) -> list[CaseResult]:
     """The default sleeve (mu = 0.1, explicit, gravity) on mesh 30x39 flexed to 57 deg, on a 2 mm triangulation
     of the blended arm (`ellipsoid_skin`, rigged by bone heat) and on the analytic blended arm: the elbow-torque
     curves over 10-57 deg differ by at most 3 % RMS (relative to the RMS of the analytic curve; the acceptance).
@@ -305,17 +307,42 @@ def skin_mesh_vs_ellipsoids_sleeve() -> list[CaseResult]:
     elbow they part by millimetres (5.5 mm outwards on the outer side, 24 mm inwards in the crease at 57 deg; 2 mm
     at 10 deg). Measured on 30x39: 5.8-6.7 % RMS at 4, 3, 2 and 1 mm, no convergence with h; on mesh 10x13: 0.04 %
     RMS over 0-8 deg, 0.15 % over 0-12 deg (docs/findings/2026-11-28-mesh-skin-normals.md; about 2 minutes serial,
-    0.6 GB). Run on demand by `python -m fabricfem.verify.skin_mesh` (prints its row)."""
+    0.6 GB). Run on demand by `python -m fabricfem.verify.skin_mesh [--spacing H]` (prints `posed_deviation`'s table
+    and its row, the triangulation's spacing H [m], default 2 mm)."""
     name = "skin-mesh-vs-ellipsoids-sleeve"
     config = SleeveConfig.of(n_around=30, n_along=39, final_angle=SLEEVE_RANGE[1])
     with Timer() as timer:
-        histories = sleeve_histories(config)
+        histories = sleeve_histories(config, spacing)
     rms, records = torque_rms(histories)
     return [result(name, f"elbow torque RMS difference over {SLEEVE_RANGE[0]:g}-{SLEEVE_RANGE[1]:g} deg ({records} "
-                   f"records), 2 mm mesh skin vs blended arm, mesh 30x39 [relative]", rms, 0.0, SLEEVE_TOLERANCE,
+                   f"records), {1e3 * spacing:g} mm mesh skin vs blended arm, mesh 30x39 [relative]", rms, 0.0, SLEEVE_TOLERANCE,
                    histories["blended"].ndofs, timer.elapsed, scale=1.0)]
 
 
+def posed_deviation(spacing: float = SLEEVE_SPACING, angles: tuple[float, ...] = (0.0, 10.0, 20.0, 30.0, 40.0, 57.0)
+                    ) -> list[dict]:
+    """How far the mesh skin posed by linear blend skinning lies from the analytic blended arm at the sleeve's elbow
+    angles [deg]: per angle the largest signed distance [m] of the posed vertices outside (`out_m`) and inside
+    (`in_m`) the blended arm (`BlendedEllipsoids.query`, exact closest points) and the fraction of vertices off
+    by more than 0.5 mm. No contact is involved."""
+    config = SleeveConfig.of(n_around=30, n_along=39, final_angle=SLEEVE_RANGE[1])
+    body, _, _ = flexion_timeline(config.motion, config.route, similarity_factor(config.fabric, config.route),
+                                  config.arm)
+    skin, blended = ellipsoid_skin(body, spacing=spacing, margin=0.0), BlendedEllipsoids(body)
+    t0, t1 = body.kinematics.time_range
+    rows = []
+    for angle in angles:            # the flexion is uniform over the kinematics' time range
+        t = t0 + (t1 - t0) * angle / SLEEVE_RANGE[1]
+        gap = blended.query(skin.vertices(t), t).gap
+        rows.append({"angle_deg": angle, "out_m": float(gap.max()), "in_m": float(-gap.min()),
+                     "off_fraction": float(np.mean(np.abs(gap) > 5e-4))})
+    return rows
+
+
 if __name__ == "__main__":
-    for row in skin_mesh_vs_ellipsoids_sleeve():
+    spacing = float(sys.argv[sys.argv.index("--spacing") + 1]) if "--spacing" in sys.argv else SLEEVE_SPACING
+    for row in posed_deviation(spacing):
+        print(f"{row['angle_deg']:5.1f} deg: posed mesh skin outside the blended arm by up to {1e3 * row['out_m']:.2f} mm, "
+              f"inside by up to {1e3 * row['in_m']:.2f} mm; {100 * row['off_fraction']:.1f} % of the vertices off by > 0.5 mm")
+    for row in skin_mesh_vs_ellipsoids_sleeve(spacing):
         print(f"{row.quantity}: {row.value:.4g} (tolerance {row.tolerance:g}, {'pass' if row.passed else 'FAIL'})")
