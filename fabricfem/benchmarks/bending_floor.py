@@ -43,6 +43,7 @@ from typing import Sequence
 import numpy as np
 
 from fabricfem import io
+from fabricfem.benchmarks.explicit_floor import against_newton, cheapest_per_target
 from fabricfem.benchmarks.speed_accuracy import AIR_DRAG, K_OVER_RHO, NEWTON_OPTIONS, free_corner
 from fabricfem.dynamics import CentralDifference, NewmarkIntegrator, critical_time_step
 from fabricfem.dynamics.newmark import DynamicsError
@@ -265,20 +266,15 @@ def conclusions(rows: Sequence[dict], uncertainty: float = 0.0, say=print) -> li
     """The cheapest measured run qualifying for each target error (`qualifies`, against the reference estimate),
     next to Newton's bending solve loop; `uncertainty` (the reference's, relative) is added to the error to say
     whether the target is met for certain."""
-    out = []
-    for target in TARGETS:
-        meeting = [r for r in rows if qualifies(r, rows, target)]
-        best = min(meeting, key=lambda r: r["solve_s"]) if meeting else None
-        out.append((target, best))
+    out = cheapest_per_target(rows, lambda r, target: qualifies(r, rows, target), TARGETS)
+    for target, best in out:
         if best is None:
             say(f"target {target:.0%}: no measured run meets it")
             continue
-        ratio = NEWTON_S[target] / best["solve_s"]
         sure = "met" if best["error"] + uncertainty <= target else "not certain"
         say(f"target {target:.0%}: {best['route']} n = {best['n']} ({best['steps']} steps) "
             f"{1e3 * best['solve_s']:.2f} ms, error {best['error']:.2e} (+ reference {uncertainty:.1e}: {sure}) "
-            f"against Newton's {NEWTON_S[target]:.3g} s: " + (f"{ratio:.3g} x cheaper" if ratio >= 1
-                                                              else f"{1 / ratio:.3g} x dearer"))
+            f"against Newton's {NEWTON_S[target]:.3g} s: " + against_newton(best, NEWTON_S[target]))
     return out
 
 

@@ -91,20 +91,31 @@ def ladder(cells: Sequence[int], repeats: int, say=print) -> list[dict]:
     return rows
 
 
+def cheapest_per_target(rows: Sequence[dict], meets, targets: Sequence[float] = TARGETS
+                        ) -> list[tuple[float, dict | None]]:
+    """(target, the run of least `solve_s` among the rows for which meets(row, target) holds, or None) per target."""
+    out = []
+    for target in targets:
+        meeting = [r for r in rows if meets(r, target)]
+        out.append((target, min(meeting, key=lambda r: r["solve_s"]) if meeting else None))
+    return out
+
+
+def against_newton(run: dict, newton_s: float) -> str:
+    """Newton's solve loop `newton_s` [s] against the run's `solve_s`: "<r> x cheaper" or "<1/r> x dearer"."""
+    ratio = newton_s / run["solve_s"]
+    return f"{ratio:.3g} x cheaper" if ratio >= 1 else f"{1 / ratio:.3g} x dearer"
+
+
 def conclusions(rows: list[dict], say=print) -> list[tuple[float, dict | None]]:
     """The cheapest compiled run meeting each target error, next to Newton's solve loop."""
-    out = []
-    for target in TARGETS:
-        meeting = [r for r in rows if r["route"] == "compiled" and r["error"] <= target]
-        best = min(meeting, key=lambda r: r["solve_s"]) if meeting else None
-        out.append((target, best))
+    out = cheapest_per_target(rows, lambda r, target: r["route"] == "compiled" and r["error"] <= target)
+    for target, best in out:
         if best is None:
             say(f"target {target:.0%}: no measured explicit run meets it")
             continue
-        ratio = NEWTON_S[target] / best["solve_s"]
         say(f"target {target:.0%}: n = {best['n']} ({best['steps']} steps) {1e3 * best['solve_s']:.3f} ms against "
-            f"Newton's {1e3 * NEWTON_S[target]:.3g} ms: " + (f"{ratio:.3g} x cheaper" if ratio >= 1
-                                                             else f"{1 / ratio:.3g} x dearer"))
+            f"Newton's {1e3 * NEWTON_S[target]:.3g} ms: " + against_newton(best, NEWTON_S[target]))
     return out
 
 
