@@ -19,9 +19,16 @@ from fabricfem.contact import nodal
 # basix's Q2 quadrilateral: vertices (0, 0), (1, 0), (0, 1), (1, 1), the midpoints of the edges (v0 v1), (v0 v2),
 # (v1 v3), (v2 v3), the centre; GRID[j][i] is the local node at (i / 2, j / 2) of the reference square
 GRID = np.array([[0, 4, 1], [5, 8, 6], [2, 7, 3]])
-# the eight triangles (counter-clockwise in the reference square, so that their normals follow the cell's)
-SPLIT = np.array([(GRID[j, i], GRID[j, i + 1], GRID[j + 1, i + 1]) for j in range(2) for i in range(2)]
-                 + [(GRID[j, i], GRID[j + 1, i + 1], GRID[j + 1, i]) for j in range(2) for i in range(2)])
+
+
+def split_cell(grid: np.ndarray) -> np.ndarray:
+    """(8, 3) local node indices of the eight triangles of a cell whose 3 x 3 nodes are `grid` (grid[j][i] the node
+    at (i / 2, j / 2) of the reference square), counter-clockwise in it, so that their normals follow the cell's."""
+    return np.array([(grid[j, i], grid[j, i + 1], grid[j + 1, i + 1]) for j in range(2) for i in range(2)]
+                    + [(grid[j, i], grid[j + 1, i + 1], grid[j + 1, i]) for j in range(2) for i in range(2)])
+
+
+SPLIT = split_cell(GRID)
 
 
 class ClothSurface:

@@ -1,11 +1,12 @@
 """Where a wear run's cloth crosses itself: `python -m fabricfem.studies.fold_crossings RUN_DIR SCENE [--record K]`.
 
 Reads the cloth of record K (default the last) from RUN_DIR/cloth.xdmf (Q2 cells, each split into 8 triangles on
-its 3 x 3 nodes), lists the intersecting triangle pairs (fabricfem.contact.intersections.intersecting) and, for the
-two triangles of each pair, the gap of their centroids to the body's skin, the skin's segment and normal there
-(the scene's body posed at that record, the blended skin of fabricfem.contact.projection.skin_gap). It tells a
-fold stacked on one side of the skin (both triangles' skin normals alike) from cloth pinched between two facing
-sheets of skin (opposed normals), and prints the counts. Metres, degrees.
+its 3 x 3 nodes as the self-contact splits them, fabricfem.contact.cloth_surface.split_cell), lists the
+intersecting triangle pairs (fabricfem.contact.intersections.intersecting) and, for the two triangles of each pair,
+the gap of their centroids to the body's skin, the skin's segment and normal there (the scene's body posed at that
+record, the blended skin of fabricfem.contact.projection.skin_gap). It tells a fold stacked on one side of the skin
+(both triangles' skin normals alike) from cloth pinched between two facing sheets of skin (opposed normals), and
+prints the counts. Metres, degrees.
 """
 from __future__ import annotations
 
@@ -16,12 +17,14 @@ import meshio
 import numpy as np
 from mpi4py import MPI
 
+from fabricfem.contact.cloth_surface import split_cell
 from fabricfem.contact.intersections import intersecting
 from fabricfem.contact.projection import skin_gap
 from fabricfem.scenes import load
 from fabricfem.scenes.build import build_wear_run
 
 OPPOSED = -0.5   # cosine of the angle between the two skin normals below which the skin faces itself
+VTK_GRID = np.array([[0, 4, 1], [7, 8, 5], [3, 6, 2]])   # the file's quad9 nodes on the 3 x 3 grid (cloth_surface.GRID)
 
 
 def cloth_triangles(folder: Path, record: int) -> tuple[np.ndarray, np.ndarray, float]:
@@ -30,9 +33,7 @@ def cloth_triangles(folder: Path, record: int) -> tuple[np.ndarray, np.ndarray, 
         points, cells = reader.read_points_cells()
         index = record if record >= 0 else reader.num_steps + record
         time, point_data, _ = reader.read_data(index)
-    q = cells[0].data                            # quad9: corners, mid-edges, centre
-    quads = np.vstack([q[:, [0, 4, 8, 7]], q[:, [4, 1, 5, 8]], q[:, [8, 5, 2, 6]], q[:, [7, 8, 6, 3]]])
-    triangles = np.vstack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])
+    triangles = cells[0].data[:, split_cell(VTK_GRID)].reshape(-1, 3)
     return points + next(iter(point_data.values()))[:, :3], triangles, float(time)
 
 
