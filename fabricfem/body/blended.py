@@ -52,6 +52,7 @@ MIN_GRADIENT = 0.5            # |grad phi| below this (a web between two facing 
 CLOSEST_ITERATIONS = 200      # orthogonal projection iterations of `closest_points`
 FULL_STEPS = 10               # undamped tangential steps before the iteration halves them (concave blends)
 CLOSEST_TOLERANCE = 1e-9      # m: |phi| and the tangential residual at convergence
+GRID_CHUNK = 1 << 20          # grid points per evaluation of the implicit function (`triangulate`)
 
 
 def check_width(width: float) -> float:
@@ -223,19 +224,23 @@ class BlendedEllipsoids:
         return triangulate(lambda points: self.implicit(points, t), self.bounds(t), spacing)
 
     def bounds(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """Corners [m] of a box holding the posed body and its blend."""
+        """Corners [m] of a box holding the posed body and its blend: the box of the posed segments' ellipsoids
+        (each one's: centre -+ sqrt(sum_j R_ij^2 r_j^2) along axis i) grown by the blend's rounding bound w / 4."""
         centers, rotations, radii = self.posed(t)
-        reach = radii.max(axis=1)[:, None] + self.width
-        return (centers - reach).min(axis=0), (centers + reach).max(axis=0)
+        half = np.sqrt(np.einsum("kij,kj->ki", rotations ** 2, radii ** 2))
+        grow = self.rounding_bound
+        return (centers - half).min(axis=0) - grow, (centers + half).max(axis=0) + grow
 
 
 def triangulate(implicit, bounds: tuple[np.ndarray, np.ndarray], spacing: float) -> tuple[np.ndarray, np.ndarray]:
     """Triangulation of {implicit(x) = 0} inside `bounds` (lower, upper corners [m]) by marching cubes
-    (skimage.measure.marching_cubes) on a grid of `spacing` [m], outward oriented (the normals along grad phi)."""
+    (skimage.measure.marching_cubes) on a grid of `spacing` [m], outward oriented (the normals along grad phi);
+    `implicit` is evaluated on GRID_CHUNK points at a time (its temporaries stay bounded)."""
     lower, upper = (np.asarray(b, dtype=float) for b in bounds)
     lower, upper = lower - 2.0 * spacing, upper + 2.0 * spacing
     axes = [np.arange(lo, hi + spacing, spacing) for lo, hi in zip(lower, upper)]
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    values = implicit(grid).reshape(tuple(len(a) for a in axes))
+    values = np.concatenate([np.asarray(implicit(grid[k:k + GRID_CHUNK]), dtype=float).reshape(-1)
+                             for k in range(0, len(grid), GRID_CHUNK)]).reshape(tuple(len(a) for a in axes))
     vertices, faces, _, _ = marching_cubes(values, level=0.0, spacing=(spacing,) * 3, gradient_direction="descent")
     return vertices + lower, faces.astype(np.int64)

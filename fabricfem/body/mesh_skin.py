@@ -62,7 +62,6 @@ from fabricfem.body.skinning import (
 HEIGHT_RANGE = (0.5, 2.5)     # m: a body's height outside this is taken for a wrong `units`
 COMPONENTS = ("largest", "all")
 CACHE_SIZE = 4                # posed surfaces kept (an explicit step asks the same time several times)
-GRID_CHUNK = 1 << 20          # grid points per evaluation of the implicit function (`ellipsoid_skin`)
 
 
 @dataclass(frozen=True, eq=False)
@@ -393,26 +392,6 @@ def union_implicit(body, t: float) -> Callable[[np.ndarray], np.ndarray]:
     return phi
 
 
-def _tight_bounds(blended: BlendedEllipsoids, t: float) -> tuple[np.ndarray, np.ndarray]:
-    """Corners [m] of the box of the posed segments' ellipsoids (each one's box: centre -+ sqrt(sum_j R_ij^2 r_j^2)
-    along axis i) grown by the blend's rounding bound w / 4 (`BlendedEllipsoids.rounding_bound`): it holds the
-    blended skin and the segments' union. (`BlendedEllipsoids.bounds` grows every segment by its largest radius
-    along every axis: a 10 times larger grid for the arm.)"""
-    centers, rotations, radii = blended.posed(t)
-    half = np.sqrt(np.einsum("kij,kj->ki", rotations ** 2, radii ** 2))
-    grow = blended.rounding_bound
-    return (centers - half).min(axis=0) - grow, (centers + half).max(axis=0) + grow
-
-
-def _in_chunks(phi: Callable[[np.ndarray], np.ndarray]) -> Callable[[np.ndarray], np.ndarray]:
-    """phi evaluated on at most GRID_CHUNK points at a time (its temporaries, ~400 bytes a point for the blended
-    ellipsoids, stay bounded)."""
-    def chunked(x: np.ndarray) -> np.ndarray:
-        return np.concatenate([np.asarray(phi(x[k:k + GRID_CHUNK]), dtype=float).reshape(-1)
-                               for k in range(0, len(x), GRID_CHUNK)])
-    return chunked
-
-
 def ellipsoid_skin(body, t: float | None = None, spacing: float = 0.01,
                    implicit: Callable[[np.ndarray], np.ndarray] | None = None, **rig) -> MeshSkin:
     """A triangulated skin of the body's own segments, rigged to them with the body's pose at t as rest pose.
@@ -421,8 +400,8 @@ def ellipsoid_skin(body, t: float | None = None, spacing: float = 0.01,
         body: the Body; t: the rest time [s] (default: the first time of its kinematics).
         spacing: marching-cubes grid spacing [m] ([Lewiner2003], skimage.measure.marching_cubes): the vertices lie
             on the surface to the grid interpolation's error, the chords cut the surface by at most
-            spacing^2 / (8 R) for a radius of curvature R. The grid spans the box of the segments' ellipsoids grown
-            by the blend's rounding w / 4, phi evaluated on GRID_CHUNK points at a time.
+            spacing^2 / (8 R) for a radius of curvature R. The grid spans `BlendedEllipsoids.bounds` (the box of
+            the segments' ellipsoids grown by the blend's rounding w / 4).
         implicit: phi(x) (N, 3) -> (N,) [m], negative inside (its zero set inside that box); default the blended
             ellipsoids (`BlendedEllipsoids.implicit` at t); `union_implicit(body, t)` gives the plain union.
         rig: keywords of `MeshSkin` (joint_tolerance defaults to 2 spacing: the joints at the segments' tips lie
@@ -433,7 +412,7 @@ def ellipsoid_skin(body, t: float | None = None, spacing: float = 0.01,
         raise ValueError(f"spacing must be a positive length [m], got {spacing!r}")
     blended = BlendedEllipsoids(body)
     phi = implicit if implicit is not None else (lambda x: blended.implicit(x, t))
-    vertices, faces = triangulate(_in_chunks(phi), _tight_bounds(blended, t), spacing)
+    vertices, faces = triangulate(phi, blended.bounds(t), spacing)
     mesh = skin_mesh(vertices, faces, source=f"ellipsoid skin at t = {t:g} s, spacing {spacing:g} m")
     rig.setdefault("joint_tolerance", 2.0 * spacing)
     return MeshSkin(mesh, body, rest_positions=body.kinematics.positions(t), **rig)
