@@ -56,6 +56,7 @@ def test_trousers_on_the_human_run_in_quick_mode_and_write_the_skin_pressure(tmp
     ({"body": {"file": "no_such_body.obj"}}, "body.file"),
     ({"body": {"skeleton": "torso"}}, "body.skeleton"),
     ({"body": {"up": "x"}}, "body.up"),
+    ({"body": {"skinning": "dual_quaternion"}}, "body.skinning"),
     ({"body": {"components": "all"}}, "body.repair"),                          # the open eye shells kept
     ({"body": {"rest_positions": {"waist": [0.0, 0.0, 3.0]}}}, "body.rest_positions"),
     ({"motion": {"type": "elbow_flexion"}}, "motion.type"),

@@ -18,6 +18,9 @@ the same formulas node by node.
   `closest_points` (the contract's SkinQuery, as fabricfem.body.blended.closest_points computes it in numpy).
 * `blend_values`: phi over N points; from Python, `implicit_values` (whose sign is the gap's: the points that
   can penetrate, found without a closest-point iteration).
+* `blend_levels`: points moved onto given level sets of phi by the Newton steps of `blend_onto`; from Python,
+  `onto_levels` (the implicit skinning of a mesh skin, fabricfem.body.implicit_skinning); `blend_weights`: the
+  segment weights at points (`segment_weights`, the contract's weights of an implicitly skinned mesh).
 """
 from __future__ import annotations
 
@@ -220,20 +223,27 @@ static double blend_lower_bound(int K, const double* bound, const double* widths
   return lower;
 }
 
-/* Newton steps onto phi = 0; returns phi at the end and grad phi, W there */
-static double blend_onto(double* p, int K, const double* center, const double* rotation, const double* radii,
-                         const double* widths, double* grad, double* W)
+/* Newton steps onto phi = level; returns phi - level at the end and grad phi, W there */
+static double blend_onto_level(double* p, double level, int K, const double* center, const double* rotation,
+                               const double* radii, const double* widths, double* grad, double* W)
 {
-  double phi = blend_eval(p, K, center, rotation, radii, widths, grad, W);
+  double phi = blend_eval(p, K, center, rotation, radii, widths, grad, W) - level;
   for (int it = 0; it < BLEND_ITERATIONS && fabs(phi) > BLEND_TOLERANCE; ++it)
   {
     const double g2 = fmax(grad[0] * grad[0] + grad[1] * grad[1] + grad[2] * grad[2],
                            BLEND_MIN_GRADIENT * BLEND_MIN_GRADIENT);
     for (int i = 0; i < 3; ++i)
       p[i] -= phi / g2 * grad[i];
-    phi = blend_eval(p, K, center, rotation, radii, widths, grad, W);
+    phi = blend_eval(p, K, center, rotation, radii, widths, grad, W) - level;
   }
   return phi;
+}
+
+/* Newton steps onto phi = 0 */
+static double blend_onto(double* p, int K, const double* center, const double* rotation, const double* radii,
+                         const double* widths, double* grad, double* W)
+{
+  return blend_onto_level(p, 0.0, K, center, rotation, radii, widths, grad, W);
 }
 
 /* the foot p of x on phi = 0, the unit normal and the weights there; returns 1 if converged */
@@ -292,6 +302,10 @@ void blend_query(int N, const double* x, int K, const double* center, const doub
 VALUES_CDEF = """
 void blend_values(int N, const double* x, int K, const double* center, const double* rotation, const double* radii,
                   const double* widths, double* phi);
+int blend_levels(int N, double* x, const double* levels, int K, const double* center, const double* rotation,
+                 const double* radii, const double* widths, double* normal);
+void blend_weights(int N, const double* x, int K, const double* center, const double* rotation, const double* radii,
+                   const double* widths, double* weights);
 """
 
 VALUES_SOURCE = r"""
@@ -301,6 +315,33 @@ void blend_values(int N, const double* x, int K, const double* center, const dou
   double grad[3], W[BLEND_MAX_SEGMENTS];
   for (int p = 0; p < N; ++p)
     phi[p] = blend_eval(x + 3 * p, K, center, rotation, radii, widths, grad, W);
+}
+
+/* the segment weights W (N, K) of the blended body at the points x (N, 3) */
+void blend_weights(int N, const double* x, int K, const double* center, const double* rotation, const double* radii,
+                   const double* widths, double* weights)
+{
+  double grad[3];
+  for (int p = 0; p < N; ++p)
+    blend_eval(x + 3 * p, K, center, rotation, radii, widths, grad, weights + (size_t)K * p);
+}
+
+/* every point x (N, 3) moved in place onto phi = levels[p] by Newton steps along grad phi, the unit grad phi there
+   in normal (N, 3); returns the number that did not converge */
+int blend_levels(int N, double* x, const double* levels, int K, const double* center, const double* rotation,
+                 const double* radii, const double* widths, double* normal)
+{
+  double grad[3], W[BLEND_MAX_SEGMENTS];
+  int failed = 0;
+  for (int p = 0; p < N; ++p)
+  {
+    failed += fabs(blend_onto_level(x + 3 * p, levels[p], K, center, rotation, radii, widths, grad, W))
+              > BLEND_TOLERANCE;
+    const double l = sqrt(grad[0] * grad[0] + grad[1] * grad[1] + grad[2] * grad[2]);
+    for (int i = 0; i < 3; ++i)
+      normal[3 * p + i] = grad[i] / l;
+  }
+  return failed;
 }
 """
 
@@ -325,6 +366,40 @@ def implicit_values(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, r
     p = functools.partial(pointer, ffi)
     lib.blend_values(len(x), p(x, "double"), len(radii), *(p(a, "double") for a in arrays), p(phi, "double"))
     return phi
+
+
+def segment_weights(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, radii: np.ndarray,
+                    widths: np.ndarray) -> np.ndarray:
+    """The segment weights W (N, K) of the blended body at the points x (N, 3) [m] (`blend_weights`, the weights of
+    fabricfem.body.blended.blend)."""
+    lib, ffi = _library(values=True)
+    x = np.ascontiguousarray(np.asarray(x, dtype=float).reshape(-1, 3))
+    weights = np.empty((len(x), len(radii)))
+    arrays = [np.ascontiguousarray(a, dtype=float) for a in (centers, rotations, radii, widths)]
+    p = functools.partial(pointer, ffi)
+    lib.blend_weights(len(x), p(x, "double"), len(radii), *(p(a, "double") for a in arrays), p(weights, "double"))
+    return weights
+
+
+def onto_levels(x: np.ndarray, levels: np.ndarray, centers: np.ndarray, rotations: np.ndarray, radii: np.ndarray,
+                widths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The points x (N, 3) [m] moved onto the level sets phi = levels (N,) [m] of the blended body by Newton steps
+    along grad phi (`blend_levels`, the `blend_onto` iteration, tolerance 1e-9 m), and the unit grad phi (N, 3)
+    there: the implicit skinning's projection ([Vaillant2013], fabricfem.body.implicit_skinning). RuntimeError if a
+    point does not converge."""
+    lib, ffi = _library(values=True)
+    out = np.array(np.asarray(x, dtype=float).reshape(-1, 3), order="C")
+    normal = np.empty_like(out)
+    levels = np.ascontiguousarray(levels, dtype=float)
+    if levels.shape != (len(out),):
+        raise ValueError(f"levels: expected shape ({len(out)},), got {levels.shape}")
+    arrays = [np.ascontiguousarray(a, dtype=float) for a in (centers, rotations, radii, widths)]
+    p = functools.partial(pointer, ffi)
+    failed = lib.blend_levels(len(out), p(out, "double"), p(levels, "double"), len(radii),
+                              *(p(a, "double") for a in arrays), p(normal, "double"))
+    if failed:
+        raise RuntimeError(f"implicit skinning: {failed} vertices did not reach their level set")
+    return out, normal
 
 
 def closest_points(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, radii: np.ndarray, widths: np.ndarray,

@@ -8,6 +8,8 @@ outward triangulation rigged by linear blend skinning, in C (`fabricfem.body.ski
   markers (the frames of fabricfem.body.pose.segment_frame, [Man2006, sec. 5.1]; g the donning's transverse growth);
 * the posed vertices, v = sum_k w_k (A_k v^0 + b_k) ([MagnenatThalmann1988]), A_k v^0 + b_k for a vertex of
   weight 1 on segment k, computed where a search needs them, once per pose (and for the whole surface by `pose`);
+  with implicit skinning (fabricfem.body.mesh_skin) a vertex of more than one segment is then moved by the pose's
+  shift (`Pose.shift`), and the mapped boxes below are grown by the pose's largest shift;
 * an axis-aligned bounding-box tree over the triangles, built once on the rest pose (top-down, split at the middle
   of the triangles' centroids along the longest axis, leaves of at most LEAF_SIZE triangles, [Ericson2005,
   sec. 6.2]), never rebuilt nor refitted. A node whose triangles all follow one segment k rigidly keeps its rest
@@ -60,15 +62,28 @@ class QueryState:
 
 class Pose:
     """The skin at one time: the segments' maps A (K, 3, 3), b (K, 3) [m] (one buffer, `pointers` into it), whether
-    they are rotations (`rigid`) and the posed vertices (V, 3) [m] (None until `CompiledSkin.pose`)."""
+    they are rotations (`rigid`), the posed vertices (V, 3) [m] (None until `CompiledSkin.pose`) and the implicit
+    skinning's shifts of the blended vertices (`shift` (S, 3) [m] in the order of `CompiledSkin`'s `shifted`, None
+    for linear blend skinning; `shift_bound` [m] their largest length)."""
 
     def __init__(self, ffi, k: int):
+        self.ffi = ffi
         self.maps = np.empty(12 * k)
         self.A, self.b = self.maps[:9 * k].reshape(k, 3, 3), self.maps[9 * k:].reshape(k, 3)
         pointer = ffi.from_buffer("double[]", self.maps)
         self.pointers = (pointer, pointer + 9 * k)
         self.vertices: np.ndarray | None = None
         self.rigid, self.epoch = True, 0
+        self.shift: np.ndarray | None = None
+        self.shift_bound, self.shift_pointer = 0.0, ffi.NULL
+
+    def set_shift(self, shift: np.ndarray) -> None:
+        """Add the shifts (S, 3) [m] of the blended vertices to this pose (before any vertex is posed)."""
+        if self.vertices is not None:
+            raise RuntimeError("set_shift: the pose's vertices were already computed")
+        self.shift = np.ascontiguousarray(shift, dtype=float)
+        self.shift_bound = float(np.sqrt((self.shift ** 2).sum(axis=1).max())) if len(self.shift) else 0.0
+        self.shift_pointer = self.ffi.from_buffer("double[]", self.shift)
 
 
 class CompiledSkin:
@@ -80,10 +95,13 @@ class CompiledSkin:
         fraction: (K,) the segments' centre fractions; rest_centers (K, 3) [m], rest_rotations (K, 3, 3): their
             rest frames (`fabricfem.body.skinning.frames`).
         centers (K, 3) [m], radii (K,) [m]: the bounding spheres of each segment's weighted rest vertices (`travel`).
+        shifted: (S,) indices of the vertices a `Pose.shift` moves (implicit skinning; empty: linear blend
+            skinning); they are never searched as rigid parts.
     """
 
     def __init__(self, rest: np.ndarray, topology: Topology, weights: np.ndarray, fraction: np.ndarray,
-                 rest_centers: np.ndarray, rest_rotations: np.ndarray, centers: np.ndarray, radii: np.ndarray):
+                 rest_centers: np.ndarray, rest_rotations: np.ndarray, centers: np.ndarray, radii: np.ndarray,
+                 shifted: np.ndarray = np.zeros(0, dtype=np.int64)):
         self.lib, self.ffi = built_once("fabricfem_skin_query", CDEF, SOURCE, MPI.COMM_SELF, KERNEL_FLAGS)
         weights = np.ascontiguousarray(weights, dtype=float)
         nv, k = weights.shape
@@ -92,6 +110,7 @@ class CompiledSkin:
         nf = len(topology.faces)
         rows, cols = np.nonzero(weights)
         single = (weights > 0.0).sum(axis=1) == 1
+        single[shifted] = False                   # a shifted vertex does not follow its segment rigidly
         a = {"rest": rest, "faces": topology.faces, "weights": weights,
              "wstart": np.searchsorted(rows, np.arange(nv + 1)), "wseg": cols, "wval": weights[rows, cols],
              "vertex_segment": np.where(single, np.argmax(weights, axis=1), -1),
@@ -101,8 +120,10 @@ class CompiledSkin:
         a.update({name: np.zeros(nodes, dtype=np.int64) for name in ("left", "right", "first", "count",
                                                                       "node_segment", "mask", "stamp")})
         a.update({name: np.zeros((nodes, 3)) for name in ("rest_lo", "rest_hi", "lo", "hi")})
+        slot = np.full(nv, -1, dtype=np.int64)
+        slot[shifted] = np.arange(len(shifted))
         a.update(perm=np.zeros(max(nf, 1), dtype=np.int64), vstamp=np.zeros(nv, dtype=np.int64),
-                 vposed=np.zeros((nv, 3)))
+                 vposed=np.zeros((nv, 3)), shift_slot=slot)
         # kept alive: the struct points into them
         self.arrays = {name: np.ascontiguousarray(v, dtype=float if np.asarray(v).dtype.kind == "f" else np.int64)
                        for name, v in a.items()}
@@ -110,6 +131,7 @@ class CompiledSkin:
         self.mesh.nv, self.mesh.nf, self.mesh.k = nv, nf, k
         for name, array in self.arrays.items():
             setattr(self.mesh, name, self._p(array))
+        self.mesh.shift, self.mesh.box_grow = self.ffi.NULL, 0.0
         self.nodes = int(self.lib.skin_build(self.mesh, self._p(np.zeros((nf, 3)))))
         self.segments = tuple(np.ascontiguousarray(v, dtype=float) for v in (fraction, rest_centers, rest_rotations,
                                                                               centers, radii))
@@ -137,10 +159,15 @@ class CompiledSkin:
         return float(self.lib.skin_travel(len(pose.b), *pose.pointers, *before.pointers,
                                           *self._segment_pointers[3:]))
 
+    def _bind(self, pose: Pose) -> None:
+        """The pose's shifts and their bound in the compiled mesh (for `pose` and `query`)."""
+        self.mesh.shift, self.mesh.box_grow = pose.shift_pointer, pose.shift_bound
+
     def pose(self, pose: Pose) -> np.ndarray:
-        """The posed vertices (V, 3) [m] of `pose` (linear blend skinning, written once)."""
+        """The posed vertices (V, 3) [m] of `pose` (linear blend skinning plus the pose's shifts, written once)."""
         if pose.vertices is None:
             vertices = np.empty((self.mesh.nv, 3))
+            self._bind(pose)
             self.lib.skin_pose(self.mesh, *pose.pointers, self._p(vertices))
             pose.vertices = vertices
         return pose.vertices
@@ -149,6 +176,7 @@ class CompiledSkin:
         """Search the points x (N, 3) [m] (C-contiguous) on the skin at `pose`, the answers in `state`; the active set
         by `travel` and `margin` [m] (< 0: every point). Returns the number of points searched; ValueError for a
         point that is not finite."""
+        self._bind(pose)
         searched = int(self.lib.skin_query(self.mesh, *pose.pointers, int(pose.rigid), pose.epoch, len(x),
                                            self.ffi.from_buffer("double[]", x), float(travel), float(margin),
                                            *state.pointers))

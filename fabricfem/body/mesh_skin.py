@@ -30,6 +30,13 @@ built once and refitted to each pose, the closest point, the pseudonormal sign a
 posed vertices of the last few times are cached. The body's segment schedule (segments switched off) is not applied
 to a mesh skin: its surface stays whole.
 
+Skinning (`skinning`): "linear" (the default: linear blend skinning, every vertex a convex combination of its
+segments' rigid maps) or "implicit" ([Vaillant2013], [Vaillant2014], fabricfem.body.implicit_skinning): the
+vertices of more than one segment and those within `skinning_reach` of a shared joint are kept on the level of the
+body's blended ellipsoids (fabricfem.body.blended) they had at rest, so a triangulation of the blended body poses as
+the blended body; the contract's segment weights at a foot are then the blended ellipsoids' own (`field_at`), as on
+the analytic skin, instead of the interpolated bone heat weights.
+
 `ellipsoid_skin` triangulates a body's own segments (the blended ellipsoids by default, or any implicit function)
 by marching cubes and rigs it: the default triangulated skin and the tests' reference.
 """
@@ -44,9 +51,11 @@ from typing import Callable, Mapping
 import numpy as np
 import trimesh
 
-from fabricfem.body.blended import BlendedEllipsoids, triangulate
+from fabricfem.body.blend_kernel import implicit_values, segment_weights
+from fabricfem.body.blended import BLEND_WIDTH, BlendedEllipsoids, stacked, triangulate
 from fabricfem.body.conventions import to_body, unit_scale, up_rotation
 from fabricfem.body.ellipsoid import _as_points
+from fabricfem.body.implicit_skinning import KEY_INTERVAL, SKINNING_REACH, ImplicitSkinning
 from fabricfem.body.mesh_distance import PosedSurface, Topology
 from fabricfem.body.mesh_query import CompiledSkin, Pose, QueryState
 from fabricfem.body.skin import SkinQuery
@@ -61,6 +70,7 @@ from fabricfem.body.skinning import (
 
 HEIGHT_RANGE = (0.5, 2.5)     # m: a body's height outside this is taken for a wrong `units`
 COMPONENTS = ("largest", "all")
+SKINNING = ("linear", "implicit")
 CACHE_SIZE = 4                # posed surfaces kept (an explicit step asks the same time several times)
 
 
@@ -203,18 +213,28 @@ class MeshSkin:
             a gap is then at most 2 tree_tolerance above the exact one (`PosedSurface`). The queries are exact
             whatever it is (a refitted tree, `fabricfem.body.mesh_query`).
         heat, cutoff: the bone heat constant and weight cut (`fabricfem.body.skinning.bone_heat_weights`).
+        skinning: "linear" (linear blend skinning) or "implicit" (then each vertex of more than one segment is moved
+            back onto the level of the body's blended ellipsoids it had at rest, [Vaillant2013]; module docstring).
+        blend_width: the width w [m] of those blended ellipsoids (`fabricfem.body.blended.BlendedEllipsoids`).
+        skinning_interval: the implicit skinning's key interval [s] (`fabricfem.body.implicit_skinning`).
+        skinning_reach: the implicit skinning moves the vertices of more than one segment and those within this
+            distance [m] of a joint two segments share.
         margin: None: every query searches every point; a length [m]: the contact's active set (`query`), the
             points whose gap is certainly above it are not searched (gap = +inf).
     `transverse_scale` (None or t -> g) grows the skin across the segments' axes as the donning grows the body
     (`transforms`).
 
     Raises:
-        ValueError naming `rest_positions` (missing names, a joint outside the mesh).
+        ValueError naming `rest_positions` (missing names, a joint outside the mesh) or `skinning`.
     """
 
     def __init__(self, mesh: SkinMesh, body, rest_positions: Mapping[str, np.ndarray] | None = None,
                  joint_tolerance: float = 0.0, tree_tolerance: float = 0.0, heat: float = HEAT,
-                 cutoff: float = WEIGHT_CUTOFF, margin: float | None = None):
+                 cutoff: float = WEIGHT_CUTOFF, margin: float | None = None, skinning: str = "linear",
+                 blend_width: float = BLEND_WIDTH, skinning_interval: float = KEY_INTERVAL,
+                 skinning_reach: float = SKINNING_REACH):
+        if skinning not in SKINNING:
+            raise ValueError(f"skinning: one of {list(SKINNING)}, got {skinning!r}")
         self.mesh, self.body = mesh, body
         self.segment_names = tuple(body.segments)
         t0 = float(body.kinematics.time_range[0])
@@ -255,8 +275,53 @@ class MeshSkin:
         self._sphere_center = 0.5 * (low + high)
         self._sphere_radius = np.array([np.linalg.norm(mesh.vertices[c] - m, axis=1).max()
                                         for c, m in zip(on.T, self._sphere_center)])
+        self.skinning = skinning
+        self.field = BlendedEllipsoids(body, blend_width) if skinning == "implicit" else None
+        shifted = self._near_joints(on, rest, skinning_reach) if self.field is not None else np.zeros(0, dtype=np.int64)
+        self._shifted, self._skinning_interval = shifted, skinning_interval
+        self._levels = self._rest_levels(rest) if self.field is not None else np.zeros(0)
+        self._field_at = None
+        self.implicit = self._tracker()
         self.compiled = CompiledSkin(mesh.vertices, self.topology, self.weights, self._fraction, self.rest_centers,
-                                     self.rest_rotations, self._sphere_center, self._sphere_radius)
+                                     self.rest_rotations, self._sphere_center, self._sphere_radius, shifted)
+
+    def _near_joints(self, on: np.ndarray, rest: Mapping[str, np.ndarray], reach: float) -> np.ndarray:
+        """The vertices the implicit skinning moves: those of more than one segment and those within `reach` [m] of
+        a joint two segments share (at rest)."""
+        if not (np.isfinite(reach) and reach >= 0.0):
+            raise ValueError(f"skinning_reach must be a length >= 0 [m], got {reach!r}")
+        ends = [n for g in self.body.segments.values() for n in (g.proximal, g.distal)]
+        shared = np.array([rest[n] for n in dict.fromkeys(ends) if ends.count(n) > 1], dtype=float).reshape(-1, 3)
+        near = np.zeros(len(on), dtype=bool)
+        for joint in shared:
+            near |= np.linalg.norm(self.mesh.vertices - joint, axis=1) <= reach
+        return np.flatnonzero(near | (on.sum(axis=1) > 1))
+
+    def _rest_levels(self, rest: Mapping[str, np.ndarray]) -> np.ndarray:
+        """phi [m] of the blended ellipsoids posed at the rest positions at the vertices the implicit skinning
+        moves (the levels they are kept on)."""
+        centers, rotations, radii = stacked([g.pose(rest) for g in self.body.segments.values()])
+        return implicit_values(self.mesh.vertices[self._shifted], centers, rotations, radii, self.field.widths)
+
+    def _tracker(self) -> ImplicitSkinning | None:
+        """The implicit skinning of this skin's body (None for linear blend skinning)."""
+        if self.field is None:
+            return None
+
+        def linear(t: float):
+            points, g = self._frame_points(t)
+            pose = self.compiled.pose_at(points, g)
+            return pose.A, pose.b
+
+        return ImplicitSkinning(self.mesh.vertices, self.mesh.faces, self.weights, self._shifted, self._levels,
+                                linear, self.field_at, float(self.body.kinematics.time_range[0]),
+                                self._skinning_interval)
+
+    def _frame_points(self, t: float) -> tuple[np.ndarray, float]:
+        """The segments' joints and markers (3K, 3) [m] at time t [s] and the donning's growth g."""
+        positions = self.body.kinematics.positions(t)
+        points = np.array([positions[n] for n in self._point_names], dtype=float)
+        return points, 1.0 if self.transverse_scale is None else float(self.transverse_scale(t))
 
     @property
     def blended_triangles(self) -> int:
@@ -279,10 +344,9 @@ class MeshSkin:
         if key in self._maps:
             self._maps.move_to_end(key)
             return self._maps[key]
-        positions = self.body.kinematics.positions(key)
-        points = np.array([positions[n] for n in self._point_names], dtype=float)
-        g = 1.0 if self.transverse_scale is None else float(self.transverse_scale(key))
-        out = self._maps[key] = self.compiled.pose_at(points, g)
+        out = self._maps[key] = self.compiled.pose_at(*self._frame_points(key))
+        if self.implicit is not None:
+            out.set_shift(self.implicit.shift(key))
         if len(self._maps) > CACHE_SIZE:
             self._maps.popitem(last=False)
         return out
@@ -298,6 +362,9 @@ class MeshSkin:
             raise ValueError(f"skin: its segments {list(self.segment_names)} are not the body's {list(body.segments)}")
         twin = copy.copy(self)
         twin.body = body
+        if self.field is not None:
+            twin.field = BlendedEllipsoids(body, self.field.width)
+            twin._field_at, twin.implicit = None, twin._tracker()
         twin._posed, twin._maps, twin._active, twin._tree = OrderedDict(), OrderedDict(), {}, None
         twin._travel, twin._last_maps = 0.0, None
         return twin
@@ -341,10 +408,11 @@ class MeshSkin:
         """The skin's travel [m] up to time t [s]: the sum over the successive times asked of a bound on the largest
         vertex displacement between them, max_k (|A_k - A'_k|_F R_k + |(A_k - A'_k) c_k + b_k - b'_k|) over the
         segments' bounding spheres (c_k, R_k) of their weighted rest vertices (a vertex moves by a convex combination
-        of its segments' displacements; `CompiledSkin.travel`)."""
+        of its segments' displacements; `CompiledSkin.travel`), plus the largest change of an implicit skinning's
+        shift between them."""
         pose = self.maps(t)
         if self._last_maps is not None and self._last_maps is not pose:
-            self._travel += self.compiled.travel(pose, self._last_maps)
+            self._travel += self.compiled.travel(pose, self._last_maps) + shift_change(pose, self._last_maps)
         self._last_maps = pose
         return self._travel
 
@@ -368,11 +436,34 @@ class MeshSkin:
             if state is None:
                 state = self._active[n] = QueryState(self.compiled.ffi, n, len(self.segment_names))
             self.exact_points += self.compiled.query(self.maps(t), pts, state, travel, self.margin)
-        return SkinQuery(state.gap.copy(), state.foot.copy(), state.normal.copy(), state.weights.copy())
+        weights = state.weights.copy()
+        if self.field is not None:
+            near = np.flatnonzero(np.isfinite(state.gap))
+            weights[near] = segment_weights(state.foot[near], *self.field_at(t))
+        return SkinQuery(state.gap.copy(), state.foot.copy(), state.normal.copy(), weights)
+
+    def field_at(self, t: float) -> tuple[np.ndarray, ...]:
+        """The implicit skinning's blended ellipsoids at time t [s], grown by the donning: centres (K, 3) [m],
+        rotations (K, 3, 3), radii (K, 3) [m], widths (K, K) [m] (the last time asked is kept)."""
+        key = float(t)
+        if self._field_at is None or self._field_at[0] != key:
+            centers, rotations, radii = self.field.posed(key)
+            g = 1.0 if self.transverse_scale is None else float(self.transverse_scale(key))
+            self._field_at = (key, (centers, rotations, radii * np.array([1.0, g, g]), self.field.widths))
+        return self._field_at[1]
 
     def surface(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """The posed skin at time t [s]: vertices (V, 3) [m], triangles (F, 3), outward oriented."""
         return self.vertices(t), self.mesh.faces
+
+
+def shift_change(pose: Pose, before: Pose) -> float:
+    """The largest change [m] of a vertex's implicit-skinning shift from `before` to `pose` (0 without shifts)."""
+    if pose.shift is None and before.shift is None:
+        return 0.0
+    if pose.shift is None or before.shift is None:
+        return max(pose.shift_bound, before.shift_bound)
+    return float(np.sqrt(((pose.shift - before.shift) ** 2).sum(axis=1).max())) if len(pose.shift) else 0.0
 
 
 def _points(x) -> np.ndarray:

@@ -25,6 +25,7 @@ typedef struct {
     int64_t *left; int64_t *right; int64_t *first; int64_t *count; int64_t *perm; int64_t *node_segment;
     int64_t *mask; int64_t *stamp; double *rest_lo; double *rest_hi; double *lo; double *hi;
     int64_t *vstamp; double *vposed;
+    int64_t *shift_slot; double *shift; double box_grow;
 } skin_mesh;
 """
 
@@ -64,7 +65,8 @@ static inline void unit(double *a) {
     for (int i = 0; i < 3; ++i) a[i] /= l;
 }
 
-/* the posed vertex v: A_s v0 + b_s for a vertex of one segment s, sum_k w_k (A_k v0 + b_k) otherwise */
+/* the posed vertex v: A_s v0 + b_s for a vertex of one segment s, sum_k w_k (A_k v0 + b_k) otherwise, plus the
+   pose's shift of a blended vertex (implicit skinning: m->shift set for the pose, NULL for linear blend skinning) */
 static inline void posed_vertex(const skin_mesh *m, const double *a, const double *b, int64_t v, double *out) {
     const double *p = m->rest + 3 * v;
     int64_t s = m->vertex_segment[v];
@@ -75,6 +77,8 @@ static inline void posed_vertex(const skin_mesh *m, const double *a, const doubl
         double w = m->wval[e];
         for (int i = 0; i < 3; ++i) out[i] += w * (dot(as + 3 * i, p) + bs[i]);
     }
+    if (m->shift && m->shift_slot[v] >= 0)
+        for (int i = 0; i < 3; ++i) out[i] += m->shift[3 * m->shift_slot[v] + i];
 }
 
 static double box_distance(const double *lo, const double *hi, const double *x) {
@@ -228,6 +232,7 @@ static void mapped_box(const skin_mesh *m, const double *a, const double *b, int
         for (int j = 0; j < 3; ++j) {
             double centre = dot(as + 3 * j, c) + b[3 * s + j];
             double half = fabs(as[3 * j]) * h[0] + fabs(as[3 * j + 1]) * h[1] + fabs(as[3 * j + 2]) * h[2];
+            half += m->box_grow;                                 /* the pose's largest shift (implicit skinning) */
             half += 1e-12 * (fabs(centre) + half);              /* round-off: the box contains its vertices */
             lo[j] = mn(lo[j], centre - half); hi[j] = mx(hi[j], centre + half);
         }

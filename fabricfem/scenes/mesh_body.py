@@ -3,7 +3,8 @@
 Keys (fabricfem.scenes.wear_sections.WearBodySection): `file` (a mesh trimesh reads, relative to the scene file, or
 "human" for the Debian assimp-testmodels human, `fabricfem.body.human.HUMAN_PATH`, read with its own units and up
 axis, `HUMAN_KEYS`), `units`, `up`, `repair`, `components` (fabricfem.body.mesh_skin.read_skin), `skeleton`
-(lower_body or arm: the segments the skin is rigged to, with that preset's dimension keys and motions) and
+(lower_body or arm: the segments the skin is rigged to, with that preset's dimension keys and motions), `skinning`
+(linear or implicit, fabricfem.body.mesh_skin) and
 `rest_positions` (the skeleton's joints and markers in the mesh [m], a table or "human"; default the skeleton's
 first pose). `check_mesh_keys` makes the checks that need no file (with `check_wear`, before anything is built);
 `scene_skin` reads the file and rigs it in `fabricfem.scenes.wear.plan`, before the garment is meshed: every refusal
@@ -22,7 +23,7 @@ import numpy as np
 
 from fabricfem.body.conventions import LENGTH_UNITS
 from fabricfem.body.human import HUMAN_KEYS, HUMAN_PATH, human_rest
-from fabricfem.body.mesh_skin import COMPONENTS, HEIGHT_RANGE, MeshSkin, read_skin
+from fabricfem.body.mesh_skin import COMPONENTS, HEIGHT_RANGE, SKINNING, MeshSkin, read_skin
 from fabricfem.scenes.errors import SceneError
 
 SKELETONS = ("lower_body", "arm")
@@ -40,6 +41,8 @@ def check_mesh_keys(body: dict) -> None:
         raise SceneError("body.file: a mesh body needs its surface mesh file (or \"human\")")
     if body.get("up", "z") not in ("y", "z"):
         raise SceneError(f"body.up: the file's up axis must be \"y\" or \"z\", got {body['up']!r}")
+    if body.get("skinning", "linear") not in SKINNING:
+        raise SceneError(f"body.skinning: one of {list(SKINNING)}, got {body['skinning']!r}")
     if body.get("components", "largest") not in COMPONENTS:
         raise SceneError(f"body.components: one of {list(COMPONENTS)}, got {body['components']!r}")
     units = body.get("units", "m")
@@ -90,7 +93,8 @@ def scene_skin(body_section, body, scene_path: Path | None) -> MeshSkin:
         rest = {name: np.asarray(p, dtype=float) for name, p in rest.items()}
     try:
         mesh = read_skin(path, height_range=None if section.skeleton == "arm" else HEIGHT_RANGE, **keys)
-        return MeshSkin(mesh, body, rest_positions=rest, margin=CONTACT_MARGIN)
+        return MeshSkin(mesh, body, rest_positions=rest, margin=CONTACT_MARGIN, skinning=section.skinning,
+                        blend_width=section.blend_width)
     except ValueError as exc:
         key, _, rest_of = str(exc).partition(":")
         key = "file" if key == "path" else key

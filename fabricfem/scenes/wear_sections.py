@@ -78,6 +78,9 @@ class WearBodySection:
                                             "-> [x, y, z] (body frame), or \"human\" (measured on the Debian "
                                             "human, fabricfem.body.human; its lower-body dimensions are then the "
                                             "defaults); default: the skeleton's own first pose", None)
+    skinning: str = doc("mesh: linear (linear blend skinning) or implicit (the vertices near the joints kept on the "
+                        "level of the skeleton's blended ellipsoids they had at rest, fabricfem.body.implicit_skinning)",
+                        "linear")
     center: list | None = doc("limb: [x, y, z] centre [m]", None)
     radii: list | None = doc("limb: [r1, r2, r3] semi-axes along x, y, z [m]", None)
     blend_width: float = doc("width of the smooth blend of the segments at the joints [m]: the skin has no crease "

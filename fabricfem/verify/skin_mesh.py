@@ -265,7 +265,8 @@ SLEEVE_RANGE = (10.0, 57.0)   # deg, the compared part of the flexion
 SLEEVE_TOLERANCE = 0.03       # relative RMS of the torque difference
 
 
-def sleeve_histories(config: SleeveConfig, spacing: float = SLEEVE_SPACING, comm=MPI.COMM_WORLD) -> dict:
+def sleeve_histories(config: SleeveConfig, spacing: float = SLEEVE_SPACING, comm=MPI.COMM_WORLD,
+                     skinning: str = "implicit") -> dict:
     """The sleeve configuration flexed on the analytic blended arm ("blended") and on the MeshSkin of its
     marching-cubes triangulation at `spacing` [m] ("mesh", `ellipsoid_skin` of the flexing body with the active set
     of margin 0 and exact trees: every gap below 0 exact, so the same contact decisions as searching every node);
@@ -273,7 +274,7 @@ def sleeve_histories(config: SleeveConfig, spacing: float = SLEEVE_SPACING, comm
     body, _, _ = flexion_timeline(config.motion, config.route, similarity_factor(config.fabric, config.route),
                                   config.arm)
     tic = time.perf_counter()
-    skins = {"blended": None, "mesh": ellipsoid_skin(body, spacing=spacing, margin=0.0)}
+    skins = {"blended": None, "mesh": ellipsoid_skin(body, spacing=spacing, margin=0.0, skinning=skinning)}
     out: dict = {"skin_s": time.perf_counter() - tic}
     for name, skin in skins.items():
         tic = time.perf_counter()
@@ -296,7 +297,7 @@ def torque_rms(histories: dict, angles: tuple[float, float] = SLEEVE_RANGE) -> t
     return float(np.sqrt(np.mean(difference ** 2)) / np.sqrt(np.mean(reference[on] ** 2))), int(on.sum())
 
 
-def skin_mesh_vs_ellipsoids_sleeve(spacing: float = SLEEVE_SPACING) -> list[CaseResult]:
+def skin_mesh_vs_ellipsoids_sleeve(spacing: float = SLEEVE_SPACING, skinning: str = "implicit") -> list[CaseResult]:
     """The default sleeve (mu = 0.1, explicit, gravity) on mesh 30x39 flexed to 57 deg, on a 2 mm triangulation
     of the blended arm (`ellipsoid_skin`, rigged by bone heat) and on the analytic blended arm: the elbow-torque
     curves over 10-57 deg differ by at most 3 % RMS (relative to the RMS of the analytic curve; the acceptance).
@@ -312,15 +313,15 @@ def skin_mesh_vs_ellipsoids_sleeve(spacing: float = SLEEVE_SPACING) -> list[Case
     name = "skin-mesh-vs-ellipsoids-sleeve"
     config = SleeveConfig.of(n_around=30, n_along=39, final_angle=SLEEVE_RANGE[1])
     with Timer() as timer:
-        histories = sleeve_histories(config, spacing)
+        histories = sleeve_histories(config, spacing, skinning=skinning)
     rms, records = torque_rms(histories)
     return [result(name, f"elbow torque RMS difference over {SLEEVE_RANGE[0]:g}-{SLEEVE_RANGE[1]:g} deg ({records} "
                    f"records), {1e3 * spacing:g} mm mesh skin vs blended arm, mesh 30x39 [relative]", rms, 0.0, SLEEVE_TOLERANCE,
                    histories["blended"].ndofs, timer.elapsed, scale=1.0)]
 
 
-def posed_deviation(spacing: float = SLEEVE_SPACING, angles: tuple[float, ...] = (0.0, 10.0, 20.0, 30.0, 40.0, 57.0)
-                    ) -> list[dict]:
+def posed_deviation(spacing: float = SLEEVE_SPACING, angles: tuple[float, ...] = (0.0, 10.0, 20.0, 30.0, 40.0, 57.0),
+                    skinning: str = "implicit") -> list[dict]:
     """How far the mesh skin posed by linear blend skinning lies from the analytic blended arm at the sleeve's elbow
     angles [deg]: per angle the largest signed distance [m] of the posed vertices outside (`out_m`) and inside
     (`in_m`) the blended arm (`BlendedEllipsoids.query`, exact closest points) and the fraction of vertices off
@@ -328,7 +329,7 @@ def posed_deviation(spacing: float = SLEEVE_SPACING, angles: tuple[float, ...] =
     config = SleeveConfig.of(n_around=30, n_along=39, final_angle=SLEEVE_RANGE[1])
     body, _, _ = flexion_timeline(config.motion, config.route, similarity_factor(config.fabric, config.route),
                                   config.arm)
-    skin, blended = ellipsoid_skin(body, spacing=spacing, margin=0.0), BlendedEllipsoids(body)
+    skin, blended = ellipsoid_skin(body, spacing=spacing, margin=0.0, skinning=skinning), BlendedEllipsoids(body)
     t0, t1 = body.kinematics.time_range
     rows = []
     for angle in angles:            # the flexion is uniform over the kinematics' time range
@@ -341,8 +342,10 @@ def posed_deviation(spacing: float = SLEEVE_SPACING, angles: tuple[float, ...] =
 
 if __name__ == "__main__":
     spacing = float(sys.argv[sys.argv.index("--spacing") + 1]) if "--spacing" in sys.argv else SLEEVE_SPACING
-    for row in posed_deviation(spacing):
+    skinning = sys.argv[sys.argv.index("--skinning") + 1] if "--skinning" in sys.argv else "implicit"
+    print(f"{skinning} skinning of a {1e3 * spacing:g} mm triangulation of the blended arm:")
+    for row in posed_deviation(spacing, skinning=skinning):
         print(f"{row['angle_deg']:5.1f} deg: posed mesh skin outside the blended arm by up to {1e3 * row['out_m']:.2f} mm, "
               f"inside by up to {1e3 * row['in_m']:.2f} mm; {100 * row['off_fraction']:.1f} % of the vertices off by > 0.5 mm")
-    for row in skin_mesh_vs_ellipsoids_sleeve(spacing):
+    for row in skin_mesh_vs_ellipsoids_sleeve(spacing, skinning):
         print(f"{row.quantity}: {row.value:.4g} (tolerance {row.tolerance:g}, {'pass' if row.passed else 'FAIL'})")
