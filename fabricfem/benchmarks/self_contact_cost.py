@@ -7,7 +7,9 @@ steps from rest (the settling under gravity, the start of every sleeve run) afte
 alternate `repeats` times so that the machine's load spreads over both. Reported: the median wall time per step
 [ms] of each, their ratio (the acceptance: at most 1.5), the critical steps dt [s] (the self-contact's penalty
 spring enters the step's frequency), the self-contact's own split (gather, search, response) per step and its
-pair-list rebuilds, the last step's vertex-triangle and edge-edge pairs. Units: seconds, milliseconds where named.
+pair-list rebuilds, the last step's vertex-triangle and edge-edge pairs. `--passes` P > 0: the self-contact with P
+passes of impulses (fabricfem.contact.impulses; their time is the `impulses` part). Units: seconds, milliseconds
+where named.
 """
 from __future__ import annotations
 
@@ -22,10 +24,12 @@ from fabricfem.wear.sleeve import build_explicit
 
 
 def timed_steps(n_around: int, n_along: int, self_contact: bool, steps: int, warmup: int,
-                comm: MPI.Comm = MPI.COMM_WORLD) -> dict:
+                comm: MPI.Comm = MPI.COMM_WORLD, passes: int = 0) -> dict:
     """ms per step of `steps` explicit steps of the sleeve after `warmup` (module docstring), dt [s] and the
-    self-contact's timings [ms per step] when on."""
-    run = build_explicit(SleeveConfig.of(n_around=n_around, n_along=n_along, self_contact=self_contact), comm)
+    self-contact's timings [ms per step] when on (with `passes` of impulses)."""
+    config = SleeveConfig.of(n_around=n_around, n_along=n_along, self_contact=self_contact,
+                             self_contact_passes=passes if self_contact else 0)
+    run = build_explicit(config, comm)
     integrator = run.integrator
     integrator.initialize(t0=0.0)
     for _ in range(warmup):
@@ -54,12 +58,13 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--steps", type=int, default=300)
     parser.add_argument("--warmup", type=int, default=20)
     parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--passes", type=int, default=0, help="passes of impulses with the self-contact")
     args = parser.parse_args(argv)
     n_around, n_along = (int(v) for v in args.mesh.split("x"))
     runs: dict[bool, list[dict]] = {False: [], True: []}
     for _ in range(args.repeats):
         for on in (False, True):
-            runs[on].append(timed_steps(n_around, n_along, on, args.steps, args.warmup))
+            runs[on].append(timed_steps(n_around, n_along, on, args.steps, args.warmup, passes=args.passes))
     if MPI.COMM_WORLD.rank:
         return
     median = {on: statistics.median(r["ms_per_step"] for r in runs[on]) for on in runs}

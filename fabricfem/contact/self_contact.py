@@ -42,6 +42,15 @@ with the four nodes' barycentric weights; they hold two layers whose edges cross
 other's triangles (coarse folds, free edges side by side). Their candidates ride on the same Verlet list (searched
 again together), their neighbours are excluded by the same reference rule, their forces go into the same arrays
 (and `between`), and `edge_pairs` holds the step's active pairs.
+
+Impulses (`passes` > 0; fabricfem.contact.impulses, [Bridson2002, sec. 7.1-7.2]): after the division (`correct`),
+the step's pairs (vertex-triangle and edge-edge, closer than d_c at d^{n+1}) that approach take inelastic impulses
+with Coulomb friction on the predicted velocities u = v~ + dt a^{n+1}, in `passes` Gauss-Seidel passes:
+a^{n+1} += du / dt. With `body` set (the body contact, whose Lagrange correction then runs before this one), the
+nodes it holds on the body this step (its `active` nodes) take no impulse (infinite mass): the layers above them
+are pushed off instead of pushing them into the body. The impulses accompany the penalty (which still pushes the
+pairs back out to d_c); `impulse` (N, 3) holds the step's normal impulses [N s], `impulse_friction` the friction
+ones, `impulse_passes` the passes taken.
 SI units.
 """
 from __future__ import annotations
@@ -51,7 +60,7 @@ import time
 
 import numpy as np
 
-from fabricfem.contact import cloth_kernel, edge_contact, nodal
+from fabricfem.contact import cloth_kernel, edge_contact, impulses, nodal
 from fabricfem.contact import friction as friction_law
 from fabricfem.contact.cloth_surface import ClothSurface
 from fabricfem.contact.edge_contact import EdgePairs
@@ -87,6 +96,7 @@ class SelfContact:
             (a garment's seams), for the neighbour rule (module docstring).
         skin: s [m] of the Verlet list (module docstring), default d_c; > 0.
         edges: also the edge-edge pairs (module docstring).
+        passes: Gauss-Seidel passes of the velocity-level impulses after the division (module docstring); 0: none.
 
     After each step: `force` (N, 3) the contact forces [N] on all nodes (global order of `surface`, every rank),
     `normal_force` / `friction_force` its two parts, `pairs` the active pairs, `timings` [s] accumulated,
@@ -96,8 +106,9 @@ class SelfContact:
 
     def __init__(self, model, contact_distance: float | None = None, friction: float = 0.0,
                  penalty: float | None = None, damping: float = DEFAULT_DAMPING, joined: np.ndarray | None = None,
-                 skin: float | None = None, edges: bool = True):
+                 skin: float | None = None, edges: bool = True, passes: int = 0):
         self.model = model
+        self.passes = impulses.checked_passes(passes)
         self.comm = model.comm
         self.surface = ClothSurface(model)
         self.distance = checked_contact_distance(contact_distance, model.fabric.thickness,
@@ -124,7 +135,12 @@ class SelfContact:
         self.force, self.normal_force, self.friction_force = np.zeros((N, 3)), np.zeros((N, 3)), np.zeros((N, 3))
         self.pairs = Pairs(*(np.zeros(0, dtype=np.int64),) * 2, np.zeros(0), np.zeros((0, 3)))
         self._mass: tuple[object, float, np.ndarray] | None = None
-        self.timings = {"gather": 0.0, "search": 0.0, "response": 0.0}
+        self.timings = {"gather": 0.0, "search": 0.0, "response": 0.0, "impulses": 0.0}
+        self.impulse, self.impulse_friction = np.zeros((N, 3)), np.zeros((N, 3))
+        self.impulse_passes = 0              # the passes taken in the last step
+        self._x = np.zeros((N, 3))           # the positions [m] of the step's pairs (d^{n+1})
+        self._ranks = impulses.node_ranks(s.reference)   # the pairs' sweep order (fabricfem.contact.impulses)
+        self.body = None     # the body contact (ExplicitBodyContact) whose active nodes the impulses hold
         self.skin = self.distance if skin is None else nodal.positive_parameter("skin", skin)
         self._candidates: Pairs | None = None
         self._searched_at = np.zeros((N, 3))
@@ -212,6 +228,7 @@ class SelfContact:
         toc = time.perf_counter()
         had_pairs = len(self.pairs) + len(self.edge_pairs) > 0
         self.pairs = pairs = self.near_pairs(x)
+        self._x = x
         edge_pairs = self.edge_pairs
         tac = time.perf_counter()
         if len(pairs) or len(edge_pairs) or had_pairs:
@@ -261,7 +278,28 @@ class SelfContact:
                 self.between[key] = normal
 
     def correct(self, integrator, t: float) -> None:
-        """Nothing after the division (a penalty law)."""
+        """With `passes` > 0: the impulses of the step's pairs on u = v~ + dt a^{n+1}, a^{n+1} += du / dt on the owned
+        rows (module docstring; every rank computes all, as the forces)."""
+        if not self.passes or not (len(self.pairs) or len(self.edge_pairs)):
+            self.impulse_passes = 0
+            return
+        tic = time.perf_counter()
+        s, dt = self.surface, integrator.dt
+        rows = s.nodes.dofs
+        a = integrator.a.getArray()
+        u0 = s.gather(integrator.velocity_predictor.getArray(readonly=True)[rows] + dt * a[rows])
+        u = u0.copy()
+        _, inverse = self._masses(integrator)
+        if self.body is not None:
+            on_body = np.zeros(len(s.nodes.dofs))
+            on_body[self.body.moving] = self.body.active
+            inverse = np.where(s.gather(on_body[:, None])[:, 0] > 0.0, 0.0, inverse)
+        pairs, edge_pairs = impulses.canonical(self.pairs, self.edge_pairs, self._triangles, self.edges, self._ranks)
+        self.impulse, self.impulse_friction, _, self.impulse_passes = impulses.apply(
+            pairs, edge_pairs, self._triangles, self.edges, self._x, u, inverse, self.distance, self.mu,
+            self.passes, self.comm)
+        a[rows] += s.owned_rows((u - u0) / dt)
+        self.timings["impulses"] += time.perf_counter() - tic
 
     def state(self) -> dict:
         """Nothing to checkpoint (the law keeps no history)."""

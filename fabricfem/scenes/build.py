@@ -537,7 +537,8 @@ def garment_scene_run(scene: Scene, comm, skin: Skin | None = None) -> GarmentRu
                             skin=plan.skin if skin is None else skin,
                             self_contact=plan.contact.self_contact,
                             self_contact_distance=plan.contact.self_contact_distance,
-                            self_friction=plan.contact.self_friction)
+                            self_friction=plan.contact.self_friction,
+                            self_contact_passes=plan.contact.self_contact_passes)
     if parsed.layered:           # several garments: their monitors, after the start state's checks
         attach_layers(run, parsed)
     return run

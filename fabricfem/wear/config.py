@@ -144,6 +144,9 @@ class ContactSpec:
     self_contact_distance: float | None = param("explicit, self_contact: contact distance between cloth layers [m], "
                                                 "0 < d_c <= the mesh size; default the fabric's thickness", None)
     self_friction: float = param("explicit, self_contact: Coulomb coefficient mu between cloth layers [-]", 0.0)
+    self_contact_passes: int = param("explicit, self_contact: Gauss-Seidel passes of the inelastic impulses that stop "
+                                     "approaching cloth-cloth pairs after each step (fabricfem.contact.impulses); "
+                                     "0: the penalty alone", 0)
 
     def __post_init__(self):
         _non_negative(self, "", "friction", "self_friction")
@@ -154,6 +157,9 @@ class ContactSpec:
             raise ValueError(f"self_contact must be true or false, got {self.self_contact!r}")
         if self.self_contact_distance is not None:
             _positive(self, "self_contact_distance")
+        passes = self.self_contact_passes
+        if isinstance(passes, bool) or not (isinstance(passes, int) and passes >= 0):
+            raise ValueError(f"self_contact_passes must be an integer >= 0, got {passes!r}")
 
 
 @dataclass(frozen=True)
@@ -223,7 +229,8 @@ class RouteSpec:
 # parameter -> default, of the parameters added after study runs were checkpointed (SleeveConfig.key_items)
 # (critical_step: the runs stored before it used the element formula)
 ADDED_LATER = {"mass_scale": 1.0, "critical_step": "estimate", "stiffness_damping": 0.0, "self_contact": False,
-               "self_contact_distance": None, "self_friction": 0.0, "damping_frame": "ground"}
+               "self_contact_distance": None, "self_friction": 0.0, "damping_frame": "ground",
+               "self_contact_passes": 0}
 
 SECTIONS = {"tube": TubeSpec, "material": FabricSpec, "motion": FlexionSpec, "contact": ContactSpec,
             "route": RouteSpec}

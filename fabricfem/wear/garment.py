@@ -405,7 +405,8 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
                       config: object = None, axis: tuple[str, Callable[[float], float]] | None = None,
                       handles: Sequence[Callable[[ShellModel], object]] = (), blend_width: float = BLEND_WIDTH,
                       skin: Skin | None = None, self_contact: bool = False,
-                      self_contact_distance: float | None = None, self_friction: float = 0.0) -> GarmentRun:
+                      self_contact_distance: float | None = None, self_friction: float = 0.0,
+                      self_contact_passes: int = 0) -> GarmentRun:
     """Shell, seams, body contact, monitors, integrator and phases of a garment run (module docstring).
 
     Args:
@@ -422,7 +423,7 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
         blend_width: the width [m] of the blend that joins the body's segments into a skin without creases
             (fabricfem.body.blended); skin: another skin of the body (fabricfem.body.skin, e.g. a surface mesh).
         self_contact: the cloth against itself (contact.self_contact.SelfContact, the seams join the panels), with
-            self_contact_distance d_c [m] (default the thickness; 0 < d_c <= mesh size) and self_friction mu >= 0.
+            self_contact_distance d_c [m] (default the thickness), self_friction mu, self_contact_passes (impulses).
     """
     if fabric.density <= 0.0:
         raise ValueError("density: the explicit engine needs a positive fabric density [kg/m^3]")
@@ -458,12 +459,11 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
         contact.segment_active = lambda t: np.isin(names, posed.active(t))
     ties = SeamTies(model, seams, sewing_time=timeline.sewing_time) if seams else None
     handles = [make(model) for make in handles]
-    cloth = _self_contact(model, ties, self_contact_distance, self_friction) if self_contact else None
+    cloth = _self_contact(model, ties, self_contact_distance, self_friction, self_contact_passes, self_contact)
     dt_estimate = _critical_step(model, settings, contact, cloth)
     steps_per_record = math.ceil(timeline.record_time / (settings.time_step_safety * dt_estimate))
     dt = timeline.record_time / steps_per_record
-    # damping frame, seams, handles, then the body contact: a seam drawn across the body cannot pull a node into it
-    hooks = [h for h in (_frame_hook(settings, contact), ties, *handles, cloth) if h is not None] + [contact]
+    hooks = _hook_order([_frame_hook(settings, contact), ties, *handles], cloth, contact)
     t_sewn = timeline.start_of("pull")
     # the garment's weight acts once it is sewn (panels would fall while their seams close), ramped on over
     # a tenth of the sewing time
@@ -477,6 +477,20 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
     return GarmentRun(name, model, posed, contact, ties, integrator, timeline, phases, dt, dt_estimate,
                       steps_per_record, tuple(torques), config, strain, axis, tuple(handles),
                       settings.time_step_safety, 0.0, steps_per_record, self_contact=cloth)
+
+
+def _hook_order(before: list, cloth: SelfContact | None, contact: ExplicitBodyContact) -> list:
+    """The explicit hooks in their order: damping frame, seams, handles (`before`, None where absent), then the body
+    contact (a seam drawn across the body cannot pull a node into it). The cloth-cloth contact comes before the body
+    contact, or after it when it applies impulses (fabricfem.contact.impulses): they then see the nodes the body
+    contact has just put on the body and hold those (`SelfContact.body`)."""
+    hooks = [h for h in before if h is not None]
+    if cloth is None:
+        return hooks + [contact]
+    if cloth.passes:
+        cloth.body = contact
+        return hooks + [contact, cloth]
+    return hooks + [cloth, contact]
 
 
 def _frame_hook(settings: ExplicitSettings, contact: ExplicitBodyContact) -> BodyFrameDamping | None:
@@ -502,12 +516,17 @@ def _critical_step(model: ShellModel, settings: ExplicitSettings, contact: Expli
                                         mass_scale=settings.mass_scale)
 
 
-def _self_contact(model: ShellModel, ties: SeamTies | None, distance: float | None, friction: float) -> SelfContact:
-    """The cloth-cloth contact hook of a garment: contact distance `distance` [m] (default the thickness), Coulomb
-    `friction`, the seams' tied node pairs joining the panels; a bad value refused naming its scene key."""
+def _self_contact(model: ShellModel, ties: SeamTies | None, distance: float | None, friction: float,
+                  passes: int = 0, on: bool = True) -> SelfContact | None:
+    """The cloth-cloth contact hook of a garment (None unless `on`): contact distance `distance` [m] (default the
+    thickness), Coulomb `friction`, `passes` of impulses, the seams' tied node pairs joining the panels; a bad value
+    refused naming its scene key."""
+    if not on:
+        return None
     joined = ties.joined_nodes() if ties is not None else None
     try:
-        return SelfContact(model, contact_distance=distance, friction=friction, joined=joined)
+        return SelfContact(model, contact_distance=distance, friction=friction, joined=joined, passes=passes)
     except ValueError as exc:
-        key = "self_contact_distance" if "contact_distance" in str(exc) else "self_friction"
+        key = ("self_contact_distance" if "contact_distance" in str(exc) else
+               "self_contact_passes" if "passes" in str(exc) else "self_friction")
         raise ValueError(f"{key}: {exc}") from None

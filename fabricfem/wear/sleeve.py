@@ -176,7 +176,8 @@ def tube_flexion_run(name: str, fabric: Fabric, tube_spec: TubeSpec, arm: ArmDim
                              contact_method=contact.method or "lagrange", friction=contact.friction,
                              penalty=contact.penalty, psri_degrees=tube_spec.quadrature, config=config, axis=axis,
                              self_contact=contact.self_contact, self_contact_distance=contact.self_contact_distance,
-                             self_friction=contact.self_friction, skin=skin, blend_width=blend_width)
+                             self_friction=contact.self_friction,
+                             self_contact_passes=contact.self_contact_passes, skin=skin, blend_width=blend_width)
 
 
 def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> GarmentRun:
