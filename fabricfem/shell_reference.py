@@ -65,8 +65,8 @@ def naghdi_kernel_form(model, reference: ReferenceAtQuadrature, flags: tuple[str
     compiled with the C flags `flags`. The model's A, D, shear stiffness Constants are read at every assembly."""
     source, parameters = naghdi_source(model)
     law_constant = fem.Constant(model.mesh, np.asarray(parameters, dtype=float))
-    address = naghdi_kernel.compile_kernel(source, model.comm, tuple(flags))
-    return cell_kernel_form(model, reference, address, [model.A, model.D, model.shear_stiffness, law_constant])
+    addresses = naghdi_kernel.compile_kernel(source, model.comm, tuple(flags))
+    return cell_kernel_form(model, reference, addresses, [model.A, model.D, model.shear_stiffness, law_constant])
 
 
 def naghdi_source(model) -> tuple[str, np.ndarray]:
@@ -81,26 +81,30 @@ def naghdi_source(model) -> tuple[str, np.ndarray]:
     return source, parameters
 
 
-def cell_kernel_form(model, reference: ReferenceAtQuadrature, address: int, constants: list):
-    """dolfinx Form (cpp) of a compiled cell kernel at `address` on the state space of `model`, with the coefficients
-    (state, reference.full, reference.reduced) and `constants` packed in that order; it holds the C++ Constants and
-    Functions (shared pointers)."""
+def cell_kernel_form(model, reference: ReferenceAtQuadrature, addresses: tuple[int, int], constants: list):
+    """dolfinx Form (cpp) of a compiled cell kernel on the state space of `model`, with the coefficients (state,
+    reference.full, reference.reduced) and `constants` packed in that order; it holds the C++ Constants and Functions
+    (shared pointers). `addresses` (naghdi_kernel.compile_kernel's): the one-cell kernel (dolfinx's) and the batched
+    assembly (naghdi_kernel.assemble_cells) that PrepackedForms and the compiled loop call instead."""
+    address, cells_address = addresses
     form = KernelForm([model.W._cpp_object], {fem.IntegralType.cell: ([(-1, address)], None)},
                       [model.w._cpp_object, reference.full._cpp_object, reference.reduced._cpp_object],
                       [c._cpp_object for c in constants], False, model.mesh._mesh)
-    form.kernel_address = address
+    form.kernel_address, form.cells_address = address, cells_address
     return form
 
 
 class KernelForm(_cpp.fem.Form_float64):
-    """dolfinx's Form (cpp) of a hand-written cell kernel, with the kernel's address (`kernel_address`, an int) for
-    loops that call the kernel themselves (fabricfem.dynamics.compiled_loop)."""
+    """dolfinx's Form (cpp) of a hand-written cell kernel, with the addresses (ints) of the kernel (`kernel_address`)
+    and of its batched assembly over cells (`cells_address`, fabricfem.forms.naghdi_kernel.assemble_cells)."""
 
 
 class PrepackedForms:
     """Linear forms assembled many times with only the `state` Function changing (the internal force of an explicit
     run): their coefficients are packed once (dolfinx packs every coefficient at every assembly otherwise) and
-    before each assembly only the state's block is refreshed, by one vectorised gather over the cells.
+    before each assembly only the state's block is refreshed, by one vectorised gather over the cells. A hand-written
+    kernel's form (KernelForm) is then assembled by the kernel's own batched loop over its cells, in dolfinx's order,
+    which reads the state from the state's array (owned and ghost entries) itself.
 
     With `prepack` False (the per-evaluation baseline), forms on interior facets, or a state whose element needs dof
     transformations, every coefficient is packed at every assembly as dolfinx does (`prepacked` is False)."""
@@ -112,6 +116,7 @@ class PrepackedForms:
         self.prepacked = (prepack and not element.needs_dof_transformations
                           and fem.IntegralType.interior_facet not in types)
         self.coefficients = [None] * len(forms)
+        self._batched: dict[int, tuple[np.ndarray, np.ndarray]] = {}     # form index -> (batched reference, cell dofs)
         if self.prepacked:
             self.repack()
 
@@ -122,13 +127,18 @@ class PrepackedForms:
         dofmap = self.state.function_space.dofmap
         blocks = dofmap.list.array.reshape(-1, dofmap.dof_layout.num_dofs)           # per cell, node-major
         cell_dofs = (blocks[:, :, None] * dofmap.bs + np.arange(dofmap.bs)).reshape(len(blocks), -1)
-        self._blocks = []
+        self._blocks, self._batched = [], {}
         for k, form in enumerate(self.forms):
             packed = pack_coefficients(form)
             sizes = [c.function_space.element.space_dimension for c in form.coefficients]
             position = next(i for i, c in enumerate(form.coefficients)
                             if np.shares_memory(c.x.array, self.state.x.array))
             start = int(np.sum(sizes[:position]))
+            if isinstance(form, KernelForm):       # the state (first) read from its vector by the kernel's loop
+                cells = np.asarray(form.domains(fem.IntegralType.cell, -1))
+                reference = naghdi_kernel.batched_reference(packed[(fem.IntegralType.cell, -1)], sizes[position])
+                self._batched[k] = (reference, np.ascontiguousarray(cell_dofs[cells], dtype=np.int32))
+                continue
             for (integral_type, subdomain), array in packed.items():
                 entities = np.asarray(form.domains(integral_type, subdomain))
                 cells = entities if integral_type == fem.IntegralType.cell else entities.reshape(-1, 2)[:, 0]
@@ -141,5 +151,12 @@ class PrepackedForms:
             values = self.state.x.array
             for array, columns, dofs in self._blocks:
                 array[:, columns] = values[dofs]
-        for form, coefficients in zip(self.forms, self.coefficients):
-            fem_petsc.assemble_vector(b, form, coeffs=coefficients)
+        for k, (form, coefficients) in enumerate(zip(self.forms, self.coefficients)):
+            if k in self._batched:
+                reference, dofs = self._batched[k]
+                constants = np.ascontiguousarray(_cpp.fem.pack_constants(form), dtype=np.float64)
+                with b.localForm() as local:
+                    naghdi_kernel.assemble_cells(form.cells_address, local.array, self.state.x.array, reference,
+                                                 constants, dofs)
+            else:
+                fem_petsc.assemble_vector(b, form, coeffs=coefficients)

@@ -121,6 +121,31 @@ def test_quadrature_data_follow_a_rebased_director(kernel):
     assert error < ROUND_OFF, error
 
 
+@pytest.mark.mpi
+@pytest.mark.parametrize("law", ["linear", "square root"])
+@pytest.mark.parametrize("n_around", [7, 5])
+def test_batched_cells_match_one_cell_calls(law, n_around):
+    """The kernel's batched loop (naghdi_kernel.LANES cells a call, PrepackedForms) against dolfinx's assembly of
+    the same kernel one cell a call, on 21 and 5 cells (a short last batch; under MPI each rank's share, ghosts
+    summed): the lanes compute each cell as the one-cell call does and add in the same order (1e-14 relative);
+    and against FFCx's derivative of `naghdi_energy` (ROUND_OFF)."""
+    assert (3 * n_around) % naghdi_kernel.LANES
+    mesh = lambda: tube(0.1, 0.03, n_around, 3, comm=COMM, order=2)       # noqa: E731
+    model = ShellModel(mesh(), fabric(LAWS[law]))
+    model.compile()
+    b, plain = model.create_vector(), model.create_vector()
+    x = perturbed_state(model)
+    model.internal_force(x, b)
+    with plain.localForm() as local:
+        local.set(0.0)
+    for form in model.internal_force_forms.forms:
+        fem_petsc.assemble_vector(plain, form)
+    plain.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+    plain.axpy(-1.0, b)
+    assert plain.norm(PETSc.NormType.NORM_INFINITY) <= 1e-14 * b.norm(PETSc.NormType.NORM_INFINITY)
+    assert force_difference(mesh, LAWS[law]) < ROUND_OFF
+
+
 def test_kernel_layouts_share_their_offsets():
     """The hand kernel reads the reduced rule's quantities at the full rule's offsets and |J|, alpha as the last two
     values of both layouts."""

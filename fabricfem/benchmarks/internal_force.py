@@ -7,8 +7,8 @@ explicit step calls), for
 * `per evaluation`: FFCx's derivative of `naghdi_energy`, the reference geometry recomputed from the P2 fields;
 * `quadrature, FFCx`: FFCx's derivative of `naghdi_energy_on_reference` (the geometry at the quadrature points);
 * `hand kernel`: the hand-written C kernel (fabricfem.forms.naghdi_kernel), the default;
-* `assembly floor`: an empty C kernel on the same space and packed coefficients: dolfinx's loop over the cells
-  (gathering, scattering), which no kernel can go below.
+* `assembly floor`: the hand kernel's batched loop over the cells (gathering, scattering) around an empty
+  kernel, on the same space and coefficients, which no kernel can go below.
 
 All with fabricfem.forms.jit.KERNEL_FLAGS. Times are medians over `repeats` blocks of `evaluations` evaluations,
 the implementations alternating; the force of each against `per evaluation`'s (max-norm relative difference).
@@ -28,23 +28,22 @@ from fabricfem import io as fio
 from fabricfem.benchmarks.wear_speed import MESHES
 from fabricfem.forms import naghdi_kernel
 from fabricfem.forms.jit import KERNEL_FLAGS
-from fabricfem.shell_reference import PrepackedForms, cell_kernel_form
+from fabricfem.shell_reference import PrepackedForms, cell_kernel_form, naghdi_source
 from fabricfem.wear.config import SleeveConfig
 from fabricfem.wear.sleeve import sleeve_shell
 
 # name -> ShellModel.use_internal_force's choice
 IMPLEMENTATIONS = {"per evaluation": "ffcx", "quadrature, FFCx": "ffcx-quadrature", "hand kernel": "kernel"}
 FLOOR = "assembly floor"
-EMPTY_KERNEL = ("#include <stdint.h>\nvoid naghdi_force(double* restrict A, const double* restrict w, "
-                "const double* restrict c, const double* restrict x, const int* e, const uint8_t* p) { }\n")
 COLUMNS = ("mesh", "implementation", "cells", "dofs", "ms_per_evaluation", "speedup", "max_relative_difference")
 
 
 def floor_evaluation(model):
-    """An evaluation of the empty kernel on the hand kernel's space and coefficients (model: its internal force
-    already built)."""
-    address = naghdi_kernel.compile_kernel(EMPTY_KERNEL, model.comm, KERNEL_FLAGS)
-    packed = PrepackedForms([cell_kernel_form(model, model.quadrature_reference, address, [])], model.w)
+    """An evaluation of the empty kernel (fabricfem.forms.naghdi_kernel.empty_source: the same batched loop, no
+    arithmetic) on the hand kernel's space and coefficients (model: its internal force already built)."""
+    source = naghdi_kernel.empty_source(naghdi_source(model)[0])
+    addresses = naghdi_kernel.compile_kernel(source, model.comm, KERNEL_FLAGS)
+    packed = PrepackedForms([cell_kernel_form(model, model.quadrature_reference, addresses, [])], model.w)
     b = model.create_vector()
 
     def evaluate():

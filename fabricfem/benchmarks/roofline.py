@@ -6,16 +6,18 @@ its memory bandwidth [byte/s]. For the hand-written Naghdi kernel (fabricfem.for
 (default 60 x 78 Q2 cells):
 
 * FLOPs per cell: the kernel's own C source compiled by g++ with `double` a counting type (each +, -, *, / of
-  two numbers one FLOP, sqrt, pow and each of sin and cos one), run on one cell: the operations as written (the
-  compiler may fuse a multiply and an add into one instruction, which still counts as two).
-* bytes per cell: what an evaluation must stream for each cell: its packed coefficients (the state's block and the
-  reference quantities at the quadrature points, unique to the cell), its residual block written, and its dofmap
-  (int32); the state gathered and the residual scattered are shared by neighbouring cells and mostly hit the cache.
+  two numbers one FLOP, sqrt, pow and each of sin and cos one) and its lane type (LANES cells) a vector of them,
+  run on one cell in every lane and divided by LANES: the operations as written (the compiler may fuse a multiply
+  and an add into one instruction, which still counts as two).
+* bytes per cell: what an evaluation must stream for each cell: the reference quantities at the quadrature points
+  (unique to the cell; the kernel's loop reads the state from the state vector itself, no packed copy), its
+  residual block and its dofmap (int32); the state gathered and the residual scattered are shared by neighbouring
+  cells and mostly hit the cache.
 * P and B of one core, measured: independent fused multiply-adds on 64 accumulators (the compiler vectorises
   them), and the triad a = b + s c over arrays of 128 MB each ([McCalpin1995], 24 bytes per element).
 * the time per cell of the kernel: the internal force's evaluation (as an explicit step calls it, medians of
-  blocks) minus the assembly floor (an empty kernel on the same space and packed coefficients: dolfinx's gather,
-  scatter and loop), over the cells.
+  blocks) minus the assembly floor (the kernel's batched loop around an empty kernel: gather, scatter and loop,
+  fabricfem.forms.naghdi_kernel.empty_source), over the cells.
 
 Writes <out>/roofline.csv and roofline.png (the roofs and the kernel's point). Serial.
 """
@@ -68,6 +70,28 @@ static inline F pow(F a, F b) { ++FLOPS; return F(pow(a.v, b.v)); }
 static inline void sincos(F a, F* s, F* c) { FLOPS += 2; s->v = sin(a.v); c->v = cos(a.v); }
 #define double F
 #define restrict __restrict__
+/* the kernel's lane type (LANES cells): each lane's operation counted */
+#define COUNTING
+struct vd {
+  F x[LANES];
+  F& operator[](int l) { return x[l]; }
+  const F& operator[](int l) const { return x[l]; }
+};
+typedef vd vdu;
+#define VD_OP(op)                                                                                    \
+  static inline vd operator op(const vd& a, const vd& b)                                            \
+  { vd r; for (int l = 0; l < LANES; ++l) r.x[l] = a.x[l] op b.x[l]; return r; }                     \
+  static inline vd operator op(F a, const vd& b)                                                     \
+  { vd r; for (int l = 0; l < LANES; ++l) r.x[l] = a op b.x[l]; return r; }                          \
+  static inline vd operator op(const vd& a, F b)                                                     \
+  { vd r; for (int l = 0; l < LANES; ++l) r.x[l] = a.x[l] op b; return r; }                          \
+  static inline vd& operator op##=(vd& a, const vd& b)                                               \
+  { for (int l = 0; l < LANES; ++l) a.x[l] = a.x[l] op b.x[l]; return a; }
+VD_OP(+)
+VD_OP(-)
+VD_OP(*)
+VD_OP(/)
+static inline vd operator-(const vd& a) { vd r; for (int l = 0; l < LANES; ++l) r.x[l] = -a.x[l]; return r; }
 """
 
 COUNTING_MAIN = r"""
@@ -117,21 +141,23 @@ def defines(source: str) -> dict[str, int]:
 
 
 def counted_flops(source: str) -> int:
-    """FLOPs of one cell's evaluation of the kernel `source` as written (module docstring), by g++."""
+    """FLOPs of one cell's evaluation of the kernel `source` as written (module docstring), by g++: its one-cell
+    entry computes LANES lanes (#define, 1 if absent) on the cell, counted and divided by LANES."""
+    lanes = defines(source).get("LANES", 1)
     with tempfile.TemporaryDirectory() as folder:
         path = Path(folder) / "count.cpp"
-        path.write_text(COUNTING_HEADER + source + COUNTING_MAIN)
+        path.write_text(f"#define LANES {lanes}\n" + COUNTING_HEADER + source + COUNTING_MAIN)
         subprocess.run(["g++", "-O0", "-w", "-o", str(path.with_suffix("")), str(path)], check=True)
         out = subprocess.run([str(path.with_suffix(""))], check=True, capture_output=True, text=True)
-    return int(out.stdout.strip())
+    return int(out.stdout.strip()) // lanes
 
 
 def cell_bytes(source: str) -> int:
-    """Bytes an evaluation must stream per cell (module docstring): packed coefficients read, residual written
+    """Bytes an evaluation must stream per cell (module docstring): reference quantities read, residual written
     (8 bytes a number), the dofmap (4 bytes a dof)."""
     d = defines(source)
     dofs = 3 * d["NU"] + 2 * d["NT"]
-    return 8 * (dofs + d["NQF"] * d["SF"] + d["NQR"] * d["SR"]) + 8 * dofs + 4 * dofs
+    return 8 * (d["NQF"] * d["SF"] + d["NQR"] * d["SR"]) + 8 * dofs + 4 * dofs
 
 
 def machine_peaks(repeats: int = 5) -> tuple[float, float]:

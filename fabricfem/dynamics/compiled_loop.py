@@ -34,6 +34,7 @@ from mpi4py import MPI
 
 from fabricfem.dynamics.explicit_source import CDEF, SOURCE
 from fabricfem.dynamics.integrator import ENERGY_FLOOR, History, compiled_energy, record_and_ask
+from fabricfem.forms import naghdi_kernel
 from fabricfem.forms.jit import KERNEL_JIT, ROUNDING_FLAGS, built_once
 
 
@@ -142,7 +143,14 @@ class CompiledLoop:
             constants = np.ascontiguousarray(_cpp.fem.pack_constants(form), dtype=np.float64)
             for address, subdomain, cells in _cell_kernels(form):
                 coefficients = np.ascontiguousarray(packed[(fem.IntegralType.cell, subdomain)])   # a row per cell
-                structs.append(dict(kernel=self.ffi.cast("ff_kernel", address), ncells=len(cells),
+                if hasattr(form, "cells_address"):     # the hand-written kernel's batched loop (state first)
+                    reference = naghdi_kernel.batched_reference(coefficients, self._cell_dofs.shape[1])
+                    batched = dict(cells=self.ffi.cast("ff_cells", form.cells_address),
+                                   reference=self._pointer(reference))
+                    coefficients = np.zeros((1, 1))
+                else:
+                    batched = {}
+                structs.append(dict(kernel=self.ffi.cast("ff_kernel", address), ncells=len(cells), **batched,
                                     ndofs=self._cell_dofs.shape[1], width=coefficients.shape[1],
                                     state_start=_state_position(form, state), ncoord=self._coordinates.shape[1],
                                     dofs=self._pointer(np.ascontiguousarray(self._cell_dofs[cells], np.int32),

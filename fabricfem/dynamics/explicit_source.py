@@ -13,7 +13,8 @@ One step, in the order and with the operations of `CentralDifference.step` and `
 f_int is assembled as dolfinx assembles a linear form over cells (fabricfem.shell.ShellModel.internal_force): per
 cell the state's entries are gathered into the cell's packed coefficients, the element vector is zeroed, the
 form's compiled kernel (FFCx's tabulate_tensor, or the hand-written fabricfem.forms.naghdi_kernel) is called and
-its values are added to the rows of the cell, cells in the order of dolfinx's integration entities. The work of
+its values are added to the rows of the cell, cells in the order of dolfinx's integration entities (the
+hand-written kernel's own batched loop does the same, several cells a call). The work of
 the loads and the damping's dissipation are booked by the trapezoidal rule, and the step is checked as
 `TimeIntegrator._check` does: a non-finite d or v (status 1), or kinetic + strain energy above
 energy_bound x (|E0| + max |W|) + floor (status 2), the strain energy by the energy form's kernels. The loop stops
@@ -26,11 +27,16 @@ from __future__ import annotations
 
 # ff_form: one compiled form over cells: kernel, cells, element vector length (0: a functional), packed coefficient
 # width per cell with the state's block at state_start, the cells' state dofs (ncells x ndofs, or x the state
-# block's length for a functional), the packed coefficients, constants and coordinate dofs (ncells x ncoord)
+# block's length for a functional), the packed coefficients, constants and coordinate dofs (ncells x ncoord); or a
+# batched kernel `cells` (fabricfem.forms.naghdi_kernel.assemble_cells) with its reference quantities, which reads
+# the state itself (then kernel, coefficients and coordinates are unused)
 TYPES = """
 typedef void (*ff_kernel)(double*, const double*, const double*, const double*, const int*, const uint8_t*);
+typedef void (*ff_cells)(double*, const double*, const double*, const double*, const int32_t*, int);
 typedef struct {
   ff_kernel kernel;
+  ff_cells cells;
+  const double* reference;
   int ncells, ndofs, width, state_start, ncoord;
   const int32_t* dofs;
   double* coefficients;
@@ -74,6 +80,11 @@ static void gather(const ff_form* f, const double* d, int nstate)
 /* rhs += the form's vector at d (cells in order; element vector zeroed before each kernel call) */
 static void assemble_vector(const ff_form* f, const double* d, double* rhs, double* element)
 {
+  if (f->cells)
+  {
+    f->cells(rhs, d, f->reference, f->constants, f->dofs, f->ncells);
+    return;
+  }
   gather(f, d, f->ndofs);
   for (int c = 0; c < f->ncells; ++c)
   {

@@ -44,12 +44,15 @@ def kernel_flags(flags: Sequence[str]) -> Iterator[None]:
 _LOADED: list[ModuleType] = []   # compiled modules stay loaded while forms and callers point into them
 
 
-def compile_c(prefix: str, cdef: str, source: str, comm, flags: Sequence[str]) -> ModuleType:
+def compile_c(prefix: str, cdef: str, source: str, comm, flags: Sequence[str],
+              libraries: Sequence[str] = ("m",)) -> ModuleType:
     """Compile C `source` declaring `cdef` with cffi (as dolfinx compiles FFCx's kernels) into the dolfinx cache
     folder (XDG_CACHE_HOME/fenics/fabricfem), once per source and flags, and load it: rank 0 of `comm` builds, the
     others wait. Processes that build the same module at once (a study's variants, one per rank) each build in
-    their own folder and move the library into place atomically. Returns the cffi module (`.ffi`, `.lib`)."""
-    digest = hashlib.sha1((cdef + source + " ".join(flags)).encode()).hexdigest()[:16]
+    their own folder and move the library into place atomically. `libraries`: linked (libm; libmvec for vector
+    sin and cos). Returns the cffi module (`.ffi`, `.lib`)."""
+    linked = "" if tuple(libraries) == ("m",) else " ".join(libraries)      # the default keeps the cached names
+    digest = hashlib.sha1((cdef + source + " ".join(flags) + linked).encode()).hexdigest()[:16]
     name = f"{prefix}_{digest}"
     cache = Path(os.getenv("XDG_CACHE_HOME", Path.home() / ".cache")) / "fenics" / "fabricfem"
     library = cache / (name + importlib.machinery.EXTENSION_SUFFIXES[0])
@@ -59,7 +62,7 @@ def compile_c(prefix: str, cdef: str, source: str, comm, flags: Sequence[str]) -
         try:
             ffi = cffi.FFI()
             ffi.cdef(cdef)
-            ffi.set_source(name, source, extra_compile_args=list(flags), libraries=["m"])
+            ffi.set_source(name, source, extra_compile_args=list(flags), libraries=list(libraries))
             os.replace(ffi.compile(tmpdir=str(build)), library)
         finally:
             shutil.rmtree(build, ignore_errors=True)
