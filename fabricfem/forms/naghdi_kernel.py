@@ -251,6 +251,8 @@ static inline void rule(vd (*restrict Au)[NU], vd (*restrict At)[NT], const vd (
   for (int q = 0; q < nq; ++q)
   {
     const vdu* r = ref + q * size;
+    for (int s = 0; s < size; ++s)   /* the next batch's values at this point (NREF on): from memory meanwhile */
+      __builtin_prefetch(r + NREF + s);
     const vdu *c1 = r + AT_c1, *c2 = r + AT_c2, *g1 = r + AT_g1, *g2 = r + AT_g2, *s0 = r + AT_s0, *a3 = r + AT_a3,
               *a1 = r + AT_a1, *a2 = r + AT_a2;
     const vd scale = weights[q] * r[size - 2];
