@@ -315,7 +315,7 @@ static inline void rule(vd (*restrict Au)[NU], vd (*restrict At)[NT], const vd (
     }
     /* [Eischen2000, eq. 4] */
     const vd gam[2] = {dot3(f1, d) - s0[0], dot3(f2, d) - s0[1]};
-    vd N[3], Q[2], M[3];
+    vd N[3], Q[2], M[3] = {{0}};   /* M: set by bend on the full rule */
     for (int i = 0; i < 3; ++i)
       N[i] = wm * 0.5 * ((Am[3 * i] + Am[i]) * eps[0] + (Am[3 * i + 1] + Am[3 + i]) * eps[1]
                          + (Am[3 * i + 2] + Am[6 + i]) * eps[2]);
