@@ -19,6 +19,7 @@ sum_k w_k = 0) and its unit normal n (as in the penalty law):
     u_rel = sum_k w_k u_k,   u_N = u_rel . n,   1 / m_eff = sum_k w_k^2 / m_k                 ([Bridson2002, sec. 7.1])
     if u_N < 0 (the pair approaches: it would end the step closer than its distance, which is below d_c):
         J_N = -m_eff u_N                              (inelastic: the relative normal velocity becomes 0)
+        (J_N = -u_N / max_k |w_k| / m_k where that is smaller: see below)
         u_T = u_rel - u_N n,   J_T = -m_eff min(mu |u_N|, |u_T|) u_T / |u_T|                   ([Bridson2002, sec. 7.2])
         u_k += w_k (J_N n + J_T) / m_k
 
@@ -27,6 +28,16 @@ distribution by w_k / m_k is the one of [Bridson2002, sec. 7.1] (their I / m wei
 coordinates, normalised by 1 / m_eff): it sets the pair's relative normal velocity to 0 exactly and conserves
 linear momentum (sum_k m_k du_k = sum_k w_k J = 0). The friction removes at most mu times the normal change of
 the relative velocity (Coulomb's bound; the relative tangential velocity stops when it is smaller).
+
+Held nodes (a prescribed displacement, or on the body: 1 / m_k = 0) take no impulse. A pair whose free nodes all
+carry small weights (a vertex on the body over a triangle whose closest point lies near a held node) would give
+its free node a change u_N / w: the normal impulse is bounded so that no node's velocity changes by more than
+|u_N| (J_N <= |u_N| / max_k |w_k| / m_k; without the bound the sleeve's run diverged at 123-126 degrees), and
+such a pair's approach is only partly removed.
+
+Restoring (`restore_rate` r [1/s], default 0): the target of the relative normal velocity is r (d_c - delta)
+instead of 0, so that a pair inside d_c separates towards it within about 1 / r, which the capped penalty does not
+ensure (the analogue of the limited repulsion of [Bridson2002, sec. 7.1]); r = 0: only the approach is removed.
 
 Passes: the pairs are treated in turn (Gauss-Seidel: each pair sees the velocities its predecessors left), all
 vertex-triangle pairs then all edge-edge pairs, for `passes` passes or until a pass applies no impulse (a pair
@@ -57,8 +68,8 @@ int64_t impulse_passes(int64_t n_vt, const int64_t* pair_p, const int64_t* pair_
                        const double* bary, const int64_t* tri, int64_t n_ee, const int64_t* first,
                        const int64_t* second, const double* ee_distance, const double* s, const double* t,
                        const int64_t* edges, const double* x, double contact_distance, const double* inverse_mass,
-                       double mu, int64_t passes, double* u, double* normal_impulse, double* friction_impulse,
-                       double* normals, int64_t* acted);
+                       double mu, double restore_rate, int64_t passes, double* u, double* normal_impulse,
+                       double* friction_impulse, double* normals, int64_t* acted);
 """
 
 SOURCE = "#pragma GCC diagnostic ignored \"-Wunused-function\"\n" + CLOSEST_C + r"""
@@ -100,21 +111,22 @@ static void pair_normal(const int64_t* node, const double* w, int edge_pair, con
 
 /* the inelastic impulse with friction of one pair on u; 1 if it acted */
 static int pair_impulse(const int64_t* node, const double* w, const double* normal, const double* inverse_mass,
-                        double mu, double* u, double* normal_impulse, double* friction_impulse)
+                        double mu, double target, double* u, double* normal_impulse, double* friction_impulse)
 {
-  double ur[3] = {0.0, 0.0, 0.0}, im = 0.0, scale = 0.0;
+  double ur[3] = {0.0, 0.0, 0.0}, im = 0.0, scale = 0.0, largest = 0.0;
   for (int q = 0; q < 4; ++q)
   {
     const double* uq = u + 3 * node[q];
     for (int k = 0; k < 3; ++k)
       ur[k] += w[q] * uq[k];
     im += w[q] * w[q] * inverse_mass[node[q]];
+    largest = fmax(largest, fabs(w[q]) * inverse_mass[node[q]]);
     scale += fabs(w[q]) * sqrt(dot3(uq, uq));
   }
-  const double un = dot3(ur, normal);
-  if (!(im > 0.0) || !(un < -ROUND_OFF * scale))    /* approaching by more than the round-off of u_rel */
+  const double un = dot3(ur, normal) - target;     /* below the target normal velocity */
+  if (!(im > 0.0) || !(un < -ROUND_OFF * scale))    /* by more than the round-off of u_rel */
     return 0;
-  const double jn = -un / im;
+  const double jn = -un / fmax(im, largest);       /* no node's change above |u_N| */
   double ut[3], jt[3] = {0.0, 0.0, 0.0};
   for (int k = 0; k < 3; ++k)
     ut[k] = ur[k] - un * normal[k];
@@ -141,8 +153,8 @@ int64_t impulse_passes(int64_t n_vt, const int64_t* pair_p, const int64_t* pair_
                        const double* bary, const int64_t* tri, int64_t n_ee, const int64_t* first,
                        const int64_t* second, const double* ee_distance, const double* s, const double* t,
                        const int64_t* edges, const double* x, double contact_distance, const double* inverse_mass,
-                       double mu, int64_t passes, double* u, double* normal_impulse, double* friction_impulse,
-                       double* normals, int64_t* acted)
+                       double mu, double restore_rate, int64_t passes, double* u, double* normal_impulse,
+                       double* friction_impulse, double* normals, int64_t* acted)
 {
   const int64_t n = n_vt + n_ee;
   int64_t node[4];
@@ -162,7 +174,9 @@ int64_t impulse_passes(int64_t n_vt, const int64_t* pair_p, const int64_t* pair_
     for (int64_t i = 0; i < n; ++i)
     {
       pair_nodes(i, n_vt, pair_p, pair_t, bary, tri, first, second, s, t, edges, node, w);
-      const int hit = pair_impulse(node, w, normals + 3 * i, inverse_mass, mu, u, normal_impulse, friction_impulse);
+      const double gap = contact_distance - (i < n_vt ? vt_distance[i] : ee_distance[i - n_vt]);
+      const int hit = pair_impulse(node, w, normals + 3 * i, inverse_mass, mu, restore_rate * fmax(gap, 0.0), u,
+                                   normal_impulse, friction_impulse);
       acted[i] += hit, count += hit;
     }
     if (count == 0)
@@ -180,7 +194,7 @@ def _module(comm):
 
 def apply(pairs: Pairs, edge_pairs: EdgePairs, triangles: np.ndarray, edges: np.ndarray, x: np.ndarray,
           u: np.ndarray, inverse_mass: np.ndarray, contact_distance: float, mu: float, passes: int,
-          comm) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+          comm, restore_rate: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """The passes of impulses (module docstring) on the velocities u (N, 3) [m/s], changed in place.
 
     Args:
@@ -188,6 +202,7 @@ def apply(pairs: Pairs, edge_pairs: EdgePairs, triangles: np.ndarray, edges: np.
         triangles (T, 3), edges (E, 2): int64 node indices; inverse_mass (N,) 1 / m [1/kg] (0 for a held node).
         contact_distance: d_c [m] (only its 1e-9 fraction is used: below it the normal is the edges' plane's).
         mu: Coulomb coefficient [-]; passes: the most Gauss-Seidel passes (>= 1).
+        restore_rate: r [1/s]: the target relative normal velocity r (d_c - delta) (module docstring).
 
     Returns:
         (normal impulses (N, 3) [N s], friction impulses (N, 3) [N s], acted (n_pairs + n_edge_pairs,) the passes
@@ -206,8 +221,8 @@ def apply(pairs: Pairs, edge_pairs: EdgePairs, triangles: np.ndarray, edges: np.
         p(c(edge_pairs.second, dtype=np.int64), "int64_t"),
         *(p(c(a, dtype=float), "double") for a in (edge_pairs.distance, edge_pairs.s, edge_pairs.t)),
         p(edges, "int64_t"), p(x, "double"), float(contact_distance), p(inverse_mass, "double"), float(mu),
-        int(passes), p(u, "double"), p(normal, "double"), p(friction, "double"), p(normals, "double"),
-        p(acted, "int64_t"))
+        float(restore_rate), int(passes), p(u, "double"), p(normal, "double"), p(friction, "double"),
+        p(normals, "double"), p(acted, "int64_t"))
     return normal, friction, acted, int(taken)
 
 
