@@ -52,7 +52,14 @@ are pushed off instead of pushing them into the body. The impulses accompany the
 pairs back out to d_c); `impulse` (N, 3) holds the step's normal impulses [N s], `impulse_friction` the friction
 ones, `impulse_passes` the passes taken. A pair inside d_c is driven apart at RESTORE_RATE (d_c - delta) (the
 impulses' restoring target): on the sleeve flexed to 130 degrees it held the folds to 120 degrees, 116 without.
-SI units.
+
+Impact zones (`zones=True`; fabricfem.contact.impact_zones, [Bridson2002, sec. 7.3-7.4]): after the impulses, the
+continuous collision detection of the step x^{n+1} -> x^{n+1} + dt u over the vertex-triangle and edge-edge
+candidates (the Verlet list, which holds every pair within d_c at x^{n+1}, when the step's relative motion
+2 max |dt u| + eta is below d_c; a search within that motion otherwise), and the nodes of colliding pairs moved as
+rigid zones, until the step is collision-free or `zone_iterations` rounds; the nodes held on the body (`body`) are
+of infinite mass (a zone containing one moves with them). `zone_report` holds the last step's counts,
+`zone_totals` their sums over the run. SI units.
 """
 from __future__ import annotations
 
@@ -60,8 +67,9 @@ import math
 import time
 
 import numpy as np
+from mpi4py import MPI
 
-from fabricfem.contact import cloth_kernel, edge_contact, impulses, nodal
+from fabricfem.contact import cloth_kernel, edge_contact, impact_zones, impulses, nodal
 from fabricfem.contact import friction as friction_law
 from fabricfem.contact.cloth_surface import ClothSurface
 from fabricfem.contact.edge_contact import EdgePairs
@@ -99,6 +107,7 @@ class SelfContact:
         skin: s [m] of the Verlet list (module docstring), default d_c; > 0.
         edges: also the edge-edge pairs (module docstring).
         passes: Gauss-Seidel passes of the velocity-level impulses after the division (module docstring); 0: none.
+        zones: the failsafe of continuous collision detection and rigid impact zones after them (module docstring).
 
     After each step: `force` (N, 3) the contact forces [N] on all nodes (global order of `surface`, every rank),
     `normal_force` / `friction_force` its two parts, `pairs` the active pairs, `timings` [s] accumulated,
@@ -108,9 +117,15 @@ class SelfContact:
 
     def __init__(self, model, contact_distance: float | None = None, friction: float = 0.0,
                  penalty: float | None = None, damping: float = DEFAULT_DAMPING, joined: np.ndarray | None = None,
-                 skin: float | None = None, edges: bool = True, passes: int = 0):
+                 skin: float | None = None, edges: bool = True, passes: int = 0, zones: bool = False):
         self.model = model
         self.passes = impulses.checked_passes(passes)
+        if not isinstance(zones, (bool, np.bool_)):
+            raise ValueError(f"impact_zones must be true or false, got {zones!r}")
+        self.zones = bool(zones)
+        self.zone_iterations = impact_zones.DEFAULT_ITERATIONS
+        self.zone_report: dict = {}
+        self.zone_totals = {"steps": 0, "collisions": 0, "unresolved_steps": 0, "rounds": 0}
         self.comm = model.comm
         self.surface = ClothSurface(model)
         self.distance = checked_contact_distance(contact_distance, model.fabric.thickness,
@@ -137,7 +152,8 @@ class SelfContact:
         self.force, self.normal_force, self.friction_force = np.zeros((N, 3)), np.zeros((N, 3)), np.zeros((N, 3))
         self.pairs = Pairs(*(np.zeros(0, dtype=np.int64),) * 2, np.zeros(0), np.zeros((0, 3)))
         self._mass: tuple[object, float, np.ndarray] | None = None
-        self.timings = {"gather": 0.0, "search": 0.0, "response": 0.0, "impulses": 0.0}
+        self._finite_mass = np.ones(N)       # the lumped masses [kg], finite also for held nodes (impact zones)
+        self.timings = {"gather": 0.0, "search": 0.0, "response": 0.0, "impulses": 0.0, "zones": 0.0}
         self.impulse, self.impulse_friction = np.zeros((N, 3)), np.zeros((N, 3))
         self.impulse_passes = 0              # the passes taken in the last step
         self._x = np.zeros((N, 3))           # the positions [m] of the step's pairs (d^{n+1})
@@ -217,6 +233,7 @@ class SelfContact:
             s = self.surface
             m = integrator.denominator.getArray(readonly=True)[s.nodes.dofs[:, 0]]
             mass = s.gather(m[:, None])[:, 0]
+            self._finite_mass = mass.copy()
             mass[s.held] = np.inf
             self._mass = cached = (integrator, integrator.dt, (mass, np.ascontiguousarray(1.0 / mass)))
         return cached[2]
@@ -281,10 +298,13 @@ class SelfContact:
                 self.between[key] = normal
 
     def correct(self, integrator, t: float) -> None:
-        """With `passes` > 0: the impulses of the step's pairs on u = v~ + dt a^{n+1}, a^{n+1} += du / dt on the owned
-        rows (module docstring; every rank computes all, as the forces)."""
-        if not self.passes or not (len(self.pairs) or len(self.edge_pairs)):
-            self.impulse_passes = 0
+        """With `passes` > 0: the impulses of the step's pairs on u = v~ + dt a^{n+1}; with `zones`, then the impact
+        zones of the step's collisions; a^{n+1} += du / dt on the owned rows (module docstring; every rank computes
+        all, as the forces)."""
+        has_pairs = len(self.pairs) or len(self.edge_pairs)
+        zones = self.zones and self._may_collide(integrator)
+        self.impulse_passes = 0
+        if not zones and (not self.passes or not has_pairs):
             return
         tic = time.perf_counter()
         s, dt = self.surface, integrator.dt
@@ -297,12 +317,57 @@ class SelfContact:
             on_body = np.zeros(len(s.nodes.dofs))
             on_body[self.body.moving] = self.body.active
             inverse = np.where(s.gather(on_body[:, None])[:, 0] > 0.0, 0.0, inverse)
-        pairs, edge_pairs = impulses.canonical(self.pairs, self.edge_pairs, self._triangles, self.edges, self._ranks)
-        self.impulse, self.impulse_friction, _, self.impulse_passes = impulses.apply(
-            pairs, edge_pairs, self._triangles, self.edges, self._x, u, inverse, self.distance, self.mu,
-            self.passes, self.comm, self.restore_rate)
+        if self.passes and has_pairs:
+            pairs, edge_pairs = impulses.canonical(self.pairs, self.edge_pairs, self._triangles, self.edges,
+                                                   self._ranks)
+            self.impulse, self.impulse_friction, _, self.impulse_passes = impulses.apply(
+                pairs, edge_pairs, self._triangles, self.edges, self._x, u, inverse, self.distance, self.mu,
+                self.passes, self.comm, self.restore_rate)
+        toc = time.perf_counter()
+        self.timings["impulses"] += toc - tic
+        if zones:
+            self._impact_zones(u, inverse, dt)
+            self.timings["zones"] += time.perf_counter() - toc
         a[rows] += s.owned_rows((u - u0) / dt)
-        self.timings["impulses"] += time.perf_counter() - tic
+
+    def _may_collide(self, integrator) -> bool:
+        """False only when no candidate pair is listed and no node moves by d_c / 2 - eta within the step (then no
+        pair can collide: module docstring); the same answer on every rank."""
+        if self._candidates is None or len(self._candidates) or len(self._edge_candidates) or not self.use_edges:
+            return True
+        rows, dt = self.surface.nodes.dofs, integrator.dt
+        a = integrator.a.getArray(readonly=True)
+        u = integrator.velocity_predictor.getArray(readonly=True)[rows] + dt * a[rows]
+        fastest = self.comm.allreduce(float(np.sqrt((u * u).sum(axis=1).max(initial=0.0))), op=MPI.MAX)
+        return 2.0 * dt * fastest + impact_zones.TOLERANCE * self.distance >= self.distance
+
+    def _impact_zones(self, u: np.ndarray, inverse: np.ndarray, dt: float) -> None:
+        """The detection and rigid zones of fabricfem.contact.impact_zones on u (N, 3) [m/s] in place, from the
+        step's positions `_x`; candidates: the Verlet list while it covers the step's motion, else a search."""
+        x, eta = self._x, impact_zones.TOLERANCE * self.distance
+        searched: dict[float, tuple] = {}
+
+        def candidates(velocity: np.ndarray) -> tuple:
+            reach = 2.0 * dt * float(np.sqrt((velocity * velocity).sum(axis=1).max(initial=0.0))) + eta
+            if self.use_edges and self._candidates is not None and reach < self.distance:
+                pairs, edge_pairs = self._candidates, self._edge_candidates
+            else:
+                radius = max([r for r in searched if r >= reach], default=None)
+                if radius is None:
+                    radius = 1.5 * reach
+                    searched[radius] = (self.contact_pairs(x, radius),
+                                        self.contact_edge_pairs(x, radius, interior=False))
+                pairs, edge_pairs = searched[radius]
+            return pairs.vertex, pairs.triangle, self._triangles, edge_pairs.first, edge_pairs.second, self.edges
+
+        report = impact_zones.resolve(candidates, x, u, dt, self._finite_mass, inverse == 0.0, eta,
+                                      self.zone_iterations, self.comm)
+        self.zone_report = report
+        totals = self.zone_totals
+        totals["steps"] += report["collisions"] > 0
+        totals["collisions"] += report["collisions"]
+        totals["unresolved_steps"] += report["left"] > 0
+        totals["rounds"] += report["rounds"]
 
     def state(self) -> dict:
         """Nothing to checkpoint (the law keeps no history)."""

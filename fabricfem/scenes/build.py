@@ -538,7 +538,8 @@ def garment_scene_run(scene: Scene, comm, skin: Skin | None = None) -> GarmentRu
                             self_contact=plan.contact.self_contact,
                             self_contact_distance=plan.contact.self_contact_distance,
                             self_friction=plan.contact.self_friction,
-                            self_contact_passes=plan.contact.self_contact_passes)
+                            self_contact_passes=plan.contact.self_contact_passes,
+                            impact_zones=plan.contact.impact_zones)
     if parsed.layered:           # several garments: their monitors, after the start state's checks
         attach_layers(run, parsed)
     return run

@@ -147,6 +147,9 @@ class ContactSpec:
     self_contact_passes: int = param("explicit, self_contact: Gauss-Seidel passes of the inelastic impulses that stop "
                                      "approaching cloth-cloth pairs after each step (fabricfem.contact.impulses); "
                                      "0: the penalty alone", 0)
+    impact_zones: bool = param("explicit, self_contact: after the impulses, continuous collision detection of the "
+                               "step and rigid impact zones for the colliding cloth-cloth pairs "
+                               "(fabricfem.contact.impact_zones, [Bridson2002, sec. 7.3-7.4])", False)
 
     def __post_init__(self):
         _non_negative(self, "", "friction", "self_friction")
@@ -160,6 +163,8 @@ class ContactSpec:
         passes = self.self_contact_passes
         if isinstance(passes, bool) or not (isinstance(passes, int) and passes >= 0):
             raise ValueError(f"self_contact_passes must be an integer >= 0, got {passes!r}")
+        if not isinstance(self.impact_zones, bool):
+            raise ValueError(f"impact_zones must be true or false, got {self.impact_zones!r}")
 
 
 @dataclass(frozen=True)
@@ -230,7 +235,7 @@ class RouteSpec:
 # (critical_step: the runs stored before it used the element formula)
 ADDED_LATER = {"mass_scale": 1.0, "critical_step": "estimate", "stiffness_damping": 0.0, "self_contact": False,
                "self_contact_distance": None, "self_friction": 0.0, "damping_frame": "ground",
-               "self_contact_passes": 0}
+               "self_contact_passes": 0, "impact_zones": False}
 
 SECTIONS = {"tube": TubeSpec, "material": FabricSpec, "motion": FlexionSpec, "contact": ContactSpec,
             "route": RouteSpec}

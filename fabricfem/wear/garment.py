@@ -406,7 +406,7 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
                       handles: Sequence[Callable[[ShellModel], object]] = (), blend_width: float = BLEND_WIDTH,
                       skin: Skin | None = None, self_contact: bool = False,
                       self_contact_distance: float | None = None, self_friction: float = 0.0,
-                      self_contact_passes: int = 0) -> GarmentRun:
+                      self_contact_passes: int = 0, impact_zones: bool = False) -> GarmentRun:
     """Shell, seams, body contact, monitors, integrator and phases of a garment run (module docstring).
 
     Args:
@@ -420,10 +420,9 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
         axis: (label, motion time [s] -> value): the records' coordinate (e.g. the elbow angle [deg]); None: time.
         handles: builders model -> hook of the donning handles (fabricfem.contact.handles: EdgeGrip during the
             pull phase, Belt from the belt phase), applied after the seams and before the body contact.
-        blend_width: the width [m] of the blend that joins the body's segments into a skin without creases
-            (fabricfem.body.blended); skin: another skin of the body (fabricfem.body.skin, e.g. a surface mesh).
+        blend_width: the width [m] of the blend joining the segments (fabricfem.body.blended); skin: another skin.
         self_contact: the cloth against itself (contact.self_contact.SelfContact, the seams join the panels), with
-            self_contact_distance d_c [m] (default the thickness), self_friction mu, self_contact_passes (impulses).
+            self_contact_distance d_c [m] (default thickness), self_friction mu, self_contact_passes, impact_zones.
     """
     if fabric.density <= 0.0:
         raise ValueError("density: the explicit engine needs a positive fabric density [kg/m^3]")
@@ -459,7 +458,8 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
         contact.segment_active = lambda t: np.isin(names, posed.active(t))
     ties = SeamTies(model, seams, sewing_time=timeline.sewing_time) if seams else None
     handles = [make(model) for make in handles]
-    cloth = _self_contact(model, ties, self_contact_distance, self_friction, self_contact_passes, self_contact)
+    cloth = _self_contact(model, ties, self_contact_distance, self_friction, self_contact_passes, self_contact,
+                          impact_zones)
     dt_estimate = _critical_step(model, settings, contact, cloth)
     steps_per_record = math.ceil(timeline.record_time / (settings.time_step_safety * dt_estimate))
     dt = timeline.record_time / steps_per_record
@@ -482,12 +482,13 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
 def _hook_order(before: list, cloth: SelfContact | None, contact: ExplicitBodyContact) -> list:
     """The explicit hooks in their order: damping frame, seams, handles (`before`, None where absent), then the body
     contact (a seam drawn across the body cannot pull a node into it). The cloth-cloth contact comes before the body
-    contact, or after it when it applies impulses (fabricfem.contact.impulses): they then see the nodes the body
-    contact has just put on the body and hold those (`SelfContact.body`)."""
+    contact, or after it when it applies impulses (fabricfem.contact.impulses) or impact zones
+    (fabricfem.contact.impact_zones): they then see the nodes the body contact has just put on the body and hold
+    those (`SelfContact.body`)."""
     hooks = [h for h in before if h is not None]
     if cloth is None:
         return hooks + [contact]
-    if cloth.passes:
+    if cloth.passes or cloth.zones:
         cloth.body = contact
         return hooks + [contact, cloth]
     return hooks + [cloth, contact]
@@ -517,16 +518,18 @@ def _critical_step(model: ShellModel, settings: ExplicitSettings, contact: Expli
 
 
 def _self_contact(model: ShellModel, ties: SeamTies | None, distance: float | None, friction: float,
-                  passes: int = 0, on: bool = True) -> SelfContact | None:
+                  passes: int = 0, on: bool = True, zones: bool = False) -> SelfContact | None:
     """The cloth-cloth contact hook of a garment (None unless `on`): contact distance `distance` [m] (default the
-    thickness), Coulomb `friction`, `passes` of impulses, the seams' tied node pairs joining the panels; a bad value
-    refused naming its scene key."""
+    thickness), Coulomb `friction`, `passes` of impulses, impact `zones`, the seams' tied node pairs joining the
+    panels; a bad value refused naming its scene key."""
     if not on:
         return None
     joined = ties.joined_nodes() if ties is not None else None
     try:
-        return SelfContact(model, contact_distance=distance, friction=friction, joined=joined, passes=passes)
+        return SelfContact(model, contact_distance=distance, friction=friction, joined=joined, passes=passes,
+                           zones=zones)
     except ValueError as exc:
         key = ("self_contact_distance" if "contact_distance" in str(exc) else
-               "self_contact_passes" if "passes" in str(exc) else "self_friction")
+               "self_contact_passes" if "passes" in str(exc) else
+               "impact_zones" if "impact_zones" in str(exc) else "self_friction")
         raise ValueError(f"{key}: {exc}") from None

@@ -177,7 +177,8 @@ def tube_flexion_run(name: str, fabric: Fabric, tube_spec: TubeSpec, arm: ArmDim
                              penalty=contact.penalty, psri_degrees=tube_spec.quadrature, config=config, axis=axis,
                              self_contact=contact.self_contact, self_contact_distance=contact.self_contact_distance,
                              self_friction=contact.self_friction,
-                             self_contact_passes=contact.self_contact_passes, skin=skin, blend_width=blend_width)
+                             self_contact_passes=contact.self_contact_passes,
+                             impact_zones=contact.impact_zones, skin=skin, blend_width=blend_width)
 
 
 def build_explicit(config: SleeveConfig, comm: MPI.Comm = MPI.COMM_WORLD) -> GarmentRun:
