@@ -77,7 +77,7 @@ def test_a_flat_sheet_has_no_intersecting_pairs():
 
 @pytest.mark.parametrize("parts", [2, 3])
 def test_the_parts_of_the_count_list_every_pair_once(parts):
-    """The ranks of a run count one part each (candidate_pairs' part k: first triangle i % parts == k): the parts'
+    """The ranks of a run count one part each (candidate_pairs' part k: first triangle in slab k): the parts'
     candidate pairs are the whole list, each once, and their counts sum to the whole count."""
     points, triangles = folded_sheet(24, 16, 0.3, seed=5)
     whole = candidate_pairs(points, triangles)

@@ -25,21 +25,36 @@ from scipy.spatial import cKDTree
 DEGENERATE = 1e-9     # a node's distance to the other's plane below DEGENERATE x the pair's size: libigl decides
 
 
+def _slab(centroid: np.ndarray, reach: float, part: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Part k of `parts`: the triangles whose centroids lie within `reach` [m] of slab k (the centroids sorted
+    along the axis of largest extent and cut into `parts` runs of equal count), and which of all triangles slab k
+    owns (T,) bool."""
+    k, parts = part
+    axis = int(np.argmax(np.ptp(centroid, axis=0))) if len(centroid) else 0
+    order = np.argsort(centroid[:, axis], kind="stable")
+    owned = np.zeros(len(centroid), dtype=bool)
+    owned[order[k * len(order) // parts:(k + 1) * len(order) // parts]] = True
+    if not owned.any():
+        return np.zeros(0, dtype=np.int64), owned
+    lo, hi = centroid[owned, axis].min(), centroid[owned, axis].max()
+    return np.flatnonzero((centroid[:, axis] >= lo - reach) & (centroid[:, axis] <= hi + reach)), owned
+
+
 def candidate_pairs(points: np.ndarray, triangles: np.ndarray, part: tuple[int, int] = (0, 1)) -> np.ndarray:
     """(n, 2) triangle pairs (i < j) whose bounding boxes overlap and that share no node; `part` = (k, parts): only
-    the pairs whose first triangle i has i % parts == k (the parts together list every pair once)."""
+    the pairs whose first triangle i lies in slab k of `_slab` (the parts together list every pair once: a pair
+    within reach lies within slab k and its margin, and is kept by the slab of its first triangle)."""
     corners = points[triangles]                                   # (T, 3, 3)
     centroid = corners.mean(axis=1)
     radius = np.linalg.norm(corners - centroid[:, None], axis=2).max(axis=1)
     reach = 2.0 * float(radius.max(initial=0.0))
-    k, parts = part
-    if parts == 1:
+    if part[1] == 1:
         pairs = cKDTree(centroid).query_pairs(reach, output_type="ndarray")
     else:
-        mine = np.arange(k, len(triangles), parts)
-        near = cKDTree(centroid[mine]).sparse_distance_matrix(cKDTree(centroid), reach, output_type="ndarray")
-        pairs = np.column_stack([mine[near["i"]], near["j"]]).astype(np.int64).reshape(-1, 2)
-        pairs = pairs[pairs[:, 0] < pairs[:, 1]]
+        local, owned = _slab(centroid, reach, part)
+        pairs = local[cKDTree(centroid[local]).query_pairs(reach, output_type="ndarray")].reshape(-1, 2)
+        pairs = np.sort(pairs, axis=1)
+        pairs = pairs[owned[pairs[:, 0]]]
     pairs = pairs[np.linalg.norm(centroid[pairs[:, 0]] - centroid[pairs[:, 1]], axis=1)
                   <= radius[pairs[:, 0]] + radius[pairs[:, 1]]]
     low, high = corners.min(axis=1), corners.max(axis=1)
@@ -53,7 +68,8 @@ def candidate_pairs(points: np.ndarray, triangles: np.ndarray, part: tuple[int, 
 def intersecting_pairs(points: np.ndarray, triangles: np.ndarray, part: tuple[int, int] = (0, 1)) -> int:
     """Number of pairs of triangles (rows of `triangles` (T, 3), node indices into `points` (N, 3) [m]) that
     intersect and share no node (module docstring); `part` = (k, parts): the pairs of `candidate_pairs`' part k
-    only (the counts of the parts sum to the whole count: each rank of a run counts one part)."""
+    only (the counts of the parts sum to the whole count: each rank of a run counts one part, a slab of the
+    surface with its margin, so each does about 1 / parts of the work)."""
     return len(intersecting(points, triangles, part))
 
 
