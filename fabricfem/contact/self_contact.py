@@ -125,7 +125,7 @@ class SelfContact:
         self.zones = bool(zones)
         self.zone_iterations = impact_zones.DEFAULT_ITERATIONS
         self.zone_report: dict = {}
-        self.zone_totals = {"steps": 0, "collisions": 0, "unresolved_steps": 0, "rounds": 0}
+        self.zone_totals = {"steps": 0, "collisions": 0, "unresolved_steps": 0, "rounds": 0, "most_left": 0}
         self.comm = model.comm
         self.surface = ClothSurface(model)
         self.distance = checked_contact_distance(contact_distance, model.fabric.thickness,
@@ -343,7 +343,8 @@ class SelfContact:
 
     def _impact_zones(self, u: np.ndarray, inverse: np.ndarray, dt: float) -> None:
         """The detection and rigid zones of fabricfem.contact.impact_zones on u (N, 3) [m/s] in place, from the
-        step's positions `_x`; candidates: the Verlet list while it covers the step's motion, else a search."""
+        step's positions `_x`; candidates: the Verlet list while it covers the step's motion, else a search within
+        1.5 times that motion, at most the mesh size (a node moving further in one step: pairs missed)."""
         x, eta = self._x, impact_zones.TOLERANCE * self.distance
         searched: dict[float, tuple] = {}
 
@@ -352,9 +353,10 @@ class SelfContact:
             if self.use_edges and self._candidates is not None and reach < self.distance:
                 pairs, edge_pairs = self._candidates, self._edge_candidates
             else:
-                radius = max([r for r in searched if r >= reach], default=None)
+                cap = self.surface.nodes.element_size      # the search's largest radius (memory)
+                radius = max([r for r in searched if r >= min(reach, cap)], default=None)
                 if radius is None:
-                    radius = 1.5 * reach
+                    radius = min(1.5 * reach, cap)
                     searched[radius] = (self.contact_pairs(x, radius),
                                         self.contact_edge_pairs(x, radius, interior=False))
                 pairs, edge_pairs = searched[radius]
@@ -368,6 +370,7 @@ class SelfContact:
         totals["collisions"] += report["collisions"]
         totals["unresolved_steps"] += report["left"] > 0
         totals["rounds"] += report["rounds"]
+        totals["most_left"] = max(totals["most_left"], report["left"])
 
     def state(self) -> dict:
         """Nothing to checkpoint (the law keeps no history)."""

@@ -67,6 +67,9 @@ def run_wear(run: WearRun, out: Path, headline: str, render_at: list[float], ren
     def on_step(step):
         recorder.record(step)
         say(f"  {step.line()}  {clock(run.fraction(step), step.phase)}")
+        cloth = getattr(run, "self_contact", None)
+        if getattr(cloth, "zones", False):           # the impact zones' counts so far (fabricfem.contact.impact_zones)
+            say(f"    impact zones: {cloth.zone_totals}")
 
     loop_start = time.perf_counter()
     if checkpoint is None:
