@@ -205,12 +205,23 @@ class WearRecorder:
         write_sto(self.out / "torque.sto", times,
                   wear_sto_columns(history.steps, self.run.torques, [self.run.motion_time(t) for t in times]),
                   comm, STO_NOTE)
-        if comm.rank == 0 and self.skin_frames:
-            top, true_max = colour_top([skin[2] for _, _, skin, _ in self.skin_frames])
-            note = (f" (colours to the {COLOUR_PERCENTILE:g}th percentile {top / 1e3:.3g} kPa; "
-                    f"largest {true_max / 1e3:.3g} kPa)")
-            for name, title, (points, triangles, values), garment in self.skin_frames:
+        self._render_skin_frames(comm)
+        plot_wear_history(self.out / "torque.png", history, self.label, f"{history.name}: resisting torque")
+        comm.barrier()                         # every rank's renders are on disk when the run returns
+
+    def _render_skin_frames(self, comm) -> None:
+        """The skin pressure renders (rank 0's frames, one colour range for all), shared among the ranks: frame i
+        on rank (i + 1) % size, so that rank 0, which also plots the torque, takes fewer."""
+        frames = comm.bcast(self.skin_frames if comm.rank == 0 else None, root=0) if comm.size > 1 \
+            else self.skin_frames
+        if not frames:
+            return
+        top, true_max = colour_top([skin[2] for _, _, skin, _ in frames])
+        note = (f" (colours to the {COLOUR_PERCENTILE:g}th percentile {top / 1e3:.3g} kPa; "
+                f"largest {true_max / 1e3:.3g} kPa)")
+        for i, (name, title, (points, triangles, values), garment) in enumerate(frames):
+            if (i + 1) % comm.size == comm.rank:
                 render_skin_pressure(self.out / name, points, triangles, values / 1e3, title + note,
                                      (0.0, max(top / 1e3, 1e-9)), garment)
+            if comm.rank == 0:
                 self.renders.append(name)
-        plot_wear_history(self.out / "torque.png", history, self.label, f"{history.name}: resisting torque")
