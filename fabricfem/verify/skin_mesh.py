@@ -308,7 +308,7 @@ def skin_mesh_vs_ellipsoids_sleeve(spacing: float = SLEEVE_SPACING, skinning: st
     the facets turn the normal by h / R ~ 0.05 rad between neighbours, which moves the friction's slip events.
     With linear blend skinning (`skinning="linear"`) the two skins part by millimetres at the flexed elbow and the
     curves by 5.8-6.7 % RMS at 4 to 1 mm (docs/findings/2026-11-28-mesh-skin-normals.md,
-    docs/findings/2026-11-28-implicit-skinning.md). About 5 minutes serial: `fabricfem verify` runs it, the tests
+    docs/findings/2026-11-28-implicit-skinning.md). A few minutes serial: `fabricfem verify` runs it, the tests
     do not; `python -m fabricfem.verify.skin_mesh [--spacing H] [--skinning linear]` prints `posed_deviation`'s
     table and the row."""
     name = "skin-mesh-vs-ellipsoids-sleeve"
