@@ -355,6 +355,13 @@ def _library(values: bool = False):
                       ROUNDING_FLAGS)
 
 
+def _body_pointers(ffi, centers: np.ndarray, rotations: np.ndarray, radii: np.ndarray, widths: np.ndarray) -> tuple:
+    """(K, the four arrays' double pointers) of the posed segments for the compiled calls (each pointer keeps its
+    C-contiguous copy alive)."""
+    return len(radii), tuple(pointer(ffi, np.ascontiguousarray(a, dtype=float), "double")
+                             for a in (centers, rotations, radii, widths))
+
+
 def implicit_values(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, radii: np.ndarray,
                     widths: np.ndarray) -> np.ndarray:
     """phi (N,) [m] of the blended body at the points x (N, 3) [m] by `blend_values` (fabricfem.body.blended.blend's
@@ -362,9 +369,8 @@ def implicit_values(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, r
     lib, ffi = _library(values=True)
     x = np.ascontiguousarray(np.asarray(x, dtype=float).reshape(-1, 3))
     phi = np.empty(len(x))
-    arrays = [np.ascontiguousarray(a, dtype=float) for a in (centers, rotations, radii, widths)]
-    p = functools.partial(pointer, ffi)
-    lib.blend_values(len(x), p(x, "double"), len(radii), *(p(a, "double") for a in arrays), p(phi, "double"))
+    k, body = _body_pointers(ffi, centers, rotations, radii, widths)
+    lib.blend_values(len(x), pointer(ffi, x, "double"), k, *body, pointer(ffi, phi, "double"))
     return phi
 
 
@@ -374,10 +380,9 @@ def segment_weights(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, r
     fabricfem.body.blended.blend)."""
     lib, ffi = _library(values=True)
     x = np.ascontiguousarray(np.asarray(x, dtype=float).reshape(-1, 3))
-    weights = np.empty((len(x), len(radii)))
-    arrays = [np.ascontiguousarray(a, dtype=float) for a in (centers, rotations, radii, widths)]
-    p = functools.partial(pointer, ffi)
-    lib.blend_weights(len(x), p(x, "double"), len(radii), *(p(a, "double") for a in arrays), p(weights, "double"))
+    k, body = _body_pointers(ffi, centers, rotations, radii, widths)
+    weights = np.empty((len(x), k))
+    lib.blend_weights(len(x), pointer(ffi, x, "double"), k, *body, pointer(ffi, weights, "double"))
     return weights
 
 
@@ -393,10 +398,9 @@ def onto_levels(x: np.ndarray, levels: np.ndarray, centers: np.ndarray, rotation
     levels = np.ascontiguousarray(levels, dtype=float)
     if levels.shape != (len(out),):
         raise ValueError(f"levels: expected shape ({len(out)},), got {levels.shape}")
-    arrays = [np.ascontiguousarray(a, dtype=float) for a in (centers, rotations, radii, widths)]
-    p = functools.partial(pointer, ffi)
-    failed = lib.blend_levels(len(out), p(out, "double"), p(levels, "double"), len(radii),
-                              *(p(a, "double") for a in arrays), p(normal, "double"))
+    k, body = _body_pointers(ffi, centers, rotations, radii, widths)
+    failed = lib.blend_levels(len(out), pointer(ffi, out, "double"), pointer(ffi, levels, "double"), k, *body,
+                              pointer(ffi, normal, "double"))
     if failed:
         raise RuntimeError(f"implicit skinning: {failed} vertices did not reach their level set")
     return out, normal
@@ -409,13 +413,13 @@ def closest_points(x: np.ndarray, centers: np.ndarray, rotations: np.ndarray, ra
     raises RuntimeError (`strict`) or keeps the foot of its last iterate."""
     lib, ffi = _library()
     x = np.ascontiguousarray(np.asarray(x, dtype=float).reshape(-1, 3))
-    n, k = len(x), len(radii)
+    n = len(x)
+    k, body = _body_pointers(ffi, centers, rotations, radii, widths)
     gap, foot, normal, weights = np.empty(n), np.empty((n, 3)), np.empty((n, 3)), np.empty((n, k))
     converged = np.empty(n, dtype=np.uint8)
-    arrays = [np.ascontiguousarray(a, dtype=float) for a in (centers, rotations, radii, widths)]
     p = functools.partial(pointer, ffi)
-    lib.blend_query(n, p(x, "double"), k, *(p(a, "double") for a in arrays), p(gap, "double"), p(foot, "double"),
-                    p(normal, "double"), p(weights, "double"), p(converged, "uint8_t"))
+    lib.blend_query(n, p(x, "double"), k, *body, p(gap, "double"), p(foot, "double"), p(normal, "double"),
+                    p(weights, "double"), p(converged, "uint8_t"))
     if strict and not converged.all():
         raise RuntimeError(f"blended skin: the closest point of {int(n - converged.sum())} points did not converge "
                            f"(farther from the skin than its curvature radius?)")

@@ -25,10 +25,12 @@ from __future__ import annotations
 
 from typing import Callable
 
+import igl
 import numpy as np
 import scipy.sparse as sp
 
 from fabricfem.body.blend_kernel import onto_levels
+from fabricfem.body.skinning import pose_vertices
 
 RELAX = 0.5                   # the tangential relaxation's step towards the one-ring mean [Vaillant2014]
 RELAX_PASSES = 1              # relaxations (each followed by a projection) per key
@@ -36,14 +38,10 @@ SKINNING_REACH = 0.1          # m: default reach of the moved vertices around a 
 KEY_INTERVAL = 2e-3           # s: default dt_key (0.09 deg per key at the sleeve's 45 deg/s, 0.6 deg at a 300 deg/s knee)
 
 
-def ring_matrix(faces: np.ndarray, rows: np.ndarray, n_vertices: int) -> sp.csr_matrix:
-    """(len(rows), V) sparse matrix whose row r averages the one-ring neighbours of vertex rows[r]."""
-    f = np.asarray(faces, dtype=np.int64)
-    i = np.concatenate([f[:, 0], f[:, 1], f[:, 2], f[:, 1], f[:, 2], f[:, 0]])
-    j = np.concatenate([f[:, 1], f[:, 2], f[:, 0], f[:, 0], f[:, 1], f[:, 2]])
-    adjacency = sp.csr_matrix((np.ones(len(i)), (i, j)), shape=(n_vertices, n_vertices))
-    adjacency.data[:] = 1.0
-    adjacency = adjacency[rows]
+def ring_matrix(faces: np.ndarray, rows: np.ndarray) -> sp.csr_matrix:
+    """(len(rows), V) sparse matrix whose row r averages the one-ring neighbours of vertex rows[r] (libigl's
+    vertex adjacency of the triangles `faces`)."""
+    adjacency = sp.csr_matrix(igl.adjacency_matrix(np.asarray(faces, dtype=np.int64)), dtype=float)[rows]
     return sp.diags(1.0 / np.asarray(adjacency.sum(axis=1)).ravel()) @ adjacency
 
 
@@ -69,7 +67,7 @@ class ImplicitSkinning:
                                          .ravel()]))
         self.ring = ring                                   # the shifted vertices and their neighbours
         self.inner = np.searchsorted(ring, self.shifted)   # the shifted ones among them
-        self.mean = ring_matrix(faces, self.shifted, len(rest))[:, ring]
+        self.mean = ring_matrix(faces, self.shifted)[:, ring]
         self.rest, self.weights = rest[ring], weights[ring]
         self.linear, self.field = linear, field
         self.t0, self.interval = float(t0), float(interval)
@@ -78,16 +76,11 @@ class ImplicitSkinning:
         self._tracked = self._lbs = None                   # (S, 3) at key self._key
         self._shifts: dict[int, np.ndarray] = {}
 
-    def _linear_ring(self, t: float) -> np.ndarray:
-        A, b = self.linear(t)
-        blended = np.einsum("vk,kij->vij", self.weights, A)
-        return np.einsum("vij,vj->vi", blended, self.rest) + self.weights @ b
-
     def _advance(self) -> None:
         """Key self._key + 1 from key self._key (or key 0 from linear blend skinning)."""
         k = self._key + 1
         t = self.t0 + k * self.interval
-        ring = self._linear_ring(t)
+        ring = pose_vertices(self.rest, self.weights, *self.linear(t))
         lbs = ring[self.inner]
         start = lbs if self._tracked is None else self._tracked + (lbs - self._lbs)
         centers, rotations, radii, widths = self.field(t)

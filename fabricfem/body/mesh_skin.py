@@ -320,8 +320,11 @@ class MeshSkin:
     def _frame_points(self, t: float) -> tuple[np.ndarray, float]:
         """The segments' joints and markers (3K, 3) [m] at time t [s] and the donning's growth g."""
         positions = self.body.kinematics.positions(t)
-        points = np.array([positions[n] for n in self._point_names], dtype=float)
-        return points, 1.0 if self.transverse_scale is None else float(self.transverse_scale(t))
+        return np.array([positions[n] for n in self._point_names], dtype=float), self.growth(t)
+
+    def growth(self, t: float) -> float:
+        """The donning's transverse growth g at time t [s] (`transverse_scale`; 1 without one)."""
+        return 1.0 if self.transverse_scale is None else float(self.transverse_scale(t))
 
     @property
     def blended_triangles(self) -> int:
@@ -448,7 +451,7 @@ class MeshSkin:
         key = float(t)
         if self._field_at is None or self._field_at[0] != key:
             centers, rotations, radii = self.field.posed(key)
-            g = 1.0 if self.transverse_scale is None else float(self.transverse_scale(key))
+            g = self.growth(key)
             self._field_at = (key, (centers, rotations, radii * np.array([1.0, g, g]), self.field.widths))
         return self._field_at[1]
 
