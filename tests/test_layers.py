@@ -6,7 +6,9 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-OPTIONAL = {"pyvista", "matplotlib", "mpl_toolkits", "gmsh", "slepc4py"}
+# optional packages, and heavy ones a run may not need (trimesh: mesh skins only; scipy: gait curves), each
+# imported at first use with a comment saying why
+OPTIONAL = {"pyvista", "matplotlib", "mpl_toolkits", "gmsh", "slepc4py", "trimesh", "scipy"}
 
 
 def test_import_linter_contracts_are_kept():

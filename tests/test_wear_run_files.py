@@ -136,3 +136,15 @@ def test_resume_of_a_completed_run_says_so_and_exits_0(sleeve_run):
     assert done.returncode == 0, done.stderr
     assert "is complete" in done.stdout and "nothing to resume" in done.stdout
     assert (out / "torque.csv").stat().st_mtime_ns == stamp
+
+
+def test_a_frame_equal_to_an_earlier_one_is_not_rendered_twice():
+    """The peak pressure at a requested coordinate gives the same frame twice: it is rendered once and copied
+    (recorder._first_equal: same title and arrays); a frame that differs in one value is rendered."""
+    from fabricfem.wear.recorder import _first_equal
+    points, triangles = np.eye(3), np.array([[0, 1, 2]])
+    values, garment = np.array([1.0, 2.0, 3.0]), (np.eye(3), np.array([[0, 1, 2]]))
+    frame = ("pressure_57.00deg.png", "57 deg", (points, triangles, values), garment)
+    peak = ("pressure_peak.png", "57 deg", (points.copy(), triangles.copy(), values.copy()), garment)
+    other = ("pressure_38.00deg.png", "57 deg", (points, triangles, values + [0.0, 0.0, 1e-12]), garment)
+    assert _first_equal([frame, other, peak]) == [0, 1, 0]

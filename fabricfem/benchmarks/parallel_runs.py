@@ -19,7 +19,6 @@ import statistics
 import tomllib
 from pathlib import Path
 
-import matplotlib
 import numpy as np
 from mpi4py import MPI
 
@@ -28,9 +27,6 @@ from fabricfem.benchmarks.commits import time_once
 from fabricfem.scenes.build import estimated_dofs
 from fabricfem.scenes.sweep import parse_value, set_key
 from fabricfem.scenes.wear_sections import garment_tables
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402  (after the backend)
 
 RANKS = (1, 2)
 
@@ -97,6 +93,9 @@ def parallel_bench(scene: str | Path, meshes: tuple[str, ...], settings: tuple[s
 
 def _plot(table: list[dict], path: Path, title: str) -> None:
     """Speed-up of 2 ranks over 1 against the dofs (the mesh labels beside the points)."""
+    import matplotlib  # optional heavy package, loaded only when a plot is drawn
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
     fig, ax = plt.subplots(figsize=(6, 4))
     x = [row["dofs"] or 0 for row in table]
     y = [row["speedup"] for row in table]

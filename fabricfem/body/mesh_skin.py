@@ -46,10 +46,9 @@ import copy
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Mapping
+from typing import TYPE_CHECKING, Callable, Mapping
 
 import numpy as np
-import trimesh
 
 from fabricfem.body.blend_kernel import implicit_values, segment_weights
 from fabricfem.body.blended import BLEND_WIDTH, BlendedEllipsoids, stacked, triangulate
@@ -58,6 +57,9 @@ from fabricfem.body.ellipsoid import _as_points
 from fabricfem.body.implicit_skinning import KEY_INTERVAL, SKINNING_REACH, ImplicitSkinning
 from fabricfem.body.mesh_distance import PosedSurface, Topology
 from fabricfem.body.mesh_query import CompiledSkin, Pose, QueryState
+
+if TYPE_CHECKING:
+    import trimesh
 from fabricfem.body.skin import SkinQuery
 from fabricfem.body.skinning import (
                                      HEAT,
@@ -93,6 +95,7 @@ class SkinMesh:
     @property
     def volume(self) -> float:
         """Enclosed volume [m^3] (positive for outward normals)."""
+        trimesh = _trimesh()
         return float(trimesh.Trimesh(self.vertices, self.faces, process=False).volume)
 
 
@@ -105,8 +108,14 @@ def _cleaned(mesh: trimesh.Trimesh) -> trimesh.Trimesh:
     return mesh
 
 
+def _trimesh():
+    """trimesh, imported at first use: 0.2-0.3 s of imports that a run on ellipsoids does not need."""
+    import trimesh  # loaded at first use: a run on ellipsoids does not need it
+    return trimesh
+
+
 def _boundary_edges(mesh: trimesh.Trimesh) -> int:
-    return len(trimesh.grouping.group_rows(mesh.edges_sorted, require_count=1))
+    return len(_trimesh().grouping.group_rows(mesh.edges_sorted, require_count=1))
 
 
 def _closed(mesh: trimesh.Trimesh, source: str, repair: bool) -> tuple[trimesh.Trimesh, tuple[str, ...]]:
@@ -118,7 +127,7 @@ def _closed(mesh: trimesh.Trimesh, source: str, repair: bool) -> tuple[trimesh.T
         if not repair:
             raise ValueError(f"repair: {source} has {holes} boundary edges (holes); give repair = true to close "
                              "them (trimesh fill_holes) or close the surface")
-        trimesh.repair.fill_holes(mesh)
+        _trimesh().repair.fill_holes(mesh)
         left = _boundary_edges(mesh)
         if left:
             raise ValueError(f"repair: {source} keeps {left} of its {holes} boundary edges open after fill_holes; "
@@ -159,7 +168,7 @@ def _check_size(vertices: np.ndarray, source: str, units, up: str, height_range)
 def skin_mesh(vertices: np.ndarray, faces: np.ndarray, source: str = "arrays", repair: bool = False
               ) -> SkinMesh:
     """A `SkinMesh` of arrays in the body frame [m] (cleaned, and closed and outward or refused naming `repair`)."""
-    mesh = _cleaned(trimesh.Trimesh(np.asarray(vertices, dtype=float), np.asarray(faces, dtype=np.int64),
+    mesh = _cleaned(_trimesh().Trimesh(np.asarray(vertices, dtype=float), np.asarray(faces, dtype=np.int64),
                                     process=False))
     mesh, done = _closed(mesh, source, repair)
     return SkinMesh(np.ascontiguousarray(mesh.vertices, dtype=float),
@@ -181,6 +190,7 @@ def read_skin(path: str | Path, units: str | float = "m", up: str = "z", compone
     Raises:
         ValueError (one line) naming `path`, `units`, `up`, `components` or `repair`.
     """
+    trimesh = _trimesh()
     scale, _ = unit_scale(units), up_rotation(up)
     path = Path(path)
     if not path.is_file():

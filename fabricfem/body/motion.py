@@ -27,7 +27,6 @@ from functools import cached_property
 from typing import Callable, Mapping, Protocol, runtime_checkable
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 from scipy.optimize import brentq
 
 
@@ -286,6 +285,8 @@ def periodic_curve(keypoints: tuple[tuple[float, float], ...]) -> Callable[[np.n
     value = np.radians([v for _, v in keypoints])
     if phase[0] != 0.0 or phase[-1] != 1.0 or not math.isclose(value[0], value[-1]):
         raise ValueError("keypoints must span phase 0 to 1 with equal end values (periodic)")
+    from scipy.interpolate import CubicSpline  # loaded only for a gait curve (0.1 s of imports)
+
     spline = CubicSpline(phase, value, bc_type="periodic")
     return lambda s: spline(np.mod(s, 1.0))
 

@@ -54,6 +54,7 @@ import numpy as np
 from dolfinx.cpp.mesh import entities_to_geometry
 from mpi4py import MPI
 
+from fabricfem.dynamics import eigen_cache
 from fabricfem.dynamics.mass import lumped_mass, rotary_scale
 
 MEMBRANE_KAPPA = {"quadrilateral": 6.1, "triangle": 7.4}
@@ -139,7 +140,8 @@ def discrete_max_frequency(model, iterations: int = 2000, rtol: float = 1e-4, ro
     32-vector subspace (the largest eigenvalues of a uniform mesh are clustered: one vector converges slowly).
     The Ritz value theta converges from below and stops at a relative residual `rtol`; for a symmetric operator an
     eigenvalue lies within ||r|| = rtol theta of it [Parlett1998, thm. 4.5.1], so theta (1 + rtol) is returned:
-    an upper bound of that eigenvalue, the safe side for the critical step."""
+    an upper bound of that eigenvalue, the safe side for the critical step. A rerun with the same operator reads
+    the eigenvalue from `eigen_cache` (the same value, bit for bit)."""
     from slepc4py import SLEPc  # optional package, loaded only for the eigenvalue estimate
 
     model.compile()
@@ -155,17 +157,25 @@ def discrete_max_frequency(model, iterations: int = 2000, rtol: float = 1e-4, ro
     inv_sqrt.sqrtabs()
     inv_sqrt.reciprocal()
     K.diagonalScale(inv_sqrt, inv_sqrt)  # M^-1/2 K M^-1/2
-    eps = SLEPc.EPS().create(model.comm)
-    eps.setOperators(K)
-    eps.setProblemType(SLEPc.EPS.ProblemType.HEP)
-    eps.setWhichEigenpairs(SLEPc.EPS.Which.LARGEST_REAL)
-    eps.setDimensions(1, min(32, max(K.getSize()[0] - 1, 1)))
-    eps.setTolerances(rtol, iterations)
-    eps.solve()
-    if eps.getConverged() < 1:
-        raise RuntimeError("SLEPc did not converge the largest eigenvalue")
-    value = eps.getEigenvalue(0).real
-    for obj in (eps, K, m, inv_sqrt):
+    subspace = min(32, max(K.getSize()[0] - 1, 1))
+
+    def solve() -> float:
+        eps = SLEPc.EPS().create(model.comm)
+        eps.setOperators(K)
+        eps.setProblemType(SLEPc.EPS.ProblemType.HEP)
+        eps.setWhichEigenpairs(SLEPc.EPS.Which.LARGEST_REAL)
+        eps.setDimensions(1, subspace)
+        eps.setTolerances(rtol, iterations)
+        eps.solve()
+        if eps.getConverged() < 1:
+            raise RuntimeError("SLEPc did not converge the largest eigenvalue")
+        eigenvalue = eps.getEigenvalue(0).real
+        eps.destroy()
+        return float(eigenvalue)
+
+    settings = f"krylovschur largest_real nev=1 ncv={subspace} rtol={rtol!r} max_it={iterations}"
+    value = eigen_cache.largest_eigenvalue(K, settings, model.comm, solve)
+    for obj in (K, m, inv_sqrt):
         obj.destroy()
     return float(np.sqrt(value * (1.0 + rtol)))
 

@@ -18,6 +18,7 @@ the pressure on the skin of the peak record is computed when the frame is final 
 """
 from __future__ import annotations
 
+import shutil
 import time
 from pathlib import Path
 
@@ -158,7 +159,6 @@ class WearRecorder:
         for name in self.fields:
             fio.SurfaceSeries.restore(self.out / f"{name}.xdmf", folder, f"{state['series']}_{name}", self.run.comm)
             self.files[name] = self._open(name, "a")
-            self.files[name] = self._open(name, "a")
 
     def _keep_skin_frame(self, step, name: str, displacement: fem.Function | None = None,
                          pressure: fem.Function | None = None) -> None:
@@ -210,8 +210,9 @@ class WearRecorder:
         comm.barrier()                         # every rank's renders are on disk when the run returns
 
     def _render_skin_frames(self, comm) -> None:
-        """The skin pressure renders (rank 0's frames, one colour range for all), shared among the ranks: frame i
-        on rank (i + 1) % size, so that rank 0, which also plots the torque, takes fewer."""
+        """The skin pressure renders (rank 0's frames, one colour range for all), shared among the ranks: the k-th
+        distinct frame on rank (k + 1) % size, so that rank 0, which also plots the torque, takes fewer; a frame
+        equal to an earlier one (the peak at a requested coordinate) is a copy of its file, made by the same rank."""
         frames = comm.bcast(self.skin_frames if comm.rank == 0 else None, root=0) if comm.size > 1 \
             else self.skin_frames
         if not frames:
@@ -219,9 +220,23 @@ class WearRecorder:
         top, true_max = colour_top([skin[2] for _, _, skin, _ in frames])
         note = (f" (colours to the {COLOUR_PERCENTILE:g}th percentile {top / 1e3:.3g} kPa; "
                 f"largest {true_max / 1e3:.3g} kPa)")
+        first = _first_equal(frames)
+        distinct = sorted(set(first))
         for i, (name, title, (points, triangles, values), garment) in enumerate(frames):
-            if (i + 1) % comm.size == comm.rank:
-                render_skin_pressure(self.out / name, points, triangles, values / 1e3, title + note,
-                                     (0.0, max(top / 1e3, 1e-9)), garment)
+            if (distinct.index(first[i]) + 1) % comm.size == comm.rank:
+                if first[i] == i:
+                    render_skin_pressure(self.out / name, points, triangles, values / 1e3, title + note,
+                                         (0.0, max(top / 1e3, 1e-9)), garment)
+                else:
+                    shutil.copyfile(self.out / frames[first[i]][0], self.out / name)
             if comm.rank == 0:
                 self.renders.append(name)
+
+
+def _first_equal(frames: list) -> list[int]:
+    """For each skin frame (name, title, (points, triangles, values), (garment points, cells)), the index of the
+    first frame with the same title and arrays (itself when none before it is equal)."""
+    def same(a, b) -> bool:
+        arrays = (*a[2], *a[3]), (*b[2], *b[3])
+        return a[1] == b[1] and all(np.array_equal(x, y) for x, y in zip(*arrays))
+    return [next(j for j in range(i + 1) if same(frames[j], frames[i])) for i in range(len(frames))]
