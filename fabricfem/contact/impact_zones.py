@@ -386,12 +386,16 @@ def resolve(candidates, x: np.ndarray, u: np.ndarray, dt: float, mass: np.ndarra
     Args:
         candidates: callable(u) -> (vertex, triangle, triangles, first, second, edges): the candidate pairs for the
             velocities u (the caller widens them when the step's motion exceeds its proximity radius).
-        x: (N, 3) positions [m]; dt [s]; mass (N,) finite lumped masses [kg]; held (N,) bool; eta [m].
+        x: (N, 3) positions [m]; dt [s]; mass (N,) lumped masses [kg], positive and finite (ValueError
+            otherwise); held (N,) bool; eta [m].
 
     Returns:
         {"collisions": the first detection's collisions, "rounds": detections run, "zone_nodes": nodes in zones,
         "left": collisions of the last detection (0: the step is collision-free)}.
     """
+    if not (np.isfinite(mass).all() and (mass > 0.0).all()):
+        raise ValueError("impact zones: the lumped masses must be positive and finite (a zone of zero total mass "
+                         "has no rigid velocity)")
     parent = np.full(len(x), -1, dtype=np.int64)
     report = {"collisions": 0, "rounds": 0, "zone_nodes": 0, "left": 0}
     for round_ in range(iterations + 1):

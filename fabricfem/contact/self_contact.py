@@ -300,7 +300,9 @@ class SelfContact:
     def correct(self, integrator, t: float) -> None:
         """With `passes` > 0: the impulses of the step's pairs on u = v~ + dt a^{n+1}; with `zones`, then the impact
         zones of the step's collisions; a^{n+1} += du / dt on the owned rows (module docstring; every rank computes
-        all, as the forces)."""
+        all, as the forces). A non-finite velocity [m/s] entering or leaving the correction raises ValueError naming
+        the stage, the time t [s] and the node (every rank alike: the velocities are gathered), so the run stops with
+        that reason instead of carrying NaN into the next step."""
         has_pairs = len(self.pairs) or len(self.edge_pairs)
         zones = self.zones and self._may_collide(integrator)
         self.impulse_passes = 0
@@ -311,6 +313,7 @@ class SelfContact:
         rows = s.nodes.dofs
         a = integrator.a.getArray()
         u0 = s.gather(integrator.velocity_predictor.getArray(readonly=True)[rows] + dt * a[rows])
+        _check_finite(u0, "predicted velocities entering the cloth-cloth correction (the step diverged before it)", t)
         u = u0.copy()
         _, inverse = self._masses(integrator)
         if self.body is not None:
@@ -323,22 +326,26 @@ class SelfContact:
             self.impulse, self.impulse_friction, _, self.impulse_passes = impulses.apply(
                 pairs, edge_pairs, self._triangles, self.edges, self._x, u, inverse, self.distance, self.mu,
                 self.passes, self.comm, self.restore_rate)
+            _check_finite(u, "velocities after the cloth-cloth impulses", t)
         toc = time.perf_counter()
         self.timings["impulses"] += toc - tic
         if zones:
             self._impact_zones(u, inverse, dt)
+            _check_finite(u, "velocities after the impact zones", t)
             self.timings["zones"] += time.perf_counter() - toc
         a[rows] += s.owned_rows((u - u0) / dt)
 
     def _may_collide(self, integrator) -> bool:
         """False only when no candidate pair is listed and no node moves by d_c / 2 - eta within the step (then no
-        pair can collide: module docstring); the same answer on every rank."""
+        pair can collide: module docstring); the same answer on every rank; True for a non-finite velocity (which
+        `correct` then reports)."""
         if self._candidates is None or len(self._candidates) or len(self._edge_candidates) or not self.use_edges:
             return True
         rows, dt = self.surface.nodes.dofs, integrator.dt
         a = integrator.a.getArray(readonly=True)
         u = integrator.velocity_predictor.getArray(readonly=True)[rows] + dt * a[rows]
-        fastest = self.comm.allreduce(float(np.sqrt((u * u).sum(axis=1).max(initial=0.0))), op=MPI.MAX)
+        local = float(np.sqrt((u * u).sum(axis=1).max(initial=0.0)))
+        fastest = self.comm.allreduce(local if math.isfinite(local) else math.inf, op=MPI.MAX)   # NaN: checked
         return 2.0 * dt * fastest + impact_zones.TOLERANCE * self.distance >= self.distance
 
     def _impact_zones(self, u: np.ndarray, inverse: np.ndarray, dt: float) -> None:
@@ -373,11 +380,25 @@ class SelfContact:
         totals["most_left"] = max(totals["most_left"], report["left"])
 
     def state(self) -> dict:
-        """Nothing to checkpoint (the law keeps no history)."""
-        return {}
+        """What the next steps read from the past ones (a checkpoint, fabricfem.wear.checkpoint; the same on every
+        rank): the Verlet list (its vertex-triangle and edge-edge candidates, the positions [m] of its search and
+        the search count: a resumed run searches again where the uninterrupted one does), the last step's pairs,
+        and the impact zones' last report and totals (their counts go on over the whole run)."""
+        return {"candidates": self._candidates, "edge_candidates": self._edge_candidates,
+                "searched_at": self._searched_at.copy(), "searches": self.searches, "pairs": self.pairs,
+                "edge_pairs": self.edge_pairs, "zone_report": dict(self.zone_report),
+                "zone_totals": dict(self.zone_totals)}
 
     def restore(self, state: dict) -> None:
-        """Nothing to restore (`state`)."""
+        """Continue from a `state()` of the same surface; ValueError (starting "resume:") for a checkpoint of
+        another surface (node count)."""
+        if state["searched_at"].shape != self._searched_at.shape:
+            raise ValueError(f"resume: the checkpoint's cloth self-contact has {len(state['searched_at'])} nodes, "
+                             f"this run's {len(self._searched_at)}")
+        self._candidates, self._edge_candidates = state["candidates"], state["edge_candidates"]
+        self._searched_at, self.searches = state["searched_at"].copy(), int(state["searches"])
+        self.pairs, self.edge_pairs = state["pairs"], state["edge_pairs"]
+        self.zone_report, self.zone_totals = dict(state["zone_report"]), dict(state["zone_totals"])
 
     def _respond(self, x: np.ndarray, vel: np.ndarray, pairs: Pairs, mass: np.ndarray, dt: float,
                  edge_pairs: EdgePairs | None = None) -> None:
@@ -439,6 +460,15 @@ def _feature_share(vertex: np.ndarray, tri: np.ndarray, w: np.ndarray) -> np.nda
     _, inverse, counts = np.unique(np.column_stack([vertex, feature]), axis=0, return_inverse=True,
                                    return_counts=True)
     return 1.0 / counts[inverse.ravel()]
+
+
+def _check_finite(u: np.ndarray, what: str, t: float) -> None:
+    """ValueError "self-contact: non-finite <what> at t = ... s (k of N nodes, node i)" unless u (N, 3) [m/s] is
+    finite."""
+    bad = ~np.isfinite(u).all(axis=1)
+    if bad.any():
+        raise ValueError(f"self-contact: non-finite {what} at t = {t:.6g} s ({int(bad.sum())} of {len(u)} nodes, "
+                         f"node {int(np.argmax(bad))})")
 
 
 def _member(keys: np.ndarray, sorted_keys: np.ndarray) -> np.ndarray:

@@ -3,7 +3,9 @@
 Every `every` records each rank writes `<folder>/checkpoint/rank<r>.pkl`: the `state()` of every stateful part of the
 run, the part it owns (the integrator's: d, v, a, t, the step counts, work and dissipation,
 fabricfem.dynamics.newmark.TimeIntegrator.state; the body contact's: its stick points; each handle's: a grip's
-anchors), the run's records so far (the same on every rank), the recorder's state (rank 0: the body frames and the
+anchors; the cloth self-contact's: its Verlet list and impact-zone counts, fabricfem.contact.self_contact), the
+adaptive step (GarmentRun.adaptive_steps: the last record's largest strain and the steps per record in use, which
+set dt), the run's records so far (the same on every rank), the recorder's state (rank 0: the body frames and the
 kept skin frames; beside them copies of the XDMF files as they were, xdmf_<records>_cloth.xdmf/.h5 and
 xdmf_<records>_cloth_pressure.xdmf/.h5, put back on resume and appended to) and the scene's SHA-256. A file is
 written to a temporary name and renamed, so a kill leaves the previous checkpoint whole. `load` gives each part its state back (`restore`) in a run built from the same scene on
@@ -19,7 +21,7 @@ import time
 
 from fabricfem import io
 
-PARTS = ("integrator", "contact", "handles")   # the run's parts a checkpoint holds besides its records
+PARTS = ("integrator", "contact", "handles", "steps", "self_contact")   # the run's parts besides its records
 
 
 class Checkpoint(io.Checkpoint):
@@ -34,6 +36,8 @@ class Checkpoint(io.Checkpoint):
         tag = f"xdmf_{records}"
         self.write({"records": records, "history": history, "integrator": run.integrator.state(),
                     "contact": run.contact.state(), "handles": [handle.state() for handle in run.handles],
+                    "steps": {"last_strain": run._last_strain, "steps_now": run._steps_now},
+                    "self_contact": cloth.state() if (cloth := getattr(run, "self_contact", None)) else None,
                     "recorder": recorder.state(self.folder, tag) if recorder is not None else None})
         if self.comm.rank == 0:
             for old in self.folder.glob("xdmf_*"):
@@ -53,6 +57,14 @@ class Checkpoint(io.Checkpoint):
                              f"run has {len(run.handles)}")
         run.integrator.restore(state["integrator"])
         run.contact.restore(state["contact"])
+        _restore_steps(run, state["steps"])
+        cloth = getattr(run, "self_contact", None)
+        if (cloth is None) != (state["self_contact"] is None):
+            raise ValueError(f"resume: the checkpoint in {self.folder} was written "
+                             f"{'with' if cloth is None else 'without'} cloth self-contact, this run has "
+                             f"{'none' if cloth is None else 'it'}")
+        if cloth is not None:
+            cloth.restore(state["self_contact"])
         for handle, saved in zip(run.handles, state["handles"]):
             handle.restore(saved)
         if recorder is not None and state["recorder"] is not None:
@@ -61,3 +73,13 @@ class Checkpoint(io.Checkpoint):
                                  f"files); run the scene without --resume")
             recorder.restore(state["recorder"], self.folder)
         return state["history"], state["records"]
+
+
+def _restore_steps(run, steps: dict) -> None:
+    """The adaptive step of `run` (GarmentRun.adaptive_steps) as saved: the last record's largest strain, the steps
+    per record in use and the integrator's dt = record_time / those steps [s] (dt is not part of the integrator's
+    state; without this the first interval after a resume ran with the reference-state step)."""
+    run._last_strain = float(steps["last_strain"])
+    if steps["steps_now"] != run._steps_now:
+        run._steps_now = int(steps["steps_now"])
+        run.integrator.set_time_step(run.timeline.record_time / run._steps_now)
