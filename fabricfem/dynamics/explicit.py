@@ -44,6 +44,12 @@ refuses (ValueError with the reason) a run the compiled loop cannot take. `route
 ("compiled" or "python: <reason>"); the compiled loop adds the wall time of its C calls to timings["compiled_steps"]
 (and leaves "internal_forces" and "contact" alone).
 
+Vector passes (`vector_passes`, default True): the Python loop's vector work around the internal force and the
+hooks (the predictor, the right-hand side with the diagonal damping, the division, the corrector and the Dirichlet
+rows' velocity) runs as four compiled passes over the owned entries that round as the PETSc calls they replace
+(fabricfem.dynamics.explicit_update, checked once per process; the same values to the bit); with a damping matrix
+(stiffness-proportional damping), or vector_passes False, the PETSc calls.
+
 Changing the step (`set_time_step`, e.g. a run that shortens it as the fabric stiffens): M + dt/2 C is rebuilt at
 the next step and the hooks that keep quantities of the step (TimeStepListener, e.g. the seams' masses) are told.
 """
@@ -58,6 +64,7 @@ from dolfinx.fem import petsc as fem_petsc
 
 from fabricfem.dynamics import stability
 from fabricfem.dynamics.compiled_loop import CompiledLoop, reason_not_compiled
+from fabricfem.dynamics.explicit_update import StepPasses, matches_petsc
 from fabricfem.dynamics.mass import InertiaDamping, rotary_scale
 from fabricfem.dynamics.newmark import DynamicsError, LoadFactor, TimeIntegrator
 from fabricfem.dynamics.safe_step import FrequencyTracker
@@ -152,6 +159,8 @@ class CentralDifference(TimeIntegrator):
         self.step_reductions = 0
         self.omega_tracked = 0.0
         self.compiled, self.route, self._loop = compiled, "", None
+        # the step's vector work by compiled passes with PETSc's rounding (`_step_passes`); False: PETSc's calls
+        self.vector_passes, self._passes = True, None
 
     @property
     def velocity_predictor(self):
@@ -210,12 +219,16 @@ class CentralDifference(TimeIntegrator):
         if self._denominator is None:
             self._set_denominator()
         t_new = self.t + dt
-        d_old_bc = self.d.getArray(readonly=True)[self.bc_rows].copy()
+        passes = self._step_passes()
         # d^{n+1} = d^n + dt v^n + dt^2/2 a^n ; v~ = v^n + dt/2 a^n
-        self.d.axpy(dt, self.v)
-        self.d.axpy(0.5 * dt ** 2, self.a)
-        self.v.copy(self._v_pred)
-        self._v_pred.axpy(0.5 * dt, self.a)
+        if passes is not None:
+            passes.predict(self.d, self.v, self.a, self._v_pred, dt)
+        else:
+            d_old_bc = self.d.getArray(readonly=True)[self.bc_rows].copy()
+            self.d.axpy(dt, self.v)
+            self.d.axpy(0.5 * dt ** 2, self.a)
+            self.v.copy(self._v_pred)
+            self._v_pred.axpy(0.5 * dt, self.a)
         lam = self.load(t_new)
         self.model.set_load_factor(lam)
         fem_petsc.set_bc(self.d, self.model.bcs)  # prescribed displacements lambda(t) g
@@ -227,29 +240,50 @@ class CentralDifference(TimeIntegrator):
         self.system.internal_force(self.d, rhs)  # f_int(d^{n+1}) (+ terms); copies d^{n+1} into the model's Function
         toc = time.perf_counter()
         self.timings["internal_forces"] += toc - tic
-        rhs.scale(-1.0)
-        rhs.axpy(float(self.model.load_factor.value), self.model.F_ref)
-        if self.ops.has_damping:
-            self.ops.damping_action(self._v_pred, self._cv)
-            rhs.axpy(-1.0, self._cv)
+        if passes is not None:      # rhs = lambda F_ref - f_int - C v~
+            damping = self.ops.damping_diag if self.ops.has_damping else None
+            passes.balance(rhs, self.model.F_ref, float(self.model.load_factor.value), damping, self._v_pred,
+                           self._cv)
+        else:
+            rhs.scale(-1.0)
+            rhs.axpy(float(self.model.load_factor.value), self.model.F_ref)
+            if self.ops.has_damping:
+                self.ops.damping_action(self._v_pred, self._cv)
+                rhs.axpy(-1.0, self._cv)
         if self._hooks:
             tic = time.perf_counter()
             for hook in self._hooks:
                 hook.forces(self, t_new, rhs)            # penalty contact: nodal forces at d^{n+1}
             self.timings["contact"] += time.perf_counter() - tic
-        self.zero_bc_rows(rhs)
-        self.a.pointwiseDivide(rhs, self._denominator)
+        if passes is not None:
+            passes.accelerate(self.a, rhs, self._denominator)
+        else:
+            self.zero_bc_rows(rhs)
+            self.a.pointwiseDivide(rhs, self._denominator)
         if self._hooks:
             tic = time.perf_counter()
             for hook in self._hooks:
                 hook.correct(self, t_new)                # [Man2006, Box 5]: a^{n+1} += a^c
             self.timings["contact"] += time.perf_counter() - tic
-        self._v_pred.copy(self.v)
-        self.v.axpy(0.5 * dt, self.a)
-        d_new_bc = self.d.getArray(readonly=True)[self.bc_rows]
-        self.v.getArray()[self.bc_rows] = (d_new_bc - d_old_bc) / dt
+        if passes is not None:      # v^{n+1} = v~ + dt/2 a^{n+1}; (d^{n+1} - d^n) / dt on the Dirichlet rows
+            passes.correct(self.v, self._v_pred, self.a, self.d, dt)
+        else:
+            self._v_pred.copy(self.v)
+            self.v.axpy(0.5 * dt, self.a)
+            d_new_bc = self.d.getArray(readonly=True)[self.bc_rows]
+            self.v.getArray()[self.bc_rows] = (d_new_bc - d_old_bc) / dt
         self.t = t_new
         return 0
+
+    def _step_passes(self) -> StepPasses | None:
+        """The compiled passes of the step's vector work (fabricfem.dynamics.explicit_update), or None for the PETSc
+        calls: with `vector_passes` False, a damping matrix (stiffness-proportional damping), or passes that do not
+        round as PETSc does on this machine."""
+        if not self.vector_passes or self.ops.C is not None:
+            return None
+        if self._passes is None:
+            self._passes = StepPasses(self.bc_rows) if matches_petsc() else False
+        return self._passes or None
 
     def compiled_reason(self) -> str:
         """Why `run` takes the Python loop ("" when the compiled loop applies; module docstring)."""
