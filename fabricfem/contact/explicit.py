@@ -190,6 +190,7 @@ class ExplicitBodyContact:
         compiled.module(self.comm)
         self._rows: np.ndarray | None = None      # (M, 3) int64 rows of the nodes in W (compiled loops)
         self._monitor_arrays: tuple | None = None  # the monitors' segment flags and axes (compiled loops)
+        self._buffers: compiled.StepBuffers | None = None   # the compiled step's work arrays
 
     # ------------------------------------------------------------------ set-up and output
     def penalty_frequency(self) -> float:
@@ -245,6 +246,7 @@ class ExplicitBodyContact:
                              f"this run {len(self._stick_local)}")
         self._stick_local[:] = state["stick_local"]
         self._stick_segment[:] = state["stick_segment"]
+        self._buffers = None      # the compiled step clears every node's contact state first (not only the last step's)
 
     def current_areas(self) -> np.ndarray:
         """(M,) lumped area [m^2] of the owned moving nodes on the current (deformed) cloth, for the state in
@@ -499,24 +501,59 @@ class ExplicitBodyContact:
     def _correct_compiled(self, integrator, ellipsoids: list[Ellipsoid], d: np.ndarray, v: np.ndarray, a: np.ndarray,
                           projected: tuple[np.ndarray, SkinProjection] | None = None):
         """`correct` by the compiled loops of fabricfem.contact.compiled: the same projection (with the blended skin's
-        closest point in the creases), friction and correction node by node; `projected`: the trial points and
-        their projection onto another skin (its normals and weights are used for every node, crease = True)."""
+        closest point in the creases), friction and correction node by node, in one call (`contact_step`, its work
+        arrays kept from step to step); `projected`: the trial points and their projection onto another skin (its
+        normals and weights are used for every node, crease = True), then `friction` alone."""
         lib, ffi = compiled.module(self.comm)
         dt = integrator.dt
         if self._rows is None:
             self._rows = np.ascontiguousarray(self.dofs, dtype=np.int64)
         segments = compiled.stacked(ellipsoids)
+        M, K = len(self._rows), len(ellipsoids)
+        if self._buffers is None or self._buffers.K != K:
+            self._buffers = compiled.StepBuffers(ffi, M, K)
+        buffers, p = self._buffers, functools.partial(pointer, ffi)
+        c = buffers.cached
+        monitors, torques = self._monitor_pointers(buffers)
+        mass = c("mass", self._lumped_mass(integrator), "double")
         if projected is None:
-            trial, skin = project_compiled(self.reference, self._rows, d, v, a, dt, segments, self.widths, self.comm)
+            position, segment = np.empty((M, 3)), np.empty(M, dtype=np.int64)
+            trial_p, *work = buffers.work()
+            n_trapped = lib.contact_step(
+                M, c("reference", self.reference, "double"), c("rows", self._rows, "int64_t"), p(d, "double"),
+                p(v, "double"), p(a, "double"), dt, K, *(p(array, "double") for array in segments), INSIDE_TOLERANCE,
+                MAX_PROJECTION_PASSES, c("widths", self.widths, "double"), trial_p, p(position, "double"),
+                p(segment, "int64_t"), c("active", self.active, "uint8_t"), *work, mass, self.mu,
+                c("stick_segment", self._stick_segment, "int64_t"),
+                c("stick_local", self._stick_local, "double"), c("force", self.force, "double"),
+                c("normal_force", self.normal_force, "double"), c("slip", self.slip, "uint8_t"), *monitors)
+            if n_trapped:
+                raise RuntimeError(f"contact: {n_trapped} points near one segment only remain inside it after "
+                                   f"{MAX_PROJECTION_PASSES} projections")
+            index = buffers.index[:int(buffers.count[0])]
         else:
             trial, skin = projected
             skin = SkinProjection(*(np.ascontiguousarray(getattr(skin, f)) for f in
                                     ("position", "moved", "segment", "crease", "normal", "weights")))
-        position, segment, moved = skin.position, skin.segment, skin.moved
-        index = np.flatnonzero(moved)
-        for buffer in (self.force, self.normal_force, self.slip):
-            buffer.fill(0)
-        p = functools.partial(pointer, ffi)
+            position, segment, moved = skin.position, skin.segment, skin.moved
+            index = np.flatnonzero(moved)
+            for buffer in (self.force, self.normal_force, self.slip):
+                buffer.fill(0)
+            lib.friction(len(index), p(index, "int64_t"), p(self._rows, "int64_t"), p(trial, "double"),
+                         p(position, "double"), p(segment, "int64_t"), mass, dt, self.mu,
+                         *(p(array, "double") for array in segments), p(self._stick_segment, "int64_t"),
+                         p(self._stick_local, "double"), p(a, "double"), p(self.force, "double"),
+                         p(self.normal_force, "double"), p(self.slip.view(np.uint8), "uint8_t"), K, *monitors,
+                         p(skin.crease.view(np.uint8), "uint8_t"), p(skin.normal, "double"), p(skin.weights, "double"))
+            if self.mu > 0.0:      # every node not in contact loses its stick point (as `_store_stick_points`)
+                self._stick_segment[~moved] = -1
+            self.active[:] = moved
+        self.position, self.segment = position, segment
+        self._accumulate(dt, index, self.normal_force[index], torques.tolist())
+
+    def _monitor_pointers(self, buffers: compiled.StepBuffers) -> tuple[tuple, np.ndarray]:
+        """(number of monitors, pointers of their segment flags, joint positions at self.time [m], axes and this
+        step's torques [N m]) for the compiled loops, and the torques' array."""
         monitors = list(self._monitors.values())
         if self._monitor_arrays is None:
             if len(monitors) > compiled.MAX_MONITORS:
@@ -526,19 +563,9 @@ class ExplicitBodyContact:
         on_segments, axes = self._monitor_arrays
         joints = np.array([self.poses.joint(m.joint, self.time) for m in monitors], dtype=float).reshape(-1, 3)
         torques = np.zeros(len(monitors))
-        lib.friction(len(index), p(index, "int64_t"), p(self._rows, "int64_t"), p(trial, "double"),
-                     p(position, "double"), p(segment, "int64_t"), p(self._lumped_mass(integrator), "double"), dt,
-                     self.mu, *(p(array, "double") for array in segments), p(self._stick_segment, "int64_t"),
-                     p(self._stick_local, "double"), p(a, "double"), p(self.force, "double"),
-                     p(self.normal_force, "double"), p(self.slip.view(np.uint8), "uint8_t"), len(ellipsoids),
-                     len(monitors), p(on_segments, "uint8_t"), p(joints, "double"), p(axes, "double"),
-                     p(torques, "double"), p(skin.crease.view(np.uint8), "uint8_t"), p(skin.normal, "double"),
-                     p(skin.weights, "double"))
-        if self.mu > 0.0:      # every node not in contact loses its stick point (as `_store_stick_points`)
-            self._stick_segment[~moved] = -1
-        self.position, self.segment = position, segment
-        self.active[:] = moved
-        self._accumulate(dt, index, self.normal_force[index], torques.tolist())
+        ffi = buffers.ffi
+        return (len(monitors), buffers.cached("on_segments", on_segments, "uint8_t"), pointer(ffi, joints, "double"),
+                buffers.cached("axes", axes, "double"), pointer(ffi, torques, "double")), torques
 
     def _set_step(self, position: np.ndarray, index: np.ndarray, force: np.ndarray, normal_force: np.ndarray,
                   segment: np.ndarray, slip: np.ndarray, dt: float, weights: np.ndarray):
