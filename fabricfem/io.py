@@ -432,22 +432,26 @@ class OutputFolder:
     """The output folder of one run: at the start the files that the previous run listed in its summary.json are
     removed (no stale output can pass for this run's) and summary.json says "running"; `finish` records the run's
     status ("completed", "stopped early: ..." or "failed: ..."), the scene's SHA-256, the start and end times and
-    the files the run wrote (modified since its start), merged into the summary the runner may have written."""
+    the files the run wrote (modified since its start; for a resumed run, `keep`, since the start of the run it
+    continues), merged into the summary the runner may have written."""
 
     SUMMARY = "summary.json"
 
     def __init__(self, path: str | Path, scene_sha256: str, comm=MPI.COMM_WORLD, keep: bool = False):
         self.path, self.comm, self.scene_sha256 = Path(path), comm, scene_sha256
         self.started = time.time()
+        self.since = self.started        # files modified since then are the run's (a resumed run: its first start)
         error = None
         if comm.rank == 0:
             try:
                 self.path.mkdir(parents=True, exist_ok=True)
+                if keep:
+                    self.since = _first_start(self._read(), self.started)
                 for name in ([] if keep else self._read().get("outputs", [])):   # keep: a resumed run
                     stale = self.path / name
                     if "/" not in name and stale.is_file():
                         stale.unlink()
-                self._write({"status": "running", "scene_sha256": scene_sha256, "started": _iso(self.started)})
+                self._write({"status": "running", "scene_sha256": scene_sha256, "started": _iso(self.since)})
             except OSError as exc:
                 error = f"output.dir: cannot write the output folder {str(self.path)!r} ({exc.strerror or exc})"
         error = comm.bcast(error, root=0)
@@ -473,11 +477,19 @@ class OutputFolder:
         """Record the run's status (and `summary` entries) in summary.json (rank 0)."""
         if self.comm.rank == 0:
             outputs = sorted(p.name for p in self.path.iterdir()
-                             if p.is_file() and p.name != self.SUMMARY and p.stat().st_mtime >= self.started - 1.0)
+                             if p.is_file() and p.name != self.SUMMARY and p.stat().st_mtime >= self.since - 1.0)
             data = {**self._read(), **(summary or {}), "status": status, "scene_sha256": self.scene_sha256,
-                    "started": _iso(self.started), "finished": _iso(time.time()), "outputs": outputs}
+                    "started": _iso(self.since), "finished": _iso(time.time()), "outputs": outputs}
             self._write(data)
         self.comm.barrier()
+
+
+def _first_start(summary: dict, now: float) -> float:
+    """The start time [s since the epoch] in an interrupted run's `summary` ("started"), else `now`."""
+    try:
+        return min(now, datetime.datetime.fromisoformat(summary["started"]).timestamp())
+    except (KeyError, TypeError, ValueError):
+        return now
 
 
 def _iso(t: float) -> str:

@@ -3,6 +3,7 @@ DynamicCheckpoint): a run killed after a checkpoint and resumed gives the record
 stops at a record with valid outputs; another scene's checkpoint, another rank count, a missing checkpoint and an
 integrator whose state cannot be saved are refused."""
 import csv
+import json
 import os
 import pickle
 import shutil
@@ -190,6 +191,9 @@ def test_sigint_then_resume_from_the_command_line(tmp_path):
         keys = [k for k in rows[0] if k not in ("phase", "peak_segment", "wall_s")]
         return np.array([[float(r[k]) for k in keys] for r in rows])
     np.testing.assert_allclose(table(part), table(whole), rtol=1e-12, atol=1e-300)
+    # the resumed run's summary lists every file of the run, those written before the interrupt too
+    listed = {folder: set(json.loads((folder / "summary.json").read_text())["outputs"]) for folder in (part, whole)}
+    assert listed[part] >= listed[whole] - {"checkpoint"}, listed[whole] - listed[part]
 
 
 # ------------------------------------------------------------------------------------------- dynamic scenes

@@ -4,7 +4,7 @@ Every `every` records each rank writes `<folder>/checkpoint/rank<r>.pkl`: the `s
 run, the part it owns (the integrator's: d, v, a, t, the step counts, work and dissipation,
 fabricfem.dynamics.newmark.TimeIntegrator.state; the body contact's: its stick points; each handle's: a grip's
 anchors; the cloth self-contact's: its Verlet list and impact-zone counts, fabricfem.contact.self_contact), the
-adaptive step (GarmentRun.adaptive_steps: the last record's largest strain and the steps per record in use, which
+adaptive step (GarmentRun.step_state: the last record's largest strain and the steps per record in use, which
 set dt), the run's records so far (the same on every rank), the recorder's state (rank 0: the body frames and the
 kept skin frames; beside them copies of the XDMF files as they were, xdmf_<records>_cloth.xdmf/.h5 and
 xdmf_<records>_cloth_pressure.xdmf/.h5, put back on resume and appended to) and the scene's SHA-256. A file is
@@ -36,7 +36,7 @@ class Checkpoint(io.Checkpoint):
         tag = f"xdmf_{records}"
         self.write({"records": records, "history": history, "integrator": run.integrator.state(),
                     "contact": run.contact.state(), "handles": [handle.state() for handle in run.handles],
-                    "steps": {"last_strain": run._last_strain, "steps_now": run._steps_now},
+                    "steps": run.step_state(),
                     "self_contact": cloth.state() if (cloth := getattr(run, "self_contact", None)) else None,
                     "recorder": recorder.state(self.folder, tag) if recorder is not None else None})
         if self.comm.rank == 0:
@@ -57,7 +57,7 @@ class Checkpoint(io.Checkpoint):
                              f"run has {len(run.handles)}")
         run.integrator.restore(state["integrator"])
         run.contact.restore(state["contact"])
-        _restore_steps(run, state["steps"])
+        run.restore_steps(state["steps"])
         cloth = getattr(run, "self_contact", None)
         if (cloth is None) != (state["self_contact"] is None):
             raise ValueError(f"resume: the checkpoint in {self.folder} was written "
@@ -74,12 +74,3 @@ class Checkpoint(io.Checkpoint):
             recorder.restore(state["recorder"], self.folder)
         return state["history"], state["records"]
 
-
-def _restore_steps(run, steps: dict) -> None:
-    """The adaptive step of `run` (GarmentRun.adaptive_steps) as saved: the last record's largest strain, the steps
-    per record in use and the integrator's dt = record_time / those steps [s] (dt is not part of the integrator's
-    state; without this the first interval after a resume ran with the reference-state step)."""
-    run._last_strain = float(steps["last_strain"])
-    if steps["steps_now"] != run._steps_now:
-        run._steps_now = int(steps["steps_now"])
-        run.integrator.set_time_step(run.timeline.record_time / run._steps_now)

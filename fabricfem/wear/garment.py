@@ -293,6 +293,18 @@ class GarmentRun:
             self.integrator.set_time_step(self.timeline.record_time / n)   # tells the seams and hooks too
         return n
 
+    def step_state(self) -> dict:
+        """The adaptive step for a checkpoint: the last record's largest Green strain and the steps per record in
+        use (they set dt, which the integrator's own state does not hold)."""
+        return {"last_strain": self._last_strain, "steps_now": self._steps_now}
+
+    def restore_steps(self, state: dict) -> None:
+        """The adaptive step of `step_state` back, with the integrator's dt = record_time / steps per record [s]."""
+        self._last_strain = float(state["last_strain"])
+        if state["steps_now"] != self._steps_now:
+            self._steps_now = int(state["steps_now"])
+            self.integrator.set_time_step(self.timeline.record_time / self._steps_now)
+
     def body_time(self, step: WearStep) -> float:
         """The body time [s] of record `step`."""
         return step.time
