@@ -28,6 +28,7 @@ from fabricfem.forms.jit import pointer
 
 DEGENERATE = 1e-9     # a node's distance to the other's plane below DEGENERATE x the pair's size: libigl decides
 _CAPACITY = {True: 1024, False: 1024}   # output rows of the last calls (narrow or not), grown on demand
+_WORK: dict[int, np.ndarray] = {}       # the compiled pass's workspace, by triangle count (kept: no page faults)
 
 
 def _checked(points: np.ndarray, triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -52,14 +53,16 @@ def _pass(points: np.ndarray, triangles: np.ndarray, part: tuple[int, int], narr
         raise ValueError(f"part must be (k, parts) with 0 <= k < parts, got {part}")
     points, triangles = _checked(points, triangles)
     lib, ffi = intersections_kernel.module()
+    if len(triangles) not in _WORK:
+        _WORK.clear()
+        _WORK[len(triangles)] = np.empty(lib.workspace(len(triangles)) // 8, np.int64)
+    work = pointer(ffi, _WORK[len(triangles)], "int64_t")
     while True:
         capacity = _CAPACITY[narrow]
         pairs, flags = np.empty((capacity, 2), np.int64), np.empty(capacity, np.int64)
         n = lib.crossings(len(triangles), pointer(ffi, points, "double"), pointer(ffi, triangles, "int64_t"), k,
-                          parts, DEGENERATE, int(narrow), capacity, pointer(ffi, pairs, "int64_t"),
+                          parts, DEGENERATE, int(narrow), work, capacity, pointer(ffi, pairs, "int64_t"),
                           pointer(ffi, flags, "int64_t"))
-        if n < 0:
-            raise MemoryError("the intersecting-pair count could not allocate its grid")
         if n <= capacity:
             break
         _CAPACITY[narrow] = int(1.25 * n) + 1

@@ -6,14 +6,18 @@ Broad phase: a uniform grid of cells of edge h >= 2 r_max (r_max the largest cir
 doubled while the dense grid would hold more than 4 T + 64 cells), the triangles sorted by cell (a counting sort,
 cells in lexicographic order); triangle p (position in that order) meets the later triangles of its own cell and
 all triangles of the 13 cells after it among its 26 neighbours, so each pair within reach is met once, by the
-earlier of its two positions. Part k of `parts` is the run [k T / parts, (k + 1) T / parts) of positions.
+earlier of its two positions. Part k of `parts` is the run [k T / parts, (k + 1) T / parts) of positions: every
+part computes the centroids and radii of all triangles (r_max, the cells) and sorts them, but gathers the boxes and
+nodes only of the positions its pairs reach (up to the end of the layer of cells after its last triangle's).
+The workspace (`workspace(T)` bytes) is the caller's, kept between calls.
 
 The filters and tests round as the numpy expressions they replace (compiled with ROUNDING_FLAGS: no contracted
 multiply-adds): centroid ((p0 + p1) + p2) / 3, Euclidean norms ((v0^2 + v1^2) + v2^2)^(1/2) (numpy's add.reduce
-over a row of three), the dot products of numpy's einsum over three terms, (u0 w0 + u2 w2) + u1 w1, np.cross's
+over a row of three; a radius is the root of the largest square, equal to the largest root: the rounded square
+root is monotone), the dot products of numpy's einsum over three terms, (u0 w0 + u2 w2) + u1 w1, np.cross's
 products. A pair is kept when its centroids' squared distance ((d0^2 + d1^2) + d2^2) is at most (2 r_max)^2 (the
 leaf test of scipy's cKDTree.query_pairs, the broad phase this grid replaced), it shares no node, its bounding boxes
-overlap and its centroids are at most r_i + r_j apart. Then (`narrow`, the triangle of the smaller index first):
+overlap and its centroids are at most r_i + r_j apart. Then (`narrow_pair`, the triangle of the smaller index first):
 the plane test [Guigue2003], the degenerate cases (flag 2: libigl decides) and the interval test [Moller1997].
 """
 from __future__ import annotations
@@ -23,16 +27,14 @@ from mpi4py import MPI
 from fabricfem.forms.jit import ROUNDING_FLAGS, built_once
 
 CDEF = """
+int64_t workspace(int64_t T);
 int64_t crossings(int64_t T, const double* x, const int64_t* tri, int64_t part, int64_t parts, double degenerate,
-                  int64_t narrow, int64_t capacity, int64_t* pairs, int64_t* flags);
+                  int64_t narrow, void* work, int64_t capacity, int64_t* pairs, int64_t* flags);
 """
 
 SOURCE = r"""
 #include <math.h>
 #include <stdint.h>
-#include <stdlib.h>
-
-typedef struct { double c[3], r, lo[3], hi[3]; int64_t n[3], id, cell[3]; } box_t;
 
 static double norm3(const double* v) { return sqrt((v[0] * v[0] + v[1] * v[1]) + v[2] * v[2]); }
 
@@ -111,132 +113,183 @@ static int narrow_pair(const double* x, const int64_t* ta, const int64_t* tb, do
   return (loa < lob ? lob : loa) <= (hia < hib ? hia : hib);
 }
 
-/* the triangles' centroids, circumradii about them, bounding boxes; returns r_max */
-static double boxes(int64_t T, const double* x, const int64_t* tri, box_t* box)
+/* the triangles' centroids and circumradii about them (4 T: x, y, z, r); returns r_max */
+static double spheres(int64_t T, const double* x, const int64_t* tri, double* cr)
 {
   double rmax = 0.0;
   for (int64_t t = 0; t < T; ++t)
   {
-    box_t* b = box + t;
     const double* p[3] = {x + 3 * tri[3 * t], x + 3 * tri[3 * t + 1], x + 3 * tri[3 * t + 2]};
+    double* c = cr + 4 * t;
     for (int k = 0; k < 3; ++k)
-    {
-      b->c[k] = ((p[0][k] + p[1][k]) + p[2][k]) / 3.0;
-      b->lo[k] = fmin(fmin(p[0][k], p[1][k]), p[2][k]), b->hi[k] = fmax(fmax(p[0][k], p[1][k]), p[2][k]);
-      b->n[k] = tri[3 * t + k];
-    }
-    b->r = 0.0, b->id = t;
+      c[k] = ((p[0][k] + p[1][k]) + p[2][k]) / 3.0;
+    double r2 = 0.0;                 /* sqrt is monotone: the largest root is the root of the largest square */
     for (int m = 0; m < 3; ++m)
     {
-      const double d[3] = {p[m][0] - b->c[0], p[m][1] - b->c[1], p[m][2] - b->c[2]}, r = norm3(d);
-      b->r = r > b->r ? r : b->r;
+      const double d0 = p[m][0] - c[0], d1 = p[m][1] - c[1], d2 = p[m][2] - c[2], e = (d0 * d0 + d1 * d1) + d2 * d2;
+      r2 = e > r2 ? e : r2;
     }
-    rmax = b->r > rmax ? b->r : rmax;
+    c[3] = sqrt(r2), rmax = c[3] > rmax ? c[3] : rmax;
   }
   return rmax;
 }
 
-/* the cells (edge >= reach) of the triangles, sorted by cell into `sorted`; start (cells + 1) of each cell's run;
-   returns the number of cells and the grid's dimensions in dims, or -1 (no memory) */
-static int64_t grid(int64_t T, const box_t* box, double reach, box_t* sorted, int64_t** start, int64_t* dims)
+typedef struct { double lo[3], hi[3]; int64_t n[3], id, key; } box_t;
+typedef struct { int64_t T, C, dims[3]; double *cr, *sc; box_t* box; int64_t *key, *start; } grid_t;
+
+int64_t workspace(int64_t T) { return (8 * T + T * (int64_t)sizeof(box_t) / 8 + T + 4 * T + 65) * 8; }
+
+static void layout(int64_t T, void* work, grid_t* g)
 {
+  g->T = T, g->cr = work, g->sc = g->cr + 4 * T, g->box = (box_t*)(g->sc + 4 * T);
+  g->key = (int64_t*)(g->box + T), g->start = g->key + T;
+}
+
+/* the grid's cell edge (>= reach, doubled while the dense grid would hold more than 4 T + 64 cells), dims, C */
+static double cells(grid_t* g, const double* lo, const double* hi, double reach)
+{
+  double h = reach * (1.0 + 1e-6);
+  if (!(h > 0.0) || !isfinite(h))
+    h = 1.0;
+  for (;; h *= 2.0)
+  {
+    double count = 1.0;
+    for (int k = 0; k < 3; ++k)
+      count *= floor((hi[k] - lo[k]) / h) + 1.0;
+    if (count <= 4.0 * g->T + 64.0)
+      break;
+  }
+  for (int k = 0; k < 3; ++k)
+    g->dims[k] = (int64_t)floor((hi[k] - lo[k]) / h) + 1;
+  g->C = g->dims[0] * g->dims[1] * g->dims[2];
+  return h;
+}
+
+/* the end of the sorted positions that position q's forward cells reach (the end of the row of cells after q's
+   row): start holds the cells' starts */
+static int64_t reached(const grid_t* g, int64_t q)
+{
+  int64_t lo = 0, hi = g->C;                        /* the cell c of q: start[c] <= q < start[c + 1] */
+  while (hi - lo > 1)
+  {
+    const int64_t mid = (lo + hi) / 2;
+    if (g->start[mid] <= q)
+      lo = mid;
+    else
+      hi = mid;
+  }
+  const int64_t layer = g->dims[1] * g->dims[2], row = (lo / layer + 2) * layer;
+  return g->start[row < g->C ? row : g->C];
+}
+
+/* the triangles sorted by cell (counting sort, stable): start (C + 1); sc (their centroids and radii) and box at
+   the sorted positions [first, end) that the pairs of positions [first, last) reach */
+static void grid(grid_t* g, const double* x, const int64_t* tri, double reach, int64_t first, int64_t last)
+{
+  const int64_t T = g->T;
   double lo[3] = {0.0, 0.0, 0.0}, hi[3] = {0.0, 0.0, 0.0};
   for (int k = 0; k < 3 && T > 0; ++k)
   {
-    lo[k] = hi[k] = box[0].c[k];
+    lo[k] = hi[k] = g->cr[k];
     for (int64_t t = 1; t < T; ++t)
-      lo[k] = fmin(lo[k], box[t].c[k]), hi[k] = fmax(hi[k], box[t].c[k]);
+      lo[k] = fmin(lo[k], g->cr[4 * t + k]), hi[k] = fmax(hi[k], g->cr[4 * t + k]);
   }
-  double h = reach * (1.0 + 1e-6), cells;
-  if (!(h > 0.0) || !isfinite(h))
-    h = 1.0;
-  for (;;)
-  {
-    cells = 1.0;
-    for (int k = 0; k < 3; ++k)
-      cells *= floor((hi[k] - lo[k]) / h) + 1.0;
-    if (cells <= 4.0 * T + 64.0)
-      break;
-    h *= 2.0;
-  }
-  for (int k = 0; k < 3; ++k)
-    dims[k] = (int64_t)floor((hi[k] - lo[k]) / h) + 1;
-  const int64_t C = dims[0] * dims[1] * dims[2];
-  int64_t* s = calloc(C + 1, sizeof(int64_t));
-  int64_t* key = malloc((T + 1) * sizeof(int64_t));
-  if (!s || !key)
-    return free(s), free(key), -1;
+  const double inverse = 1.0 / cells(g, lo, hi, reach);    /* the cells' margin (1e-6) covers its round-off */
+  int64_t* s = g->start;
+  for (int64_t c = 0; c <= g->C; ++c)
+    s[c] = 0;
   for (int64_t t = 0; t < T; ++t)
   {
     int64_t c[3];
     for (int k = 0; k < 3; ++k)
     {
-      c[k] = (int64_t)floor((box[t].c[k] - lo[k]) / h);
-      c[k] = c[k] < 0 ? 0 : (c[k] >= dims[k] ? dims[k] - 1 : c[k]);
+      c[k] = (int64_t)floor((g->cr[4 * t + k] - lo[k]) * inverse);
+      c[k] = c[k] < 0 ? 0 : (c[k] >= g->dims[k] ? g->dims[k] - 1 : c[k]);
     }
-    key[t] = (c[0] * dims[1] + c[1]) * dims[2] + c[2];
-    ++s[key[t] + 1];
+    g->key[t] = (c[0] * g->dims[1] + c[1]) * g->dims[2] + c[2];
+    ++s[g->key[t] + 1];
   }
-  for (int64_t c = 0; c < C; ++c)
+  for (int64_t c = 0; c < g->C; ++c)
     s[c + 1] += s[c];
-  for (int64_t t = 0; t < T; ++t)                  /* counting sort, stable */
+  const int64_t end = last > first ? reached(g, last - 1) : first;
+  for (int64_t t = 0; t < T; ++t)
   {
-    box_t* b = sorted + s[key[t]]++;
-    *b = box[t];
-    b->cell[0] = key[t] / (dims[1] * dims[2]), b->cell[1] = key[t] / dims[2] % dims[1], b->cell[2] = key[t] % dims[2];
+    const int64_t q = s[g->key[t]]++;
+    if (q < first || q >= end)
+      continue;
+    box_t* b = g->box + q;
+    const double* p[3] = {x + 3 * tri[3 * t], x + 3 * tri[3 * t + 1], x + 3 * tri[3 * t + 2]};
+    for (int k = 0; k < 4; ++k)
+      g->sc[4 * q + k] = g->cr[4 * t + k];
+    for (int k = 0; k < 3; ++k)
+    {
+      b->lo[k] = fmin(fmin(p[0][k], p[1][k]), p[2][k]), b->hi[k] = fmax(fmax(p[0][k], p[1][k]), p[2][k]);
+      b->n[k] = tri[3 * t + k];
+    }
+    b->id = t, b->key = g->key[t];
   }
-  for (int64_t c = C; c > 0; --c)                  /* s[c] was the end of cell c: shift back to starts */
+  for (int64_t c = g->C; c > 0; --c)               /* s[c] was the end of cell c: shift back to starts */
     s[c] = s[c - 1];
   s[0] = 0;
-  free(key);
-  *start = s;
-  return C;
 }
 
-/* the broad phase's filters (module docstring) */
-static int candidate(const box_t* p, const box_t* q, double reach2)
+/* the broad phase's filters (module docstring) for sorted positions p, q */
+static int candidate(const grid_t* g, int64_t p, int64_t q, double reach2)
 {
-  const double d[3] = {p->c[0] - q->c[0], p->c[1] - q->c[1], p->c[2] - q->c[2]};
+  const double *u = g->sc + 4 * p, *w = g->sc + 4 * q;
+  const double d[3] = {u[0] - w[0], u[1] - w[1], u[2] - w[2]};
   if (!((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2] <= reach2))
     return 0;
-  for (int u = 0; u < 3; ++u)
-    if (p->n[u] == q->n[0] || p->n[u] == q->n[1] || p->n[u] == q->n[2])
+  const box_t *a = g->box + p, *b = g->box + q;
+  for (int k = 0; k < 3; ++k)
+    if (a->n[k] == b->n[0] || a->n[k] == b->n[1] || a->n[k] == b->n[2])
       return 0;
   for (int k = 0; k < 3; ++k)
-    if (!(p->lo[k] <= q->hi[k] && q->lo[k] <= p->hi[k]))
+    if (!(a->lo[k] <= b->hi[k] && b->lo[k] <= a->hi[k]))
       return 0;
-  return norm3(d) <= p->r + q->r;
+  return norm3(d) <= u[3] + w[3];
+}
+
+/* the run of sorted positions [from, to) of the cells (c0, c1, c2 - 1 .. c2 + 1) within the grid */
+static void run(const grid_t* g, int64_t c0, int64_t c1, int64_t c2, int64_t* from, int64_t* to)
+{
+  *from = *to = 0;
+  if (c0 < 0 || c0 >= g->dims[0] || c1 < 0 || c1 >= g->dims[1])
+    return;
+  const int64_t row = (c0 * g->dims[1] + c1) * g->dims[2];
+  *from = g->start[row + (c2 > 0 ? c2 - 1 : 0)];
+  *to = g->start[row + (c2 + 1 < g->dims[2] ? c2 + 2 : g->dims[2])];
 }
 
 /* the pairs (i < j) of part `part` of `parts` passing the broad phase (narrow = 0, flags 0) or, with narrow = 1,
    those intersecting (flag 1) or degenerate (flag 2), written while fewer than `capacity`; returns their number
-   (more than capacity: call again with a larger one), -1 when out of memory */
+   (more than capacity: call again with a larger one). `work`: workspace(T) bytes, 8-byte aligned */
 int64_t crossings(int64_t T, const double* x, const int64_t* tri, int64_t part, int64_t parts, double degenerate,
-                  int64_t narrow, int64_t capacity, int64_t* pairs, int64_t* flags)
+                  int64_t narrow, void* work, int64_t capacity, int64_t* pairs, int64_t* flags)
 {
-  box_t* box = malloc((2 * T + 1) * sizeof(box_t));
-  int64_t *start = NULL, dims[3], n = 0;
-  if (!box)
-    return -1;
-  box_t* sorted = box + T;
-  const double reach = 2.0 * boxes(T, x, tri, box), reach2 = reach * reach;
-  if (grid(T, box, reach, sorted, &start, dims) < 0)
-    return free(box), -1;
-  for (int64_t p = part * T / parts; p < (part + 1) * T / parts; ++p)
+  grid_t g;
+  layout(T, work, &g);
+  const double reach = 2.0 * spheres(T, x, tri, g.cr), reach2 = reach * reach;
+  const int64_t first = part * T / parts, last = (part + 1) * T / parts;
+  grid(&g, x, tri, reach, first, last);
+  const int64_t layer = g.dims[1] * g.dims[2];
+  int64_t n = 0;
+  for (int64_t p = first; p < last; ++p)
   {
-    const box_t* a = sorted + p;
-    for (int o = 13; o < 27; ++o)                 /* own cell (o = 13), then the 13 cells after it */
+    const box_t* a = g.box + p;
+    const int64_t c0 = a->key / layer, c1 = a->key / g.dims[2] % g.dims[1], c2 = a->key % g.dims[2];
+    for (int o = 0; o < 5; ++o)       /* the 13 cells after p's own: runs along the last axis of the grid */
     {
-      const int64_t c0 = a->cell[0] + o / 9 - 1, c1 = a->cell[1] + o / 3 % 3 - 1, c2 = a->cell[2] + o % 3 - 1;
-      if (c0 < 0 || c0 >= dims[0] || c1 < 0 || c1 >= dims[1] || c2 < 0 || c2 >= dims[2])
-        continue;
-      const int64_t c = (c0 * dims[1] + c1) * dims[2] + c2;
-      for (int64_t q = o == 13 ? p + 1 : start[c]; q < start[c + 1]; ++q)
+      const int64_t dx = o < 2 ? 0 : 1, dy = o == 0 ? 0 : (o == 1 ? 1 : o - 3);
+      int64_t from, to;
+      run(&g, c0 + dx, c1 + dy, c2, &from, &to);
+      if (o == 0)
+        from = p + 1;
+      for (int64_t q = from; q < to; ++q)
       {
-        const box_t* b = sorted + q;
-        if (!candidate(a, b, reach2))
+        if (!candidate(&g, p, q, reach2))
           continue;
-        const int64_t i = a->id < b->id ? a->id : b->id, j = a->id < b->id ? b->id : a->id;
+        const int64_t i = a->id < g.box[q].id ? a->id : g.box[q].id, j = a->id ^ g.box[q].id ^ i;
         const int flag = narrow ? narrow_pair(x, tri + 3 * i, tri + 3 * j, degenerate) : 0;
         if (narrow && !flag)
           continue;
@@ -246,7 +299,6 @@ int64_t crossings(int64_t T, const double* x, const int64_t* tri, int64_t part, 
       }
     }
   }
-  free(start), free(box);
   return n;
 }
 """
