@@ -16,7 +16,9 @@ lists them (fabricfem.contact.intersections_kernel). Then, for each candidate, i
   planes. Coplanar triangles that overlap count as intersecting.
 
 The compiled loop rounds as the numpy expressions of these tests did (intersections_kernel's docstring), so the
-pairs are those of the numpy version, bit for bit in every decision. Units: metres (the count has none).
+pairs are those of the numpy version, bit for bit in every decision (but for a pair whose centroids lie within
+round-off of 2 r_max, which cKDTree's broad phase could also accept by its cells' bounds).
+Units: metres (the count has none).
 """
 from __future__ import annotations
 
