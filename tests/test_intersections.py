@@ -3,8 +3,9 @@ of libigl's triangle-triangle test run pair by pair on every pair of triangles t
 an independent count), on random triangle soups and on a sheet folded onto itself; exact equality, the
 configurations perturbed by 1e-7 m so that no node lies exactly on another triangle's plane (touching pairs are
 decided by round-off in either count). The compiled count is also compared with the numpy count it replaced
-(`numpy_reference_pairs`, its expressions restated here: the same pairs, bit for bit in every decision) on soups snapped to
-a lattice (coplanar, touching and node-on-plane pairs: libigl's cases), folded sheets and a crossing tube."""
+(`numpy_reference_pairs`, its expressions restated here: the same pairs, bit for bit in every decision) on soups
+snapped to a lattice (coplanar, touching and node-on-plane pairs: libigl's cases), folded sheets and a crossing
+tube."""
 from __future__ import annotations
 
 import itertools
