@@ -2,7 +2,7 @@
 forms, conservation laws and the independent intersection count: the CCD time of a vertex moving through a fixed
 triangle (t = d / v) and of two crossing edges; a zone's rigid velocity conserves linear and angular momentum; two
 sheets thrown through each other within one step stay uncrossed (fabricfem.contact.intersections) with the zones
-and cross without them; 1 and 2 ranks agree."""
+and cross without them; 1 and 2 ranks agree; a non-finite velocity stops the step with its reason."""
 from __future__ import annotations
 
 import numpy as np
@@ -86,6 +86,19 @@ def test_rigid_zone_conserves_momentum():
     np.testing.assert_allclose(after[6:9], np.broadcast_to(u[6], (3, 3)), rtol=0, atol=1e-14)
 
 
+def _two_sheets(zones: bool, comm) -> tuple[SelfContact, CentralDifference]:
+    """Two free cotton sheets (case._two_rectangles, 6 x 4 cells, GAP apart) with self-contact (penalty 1e-3 Pa/m,
+    the impulses' 4 passes, impact `zones`) and their explicit integrator at 0.8 of the critical step, at rest."""
+    fmesh = mesh_from_gmsh(lambda m: case._two_rectangles(m, 6, 4, GAP), (1.0, 0.0, 0.0),
+                           (0.0, 0.0, 1.0), comm, name="two-sheets")
+    model = ShellModel(fmesh, case.cotton())
+    model.compile()
+    contact = SelfContact(model, penalty=1e-3, passes=4, zones=zones)
+    dt = 0.8 * critical_time_step(model, (0.0, 0.0), rotary_inertia_scale=case.ROTARY_SCALE)
+    return contact, CentralDifference(model, dt, rotary_inertia_scale=case.ROTARY_SCALE, contact=[contact],
+                                      energy_bound=None)
+
+
 def _thrown_through(zones: bool, steps: int = 6, comm=MPI.COMM_WORLD) -> tuple[int, np.ndarray, dict]:
     """Two free sheets (case._two_rectangles, GAP apart), the upper one thrown down tilting, at a speed rising
     linearly across it from 0 (at x = -0.095 m) to 6 mm a step (at x = 0.095 m): its fast side passes the lower
@@ -93,14 +106,8 @@ def _thrown_through(zones: bool, steps: int = 6, comm=MPI.COMM_WORLD) -> tuple[i
     the two cross along a line; the impulses' 4 passes on; no gravity, no damping, a penalty of 1e-3 Pa/m. Returns
     the intersecting triangle pairs after `steps` (fabricfem.contact.intersections), the positions (N, 3) [m] in
     the reference order, the zones' totals."""
-    fmesh = mesh_from_gmsh(lambda m: case._two_rectangles(m, 6, 4, GAP), (1.0, 0.0, 0.0),
-                           (0.0, 0.0, 1.0), comm, name="two-sheets")
-    model = ShellModel(fmesh, case.cotton())
-    model.compile()
-    contact = SelfContact(model, penalty=1e-3, passes=4, zones=zones)
-    dt = 0.8 * critical_time_step(model, (0.0, 0.0), rotary_inertia_scale=case.ROTARY_SCALE)
-    integrator = CentralDifference(model, dt, rotary_inertia_scale=case.ROTARY_SCALE, contact=[contact],
-                                   energy_bound=None)
+    contact, integrator = _two_sheets(zones, comm)
+    dt = integrator.dt
     nodes = contact.surface.nodes
     upper = nodes.reference[:, 2] > 0.5 * case.THICKNESS
     fast = 6.0 * case.THICKNESS / dt                                # m/s at the fast side
@@ -123,6 +130,22 @@ def test_sheets_thrown_through_each_other_stay_uncrossed_with_zones():
     held, _, totals = _thrown_through(zones=True)
     assert held == 0
     assert totals["collisions"] > 0 and totals["unresolved_steps"] == 0
+
+
+def test_non_finite_velocity_stops_the_step_with_its_reason():
+    """A NaN velocity entering the cloth-cloth correction (impulses and zones on) raises ValueError naming the
+    stage, the time and the node, the reason the wear loop reports (fabricfem.wear.engine), instead of a
+    RuntimeWarning and NaN carried on; impact zones refuse a zero mass (a zone of no mass has no rigid
+    velocity)."""
+    contact, integrator = _two_sheets(True, MPI.COMM_SELF)
+    integrator.v.getArray()[contact.surface.nodes.dofs[3, 2]] = np.nan
+    with pytest.raises(ValueError, match=r"self-contact: non-finite predicted velocities .* at t = .* node \d+\)"):
+        integrator.step()
+    integrator.destroy()
+    x, u = np.zeros((4, 3)), np.zeros((4, 3))
+    with pytest.raises(ValueError, match="impact zones: the lumped masses must be positive"):
+        impact_zones.resolve(None, x, u, 1e-3, np.array([1.0, 0.0, 1.0, 1.0]), np.zeros(4, bool), 1e-6, 2,
+                             MPI.COMM_SELF)
 
 
 def test_refused_zones():

@@ -1,8 +1,8 @@
 """`fabricfem run --resume` with cloth self-contact impulses and impact zones (scenes/sleeve_130.toml on a 10 x 13
 mesh, flexed fast to 120 degrees): a run interrupted at 116 degrees, where the impact zones act and the adaptive
 step (fabricfem.wear.garment.GarmentRun.adaptive_steps) has shortened dt, and resumed gives the records,
-summary.json and impact-zone counts of the uninterrupted run; a non-finite velocity in the cloth-cloth correction
-stops the step with its reason."""
+summary.json and impact-zone counts of the uninterrupted run (a non-finite velocity in the cloth-cloth correction:
+tests/test_impact_zones.py)."""
 from __future__ import annotations
 
 import ast
@@ -17,10 +17,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from mpi4py import MPI
-from test_impact_zones import GAP
 
 from fabricfem import scenes as scene_module
-from fabricfem.contact import impact_zones
 from fabricfem.scenes.run import run_scene
 from fabricfem.wear import run as wear_run
 
@@ -109,32 +107,3 @@ def test_interrupted_sleeve_with_zones_resumes_on_two_ranks(capsys):
     folder = Path(comm.bcast(tempfile.mkdtemp() if comm.rank == 0 else None, root=0))
     _interrupt_and_resume(comm, folder, capsys)
 
-
-def test_non_finite_velocity_stops_the_step_with_its_reason():
-    """A NaN velocity entering the cloth-cloth correction (impulses and zones on) raises ValueError naming the
-    stage, the time and the node, the reason the wear loop reports (fabricfem.wear.engine), instead of a
-    RuntimeWarning and NaN carried on; impact zones refuse a zero mass (a zone of no mass has no rigid
-    velocity)."""
-    from fabricfem.contact.self_contact import SelfContact
-    from fabricfem.dynamics.explicit import CentralDifference
-    from fabricfem.dynamics.stability import critical_time_step
-    from fabricfem.meshes.gmsh_io import mesh_from_gmsh
-    from fabricfem.shell import ShellModel
-    from fabricfem.verify import self_contact as case
-
-    fmesh = mesh_from_gmsh(lambda m: case._two_rectangles(m, 6, 4, GAP), (1.0, 0.0, 0.0), (0.0, 0.0, 1.0),
-                           MPI.COMM_SELF, name="two-sheets")
-    model = ShellModel(fmesh, case.cotton())
-    model.compile()
-    contact = SelfContact(model, penalty=1e-3, passes=4, zones=True)
-    dt = 0.8 * critical_time_step(model, (0.0, 0.0), rotary_inertia_scale=case.ROTARY_SCALE)
-    integrator = CentralDifference(model, dt, rotary_inertia_scale=case.ROTARY_SCALE, contact=[contact],
-                                   energy_bound=None)
-    integrator.v.getArray()[contact.surface.nodes.dofs[3, 2]] = np.nan
-    with pytest.raises(ValueError, match=r"self-contact: non-finite predicted velocities .* at t = .* node \d+\)"):
-        integrator.step()
-    integrator.destroy()
-    x, u = np.zeros((4, 3)), np.zeros((4, 3))
-    with pytest.raises(ValueError, match="impact zones: the lumped masses must be positive"):
-        impact_zones.resolve(None, x, u, 1e-3, np.array([1.0, 0.0, 1.0, 1.0]), np.zeros(4, bool), 1e-6, 2,
-                             MPI.COMM_SELF)
