@@ -24,6 +24,7 @@ from toml_text import dumps
 from fabricfem import io as fio
 from fabricfem import scenes as scene_module
 from fabricfem.contact.seams import SeamSpec
+from fabricfem.launch import child_environment
 from fabricfem.materials import Fabric
 from fabricfem.meshes.pattern import Panel, Pattern, Stitch
 from fabricfem.meshes.pattern_mesh import mesh_pattern
@@ -33,6 +34,8 @@ from fabricfem.wear.checkpoint import Checkpoint
 from fabricfem.wear.garment import ExplicitSettings, Timeline, TorqueSpec, build_garment_run
 from fabricfem.wear.run import interrupt_flag
 
+# a child fabricfem or mpirun must not inherit this process's MPI job (fabricfem.launch)
+CHILD_ENV = child_environment()
 COTTON = Fabric(E1=1.2e6, E2=1.2e6, G12=1e5, nu12=0.0, thickness=1e-3, density=436.0)
 
 
@@ -169,10 +172,10 @@ def test_sigint_then_resume_from_the_command_line(tmp_path):
     (tmp_path / "scene.toml").write_text(SCENE)
     command = [sys.executable, "-m", "fabricfem.cli", "run", str(tmp_path / "scene.toml")]
     whole = tmp_path / "whole"
-    assert subprocess.run(command + ["--out", str(whole)], capture_output=True).returncode == 0
+    assert subprocess.run(command + ["--out", str(whole)], capture_output=True, env=CHILD_ENV).returncode == 0
     part = tmp_path / "part"
     process = subprocess.Popen(command + ["--out", str(part)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                               text=True)
+                               text=True, env=CHILD_ENV)
     for line in process.stdout:          # wait for a few records, then Ctrl-C
         if line.strip().startswith("motion"):
             process.send_signal(signal.SIGINT)
@@ -184,8 +187,9 @@ def test_sigint_then_resume_from_the_command_line(tmp_path):
     with meshio.xdmf.TimeSeriesReader(part / "cloth.xdmf") as reader:
         reader.read_points_cells()
         assert reader.num_steps == len(rows)
-    resumed = subprocess.run(command + ["--out", str(part), "--resume"], capture_output=True, text=True)
-    assert resumed.returncode == 0, resumed.stderr
+    resumed = subprocess.run(command + ["--out", str(part), "--resume"], capture_output=True, text=True,
+                             env=CHILD_ENV)
+    assert resumed.returncode == 0, (resumed.returncode, resumed.stdout[-3000:], resumed.stderr)
     def table(folder):
         rows = list(csv.DictReader(open(folder / "torque.csv")))
         keys = [k for k in rows[0] if k not in ("phase", "peak_segment", "wall_s")]
@@ -198,11 +202,6 @@ def test_sigint_then_resume_from_the_command_line(tmp_path):
 
 # ------------------------------------------------------------------------------------------- dynamic scenes
 ROOT = Path(__file__).resolve().parents[1]
-# the launcher's environment: without the variables of this process's own (singleton) MPI, which an mpirun
-# started from it would take for its own and fail on, silently (seen under pytest-xdist)
-MPI_ENV = {**{k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_", "OPAL_", "PRTE_"))},
-           "OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
-           "OMPI_MCA_rmaps_base_oversubscribe": "1"}
 
 
 def _corner_pinned(folder: Path, n: int = 6, end_time: float = 0.6) -> Path:
@@ -244,10 +243,10 @@ def _kill_and_resume_scene(tmp_path: Path, launcher: list[str]) -> float:
     command = launcher + [sys.executable, "-m", "fabricfem.cli", "run", str(scene)] + \
         (["--all-ranks"] if launcher else []) + ["--out"]     # a small scene would run on rank 0 alone
     whole, part = tmp_path / "whole", tmp_path / "part"
-    done = subprocess.run(command + [str(whole)], capture_output=True, text=True, env=MPI_ENV)
+    done = subprocess.run(command + [str(whole)], capture_output=True, text=True, env=CHILD_ENV)
     assert done.returncode == 0, done.stderr
     process = subprocess.Popen(command + [str(part)], stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
-                               env=MPI_ENV, start_new_session=True)
+                               env=CHILD_ENV, start_new_session=True)
     killed = ""
     for line in process.stdout:      # progress lines "step k/n t = ... [50.1%, ...]" every tenth of the run
         if "%" in line and float(line.split("[")[1].split("%")[0]) >= 50.0 and \
@@ -258,7 +257,7 @@ def _kill_and_resume_scene(tmp_path: Path, launcher: list[str]) -> float:
     process.wait(timeout=120)
     assert killed and process.returncode == -signal.SIGKILL, "the run ended before it was killed"
     assert (part / "checkpoint" / "rank0.pkl").exists()
-    resumed = subprocess.run(command + [str(part), "--resume"], capture_output=True, text=True, env=MPI_ENV)
+    resumed = subprocess.run(command + [str(part), "--resume"], capture_output=True, text=True, env=CHILD_ENV)
     assert resumed.returncode == 0, resumed.stderr
     assert "resumed at t = " in resumed.stdout
     table = _table(part)
@@ -289,8 +288,9 @@ def test_sigint_stops_a_dynamic_scene_with_valid_outputs(tmp_path):
     scene = _corner_pinned(tmp_path)
     command = [sys.executable, "-m", "fabricfem.cli", "run", str(scene), "--out"]
     whole, part = tmp_path / "whole", tmp_path / "part"
-    assert subprocess.run(command + [str(whole)], capture_output=True).returncode == 0
-    process = subprocess.Popen(command + [str(part)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    assert subprocess.run(command + [str(whole)], capture_output=True, env=CHILD_ENV).returncode == 0
+    process = subprocess.Popen(command + [str(part)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                               env=CHILD_ENV)
     for line in process.stdout:
         if "%" in line and float(line.split("[")[1].split("%")[0]) >= 30.0:
             process.send_signal(signal.SIGINT)
@@ -302,7 +302,7 @@ def test_sigint_stops_a_dynamic_scene_with_valid_outputs(tmp_path):
     assert _relative_difference(table, full[:len(table)]) <= 1e-12
     assert _xdmf_steps(part) == pytest.approx(list(table[:, 0]), rel=1e-12)
     assert "stopped early: interrupted (SIGINT)" in (part / "summary.json").read_text()
-    resumed = subprocess.run(command + [str(part), "--resume"], capture_output=True, text=True)
+    resumed = subprocess.run(command + [str(part), "--resume"], capture_output=True, text=True, env=CHILD_ENV)
     assert resumed.returncode == 0, resumed.stderr
     assert _relative_difference(_table(part), full) <= 1e-12
     assert _xdmf_steps(part) == pytest.approx(list(full[:, 0]), rel=1e-12)

@@ -9,12 +9,12 @@ import sys
 from pathlib import Path
 
 import pytest
-from test_checkpoint import MPI_ENV
 
 from fabricfem import cli
 from fabricfem import scenes as scene_module
 from fabricfem.cli import bench as cli_bench
 from fabricfem.cli import study as cli_study
+from fabricfem.launch import child_environment
 from fabricfem.scenes import SceneError
 from fabricfem.scenes.ranks import SERIAL_BELOW_DOFS, estimated_scene_dofs
 
@@ -159,7 +159,17 @@ def test_a_small_scene_under_mpirun_runs_on_rank_0_alone(tmp_path):
     command = ["mpirun", "-n", "2", sys.executable, "-m", "fabricfem.cli", "run", str(scene)]
     for extra, ranks in (([], 1), (["--all-ranks"], 2)):
         out = tmp_path / str(ranks)
-        done = subprocess.run(command + extra + ["--out", str(out)], capture_output=True, text=True, env=MPI_ENV)
+        done = subprocess.run(command + extra + ["--out", str(out)], capture_output=True, text=True, env=child_environment())
         assert done.returncode == 0, done.stderr
         assert ("rank 0 runs it alone" in done.stdout) == (ranks == 1)
         assert json.loads((out / "summary.json").read_text())["ranks"] == ranks
+
+
+def test_a_child_does_not_inherit_this_process_s_mpi_job():
+    """This process has started MPI (mpi4py, imported by fabricfem: a singleton job): a child started with the inherited environment sees
+    the job's PMIX_ variables (the check bites), one started with fabricfem.launch.child_environment() none."""
+    code = "import os; print(sorted(k for k in os.environ if k.startswith(('PMIX_', 'OMPI_MCA_ess'))))"
+    inherited = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True).stdout
+    clean = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                           env=child_environment()).stdout
+    assert "PMIX_RANK" in inherited and clean.strip() == "[]"

@@ -17,6 +17,7 @@ from mpi4py import MPI
 from test_checkpoint import SCENE, SQUARES
 
 from fabricfem import scenes as scene_module
+from fabricfem.launch import child_environment
 from fabricfem.scenes.run import run_scene
 from fabricfem.wear import run as wear_run
 
@@ -50,7 +51,8 @@ def test_killed_run_resumes_into_the_same_xdmf_files(tmp_path):
     """`fabricfem run` killed by SIGKILL after its checkpoint (record 25) and two more records, then `--resume`:
     both XDMF files hold all 45 records (the ones written again after the checkpoint once)."""
     command = [sys.executable, "-m", "fabricfem.cli", "run", str(_scene(tmp_path)), "--out", str(tmp_path / "out")]
-    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
+                               env=child_environment())
     records = 0
     for line in process.stdout:
         records += line.strip().startswith(("sew", "motion"))
@@ -59,7 +61,7 @@ def test_killed_run_resumes_into_the_same_xdmf_files(tmp_path):
             break
     process.wait(timeout=120)
     assert process.returncode == -signal.SIGKILL, "the run ended before it was killed"
-    resumed = subprocess.run(command + ["--resume"], capture_output=True, text=True)
+    resumed = subprocess.run(command + ["--resume"], capture_output=True, text=True, env=child_environment())
     assert resumed.returncode not in (1, 2), resumed.stderr
     assert (tmp_path / "out" / "summary.json").read_text().count('"status": "completed') == 1
     _check_series(tmp_path / "out")

@@ -14,6 +14,7 @@ from shipped_scenes import scene_data
 from toml_text import dumps
 
 from fabricfem import scenes as scene_module
+from fabricfem.launch import child_environment
 from fabricfem.scenes.run import run_scene
 from fabricfem.wear import recorder as recorder_module
 from fabricfem.wear.garment import TorqueSpec
@@ -132,7 +133,7 @@ def test_resume_of_a_completed_run_says_so_and_exits_0(sleeve_run):
     out, path, _, _ = sleeve_run
     stamp = (out / "torque.csv").stat().st_mtime_ns
     done = subprocess.run([sys.executable, "-m", "fabricfem.cli", "run", str(path), "--resume"], capture_output=True,
-                          text=True)
+                          text=True, env=child_environment())
     assert done.returncode == 0, done.stderr
     assert "is complete" in done.stdout and "nothing to resume" in done.stdout
     assert (out / "torque.csv").stat().st_mtime_ns == stamp

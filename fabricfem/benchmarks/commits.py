@@ -18,7 +18,6 @@ torque difference) under `out`. SI units; times in seconds.
 from __future__ import annotations
 
 import json
-import os
 import statistics
 import subprocess
 import sys
@@ -30,6 +29,7 @@ import numpy as np
 from mpi4py import MPI
 
 from fabricfem import io as fio
+from fabricfem.launch import child_environment
 from fabricfem.scenes.sweep import parse_value, set_key
 
 # run in the checked-out commit: build, time run.run(), print one JSON line (rank 0)
@@ -71,12 +71,9 @@ def checkout(repo: Path, commit: str, folder: Path) -> tuple[str, Path]:
 
 def time_once(tree: Path, scene: Path, data: dict, ranks: int) -> dict:
     """One timed run of the scene at the commit checked out in `tree`."""
-    env = {**os.environ, "PYTHONPATH": str(tree), "OMP_NUM_THREADS": "1"}
+    env = child_environment({"PYTHONPATH": str(tree), "OMP_NUM_THREADS": "1"})
     cmd = [sys.executable, "-c", TIMER, str(scene.resolve()), json.dumps(data)]
-    if ranks > 1:      # without this process's own (singleton) MPI variables, which mpirun would take for its own
-        env = {k: v for k, v in env.items() if not k.startswith(("OMPI_", "PMIX_", "OPAL_", "PRTE_"))}
-        env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-                   OMPI_MCA_rmaps_base_oversubscribe="1")
+    if ranks > 1:
         cmd = ["mpirun", "-n", str(ranks), *cmd]
     done = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True)
     lines = [line for line in done.stdout.splitlines() if line.startswith("TIMING ")]

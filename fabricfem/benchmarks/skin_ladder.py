@@ -21,7 +21,6 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import os
 import subprocess
 import sys
 import tomllib
@@ -29,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from fabricfem.launch import child_environment
 from fabricfem.wear.outputs import torque_rms_error
 
 MESHES = ("10x13", "15x20", "20x26", "30x39", "36x60", "40x52", "44x57", "60x78", "80x104")
@@ -63,9 +63,8 @@ def run_level(scene: Path, mesh: str, out: Path, ranks: int = 1) -> Path:
         return folder
     path = level_scene(scene, mesh, out)
     command = [sys.executable, "-m", "fabricfem.cli", "run", str(path), "--out", str(folder)]
-    # this process has started MPI (mpi4py): its run-time variables must not reach the child's mpirun
-    env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_COMM", "OMPI_MCA_ess", "PMIX_", "OMPI_FILE"))}
-    subprocess.run((["mpirun", "-n", str(ranks)] if ranks > 1 else []) + command, check=False, env=env)
+    subprocess.run((["mpirun", "-n", str(ranks)] if ranks > 1 else []) + command, check=False,
+                   env=child_environment())
     return folder
 
 

@@ -3,13 +3,13 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
 import subprocess
 import sys
 
 import numpy as np
 from mpi4py import MPI
 
+from fabricfem.launch import child_environment
 from fabricfem.materials import Fabric
 from fabricfem.meshes import directions, plate
 from fabricfem.shell import ShellModel
@@ -148,14 +148,8 @@ def mpi_consistency() -> list:
         if MPI.COMM_WORLD.size > 1:
             parallel, _ = rollup_tip_half(MPI.COMM_WORLD)
         else:
-            # a singleton MPI init of this process (e.g. in a pytest-xdist worker) can leave OMPI_* / PMIX_*
-            # variables in os.environ; a child mpirun that inherits them takes itself for a rank of this job and
-            # exits 1 without a word (measured), so they are left out
-            env = {k: v for k, v in os.environ.items() if not k.startswith(("OMPI_", "PMIX_"))}
-            env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
-                       OMPI_MCA_rmaps_base_oversubscribe="1")
             proc = subprocess.run(["mpirun", "-n", "2", sys.executable, "-m", "fabricfem.verify.cantilevers"],
-                                  capture_output=True, text=True, env=env, timeout=900)
+                                  capture_output=True, text=True, env=child_environment(), timeout=900)
             if proc.returncode != 0:
                 raise RuntimeError(f"mpirun -n 2 failed (exit {proc.returncode}):\n{proc.stdout[-2000:]}\n"
                                    f"{proc.stderr[-2000:]}")
