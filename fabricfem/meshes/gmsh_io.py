@@ -38,6 +38,7 @@ from mpi4py import MPI
 from . import directions
 from ._gmsh_session import gmsh_model
 from .fabric_mesh import DirectionField, FabricMesh
+from .sector_partition import sector_partitioner
 
 __all__ = ["FabricMesh", "gmsh_to_dolfinx", "mesh_from_gmsh", "model_to_mesh"]
 
@@ -144,8 +145,17 @@ def entity_tags(mesh: Mesh, dim: int, entities: np.ndarray, values: np.ndarray) 
     return dolfinx.mesh.meshtags_from_entities(mesh, dim, adj, local_values.astype(np.int32))
 
 
+def _partitioner(partition: str, x: np.ndarray):
+    """The cell partitioner named `partition` ("graph" or "sectors"; `x`: this rank's input nodes [m])."""
+    if partition == "sectors":
+        return sector_partitioner(x)
+    if partition != "graph":
+        raise ValueError(f"partition: must be 'graph' or 'sectors', got {partition!r}")
+    return dolfinx.mesh.create_cell_partitioner()
+
+
 def model_to_mesh(model: Any, comm: MPI.Comm, rank: int = 0, gdim: int = 3,
-                  ghost_mode: GhostMode = GhostMode.shared_facet,
+                  ghost_mode: GhostMode = GhostMode.shared_facet, partition: str = "graph",
                   ) -> tuple[Mesh, MeshTagsMetaClass | None, MeshTagsMetaClass, dict[str, int]]:
     """Convert the current gmsh model (meshed on ``rank`` only) to a dolfinx mesh.
 
@@ -159,6 +169,9 @@ def model_to_mesh(model: Any, comm: MPI.Comm, rank: int = 0, gdim: int = 3,
         gdim: Geometric dimension of the mesh (3 for surfaces in space).
         ghost_mode: dolfinx ghost mode (default as in dolfinx 0.5,
             ``shared_facet``).
+        partition: ``"graph"`` (dolfinx's graph partitioner, SCOTCH) or
+            ``"sectors"`` (a tube about +x split by angle,
+            fabricfem.meshes.sector_partition).
 
     Returns:
         ``(mesh, cell_tags, facet_tags, names)``: cell tags from physical
@@ -197,7 +210,7 @@ def model_to_mesh(model: Any, comm: MPI.Comm, rank: int = 0, gdim: int = 3,
     cells = data["cells"][:, dolfinx.cpp.io.perm_gmsh(cell_type, data["cells"].shape[1])]
     mesh = dolfinx.mesh.create_mesh(
         comm, cells, np.ascontiguousarray(data["x"]), _ufl_domain(cell_name, degree, gdim),
-        ghost_mode=ghost_mode, partitioner=dolfinx.mesh.create_cell_partitioner())
+        ghost_mode=ghost_mode, partitioner=_partitioner(partition, data["x"]))
     tdim = mesh.topology.dim
 
     cell_tags = None
@@ -218,9 +231,10 @@ def model_to_mesh(model: Any, comm: MPI.Comm, rank: int = 0, gdim: int = 3,
 
 def gmsh_to_dolfinx(build: Callable[[Any], None], comm: MPI.Comm, rank: int = 0, gdim: int = 3,
                     name: str = "fabricfem", options: Mapping[str, float] | None = None,
-                   ghost_mode: GhostMode = GhostMode.shared_facet,
+                   ghost_mode: GhostMode = GhostMode.shared_facet, partition: str = "graph",
                    ) -> tuple[Mesh, MeshTagsMetaClass | None, MeshTagsMetaClass, dict[str, int]]:
-    """Run ``build(gmsh.model)`` in a fresh gmsh model on ``rank`` and convert it.
+    """Run ``build(gmsh.model)`` in a fresh gmsh model on ``rank`` and convert it (``partition``: as in
+    :func:`model_to_mesh`).
 
     ``build`` must create the geometry, physical groups and mesh.  gmsh is
     initialised/cleaned up around it (see ``_gmsh_session.gmsh_model``) with
@@ -238,13 +252,13 @@ def gmsh_to_dolfinx(build: Callable[[Any], None], comm: MPI.Comm, rank: int = 0,
         error = comm.bcast(error, root=rank)
         if error is not None:
             raise error
-        return model_to_mesh(model, comm, rank, gdim=gdim, ghost_mode=ghost_mode)
+        return model_to_mesh(model, comm, rank, gdim=gdim, ghost_mode=ghost_mode, partition=partition)
 
 
 def mesh_from_gmsh(build: Callable[[Any], None], warp: Sequence[float] | DirectionField,
                    normal: Sequence[float] | DirectionField, comm: MPI.Comm = MPI.COMM_WORLD, name: str = "fabricfem",
                    options: Mapping[str, float] | None = None,
-                   ghost_mode: GhostMode = GhostMode.shared_facet) -> FabricMesh:
+                   ghost_mode: GhostMode = GhostMode.shared_facet, partition: str = "graph") -> FabricMesh:
     """Any surface built in gmsh as a distributed, tagged :class:`FabricMesh` (metres).
 
     ``build(model)`` runs on rank 0 in a fresh ``gmsh.model`` (``options``: numeric gmsh options meanwhile)
@@ -258,6 +272,8 @@ def mesh_from_gmsh(build: Callable[[Any], None], warp: Sequence[float] | Directi
             ``x (3, N) -> (3, N)`` (fabricfem.meshes.directions).
         normal: unit reference normal, oriented like the cells (a 3-vector or a field as ``warp``).
         comm: communicator of the mesh; gmsh runs on its rank 0 only.
+        partition: how the cells are split among the ranks: "graph" (SCOTCH) or "sectors" (a tube about +x,
+            by angle: fabricfem.meshes.sector_partition).
 
     Raises:
         ValueError: on every rank, if ``build`` fails or the model cannot be converted (naming the cause), or
@@ -265,6 +281,6 @@ def mesh_from_gmsh(build: Callable[[Any], None], warp: Sequence[float] | Directi
     """
     fields = [directions.constant(v) if not callable(v) else v for v in (warp, normal)]
     mesh, cell_tags, facet_tags, names = gmsh_to_dolfinx(build, comm, 0, gdim=3, name=name, options=options,
-                                                         ghost_mode=ghost_mode)
+                                                         ghost_mode=ghost_mode, partition=partition)
     return FabricMesh(mesh=mesh, facet_tags=facet_tags, tags=names, warp=fields[0], normal=fields[1],
                       cell_tags=cell_tags)

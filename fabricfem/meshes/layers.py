@@ -66,8 +66,9 @@ def _build(model: Any, layers: Sequence[TubeLayer], cell: str, order: int) -> No
 
 def concentric_tubes(layers: Sequence[TubeLayer], cell: str = "quadrilateral", order: int = 2,
                      comm: MPI.Comm = MPI.COMM_WORLD) -> FabricMesh:
-    """One FabricMesh of the tube `layers` (module docstring), each a connected part; ValueError naming a refused
-    value (sizes positive, at least 3 cells around, unique names)."""
+    """One FabricMesh of the tube `layers` (module docstring), each a connected part, its cells split among the
+    ranks by angle about +x (fabricfem.meshes.sector_partition); ValueError naming a refused value (sizes positive,
+    at least 3 cells around, unique names)."""
     checked = []
     for layer in layers:
         checked.append(TubeLayer(str(layer.name), _validate.positive_length("length", layer.length),
@@ -80,4 +81,4 @@ def concentric_tubes(layers: Sequence[TubeLayer], cell: str = "quadrilateral", o
     cell = _validate.choice("cell", cell, _validate.CELLS)
     order = _validate.choice("order", _validate.count("order", order), (1, 2))
     return mesh_from_gmsh(lambda model: _build(model, checked, cell, order), (1.0, 0.0, 0.0),
-                          directions.radial_from_x_axis(), comm, name="layers")
+                          directions.radial_from_x_axis(), comm, name="layers", partition="sectors")

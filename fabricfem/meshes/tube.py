@@ -80,7 +80,8 @@ def tube(length: float, radius: float, n_around: int, n_along: int, cell: str = 
         n_around: Elements around the circumference (>= 3).
         n_along: Elements along the axis (>= 1).
         cell: ``"quadrilateral"`` or ``"triangle"`` (2 per quadrilateral).
-        comm: Communicator; gmsh runs on its rank 0 only.
+        comm: Communicator; gmsh runs on its rank 0 only; the cells are split among the ranks by their angle
+            about +x (fabricfem.meshes.sector_partition: on 2 ranks, z < 0 and z >= 0).
         order: Geometry order, 1 or 2 (6-node triangles / 9-node quads).
         ghost_mode: dolfinx ghost mode of the distributed mesh.
 
@@ -119,5 +120,8 @@ def _cylinder(length: float, radius: float, n_around: int, n_along: int, cell: s
     n_along = _validate.count("n_along", n_along)
     cell = _validate.choice("cell", cell, _validate.CELLS)
     order = _validate.choice("order", _validate.count("order", order), (1, 2))
+    # a whole tube is split among the ranks by angle (each rank one side of the plane z = 0 on 2 ranks: the sleeve's
+    # mirror plane, so both halves carry the same contact), a panel by the graph partitioner
     return mesh_from_gmsh(lambda model: _build(model, length, radius, n_around, n_along, cell, order, sector),
-                          (1.0, 0.0, 0.0), directions.radial_from_x_axis(), comm, name=name, ghost_mode=ghost_mode)
+                          (1.0, 0.0, 0.0), directions.radial_from_x_axis(), comm, name=name, ghost_mode=ghost_mode,
+                          partition="graph" if sector is not None else "sectors")
