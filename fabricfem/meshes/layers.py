@@ -67,7 +67,8 @@ def _build(model: Any, layers: Sequence[TubeLayer], cell: str, order: int) -> No
 def concentric_tubes(layers: Sequence[TubeLayer], cell: str = "quadrilateral", order: int = 2,
                      comm: MPI.Comm = MPI.COMM_WORLD) -> FabricMesh:
     """One FabricMesh of the tube `layers` (module docstring), each a connected part, its cells split among the
-    ranks by angle about +x (fabricfem.meshes.sector_partition); ValueError naming a refused value (sizes positive,
+    ranks by angle about +x (fabricfem.meshes.sector_partition) when every layer has 2 cells around per rank, else
+    by the graph partitioner; ValueError naming a refused value (sizes positive,
     at least 3 cells around, unique names)."""
     checked = []
     for layer in layers:
@@ -81,4 +82,5 @@ def concentric_tubes(layers: Sequence[TubeLayer], cell: str = "quadrilateral", o
     cell = _validate.choice("cell", cell, _validate.CELLS)
     order = _validate.choice("order", _validate.count("order", order), (1, 2))
     return mesh_from_gmsh(lambda model: _build(model, checked, cell, order), (1.0, 0.0, 0.0),
-                          directions.radial_from_x_axis(), comm, name="layers", partition="sectors")
+                          directions.radial_from_x_axis(), comm, name="layers",
+                          partition="sectors" if comm.size <= min(c.n_around for c in checked) // 2 else "graph")

@@ -81,7 +81,8 @@ def tube(length: float, radius: float, n_around: int, n_along: int, cell: str = 
         n_along: Elements along the axis (>= 1).
         cell: ``"quadrilateral"`` or ``"triangle"`` (2 per quadrilateral).
         comm: Communicator; gmsh runs on its rank 0 only; the cells are split among the ranks by their angle
-            about +x (fabricfem.meshes.sector_partition: on 2 ranks, z < 0 and z >= 0).
+            about +x (fabricfem.meshes.sector_partition: on 2 ranks, z < 0 and z >= 0) when there are at least 2
+            cells around per rank, else by the graph partitioner.
         order: Geometry order, 1 or 2 (6-node triangles / 9-node quads).
         ghost_mode: dolfinx ghost mode of the distributed mesh.
 
@@ -121,7 +122,9 @@ def _cylinder(length: float, radius: float, n_around: int, n_along: int, cell: s
     cell = _validate.choice("cell", cell, _validate.CELLS)
     order = _validate.choice("order", _validate.count("order", order), (1, 2))
     # a whole tube is split among the ranks by angle (each rank one side of the plane z = 0 on 2 ranks: the sleeve's
-    # mirror plane, so both halves carry the same contact), a panel by the graph partitioner
+    # mirror plane, so both halves carry the same contact) while each rank gets at least 2 cells around; a panel,
+    # or a tube on more ranks, by the graph partitioner
+    by_angle = sector is None and comm.size <= n_around // 2
     return mesh_from_gmsh(lambda model: _build(model, length, radius, n_around, n_along, cell, order, sector),
                           (1.0, 0.0, 0.0), directions.radial_from_x_axis(), comm, name=name, ghost_mode=ghost_mode,
-                          partition="graph" if sector is not None else "sectors")
+                          partition="sectors" if by_angle else "graph")
