@@ -24,7 +24,13 @@ fabricfem.contact.impulses), and
 Held nodes (1 / m = 0: a prescribed displacement, or held on the body by the body contact this step) are of
 infinite mass: in a zone that contains one, the rigid motion is that of the held nodes (the weights m_k of the free
 nodes set to 0, the held nodes' lumped masses kept), the free nodes take it and the held ones keep their
-velocities. A zone whose held nodes do not move rigidly can still collide; the iterations then end at the limit.
+velocities. A zone whose held nodes do not move rigidly (across the elbow's crease, or on two segments) can still
+collide. So from round `RELEASE_ROUND` on, a zone with a collision left releases its held nodes: they take its
+rigid motion too, with their lumped masses, as every node of a zone does in [Bridson2002, sec. 7.4], and stay
+released for the rest of the step. A released node may leave the skin by the zone's motion within the step; the
+body contact puts it back in the next one (the run's penetration monitor sees it). Measured on the sleeve flexed to
+130 degrees (docs/findings/2026-11-28-zone-release.md): without the release, 129 of 195 steps with collisions
+ended unresolved at the round limit.
 
 Candidates: the pairs that can collide during the step are those closer than the step's largest relative motion
 2 max_k |dx_k| (+ eta) at x. The caller (fabricfem.contact.self_contact) passes the Verlet candidates of the
@@ -45,6 +51,7 @@ from fabricfem.forms.jit import KERNEL_FLAGS, built_once, pointer
 
 TOLERANCE = 1e-3        # eta / d_c: the distance at a coplanar time below which a pair collides
 DEFAULT_ITERATIONS = 20  # detection / zone rounds per step
+RELEASE_ROUND = 10       # the round from which a zone still colliding moves its held nodes too (module docstring)
 
 CDEF = """
 int64_t detect(int64_t n_vt, const int64_t* vt_p, const int64_t* vt_t, const int64_t* tri, int64_t n_ee,
@@ -379,9 +386,10 @@ def pair_nodes(vertex: np.ndarray, triangle: np.ndarray, triangles: np.ndarray, 
 
 
 def resolve(candidates, x: np.ndarray, u: np.ndarray, dt: float, mass: np.ndarray, held: np.ndarray, eta: float,
-            iterations: int, comm) -> dict:
+            iterations: int, comm, release: int | None = None) -> dict:
     """Detection and rigid zones until the step x -> x + dt u is collision-free or `iterations` rounds (module
-    docstring); u (N, 3) [m/s] changed in place.
+    docstring); u (N, 3) [m/s] changed in place; from round `release` (0-based; None: RELEASE_ROUND) on, the held
+    nodes of the zones with a collision left are released (module docstring).
 
     Args:
         candidates: callable(u) -> (vertex, triangle, triangles, first, second, edges): the candidate pairs for the
@@ -391,13 +399,16 @@ def resolve(candidates, x: np.ndarray, u: np.ndarray, dt: float, mass: np.ndarra
 
     Returns:
         {"collisions": the first detection's collisions, "rounds": detections run, "zone_nodes": nodes in zones,
-        "left": collisions of the last detection (0: the step is collision-free)}.
+        "left": collisions of the last detection (0: the step is collision-free), "released": held nodes
+        released}.
     """
     if not (np.isfinite(mass).all() and (mass > 0.0).all()):
         raise ValueError("impact zones: the lumped masses must be positive and finite (a zone of zero total mass "
                          "has no rigid velocity)")
+    release = RELEASE_ROUND if release is None else release
     parent = np.full(len(x), -1, dtype=np.int64)
-    report = {"collisions": 0, "rounds": 0, "zone_nodes": 0, "left": 0}
+    released = np.zeros(len(x), dtype=bool)
+    report = {"collisions": 0, "rounds": 0, "zone_nodes": 0, "left": 0, "released": 0}
     for round_ in range(iterations + 1):
         vertex, triangle, triangles, first, second, edges = candidates(u)
         hit, _ = detect(vertex, triangle, triangles, first, second, edges, x, dt * u, eta, comm)
@@ -409,5 +420,8 @@ def resolve(candidates, x: np.ndarray, u: np.ndarray, dt: float, mass: np.ndarra
             break
         nodes = pair_nodes(vertex, triangle, triangles, first, second, edges)[hit]
         report["zone_nodes"] = merge(nodes, parent, comm)
-        rigid(parent, x, u, mass, held, comm)
+        if round_ >= release:              # the zones still colliding: their held nodes join the rigid motion
+            released |= np.isin(parent, parent[nodes.ravel()]) & held
+            report["released"] = int(released.sum())
+        rigid(parent, x, u, mass, held & ~released, comm)
     return report

@@ -58,8 +58,9 @@ continuous collision detection of the step x^{n+1} -> x^{n+1} + dt u over the ve
 candidates (the Verlet list, which holds every pair within d_c at x^{n+1}, when the step's relative motion
 2 max |dt u| + eta is below d_c; a search within that motion otherwise), and the nodes of colliding pairs moved as
 rigid zones, until the step is collision-free or `zone_iterations` rounds; the nodes held on the body (`body`) are
-of infinite mass (a zone containing one moves with them). `zone_report` holds the last step's counts,
-`zone_totals` their sums over the run. SI units.
+of infinite mass (a zone containing one moves with them) until a zone still colliding at round
+impact_zones.RELEASE_ROUND releases them. `zone_report` holds the last step's counts, `zone_totals` their sums
+over the run (released_steps: the steps in which a zone released held nodes). SI units.
 """
 from __future__ import annotations
 
@@ -125,7 +126,8 @@ class SelfContact:
         self.zones = bool(zones)
         self.zone_iterations = impact_zones.DEFAULT_ITERATIONS
         self.zone_report: dict = {}
-        self.zone_totals = {"steps": 0, "collisions": 0, "unresolved_steps": 0, "rounds": 0, "most_left": 0}
+        self.zone_totals = {"steps": 0, "collisions": 0, "unresolved_steps": 0, "rounds": 0, "most_left": 0,
+                            "released_steps": 0}
         self.comm = model.comm
         self.surface = ClothSurface(model)
         self.distance = checked_contact_distance(contact_distance, model.fabric.thickness,
@@ -378,6 +380,7 @@ class SelfContact:
         totals["unresolved_steps"] += report["left"] > 0
         totals["rounds"] += report["rounds"]
         totals["most_left"] = max(totals["most_left"], report["left"])
+        totals["released_steps"] = totals.get("released_steps", 0) + (report["released"] > 0)
 
     def state(self) -> dict:
         """What the next steps read from the past ones (a checkpoint, fabricfem.wear.checkpoint; the same on every
