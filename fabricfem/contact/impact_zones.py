@@ -24,8 +24,14 @@ fabricfem.contact.impulses), and
 Held nodes (1 / m = 0: a prescribed displacement, or held on the body by the body contact this step) are of
 infinite mass: in a zone that contains one, the rigid motion is that of the held nodes (the weights m_k of the free
 nodes set to 0, the held nodes' lumped masses kept), the free nodes take it and the held ones keep their
-velocities. A zone whose held nodes do not move rigidly (across the elbow's crease, or on two segments) can still
-collide. So from round `RELEASE_ROUND` on, a zone with a collision left releases its held nodes: they take its
+velocities. The rotation is scaled by min(1, R_h^2 / R_z^2), R_h^2 = sum_held m r^2 / sum_held m and R_z^2 =
+sum_zone m r^2 / sum_zone m (r from the held nodes' centre), so that omega x r is not extrapolated beyond the held
+nodes' own extent: the free nodes then move no faster than the held nodes' translation plus the rotation's speed at
+the held nodes. A rotation fitted to two held nodes a few millimetres apart, extrapolated to free nodes 0.1 m away,
+gave those nodes speeds far above any held node's (measured on the pants' sewing: a zone of 69 nodes with 2 held ones
+at 0.03 m/s took the zones' largest speed from 0.66 to 10 m/s and the walk blew up;
+docs/findings/2026-11-28-zone-release.md). A zone whose held nodes do not move rigidly (across the elbow's crease,
+or on two segments) can still collide. So from round `RELEASE_ROUND` on, a zone with a collision left releases its held nodes: they take its
 rigid motion too, with their lumped masses, as every node of a zone does in [Bridson2002, sec. 7.4], and stay
 released for the rest of the step. A released node may leave the skin by the zone's motion within the step; the
 body contact puts it back in the next one (the run's penetration monitor sees it). Measured on the sleeve flexed to
@@ -52,6 +58,7 @@ from fabricfem.forms.jit import KERNEL_FLAGS, built_once, pointer
 TOLERANCE = 1e-3        # eta / d_c: the distance at a coplanar time below which a pair collides
 DEFAULT_ITERATIONS = 20  # detection / zone rounds per step
 RELEASE_ROUND = 10       # the round from which a zone still colliding moves its held nodes too (module docstring)
+SUMS = 19                # per-zone sums of rigid_velocities
 
 CDEF = """
 int64_t detect(int64_t n_vt, const int64_t* vt_p, const int64_t* vt_t, const int64_t* tri, int64_t n_ee,
@@ -62,7 +69,8 @@ void rigid_velocities(int64_t N, const int64_t* parent, const double* x, double*
                       const uint8_t* held, double* sums);
 """
 
-SOURCE = "#pragma GCC diagnostic ignored \"-Wunused-function\"\n" + CLOSEST_C + r"""
+SOURCE = "#pragma GCC diagnostic ignored \"-Wunused-function\"\n#include <math.h>\n" + f"#define SUMS {SUMS}\n" \
+    + CLOSEST_C + r"""
 static void cross3(const double* a, const double* b, double* c)
 {
   c[0] = a[1] * b[2] - a[2] * b[1], c[1] = a[2] * b[0] - a[0] * b[2], c[2] = a[0] * b[1] - a[1] * b[0];
@@ -253,21 +261,23 @@ int64_t merge_zones(int64_t N, int64_t n_hit, const int64_t* nodes, int64_t* par
   return count;
 }
 
-/* u of the nodes in zones (parent[i] >= 0, flattened to the root) := the zone's rigid velocity (module docstring);
-   sums (N, 17) scratch: held flag, M, M x_c, M v_c, L, I (6) per root */
+/* u of the nodes in zones (parent[i] >= 0, flattened to the root) := the zone's rigid velocity (module docstring;
+   a zone with held nodes: their rotation scaled by their extent over the zone's);
+   sums (N, SUMS) scratch: held flag, M, M x_c, M v_c, L, I (6), then the whole zone's mass and second moment about
+   the centre, per root */
 void rigid_velocities(int64_t N, const int64_t* parent, const double* x, double* u, const double* mass,
                       const uint8_t* held, double* sums)
 {
-  for (int64_t i = 0; i < 17 * N; ++i)
+  for (int64_t i = 0; i < SUMS * N; ++i)
     sums[i] = 0.0;
   for (int64_t i = 0; i < N; ++i)
     if (parent[i] >= 0 && held[i])
-      sums[17 * parent[i]] = 1.0;
+      sums[SUMS * parent[i]] = 1.0;
   for (int64_t i = 0; i < N; ++i)
   {
     if (parent[i] < 0)
       continue;
-    double* S = sums + 17 * parent[i];
+    double* S = sums + SUMS * parent[i];
     const double m = (S[0] > 0.0 && !held[i]) ? 0.0 : mass[i];
     S[1] += m;
     for (int k = 0; k < 3; ++k)
@@ -277,7 +287,7 @@ void rigid_velocities(int64_t N, const int64_t* parent, const double* x, double*
   {
     if (parent[i] < 0)
       continue;
-    double* S = sums + 17 * parent[i];
+    double* S = sums + SUMS * parent[i];
     const double m = (S[0] > 0.0 && !held[i]) ? 0.0 : mass[i];
     double r[3], v[3], L[3];
     for (int k = 0; k < 3; ++k)
@@ -288,12 +298,13 @@ void rigid_velocities(int64_t N, const int64_t* parent, const double* x, double*
       S[8 + k] += m * L[k];
     S[11] += m * (rr - r[0] * r[0]), S[12] += m * (rr - r[1] * r[1]), S[13] += m * (rr - r[2] * r[2]);
     S[14] -= m * r[0] * r[1], S[15] -= m * r[0] * r[2], S[16] -= m * r[1] * r[2];
+    S[17] += mass[i], S[18] += mass[i] * rr;
   }
   for (int64_t i = 0; i < N; ++i)       /* omega = I^-1 L at each root, into S[8..10] */
   {
     if (parent[i] != i)
       continue;
-    double* S = sums + 17 * i;
+    double* S = sums + SUMS * i;
     const double trace = S[11] + S[12] + S[13];
     double eps = 0.0, a, b, c, d, e, f, c00, c01, c02, c11, c12, c22, det;
     for (int attempt = 0; attempt < 2; ++attempt)     /* exact, then regularised for a (nearly) collinear zone */
@@ -307,7 +318,9 @@ void rigid_velocities(int64_t N, const int64_t* parent, const double* x, double*
       eps = 1e-14 * trace;
     }
     const double L0 = S[8], L1 = S[9], L2 = S[10];
-    const double ok = det > 0.0 ? 1.0 / det : 0.0;
+    double ok = det > 0.0 ? 1.0 / det : 0.0;
+    if (S[0] > 0.0 && S[18] > 0.0)      /* held nodes: omega x r not extrapolated beyond their extent */
+      ok *= fmin(1.0, (0.5 * trace / S[1]) / (S[18] / S[17]));
     S[8] = ok * (c00 * L0 + c01 * L1 + c02 * L2);
     S[9] = ok * (c01 * L0 + c11 * L1 + c12 * L2);
     S[10] = ok * (c02 * L0 + c12 * L1 + c22 * L2);
@@ -316,7 +329,7 @@ void rigid_velocities(int64_t N, const int64_t* parent, const double* x, double*
   {
     if (parent[i] < 0 || held[i])
       continue;
-    const double* S = sums + 17 * parent[i];
+    const double* S = sums + SUMS * parent[i];
     double r[3], w[3];
     for (int k = 0; k < 3; ++k)
       r[k] = x[3 * i + k] - S[2 + k] / S[1];
@@ -370,7 +383,7 @@ def rigid(parent: np.ndarray, x: np.ndarray, u: np.ndarray, mass: np.ndarray, he
     """u (N, 3) [m/s] of the nodes in zones (`parent` from `merge`) := their zone's rigid velocity (module
     docstring), in place; mass (N,) finite lumped masses [kg], held (N,) bool (infinite mass)."""
     lib, ffi = _module(comm)
-    sums = np.empty((len(parent), 17))
+    sums = np.empty((len(parent), SUMS))
     lib.rigid_velocities(len(parent), pointer(ffi, parent, "int64_t"),
                          pointer(ffi, np.ascontiguousarray(x, dtype=float), "double"), pointer(ffi, u, "double"),
                          pointer(ffi, np.ascontiguousarray(mass, dtype=float), "double"),
