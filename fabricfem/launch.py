@@ -18,7 +18,9 @@ MPIRUN_SETTINGS = {"OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIR
 
 
 def child_environment(extra: Mapping[str, str] | None = None) -> dict[str, str]:
-    """This process's environment (os.environ, read at start) without the MPI job variables, with MPIRUN_SETTINGS
-    and `extra` added: pass it as `env=` to subprocess for any child that imports mpi4py or is mpirun."""
+    """This process's environment (os.environ, read at start) without any variable of the prefixes JOB_PREFIXES,
+    with MPIRUN_SETTINGS and `extra` added: pass it as `env=` to subprocess for any child that imports mpi4py or is
+    mpirun. The job's variables cannot be told from a user's own Open MPI settings (OMPI_MCA_btl, ...) by their
+    names, so those are dropped too: pass them in `extra` if a child needs them."""
     env = {k: v for k, v in os.environ.items() if not k.startswith(JOB_PREFIXES)}
     return {**env, **MPIRUN_SETTINGS, **(extra or {})}

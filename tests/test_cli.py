@@ -159,17 +159,27 @@ def test_a_small_scene_under_mpirun_runs_on_rank_0_alone(tmp_path):
     command = ["mpirun", "-n", "2", sys.executable, "-m", "fabricfem.cli", "run", str(scene)]
     for extra, ranks in (([], 1), (["--all-ranks"], 2)):
         out = tmp_path / str(ranks)
-        done = subprocess.run(command + extra + ["--out", str(out)], capture_output=True, text=True, env=child_environment())
+        done = subprocess.run(command + extra + ["--out", str(out)], capture_output=True, text=True,
+                              env=child_environment())
         assert done.returncode == 0, done.stderr
         assert ("rank 0 runs it alone" in done.stdout) == (ranks == 1)
         assert json.loads((out / "summary.json").read_text())["ranks"] == ranks
 
 
-def test_a_child_does_not_inherit_this_process_s_mpi_job():
-    """This process has started MPI (mpi4py, imported by fabricfem: a singleton job): a child started with the inherited environment sees
-    the job's PMIX_ variables (the check bites), one started with fabricfem.launch.child_environment() none."""
+def test_a_child_does_not_inherit_this_process_s_mpi_job(monkeypatch):
+    """This process has started MPI (mpi4py, imported by fabricfem: a singleton job, whose variables live in the C
+    environment only): a child started with the inherited environment sees the job's PMIX_ variables (the check
+    bites), one started with fabricfem.launch.child_environment() none. The filter itself, for a process started
+    under mpirun (its job's variables in os.environ): PMIX_RANK and OMPI_COMM_WORLD_SIZE are dropped, an unrelated
+    variable is kept and the mpirun settings are added."""
     code = "import os; print(sorted(k for k in os.environ if k.startswith(('PMIX_', 'OMPI_MCA_ess'))))"
     inherited = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True).stdout
     clean = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                            env=child_environment()).stdout
     assert "PMIX_RANK" in inherited and clean.strip() == "[]"
+    monkeypatch.setenv("PMIX_RANK", "1")
+    monkeypatch.setenv("OMPI_COMM_WORLD_SIZE", "2")
+    monkeypatch.setenv("FABRICFEM_TEST_KEPT", "yes")
+    env = child_environment({"EXTRA": "1"})
+    assert "PMIX_RANK" not in env and "OMPI_COMM_WORLD_SIZE" not in env
+    assert env["FABRICFEM_TEST_KEPT"] == "yes" and env["EXTRA"] == "1" and env["OMPI_ALLOW_RUN_AS_ROOT"] == "1"

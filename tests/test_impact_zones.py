@@ -63,8 +63,8 @@ def test_crossing_edges_collide_at_d_over_v():
 def test_held_edges_crossing_in_the_step_are_released_into_one_rigid_zone():
     """Two crossed edges 1 mm apart whose four nodes are all held (infinite mass, as nodes held on the skin), one edge
     closing on the other at 0.2 m/s in a step of 10 ms (2 mm): a zone of held nodes keeps their velocities, so
-    without the release the step ends with the collision left; with it (from round 1) the four nodes take the
-    zone's rigid velocity with their masses: the collision is gone, the linear momentum sum m u is kept (to 1e-15)
+    without the release the step ends with the collision left, and so it does when the four are not releasable (a
+    prescribed motion); with it (from round 1) the four nodes take the zone's rigid velocity with their masses: the collision is gone, the linear momentum sum m u is kept (to 1e-15)
     and the four move rigidly (no relative velocity along their offsets)."""
     x0 = np.array([[-1.0, 0.0, 1e-3], [1.0, 0.0, 1e-3], [0.0, -1.0, 0.0], [0.0, 1.0, 0.0]])
     mass, held = np.array([1.0, 2.0, 3.0, 0.5]), np.ones(4, dtype=bool)
@@ -73,11 +73,13 @@ def test_held_edges_crossing_in_the_step_are_released_into_one_rigid_zone():
     def candidates(u):
         return NONE, NONE, np.zeros((0, 3), dtype=np.int64), np.array([0]), np.array([1]), edges
 
-    for release, left in ((100, 1), (1, 0)):
+    # no release; the release; the release of nodes whose motion is prescribed (not releasable): refused
+    for release, releasable, left in ((100, None, 1), (1, None, 0), (1, np.zeros(4, dtype=bool), 1)):
         u = np.zeros((4, 3))
         u[:2, 2] = -0.2
         momentum = mass @ u
-        report = impact_zones.resolve(candidates, x0, u, 0.01, mass, held, 1e-6, 4, MPI.COMM_SELF, release=release)
+        report = impact_zones.resolve(candidates, x0, u, 0.01, mass, held, 1e-6, 4, MPI.COMM_SELF, release=release,
+                                      releasable=releasable)
         assert report["left"] == left and report["released"] == (4 if left == 0 else 0)
         if left == 0:
             np.testing.assert_allclose(mass @ u, momentum, atol=1e-15)

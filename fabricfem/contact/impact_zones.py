@@ -26,14 +26,17 @@ infinite mass: in a zone that contains one, the rigid motion is that of the held
 nodes set to 0, the held nodes' lumped masses kept), the free nodes take it and the held ones keep their
 velocities. The rotation is scaled by min(1, R_h^2 / R_z^2), R_h^2 = sum_held m r^2 / sum_held m and R_z^2 =
 sum_zone m r^2 / sum_zone m (r from the held nodes' centre), so that omega x r is not extrapolated beyond the held
-nodes' own extent: the free nodes then move no faster than the held nodes' translation plus the rotation's speed at
-the held nodes. A rotation fitted to two held nodes a few millimetres apart, extrapolated to free nodes 0.1 m away,
+nodes' own extent on (mass-weighted) average: the zone's RMS rotational speed is then at most the held nodes'. A
+single free node far out in a zone whose other free nodes sit near the held ones can still move faster than any held
+node. A rotation fitted to two held nodes a few millimetres apart, extrapolated to free nodes 0.1 m away,
 gave those nodes speeds far above any held node's (measured on the pants' sewing: a zone of 69 nodes with 2 held ones
 at 0.03 m/s took the zones' largest speed from 0.66 to 10 m/s and the walk blew up;
 docs/findings/2026-11-28-zone-release.md). A zone whose held nodes do not move rigidly (across the elbow's crease,
-or on two segments) can still collide. So from round `RELEASE_ROUND` on, a zone with a collision left releases its held nodes: they take its
-rigid motion too, with their lumped masses, as every node of a zone does in [Bridson2002, sec. 7.4], and stay
-released for the rest of the step. A released node may leave the skin by the zone's motion within the step; the
+or on two segments) can still collide. So from round `RELEASE_ROUND` on, a zone with a collision left releases its
+held nodes: they take its rigid motion too, with their lumped masses, as every node of a zone does in
+[Bridson2002, sec. 7.4], and stay released for the rest of the step. Nodes with a prescribed component are not
+released (the caller's `releasable`): the integrator imposes their motion whatever the zone says. A released node
+may leave the skin by the zone's motion within the step; the
 body contact puts it back in the next one (the run's penetration monitor sees it). Measured on the sleeve flexed to
 130 degrees (docs/findings/2026-11-28-zone-release.md): without the release, 129 of 195 steps with collisions
 ended unresolved at the round limit.
@@ -399,10 +402,11 @@ def pair_nodes(vertex: np.ndarray, triangle: np.ndarray, triangles: np.ndarray, 
 
 
 def resolve(candidates, x: np.ndarray, u: np.ndarray, dt: float, mass: np.ndarray, held: np.ndarray, eta: float,
-            iterations: int, comm, release: int | None = None) -> dict:
+            iterations: int, comm, release: int | None = None, releasable: np.ndarray | None = None) -> dict:
     """Detection and rigid zones until the step x -> x + dt u is collision-free or `iterations` rounds (module
     docstring); u (N, 3) [m/s] changed in place; from round `release` (0-based; None: RELEASE_ROUND) on, the held
-    nodes of the zones with a collision left are released (module docstring).
+    nodes of the zones with a collision left are released (module docstring), those of `releasable` (N,) bool only
+    (None: all; a node whose motion is prescribed must not be).
 
     Args:
         candidates: callable(u) -> (vertex, triangle, triangles, first, second, edges): the candidate pairs for the
@@ -434,7 +438,7 @@ def resolve(candidates, x: np.ndarray, u: np.ndarray, dt: float, mass: np.ndarra
         nodes = pair_nodes(vertex, triangle, triangles, first, second, edges)[hit]
         report["zone_nodes"] = merge(nodes, parent, comm)
         if round_ >= release:              # the zones still colliding: their held nodes join the rigid motion
-            released |= np.isin(parent, parent[nodes.ravel()]) & held
+            released |= np.isin(parent, parent[nodes.ravel()]) & held & (True if releasable is None else releasable)
             report["released"] = int(released.sum())
         rigid(parent, x, u, mass, held & ~released, comm)
     return report

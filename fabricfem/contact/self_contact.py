@@ -59,7 +59,8 @@ candidates (the Verlet list, which holds every pair within d_c at x^{n+1}, when 
 2 max |dt u| + eta is below d_c; a search within that motion otherwise), and the nodes of colliding pairs moved as
 rigid zones, until the step is collision-free or `zone_iterations` rounds; the nodes held on the body (`body`) are
 of infinite mass (a zone containing one moves with them) until a zone still colliding at round
-impact_zones.RELEASE_ROUND releases them. `zone_report` holds the last step's counts, `zone_totals` their sums
+impact_zones.RELEASE_ROUND releases them (not the nodes with a prescribed
+component). `zone_report` holds the last step's counts, `zone_totals` their sums
 over the run (released_steps: the steps in which a zone released held nodes). SI units.
 """
 from __future__ import annotations
@@ -371,8 +372,9 @@ class SelfContact:
                 pairs, edge_pairs = searched[radius]
             return pairs.vertex, pairs.triangle, self._triangles, edge_pairs.first, edge_pairs.second, self.edges
 
+        # a node with a prescribed component is never released: the integrator imposes its motion whatever u says
         report = impact_zones.resolve(candidates, x, u, dt, self._finite_mass, inverse == 0.0, eta,
-                                      self.zone_iterations, self.comm)
+                                      self.zone_iterations, self.comm, releasable=~self.surface.held)
         self.zone_report = report
         totals = self.zone_totals
         totals["steps"] += report["collisions"] > 0

@@ -145,9 +145,12 @@ def entity_tags(mesh: Mesh, dim: int, entities: np.ndarray, values: np.ndarray) 
     return dolfinx.mesh.meshtags_from_entities(mesh, dim, adj, local_values.astype(np.int32))
 
 
-def _partitioner(partition: str, x: np.ndarray):
-    """The cell partitioner named `partition` ("graph" or "sectors"; `x`: this rank's input nodes [m])."""
+def _partitioner(partition: str, x: np.ndarray, gdim: int):
+    """The cell partitioner named `partition` ("graph" or "sectors"; `x`: this rank's input nodes [m]); checked on
+    every rank, before create_mesh, so that a refusal cannot leave the other ranks waiting in it."""
     if partition == "sectors":
+        if gdim != 3:
+            raise ValueError(f"partition: 'sectors' splits a tube about +x in 3D, got gdim = {gdim}")
         return sector_partitioner(x)
     if partition != "graph":
         raise ValueError(f"partition: must be 'graph' or 'sectors', got {partition!r}")
@@ -210,7 +213,7 @@ def model_to_mesh(model: Any, comm: MPI.Comm, rank: int = 0, gdim: int = 3,
     cells = data["cells"][:, dolfinx.cpp.io.perm_gmsh(cell_type, data["cells"].shape[1])]
     mesh = dolfinx.mesh.create_mesh(
         comm, cells, np.ascontiguousarray(data["x"]), _ufl_domain(cell_name, degree, gdim),
-        ghost_mode=ghost_mode, partitioner=_partitioner(partition, data["x"]))
+        ghost_mode=ghost_mode, partitioner=_partitioner(partition, data["x"], gdim))
     tdim = mesh.topology.dim
 
     cell_tags = None

@@ -20,6 +20,7 @@ from mpi4py import MPI
 
 from . import _validate, directions
 from .gmsh_io import FabricMesh, mesh_from_gmsh
+from .sector_partition import by_sectors
 from .tube import _n_arcs
 
 
@@ -83,4 +84,4 @@ def concentric_tubes(layers: Sequence[TubeLayer], cell: str = "quadrilateral", o
     order = _validate.choice("order", _validate.count("order", order), (1, 2))
     return mesh_from_gmsh(lambda model: _build(model, checked, cell, order), (1.0, 0.0, 0.0),
                           directions.radial_from_x_axis(), comm, name="layers",
-                          partition="sectors" if comm.size <= min(c.n_around for c in checked) // 2 else "graph")
+                          partition="sectors" if by_sectors(comm.size, min(c.n_around for c in checked)) else "graph")

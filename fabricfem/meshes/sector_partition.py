@@ -6,6 +6,7 @@ contact sits nearer one end (the sleeve's elbow), one rank then does most of the
 axis (the sleeve: flexion about +z, gravity along -y, the plane z = 0) splits evenly in both internal-force and
 contact work when each rank takes one side of that plane.
 
+The mesh must go all the way round the axis (a panel would leave sectors, and so ranks, empty) and lie in 3D.
 `sector_partitioner(x)` returns a cell partitioner for dolfinx.mesh.create_mesh (the callable
 (comm, n_parts, tdim, cells, ghost_mode) -> AdjacencyList_int32 of destination ranks, the owner first, then the
 ranks that hold the cell as a ghost): cell c goes to sector floor((theta_c + pi) / (2 pi / n_parts)), where
@@ -23,6 +24,12 @@ from dolfinx.mesh import GhostMode
 
 # the local vertex pairs of the edges of dolfinx's reference cells (basix numbering)
 CELL_EDGES = {3: ((1, 2), (0, 2), (0, 1)), 4: ((0, 1), (0, 2), (1, 3), (2, 3))}
+
+
+def by_sectors(ranks: int, n_around: int) -> bool:
+    """Whether a tube of `n_around` cells around is split by angle on `ranks` ranks: while each rank gets at least
+    2 cells around (else the graph partitioner)."""
+    return ranks <= n_around // 2
 
 
 def sector_owner(centroids: np.ndarray, n_parts: int) -> np.ndarray:

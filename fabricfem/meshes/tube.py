@@ -28,6 +28,7 @@ from mpi4py import MPI
 
 from . import _validate, directions
 from .gmsh_io import FabricMesh, mesh_from_gmsh
+from .sector_partition import by_sectors
 
 
 def _n_arcs(n_around: int) -> int:
@@ -124,7 +125,7 @@ def _cylinder(length: float, radius: float, n_around: int, n_along: int, cell: s
     # a whole tube is split among the ranks by angle (each rank one side of the plane z = 0 on 2 ranks: the sleeve's
     # mirror plane, so both halves carry the same contact) while each rank gets at least 2 cells around; a panel,
     # or a tube on more ranks, by the graph partitioner
-    by_angle = sector is None and comm.size <= n_around // 2
+    by_angle = sector is None and by_sectors(comm.size, n_around)
     return mesh_from_gmsh(lambda model: _build(model, length, radius, n_around, n_along, cell, order, sector),
                           (1.0, 0.0, 0.0), directions.radial_from_x_axis(), comm, name=name, ghost_mode=ghost_mode,
                           partition="sectors" if by_angle else "graph")
