@@ -36,10 +36,10 @@ or on two segments) can still collide. So from round `RELEASE_ROUND` on, a zone 
 held nodes: they take its rigid motion too, with their lumped masses, as every node of a zone does in
 [Bridson2002, sec. 7.4], and stay released for the rest of the step. Nodes with a prescribed component are not
 released (the caller's `releasable`): the integrator imposes their motion whatever the zone says. A released node
-may leave the skin by the zone's motion within the step; the
-body contact puts it back in the next one (the run's penetration monitor sees it). Measured on the sleeve flexed to
-130 degrees (docs/findings/2026-11-28-zone-release.md): without the release, 129 of 195 steps with collisions
-ended unresolved at the round limit.
+may leave the skin by the zone's motion within the step; the body contact puts it back in the next one (the run's
+penetration monitor sees it). Measured on a fast copy of the sleeve flexed to 130 degrees
+(docs/findings/2026-11-28-zone-release.md): without the release, 129 of 195 steps with collisions ended unresolved
+at the round limit.
 
 Candidates: the pairs that can collide during the step are those closer than the step's largest relative motion
 2 max_k |dx_k| (+ eta) at x. The caller (fabricfem.contact.self_contact) passes the Verlet candidates of the
@@ -423,6 +423,7 @@ def resolve(candidates, x: np.ndarray, u: np.ndarray, dt: float, mass: np.ndarra
         raise ValueError("impact zones: the lumped masses must be positive and finite (a zone of zero total mass "
                          "has no rigid velocity)")
     release = RELEASE_ROUND if release is None else release
+    releasable = held if releasable is None else held & releasable
     parent = np.full(len(x), -1, dtype=np.int64)
     released = np.zeros(len(x), dtype=bool)
     report = {"collisions": 0, "rounds": 0, "zone_nodes": 0, "left": 0, "released": 0}
@@ -438,7 +439,7 @@ def resolve(candidates, x: np.ndarray, u: np.ndarray, dt: float, mass: np.ndarra
         nodes = pair_nodes(vertex, triangle, triangles, first, second, edges)[hit]
         report["zone_nodes"] = merge(nodes, parent, comm)
         if round_ >= release:              # the zones still colliding: their held nodes join the rigid motion
-            released |= np.isin(parent, parent[nodes.ravel()]) & held & (True if releasable is None else releasable)
+            released |= np.isin(parent, parent[nodes.ravel()]) & releasable
             report["released"] = int(released.sum())
         rigid(parent, x, u, mass, held & ~released, comm)
     return report
