@@ -38,7 +38,10 @@ def test_a_plausible_sleeve_completes_with_every_check_passed(tmp_path, capsys):
     assert summary["status"] == "completed" and summary["verdict"]["status"] == "plausible"
     names = {c["name"] for c in summary["verdict"]["checks"]}
     assert names == {"penetration", "seam gap", "fabric strain", "skin pressure", "kinetic energy", "start distance",
-                     "contact", "intersecting triangle pairs"}
+                     "contact", "intersecting triangle pairs", "local strain"}
+    local = next(c for c in summary["verdict"]["checks"] if c["name"] == "local strain")
+    # the quadrature-point maximum is at least the largest vertex (patch) average (an average never exceeds its max)
+    assert summary["max_local_strain"] == local["value"] >= summary["max_strain"] > 0.0
     assert summary["max_intersecting_pairs"] == 0 and summary["self_contact"] is False
     assert "CHECK FAILED" not in capsys.readouterr().out
 
@@ -65,6 +68,18 @@ def test_each_check_compares_its_record_values_with_its_bound(values, failed):
     checks = wear_checks(history, Bounds(), failure_strain=0.3)
     assert {c.name for c in checks if not c.passed} == failed
     assert all(c.line().startswith(f"CHECK FAILED {c.name}") for c in checks if not c.passed)
+
+
+def test_the_local_strain_is_reported_and_never_fails():
+    """The records' largest quadrature-point strain is information: its check passes above the failure strain, it
+    is in the summary, and records that did not measure it (nan) leave both out."""
+    history = WearHistory("pants", steps=[_step(phase="settle"), _step(max_local_strain=5.45)], initial_gap=0.01)
+    check = {c.name: c for c in wear_checks(history, Bounds(), failure_strain=0.3)}["local strain"]
+    assert check.passed and check.value == 5.45 and check.bound == 0.3
+    assert history.summary()["max_local_strain"] == 5.45
+    unmeasured = WearHistory("pants", steps=[_step()], initial_gap=0.01)
+    assert "local strain" not in {c.name for c in wear_checks(unmeasured)}
+    assert "max_local_strain" not in unmeasured.summary()
 
 
 @pytest.mark.parametrize("self_contact, counts, failed", [

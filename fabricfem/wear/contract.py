@@ -41,7 +41,7 @@ class WearStep:
     contact_force: float              # N, |sum of contact forces on the cloth|
     seam_gap: float                   # m, largest distance of stitched nodes
     seam_forces: dict[str, float]     # N/m, mean seam line force per seam
-    max_strain: float                 # largest warp/weft Green strain
+    max_strain: float                 # largest warp/weft Green strain of a vertex (its patch's average)
     time_steps: int                   # time steps since the previous record (0: a Newton route)
     kinetic_energy: float             # J
     strain_energy: float              # J
@@ -52,6 +52,7 @@ class WearStep:
     intersecting_pairs: int | None = None   # pairs of the cloth's triangles that cross (None: not counted)
     layers: dict[str, float] = field(default_factory=dict)   # per garment of several (fabricfem.wear.layers): N, Pa
     sensor_pressure: float = math.nan  # Pa, the largest mean over a sensor's disc (fabricfem.wear.sensor; nan: none)
+    max_local_strain: float = math.nan  # largest warp/weft Green strain at a quadrature point (nan: not measured)
 
     @property
     def coordinate(self) -> float:
@@ -152,14 +153,15 @@ class WearHistory:
                 "peak_pressure_mmHg", "peak_segment", "peak_x_m", "peak_y_m", "peak_z_m", "mean_pressure_Pa",
                 "max_penetration_m", "contact_force_N", "seam_gap_m", *(f"seam_{n}_N_per_m" for n in self.seams),
                 "max_strain", "time_steps", "kinetic_energy_J", "strain_energy_J", "wall_s", "newton_iterations",
-                "drag_ratio", "intersecting_pairs", "sensor_pressure_Pa", *self.layer_columns)
+                "drag_ratio", "intersecting_pairs", "sensor_pressure_Pa", "max_local_strain", *self.layer_columns)
 
     def rows(self) -> list[list]:
         return [[s.time, s.phase, s.coordinate, *s.torques.values(), s.peak_pressure, s.peak_pressure / PA_PER_MMHG,
                  s.peak_segment, *s.peak_position, s.mean_pressure, s.max_penetration, s.contact_force, s.seam_gap,
                  *s.seam_forces.values(), s.max_strain, s.time_steps, s.kinetic_energy, s.strain_energy, s.wall,
                  s.newton_iterations, s.drag_ratio, "" if s.intersecting_pairs is None else s.intersecting_pairs,
-                 s.sensor_pressure, *(s.layers[c] for c in self.layer_columns)] for s in self.steps]
+                 s.sensor_pressure, s.max_local_strain, *(s.layers[c] for c in self.layer_columns)]
+                for s in self.steps]
 
     def torque_curves(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Resisting torque [N m] per monitor against the record coordinate, over the motion (`motion_curve`)."""
@@ -191,6 +193,9 @@ class WearHistory:
         # strain and penetration once the seams are sewn (sewing draws the panels across the body)
         sewn = [s for s in self.steps if s.phase != "sew"] or self.steps
         out["max_strain"] = max(s.max_strain for s in sewn)
+        local = [s.max_local_strain for s in sewn if not math.isnan(s.max_local_strain)]
+        if local:
+            out["max_local_strain"] = max(local)
         out["max_penetration_m"] = max(s.max_penetration for s in sewn)
         out["max_seam_gap_after_sewing_m"] = max(s.seam_gap for s in sewn)
         counted = [s.intersecting_pairs for s in self.steps if s.intersecting_pairs is not None]

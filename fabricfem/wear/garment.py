@@ -381,7 +381,8 @@ class GarmentRun:
             peak, segment, position, mean = self._peak(pressure)
             sensor = sensor_pressure(contact.reference + d[contact.dofs], pressure, contact.current_areas(),
                                      self.sensor_diameter, self.comm)
-            strains = self.strain.strain_summary() if self.strain is not None else {"max_warp": 0.0, "max_weft": 0.0}
+            strains = (self.strain.strain_summary() if self.strain is not None
+                       else {"max_warp": 0.0, "max_weft": 0.0, "max_local": math.nan})
             return WearStep(
                 phase=phase.name, time=integ.t, torques={s.name: -means[s.name] for s in self.torques},
                 peak_pressure=peak, peak_segment=segment, peak_position=position, mean_pressure=mean,
@@ -394,7 +395,7 @@ class GarmentRun:
                 wall=time.perf_counter() - t0, axis_value=self.axis_at(integ.t, phase),
                 intersecting_pairs=self.intersections(d),
                 layers=self.layers.values(pressure, contact) if self.layers is not None else {},
-                sensor_pressure=sensor)
+                sensor_pressure=sensor, max_local_strain=strains["max_local"])
 
         save = None
         if checkpoint is not None:
