@@ -225,3 +225,42 @@ def test_the_ranks_parts_sum_to_the_serial_count():
     points, triangles = crossing_tube()
     total = comm.allreduce(intersecting_pairs(points, triangles, (comm.rank, comm.size)), op=MPI.SUM)
     assert total == intersecting_pairs(points, triangles) == len(numpy_reference_pairs(points, triangles)) > 0
+
+
+def _grid(nx: int, ny: int, corner: np.ndarray, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """An nx x ny node grid corner + s u + t v (s, t in [0, 1]) and its triangles."""
+    s, t = np.meshgrid(np.linspace(0, 1, nx), np.linspace(0, 1, ny), indexing="ij")
+    points = corner + s.reshape(-1, 1) * u + t.reshape(-1, 1) * v
+    index = np.arange(nx * ny).reshape(nx, ny)
+    triangles = np.r_[np.c_[index[:-1, :-1].ravel(), index[1:, :-1].ravel(), index[1:, 1:].ravel()],
+                      np.c_[index[:-1, :-1].ravel(), index[1:, 1:].ravel(), index[:-1, 1:].ravel()]]
+    return points, triangles
+
+
+@pytest.mark.parametrize("angle", [30.0, 90.0, 179.0])
+def test_panels_joined_by_a_seam_are_neighbours_and_a_real_crossing_still_counts(angle):
+    """Two 5 x 5 panels sewn along an edge (the seam's nodes duplicated, as a garment's stitched pairs are) at a
+    dihedral angle, and a strip that pierces the first panel away from the seam. The reference is the same cloth
+    with the seam's nodes merged (one node each), where the only pairs the count may list are those that share no
+    node: the strip's crossings. With the stitched nodes given as `same` labels the count equals it; without them the
+    seam's touching triangles are listed too (31 pairs at each angle)."""
+    a_points, a_tri = _grid(5, 5, np.zeros(3), np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]))
+    turn = np.radians(angle)
+    b_points, b_tri = _grid(5, 5, np.array([1.0, 0.0, 0.0]), np.array([-np.cos(turn), 0.0, np.sin(turn)]),
+                            np.array([0.0, 1.0, 0.0]))
+    strip, strip_tri = _grid(2, 2, np.array([0.3, 0.35, -0.2]), np.array([0.0, 0.0, 0.4]), np.array([0.0, 0.3, 0.0]))
+    points = np.r_[a_points, b_points, strip]
+    triangles = np.r_[a_tri, b_tri + len(a_points), strip_tri + len(a_points) + len(b_points)]
+    seam_a = np.flatnonzero(np.isclose(a_points[:, 0], 1.0))                      # x = 1 on the first panel
+    seam_b = len(a_points) + np.flatnonzero(np.isclose(b_points[:, 0] - 1.0, 0.0) & np.isclose(b_points[:, 2], 0.0))
+    assert len(seam_a) == len(seam_b) == 5
+    same = np.arange(len(points))
+    same[seam_b] = seam_a                                                         # one label per point of the cloth
+    merged = same[triangles]                                                      # the seam's nodes merged
+    reference = brute_force_pairs(points, merged)
+    assert reference and all(i >= 2 * len(a_tri) or j >= 2 * len(a_tri) for i, j in reference)   # the strip's
+    assert {tuple(p) for p in intersecting(points, triangles, same=same)} == reference
+    unlabelled = set(map(tuple, intersecting(points, triangles)))
+    assert unlabelled > reference           # the seam's touching triangles are listed without the labels
+    with pytest.raises(ValueError, match="same must hold one label per point"):
+        intersecting(points, triangles, same=same[:-1])

@@ -151,6 +151,30 @@ def test_surface_triangulation_and_refused_distances():
             SelfContact(model, contact_distance=bad)
 
 
+
+def test_stitched_labels_join_the_seams_pairs_and_leave_other_nodes_alone():
+    """ClothSurface.stitched: the nodes of each joined pair (and chains of pairs) share one label, every other
+    node has a label of its own (the partition of the nodes by the joined graph, checked against a union-find
+    written here)."""
+    surface = ClothSurface(_small_model())
+    n = surface.count
+    joined = np.array([[0, 5], [5, 9], [2, 3]])
+    labels = surface.stitched(joined)
+    parent = list(range(n))
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            i = parent[i]
+        return i
+
+    for a, b in joined:
+        parent[root(a)] = root(b)
+    groups = {}
+    for i in range(n):
+        groups.setdefault(root(i), set()).add(int(labels[i]))
+    assert all(len(g) == 1 for g in groups.values()) and len(set(labels)) == len(groups) == n - 3
+    assert len(set(surface.stitched(None))) == n
+
 def _short_fold(comm, steps: int = 2000) -> tuple[np.ndarray, int, int]:
     """Positions (N, 3) [m] of all nodes, ordered by their reference coordinates, after `steps` of the fold with
     self-contact, and the numbers of vertex-triangle and of edge-edge contact pairs then."""

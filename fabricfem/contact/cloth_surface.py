@@ -89,6 +89,14 @@ class ClothSurface:
         """The (n, k) rows of an (N, k) all-node array that belong to this rank's owned nodes."""
         return values[self.owned]
 
+    def stitched(self, joined: np.ndarray | None = None) -> np.ndarray:
+        """(N,) label of each node, equal for the nodes that the node pairs `joined` ((k, 2) global indices, a
+        garment's seams) make one point of the cloth; each other node its own label."""
+        pairs = (np.asarray(joined, dtype=np.int64).reshape(-1, 2) if joined is not None
+                 else np.zeros((0, 2), dtype=np.int64))
+        graph = scipy.sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(self.count,) * 2)
+        return connected_components(graph, directed=False)[1]
+
     def parts(self, joined: np.ndarray | None = None) -> np.ndarray:
         """(N,) label of the connected part of each node: nodes of a cell are connected, and so are the node pairs
         `joined` ((k, 2) global indices, e.g. a garment's seams)."""

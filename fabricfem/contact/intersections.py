@@ -3,7 +3,8 @@
 It does not use the contact code. The candidates are the pairs of triangles whose centroids lie closer than the
 sum of their circumradii about the centroids (the only pairs whose bounding spheres, hence the triangles, can meet),
 whose bounding boxes overlap and that share no node (neighbours in the triangulation touch along an edge or at a
-node by construction and are not counted); a uniform grid of cells of edge at least twice the largest radius
+node by construction and are not counted; so are two triangles with nodes that are one point of the cloth, the
+stitched nodes of a seam, given as `same` labels); a uniform grid of cells of edge at least twice the largest radius
 lists them (fabricfem.contact.intersections_kernel). Then, for each candidate, in the same compiled loop:
 
 * the plane test of [Guigue2003] (its first test): a pair where all three nodes of one triangle lie strictly on
@@ -80,15 +81,19 @@ def candidate_pairs(points: np.ndarray, triangles: np.ndarray, part: tuple[int, 
     return _pass(points, triangles, part, narrow=False)[0]
 
 
-def intersecting_pairs(points: np.ndarray, triangles: np.ndarray, part: tuple[int, int] = (0, 1)) -> int:
+def intersecting_pairs(points: np.ndarray, triangles: np.ndarray, part: tuple[int, int] = (0, 1),
+                       same: np.ndarray | None = None) -> int:
     """Number of pairs of triangles (rows of `triangles` (T, 3), node indices into `points` (N, 3) [m]) that
     intersect and share no node (module docstring); `part` = (k, parts): the pairs of `candidate_pairs`' part k
     only (the counts of the parts sum to the whole count: each rank of a run counts one part, a run of 1 / parts
-    of the triangles in grid order, so each does about 1 / parts of the pair work)."""
-    return len(intersecting(points, triangles, part))
+    of the triangles in grid order, so each does about 1 / parts of the pair work); `same` (N,): a label per
+    node, equal for nodes that are one point of the cloth (`ClothSurface.stitched`); triangles that share a label
+    are neighbours and are not counted (None: each node its own)."""
+    return len(intersecting(points, triangles, part, same))
 
 
-def intersecting(points: np.ndarray, triangles: np.ndarray, part: tuple[int, int] = (0, 1)) -> np.ndarray:
+def intersecting(points: np.ndarray, triangles: np.ndarray, part: tuple[int, int] = (0, 1),
+                 same: np.ndarray | None = None) -> np.ndarray:
     """The (n, 2) pairs (i < j), in lexicographic order, counted by `intersecting_pairs`."""
     pairs, flags = _pass(points, triangles, part, narrow=True)
     hits = flags == 1
@@ -97,4 +102,11 @@ def intersecting(points: np.ndarray, triangles: np.ndarray, part: tuple[int, int
         for k in np.flatnonzero(flags == 2):
             p, q = points[triangles[pairs[k, 0]]], points[triangles[pairs[k, 1]]]
             hits[k] = bool(igl.tri_tri_intersection_test_3d(p[0:1], p[1:2], p[2:3], q[0:1], q[1:2], q[2:3])[0])
-    return pairs[hits]
+    found = pairs[hits]
+    if same is not None and len(found):
+        labels = np.asarray(same)
+        if labels.shape != (len(points),):
+            raise ValueError(f"same must hold one label per point ({len(points)}), got shape {labels.shape}")
+        first, second = labels[triangles[found[:, 0]]], labels[triangles[found[:, 1]]]
+        found = found[~(first[:, :, None] == second[:, None, :]).any(axis=(1, 2))]
+    return found

@@ -200,6 +200,7 @@ class GarmentRun:
     _steps_now: int = 0          # steps per record in use
     self_contact: SelfContact | None = None   # the cloth-cloth contact hook (None: the cloth may pass through itself)
     _surface: ClothSurface | None = None      # the cloth's triangulation of the intersection count
+    _stitched: np.ndarray | None = None       # its node labels, one per point of the cloth (seams' stitched nodes)
     layers: LayerMonitor | None = None        # the monitors per garment of several garments (fabricfem.wear.layers)
     sensor_diameter: float = SENSOR_DIAMETER  # m, the disc of the records' sensor pressure (fabricfem.wear.sensor)
 
@@ -326,12 +327,15 @@ class GarmentRun:
     def intersections(self, d: np.ndarray) -> int:
         """The number of intersecting triangle pairs of the cloth at the displacements `d` (local array of W):
         the independent check of fabricfem.contact.intersections on the whole surface, each rank counting its part
-        of the pairs, summed over the ranks (all ranks call this)."""
+        of the pairs, summed over the ranks (all ranks call this); triangles joined by a seam's stitched nodes are
+        neighbours (`ClothSurface.stitched`), not counted."""
         if self._surface is None:
             self._surface = self.self_contact.surface if self.self_contact is not None else ClothSurface(self.model)
+            self._stitched = self._surface.stitched(self.seams.joined_nodes() if self.seams else None)
         x = self._surface.positions(d)
         part = (self.comm.rank, self.comm.size)
-        return int(self.comm.allreduce(intersecting_pairs(x, self._surface.triangles, part), op=MPI.SUM))
+        return int(self.comm.allreduce(intersecting_pairs(x, self._surface.triangles, part, self._stitched),
+                                       op=MPI.SUM))
 
     def _peak(self, pressure: np.ndarray) -> tuple[float, str, tuple, float]:
         """(peak [Pa], segment, position, area-weighted mean over the contact [Pa]) over all ranks."""
