@@ -81,27 +81,61 @@ def test_uniform_overstretch_projects_to_uniform_scaling(model_kind):
 
 
 @pytest.mark.mpi
-def test_point_strain_sees_a_strain_confined_to_one_cell_column():
-    """u_x = (s - 1)(x - a) clipped to the column a <= x <= a + L / nx (piecewise linear, nodal on Q2): inside the
-    column E_warp = (s^2 - 1) / 2 exactly, outside 0. The largest quadrature-point strain is that closed form; the
-    vertex strains average it over their patches (2 columns wide) and stay below it; on a uniform stretch the two
-    agree."""
-    model = strip("membrane", nx=8, ny=2)
+@pytest.mark.parametrize("model_kind, cell", [("membrane", "quadrilateral"), ("naghdi", "quadrilateral"),
+                                              ("membrane", "triangle")])
+def test_point_strain_sees_a_strain_confined_to_one_cell_column(model_kind, cell):
+    """u_x = (s - 1)(x - a) clipped to the column a <= x <= a + L / nx (piecewise linear, nodal on Q2 / P2): inside
+    the column E_warp = (s^2 - 1) / 2 exactly, outside 0. The largest quadrature-point strain is that closed form;
+    the vertex strains average it over their patches: on quadrilaterals half of the patch is stretched,
+    (s^2 - 1) / 4; on triangles the diagonals split it unevenly, below the closed form. Only the owned
+    displacement entries are set (the ghosts are the method's to update). The points are the strain form's own:
+    the quadrature sum of the evaluated strains per cell equals the assembled cell integral of E_warp."""
+    model = ShellModel(plate(1.0, 0.25, 8, 2, cell=cell), FABRIC, model=model_kind)
+    model.compile()
     projection = FastProjection(model, 1.0)
     s, a, width = 1.3, 0.5, 1.0 / 8
     x, dofs = displacement_dofs(model)
+    owned = model.W.dofmap.index_map.size_local * model.W.dofmap.index_map_bs
     model.w.x.array[:] = 0.0
-    model.w.x.array[dofs[:, 0]] = (s - 1.0) * np.clip(x[:, 0] - a, 0.0, width)
+    values = (s - 1.0) * np.clip(x[:, 0] - a, 0.0, width)
+    mine = dofs[:, 0] < owned
+    model.w.x.array[dofs[mine, 0]] = values[mine]
     closed = (s * s - 1.0) / 2.0
-    summary = projection.strain_summary()
-    # rel 1e-10: round-off of the assembled and evaluated strains (measured up to 6e-12); the patch average is
-    # about half of it (half the patch stretched)
-    assert summary["max_local"] == pytest.approx(closed, rel=1e-10)
-    assert summary["max_warp"] < 0.75 * closed
+    # rel 1e-10: round-off of the assembled and evaluated strains (measured up to 6e-12)
+    assert projection.point_strain_max() == pytest.approx(closed, rel=1e-10)
+    vertex = projection.strain_summary()["max_warp"]
+    if cell == "quadrilateral":
+        assert vertex == pytest.approx(closed / 2.0, rel=1e-10)
+    else:
+        assert 0.25 * closed < vertex < 0.75 * closed
     set_uniaxial_stretch(model, s)
-    summary = projection.strain_summary()
-    assert summary["max_local"] == pytest.approx(summary["max_warp"], rel=1e-10)
-    assert summary["max_local"] == pytest.approx(closed, rel=1e-10)
+    assert projection.point_strain_max() == pytest.approx(closed, rel=1e-10)
+    assert projection.strain_summary()["max_warp"] == pytest.approx(closed, rel=1e-10)
+
+
+def test_point_strains_are_the_strain_forms_quadrature_points():
+    """Per cell, sum_q w_q |J_q| E_warp(x_q) over the evaluated points equals the assembled DG0 integral of E_warp
+    (a curved, sheared state: the strain varies within the cells), to round-off."""
+    import basix
+    import ufl
+    from dolfinx import fem
+    model = strip("membrane", nx=4, ny=2)
+    projection = FastProjection(model, 1.0)
+    x, dofs = displacement_dofs(model)
+    model.w.x.array[dofs[:, 0]] = 0.2 * x[:, 0] ** 2 + 0.1 * x[:, 1]
+    model.w.x.array[dofs[:, 2]] = 0.05 * np.sin(3.0 * x[:, 0])
+    projection.point_strain_max()                      # builds the Expression
+    points, weights = basix.make_quadrature(basix.CellType.quadrilateral, 4)
+    cells = np.arange(model.mesh.topology.index_map(2).size_local, dtype=np.int32)
+    strain = ufl.as_vector(FastProjection.strain_expressions(model))
+    values = fem.Expression(strain, points).eval(cells).reshape(len(cells), len(points), 2)[:, :, 0]
+    jacobian = fem.Expression(abs(ufl.JacobianDeterminant(model.mesh)), points).eval(cells).reshape(len(cells), len(points))
+    DG0 = fem.FunctionSpace(model.mesh, ("DG", 0))
+    test = ufl.TestFunction(DG0)
+    dx = ufl.Measure("dx", domain=model.mesh, metadata={"quadrature_degree": 4})
+    assembled = fem.petsc.assemble_vector(fem.form(strain[0] * test * dx)).array[:len(cells)]
+    summed = (values * jacobian * weights).sum(axis=1)
+    assert np.allclose(summed, assembled, rtol=1e-12, atol=1e-15)
 
 
 @pytest.mark.mpi

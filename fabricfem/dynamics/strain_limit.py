@@ -47,7 +47,7 @@ from dataclasses import dataclass, field
 import basix
 import numpy as np
 import ufl
-from dolfinx import cpp, fem
+from dolfinx import fem
 from dolfinx.fem import petsc as fem_petsc
 from mpi4py import MPI
 from petsc4py import PETSc
@@ -118,7 +118,8 @@ class FastProjection:
         self._G_form = fem.form(ufl.derivative(C_form, model.w, model.w_trial))
         self._area_form = fem.form((mu[0] + mu[1]) * dx)
         self._quadrature_degree = int(quadrature_degree)
-        self._point_strains = None   # fem.Expression of (E_warp, E_weft) at the quadrature points, built at first use
+        # (E_warp, E_weft) at the strain form's quadrature points, built at the first `point_strain_max`
+        self._point_strains: fem.Expression | None = None
         # nodal areas a_i = int phi_i dA (eq. 37), ghosted like C
         self.area = fem_petsc.assemble_vector(self._area_form)
         self.area.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
@@ -189,8 +190,7 @@ class FastProjection:
         return self.C.getArray(readonly=True).reshape(-1, 2) + self.strain_limit
 
     def strain_summary(self) -> dict[str, float]:
-        """Max and area-weighted mean of the vertex E_warp, E_weft over all ranks [-], and "max_local": the largest
-        E_warp or E_weft at a quadrature point of any cell (`point_strain_max`).
+        """Max and area-weighted mean of the vertex E_warp, E_weft over all ranks [-].
 
         The mean is sum_i a_i E_i / sum_i a_i = int E dA / A (the hat functions sum to 1)."""
         E = self.vertex_strains()
@@ -200,7 +200,6 @@ class FastProjection:
             out[f"max_{name}"] = self.comm.allreduce(float(E[:, k].max(initial=-np.inf)), op=MPI.MAX)
             num = self.comm.allreduce(float(a @ E[:, k]))
             out[f"mean_{name}"] = num / self.comm.allreduce(float(a.sum()))
-        out["max_local"] = self.point_strain_max()
         return out
 
     def point_strain_max(self) -> float:
@@ -210,8 +209,8 @@ class FastProjection:
         self._sync()
         mesh = self.model.mesh
         if self._point_strains is None:
-            cell = cpp.mesh.to_string(mesh.topology.cell_type)
-            points, _ = basix.make_quadrature(basix.cell.string_to_type(cell), self._quadrature_degree)
+            cell = basix.cell.string_to_type(mesh.ufl_cell().cellname())
+            points, _ = basix.make_quadrature(cell, self._quadrature_degree)
             self._point_strains = fem.Expression(ufl.as_vector(self.strain_expressions(self.model)), points)
         owned = np.arange(mesh.topology.index_map(mesh.topology.dim).size_local, dtype=np.int32)
         values = self._point_strains.eval(owned)

@@ -178,7 +178,7 @@ class WearHistory:
     def summary(self) -> dict:
         """Over the motion phase: peak and final per torque monitor (with their time and axis value), pressure
         peak and mean (Pa, kPa, mmHg) with the segment and position of the peak; after the sewing: the largest
-        strain, penetration and seam gap; the dofs, wall time [s], explicit step dt_s [s] and the number of
+        vertex strain and (explicit routes) quadrature-point strain, penetration and seam gap; the dofs, wall time [s], explicit step dt_s [s] and the number of
         steps (fabricfem.scenes.accuracy reads them); `wall_split`: the process's wall time by phase
         (fabricfem.wear.run.wall_split) when the run was made by `fabricfem run`."""
         out: dict = {"records": len(self.steps), "completed": self.completed, "ndofs": self.ndofs,

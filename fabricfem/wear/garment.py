@@ -23,7 +23,8 @@ monitored joint (TorqueSpec: tau = a . sum_i (x_i - J) x f_i over the chosen seg
 the body [Man2006, ch. 5 intro]; reported as -tau, positive when the garment opposes a right-handed rotation
 about the axis), the contact pressure on the body per unit deformed cloth area (peak with its segment and
 position, and the mean over the contact area), the largest penetration, the largest seam gap and the seam
-line forces, the largest fabric Green strain (warp and weft), kinetic and strain energy.
+line forces, the largest fabric Green strain (warp and weft) of a vertex (its patch's average) and at a quadrature
+point, kinetic and strain energy.
 """
 from __future__ import annotations
 
@@ -385,8 +386,8 @@ class GarmentRun:
             peak, segment, position, mean = self._peak(pressure)
             sensor = sensor_pressure(contact.reference + d[contact.dofs], pressure, contact.current_areas(),
                                      self.sensor_diameter, self.comm)
-            strains = (self.strain.strain_summary() if self.strain is not None
-                       else {"max_warp": 0.0, "max_weft": 0.0, "max_local": math.nan})
+            strains = self.strain.strain_summary() if self.strain is not None else {"max_warp": 0.0, "max_weft": 0.0}
+            local = self.strain.point_strain_max() if self.strain is not None else math.nan
             return WearStep(
                 phase=phase.name, time=integ.t, torques={s.name: -means[s.name] for s in self.torques},
                 peak_pressure=peak, peak_segment=segment, peak_position=position, mean_pressure=mean,
@@ -399,7 +400,7 @@ class GarmentRun:
                 wall=time.perf_counter() - t0, axis_value=self.axis_at(integ.t, phase),
                 intersecting_pairs=self.intersections(d),
                 layers=self.layers.values(pressure, contact) if self.layers is not None else {},
-                sensor_pressure=sensor, max_local_strain=strains["max_local"])
+                sensor_pressure=sensor, max_local_strain=local)
 
         save = None
         if checkpoint is not None:

@@ -204,7 +204,9 @@ def format_summary(summary: dict) -> list[str]:
             lines.append(f"contact pressure on a sensor's disc (diameter {p['sensor_diameter_m'] * 100:.3g} cm): peak "
                          f"{p['sensor_peak_kPa']:.4g} kPa = {p['sensor_peak_Pa'] / PA_PER_MMHG:.4g} mmHg")
     if "max_strain" in summary:
-        lines.append(f"largest fabric strain {summary['max_strain']:.3e}, largest penetration "
+        local = (f" (at a quadrature point {summary['max_local_strain']:.3e})" if "max_local_strain" in summary
+                 else "")
+        lines.append(f"largest fabric strain {summary['max_strain']:.3e}{local}, largest penetration "
                      f"{summary['max_penetration_m']:.2e} m, largest seam gap after sewing "
                      f"{summary['max_seam_gap_after_sewing_m']:.2e} m")
     return lines

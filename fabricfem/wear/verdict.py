@@ -115,7 +115,7 @@ def wear_checks(history: WearHistory, bounds: Bounds = Bounds(),
     local = [s.max_local_strain for s in sewn if not math.isnan(s.max_local_strain)]
     if local:
         checks.append(Check("local strain", "largest Green strain at a quadrature point after the sewing "
-                            "(information, the bound not applied)", max(local), failure_strain, "", True))
+                            "(information, the bound not applied)", max(local), failure_strain, "", passed=True))
     if bounds.require_contact:
         force = max(s.contact_force for s in motion)
         checks.append(Check("contact", "the body never touches the garment during the motion (largest contact "
