@@ -175,6 +175,38 @@ def test_stitched_labels_join_the_seams_pairs_and_leave_other_nodes_alone():
     assert all(len(g) == 1 for g in groups.values()) and len(set(labels)) == len(groups) == n - 3
     assert len(set(surface.stitched(None))) == n
 
+
+def test_seam_neighbours_take_no_contact():
+    """Two far nodes a, b of a sheet stitched together (a seam's pair): `seam_neighbours` lists, against a brute
+    force over all vertex-triangle and edge-edge pairs, the vertex a or b with every triangle of a cell holding a or
+    b, and the edges that have a or b as an end; with a moved onto b (the seam sewn), the pairs of a with b's
+    triangles take contact without the seam and none with it."""
+    from fabricfem.contact.self_contact import seam_neighbours
+    model = _small_model()
+    surface = ClothSurface(model)
+    x0 = surface.reference
+    a, b = int(np.argmin(x0[:, 0] + x0[:, 1])), int(np.argmax(x0[:, 0] + x0[:, 1]))   # opposite corners
+    joined = np.array([[a, b]])
+    plain = SelfContact(model)
+    sewn = SelfContact(model, joined=joined)
+    keys, edge_keys = seam_neighbours(surface, joined, sewn.edges)
+    T, E = len(surface.triangles), len(sewn.edges)
+    holds = [{a, b} & set(surface.cell_nodes[c]) for c in surface.triangle_cell]
+    expected = sorted(v * T + t for v in (a, b) for t in range(T) if holds[t])
+    assert keys.tolist() == expected
+    ends = [set(e) & {a, b} for e in sewn.edges]
+    expected_edges = sorted(i * E + j for i in range(E) for j in range(i + 1, E) if ends[i] and ends[j])
+    assert edge_keys.tolist() == expected_edges
+    x = x0.copy()
+    x[a] = x0[b] + np.array([0.0, 0.0, 0.2 * case.THICKNESS])      # sewn, a hair above b's cells
+    of_b = {t for t in range(T) if b in set(surface.cell_nodes[surface.triangle_cell[t]])}
+    assert any(v == a and t in of_b for v, t in zip(*_pair_lists(plain.contact_pairs(x))))
+    assert not any(v == a and t in of_b for v, t in zip(*_pair_lists(sewn.contact_pairs(x))))
+
+
+def _pair_lists(pairs) -> tuple[list, list]:
+    return pairs.vertex.tolist(), pairs.triangle.tolist()
+
 def _short_fold(comm, steps: int = 2000) -> tuple[np.ndarray, int, int]:
     """Positions (N, 3) [m] of all nodes, ordered by their reference coordinates, after `steps` of the fold with
     self-contact, and the numbers of vertex-triangle and of edge-edge contact pairs then."""

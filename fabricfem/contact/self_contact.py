@@ -141,14 +141,15 @@ class SelfContact:
         self.damping = float(damping)
         s = self.surface
         self.part = s.parts(joined)
-        near = self.search(s.reference, EXCLUSION * self.distance)
-        same = self.part[near.vertex] == self.part[s.triangles[near.triangle, 0]]
-        self._excluded = np.sort(self._keys(near.subset(same)))
         self.use_edges = bool(edges)
         self.edges = edge_contact.surface_edges(s.triangles)
+        seam_pairs, seam_edge_pairs = seam_neighbours(s, joined, self.edges)
+        near = self.search(s.reference, EXCLUSION * self.distance)
+        same = self.part[near.vertex] == self.part[s.triangles[near.triangle, 0]]
+        self._excluded = np.union1d(self._keys(near.subset(same)), seam_pairs)
         near_edges = self.search_edges(s.reference, EXCLUSION * self.distance, interior=False)
         same = self.part[self.edges[near_edges.first, 0]] == self.part[self.edges[near_edges.second, 0]]
-        self._excluded_edges = np.sort(near_edges.subset(same).keys(len(self.edges)))
+        self._excluded_edges = np.union1d(near_edges.subset(same).keys(len(self.edges)), seam_edge_pairs)
         self._inverse_area = np.ascontiguousarray(np.where(s.held, 0.0, 1.0 / s.area))
         self.edge_pairs = self._edge_candidates = edge_contact.no_edge_pairs()
         N = s.count
@@ -474,6 +475,44 @@ def _check_finite(u: np.ndarray, what: str, t: float) -> None:
     if bad.any():
         raise ValueError(f"self-contact: non-finite {what} at t = {t:.6g} s ({int(bad.sum())} of {len(u)} nodes, "
                          f"node {int(np.argmax(bad))})")
+
+
+def seam_neighbours(surface: ClothSurface, joined: np.ndarray | None, edges: np.ndarray
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """The pairs that the seams make neighbours, as sorted keys: vertex-triangle (vertex x T + triangle) where the
+    vertex is stitched to a node of the triangle's cell, and edge-edge (first x E + second, first < second) where
+    the two edges have stitched nodes in common (`ClothSurface.stitched`). A sewn seam holds those nodes together,
+    so these pairs touch by construction, as a vertex and its own cells do."""
+    labels = surface.stitched(joined)
+    sewn = np.bincount(labels)[labels] > 1
+    cells, per_cell = surface.cell_nodes, len(surface.triangles) // max(len(surface.cell_nodes), 1)
+    node, cell = cells.ravel(), np.repeat(np.arange(len(cells), dtype=np.int64), cells.shape[1])
+    label_cell = np.unique(np.c_[labels[node[sewn[node]]], cell[sewn[node]]], axis=0)
+    vertex, row = _same_label(labels, np.flatnonzero(sewn), label_cell[:, 0])
+    triangle = (label_cell[row, 1][:, None] * per_cell + np.arange(per_cell)).ravel()
+    vertex_keys = np.unique(np.repeat(vertex, per_cell) * len(surface.triangles) + triangle)
+    ends = np.c_[edges.ravel(), np.repeat(np.arange(len(edges), dtype=np.int64), 2)]
+    ends = np.unique(np.c_[labels[ends[sewn[ends[:, 0]], 0]], ends[sewn[ends[:, 0]], 1]], axis=0)   # (label, edge)
+    start = np.searchsorted(ends[:, 0], ends[:, 0], side="right")       # the later edges of the same label
+    count = start - np.arange(len(ends)) - 1
+    first = np.repeat(ends[:, 1], count)
+    second = ends[np.repeat(np.arange(len(ends)) + 1, count) + _ramp(count), 1]
+    low, high = np.minimum(first, second), np.maximum(first, second)
+    return vertex_keys, np.unique(low[low != high] * len(edges) + high[low != high])
+
+
+def _same_label(labels: np.ndarray, nodes: np.ndarray, wanted: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(node, row): every node of `nodes` whose label is wanted[row], for every row."""
+    nodes = nodes[np.argsort(labels[nodes], kind="stable")]
+    start = np.searchsorted(labels[nodes], wanted, side="left")
+    count = np.searchsorted(labels[nodes], wanted, side="right") - start
+    return nodes[np.repeat(start, count) + _ramp(count)], np.repeat(np.arange(len(wanted)), count)
+
+
+def _ramp(count: np.ndarray) -> np.ndarray:
+    """0, 1, ..., count[0] - 1, 0, 1, ..., count[1] - 1, ... (int64)."""
+    total = int(count.sum())
+    return np.arange(total, dtype=np.int64) - np.repeat(np.cumsum(count) - count, count)
 
 
 def _member(keys: np.ndarray, sorted_keys: np.ndarray) -> np.ndarray:
