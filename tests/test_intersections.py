@@ -39,6 +39,13 @@ def brute_force_pairs(points: np.ndarray, triangles: np.ndarray) -> set[tuple[in
     return found
 
 
+
+def grid_triangles(nx: int, ny: int) -> np.ndarray:
+    """The triangles (T, 3) of an nx x ny node grid numbered row-major (two per grid square)."""
+    index = np.arange(nx * ny).reshape(nx, ny)
+    return np.r_[np.c_[index[:-1, :-1].ravel(), index[1:, :-1].ravel(), index[1:, 1:].ravel()],
+                 np.c_[index[:-1, :-1].ravel(), index[1:, 1:].ravel(), index[:-1, 1:].ravel()]]
+
 def folded_sheet(nx: int, ny: int, fold: float, seed: int) -> tuple[np.ndarray, np.ndarray]:
     """A unit square grid whose half x > 0.5 is folded back over the other half, 1 cm above it, and waved by
     `fold` [m] across the flat half (fold > 0.01 m: through it); nodes perturbed by 1e-7 m."""
@@ -47,10 +54,7 @@ def folded_sheet(nx: int, ny: int, fold: float, seed: int) -> tuple[np.ndarray, 
     points = np.c_[np.where(back, 1.0 - x, x).ravel(), y.ravel(),
                    (back * (0.01 + fold * np.sin(4 * np.pi * x) * y)).ravel()]
     points += 1e-7 * np.random.default_rng(seed).standard_normal(points.shape)
-    index = np.arange(nx * ny).reshape(nx, ny)
-    triangles = np.r_[np.c_[index[:-1, :-1].ravel(), index[1:, :-1].ravel(), index[1:, 1:].ravel()],
-                      np.c_[index[:-1, :-1].ravel(), index[1:, 1:].ravel(), index[:-1, 1:].ravel()]]
-    return points, triangles
+    return points, grid_triangles(nx, ny)
 
 
 @pytest.mark.parametrize("spread", [0.3, 0.8, 1.6])
@@ -231,10 +235,7 @@ def _grid(nx: int, ny: int, corner: np.ndarray, u: np.ndarray, v: np.ndarray) ->
     """An nx x ny node grid corner + s u + t v (s, t in [0, 1]) and its triangles."""
     s, t = np.meshgrid(np.linspace(0, 1, nx), np.linspace(0, 1, ny), indexing="ij")
     points = corner + s.reshape(-1, 1) * u + t.reshape(-1, 1) * v
-    index = np.arange(nx * ny).reshape(nx, ny)
-    triangles = np.r_[np.c_[index[:-1, :-1].ravel(), index[1:, :-1].ravel(), index[1:, 1:].ravel()],
-                      np.c_[index[:-1, :-1].ravel(), index[1:, 1:].ravel(), index[:-1, 1:].ravel()]]
-    return points, triangles
+    return points, grid_triangles(nx, ny)
 
 
 @pytest.mark.parametrize("angle", [30.0, 90.0, 179.0])
