@@ -93,6 +93,33 @@ def test_edge_edge_impulse_closed_form():
     assert normal[0, 2] * (1.0 - s) ** -1 == pytest.approx(-m_eff * (w @ u)[2], rel=1e-14)
 
 
+
+@pytest.mark.parametrize("s_weight", [0.1, 0.3, 0.45])
+def test_a_pair_with_one_free_node_is_bounded_in_friction_too(s_weight):
+    """Crossed edges (a, b) and (c, d) 0.4 mm apart; only node b is free (a, c, d held: inverse mass 0), at the
+    weight s of the closest point. The held edge slides along x at 1 m/s under b, which approaches at 0.1 m/s:
+    a pair sliding fast with little approach, as cloth on a moving body. The bound of the normal impulse (no node's
+    change above |u_N|) now holds for the friction as well: b's tangential change is at most the relative
+    tangential speed (here mu |u_N| = 0.05 m/s: Coulomb's limit binds), and |J_T| <= mu |J_N| for the impulses
+    that act. With 1 / m_eff in the friction, b took mu |u_N| / s: 0.5 m/s at s = 0.1."""
+    x = np.array([[-2.0 * s_weight, 0.0, 4e-4], [2.0 * (1.0 - s_weight), 0.0, 4e-4], [0.0, -1.0, 0.0],
+                  [0.0, 3.0, 0.0]])                                          # they cross at s and t = 0.25
+    t, mu = 0.25, 0.5
+    inverse = np.array([0.0, 2.0, 0.0, 0.0])
+    u = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -0.1], [1.0, 0.0, 0.0], [1.0, 0.0, 0.0]])
+    edge_pairs = EdgePairs(np.array([0]), np.array([1]), np.array([4e-4]), np.array([s_weight]), np.array([t]))
+    after = u.copy()
+    normal, friction, acted, _ = impulses.apply(
+        Pairs(*(np.zeros(0, dtype=np.int64),) * 2, np.zeros(0), np.zeros((0, 3))), edge_pairs,
+        np.zeros((0, 3), dtype=np.int64), np.array([[0, 1], [2, 3]], dtype=np.int64), x, after, inverse, D_C, mu, 1,
+        MPI.COMM_SELF)
+    assert acted.tolist() == [1]
+    np.testing.assert_array_equal(after[[0, 2, 3]], u[[0, 2, 3]])           # the held nodes do not move
+    change = after[1] - u[1]
+    assert abs(change[2]) <= 0.1 * (1 + 1e-12)                                # the normal bound: |u_N|
+    assert np.hypot(change[0], change[1]) <= mu * 0.1 * (1 + 1e-12)           # the friction bound: mu |u_N|
+    assert np.linalg.norm(friction[1]) <= mu * np.linalg.norm(normal[1]) * (1 + 1e-12)
+
 def _thrown_sheets(passes: int, speed: float = 0.5, steps: int = 400, comm=MPI.COMM_WORLD) -> dict:
     """Two free sheets (case._two_rectangles, 2 mm apart), the upper thrown down at `speed` [m/s], the lower up at
     half of it; no gravity, no damping, a penalty k_N = 1e-3 Pa/m (it cannot hold them). Returns the smallest

@@ -21,6 +21,7 @@ sum_k w_k = 0) and its unit normal n (as in the penalty law):
         J_N = -m_eff u_N                              (inelastic: the relative normal velocity becomes 0)
         (J_N = -u_N / max_k |w_k| / m_k where that is smaller: see below)
         u_T = u_rel - u_N n,   J_T = -m_eff min(mu |u_N|, |u_T|) u_T / |u_T|                   ([Bridson2002, sec. 7.2])
+        (with the same bound as J_N where it applies)
         u_k += w_k (J_N n + J_T) / m_k
 
 m_k the lumped masses M + dt/2 C [kg] of the step's division (1 / m_k = 0 for a held node). The impulse
@@ -33,7 +34,11 @@ Held nodes (a prescribed displacement, or on the body: 1 / m_k = 0) take no impu
 carry small weights (a vertex on the body over a triangle whose closest point lies near a held node) would give
 its free node a change u_N / w: the normal impulse is bounded so that no node's velocity changes by more than
 |u_N| (J_N <= |u_N| / max_k |w_k| / m_k; without the bound the sleeve's run diverged at 123-126 degrees), and
-such a pair's approach is only partly removed.
+such a pair's approach is only partly removed. The friction impulse takes the same bound (m_eff replaced by
+1 / max(1 / m_eff, max_k |w_k| / m_k)), so that no node's velocity changes by more than |u_T| in friction and
+|J_T| <= mu J_N holds for the bounded J_N: with m_eff alone a free node of weight w took u_T / w, overshot the
+held nodes' motion and grew by about (1 / w - 1) per step (an edge-edge pair with three nodes on the body diverged
+the pants walk, docs/findings/2026-11-28-seam-contact.md).
 
 Restoring (`restore_rate` r [1/s], default 0): the target of the relative normal velocity is r (d_c - delta)
 instead of 0, so that a pair inside d_c separates towards it within about 1 / r, which the capped penalty does not
@@ -126,14 +131,15 @@ static int pair_impulse(const int64_t* node, const double* w, const double* norm
   const double un = dot3(ur, normal) - target;     /* below the target normal velocity */
   if (!(im > 0.0) || !(un < -ROUND_OFF * scale))    /* by more than the round-off of u_rel */
     return 0;
-  const double jn = -un / fmax(im, largest);       /* no node's change above |u_N| */
+  const double bound = fmax(im, largest);           /* no node's change above |u_N| (and |u_T| in friction) */
+  const double jn = -un / bound;
   double ut[3], jt[3] = {0.0, 0.0, 0.0};
   for (int k = 0; k < 3; ++k)
     ut[k] = ur[k] - un * normal[k];
   const double speed = sqrt(dot3(ut, ut));
   if (mu > 0.0 && speed > 0.0)
   {
-    const double scale = fmin(-mu * un, speed) / (speed * im);
+    const double scale = fmin(-mu * un, speed) / (speed * bound);   /* |J_T| <= mu J_N */
     for (int k = 0; k < 3; ++k)
       jt[k] = -scale * ut[k];
   }
