@@ -64,7 +64,8 @@ def test_held_edges_crossing_in_the_step_are_released_into_one_rigid_zone():
     """Two crossed edges 1 mm apart whose four nodes are all held (infinite mass, as nodes held on the skin), one edge
     closing on the other at 0.2 m/s in a step of 10 ms (2 mm): a zone of held nodes keeps their velocities, so
     without the release the step ends with the collision left, and so it does when the four are not releasable (a
-    prescribed motion); with it (from round 1) the four nodes take the zone's rigid velocity with their masses: the collision is gone, the linear momentum sum m u is kept (to 1e-15)
+    prescribed motion); with it (from round 1) the four nodes take the zone's rigid velocity with their masses:
+    the collision is gone, the linear momentum sum m u is kept (to 1e-15)
     and the four move rigidly (no relative velocity along their offsets)."""
     x0 = np.array([[-1.0, 0.0, 1e-3], [1.0, 0.0, 1e-3], [0.0, -1.0, 0.0], [0.0, 1.0, 0.0]])
     mass, held = np.array([1.0, 2.0, 3.0, 0.5]), np.ones(4, dtype=bool)

@@ -129,7 +129,8 @@ def test_point_strains_are_the_strain_forms_quadrature_points():
     cells = np.arange(model.mesh.topology.index_map(2).size_local, dtype=np.int32)
     strain = ufl.as_vector(FastProjection.strain_expressions(model))
     values = fem.Expression(strain, points).eval(cells).reshape(len(cells), len(points), 2)[:, :, 0]
-    jacobian = fem.Expression(abs(ufl.JacobianDeterminant(model.mesh)), points).eval(cells).reshape(len(cells), len(points))
+    area = fem.Expression(abs(ufl.JacobianDeterminant(model.mesh)), points)
+    jacobian = area.eval(cells).reshape(len(cells), len(points))
     DG0 = fem.FunctionSpace(model.mesh, ("DG", 0))
     test = ufl.TestFunction(DG0)
     dx = ufl.Measure("dx", domain=model.mesh, metadata={"quadrature_degree": 4})

@@ -79,6 +79,12 @@ class WearStep:
                 f"  seam gap {self.seam_gap:.1e} m  penetration {self.max_penetration:.1e} m  {self.work()}")
 
 
+def largest_local_strain(steps: list[WearStep]) -> float | None:
+    """The largest quadrature-point strain [-] of the records that measured it (None: none did)."""
+    local = [s.max_local_strain for s in steps if not math.isnan(s.max_local_strain)]
+    return max(local) if local else None
+
+
 @dataclass
 class WearHistory:
     """The records (WearStep) of a wear run, with its dofs, wall time [s], timings, the smallest garment-body gap
@@ -178,9 +184,9 @@ class WearHistory:
     def summary(self) -> dict:
         """Over the motion phase: peak and final per torque monitor (with their time and axis value), pressure
         peak and mean (Pa, kPa, mmHg) with the segment and position of the peak; after the sewing: the largest
-        vertex strain and (explicit routes) quadrature-point strain, penetration and seam gap; the dofs, wall time [s], explicit step dt_s [s] and the number of
-        steps (fabricfem.scenes.accuracy reads them); `wall_split`: the process's wall time by phase
-        (fabricfem.wear.run.wall_split) when the run was made by `fabricfem run`."""
+        vertex strain and (explicit routes) quadrature-point strain, penetration and seam gap; the dofs, wall time
+        [s], explicit step dt_s [s] and the number of steps (fabricfem.scenes.accuracy reads them); `wall_split`:
+        the process's wall time by phase (fabricfem.wear.run.wall_split) when the run was made by `fabricfem run`."""
         out: dict = {"records": len(self.steps), "completed": self.completed, "ndofs": self.ndofs,
                      "wall_s": self.wall, "dt_s": self.timings.get("dt"),
                      "time_steps": int(sum(s.time_steps for s in self.steps))}
@@ -193,9 +199,9 @@ class WearHistory:
         # strain and penetration once the seams are sewn (sewing draws the panels across the body)
         sewn = [s for s in self.steps if s.phase != "sew"] or self.steps
         out["max_strain"] = max(s.max_strain for s in sewn)
-        local = [s.max_local_strain for s in sewn if not math.isnan(s.max_local_strain)]
-        if local:
-            out["max_local_strain"] = max(local)
+        local = largest_local_strain(sewn)
+        if local is not None:
+            out["max_local_strain"] = local
         out["max_penetration_m"] = max(s.max_penetration for s in sewn)
         out["max_seam_gap_after_sewing_m"] = max(s.seam_gap for s in sewn)
         counted = [s.intersecting_pairs for s in self.steps if s.intersecting_pairs is not None]

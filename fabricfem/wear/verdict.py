@@ -33,7 +33,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from fabricfem.parameters import param as doc
-from fabricfem.wear.contract import WearHistory
+from fabricfem.wear.contract import WearHistory, largest_local_strain
 from fabricfem.wear.engine import kinetic_ratio
 
 EXIT_WARNINGS = 3                  # exit code of a run that completed with failed checks
@@ -112,10 +112,10 @@ def wear_checks(history: WearHistory, bounds: Bounds = Bounds(),
         checks.append(bounded_check("start distance", "smallest garment-body gap at the start", history.initial_gap,
                              bounds.max_start_gap, "m"))
     checks.extend(_intersection_checks(history))
-    local = [s.max_local_strain for s in sewn if not math.isnan(s.max_local_strain)]
-    if local:
+    local = largest_local_strain(sewn)
+    if local is not None:
         checks.append(Check("local strain", "largest Green strain at a quadrature point after the sewing "
-                            "(information, the bound not applied)", max(local), failure_strain, "", passed=True))
+                            "(information, the bound not applied)", local, failure_strain, "", passed=True))
     if bounds.require_contact:
         force = max(s.contact_force for s in motion)
         checks.append(Check("contact", "the body never touches the garment during the motion (largest contact "
