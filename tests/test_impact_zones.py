@@ -190,13 +190,27 @@ def test_non_finite_velocity_stops_the_step_with_its_reason():
     velocity)."""
     contact, integrator = _two_sheets(True, MPI.COMM_SELF)
     integrator.v.getArray()[contact.surface.nodes.dofs[3, 2]] = np.nan
-    with pytest.raises(ValueError, match=r"self-contact: non-finite predicted velocities .* at t = .* node \d+\)"):
+    stage = r"self-contact: non-finite or faster than 1000 m/s predicted velocities .* at t = .* "
+    with pytest.raises(ValueError, match=stage + r"node \d+, \|u\| = nan m/s\)"):
         integrator.step()
     integrator.destroy()
     x, u = np.zeros((4, 3)), np.zeros((4, 3))
     with pytest.raises(ValueError, match="impact zones: the lumped masses must be positive"):
         impact_zones.resolve(None, x, u, 1e-3, np.array([1.0, 0.0, 1.0, 1.0]), np.zeros(4, bool), 1e-6, 2,
                              MPI.COMM_SELF)
+
+
+def test_a_step_faster_than_the_blow_up_speed_stops_with_its_reason():
+    """A finite state that moves a node by more than BLOW_UP_SPEED x dt in one step (here 1 m in a step of about
+    1e-5 s) raises ValueError in the contact's forces naming the stage and the speed, before the broad phase: a
+    blown-up state that stays finite put every triangle into one hash cell, and the pants walk with impulses then
+    spent minutes per step instead of stopping."""
+    contact, integrator = _two_sheets(False, MPI.COMM_SELF)
+    integrator.step()
+    integrator.d.getArray()[contact.surface.nodes.dofs[3, 2]] += 1.0
+    with pytest.raises(ValueError, match=r"faster than 1000 m/s step motion / dt .* node 3, \|u\| = [0-9.e+]+ m/s"):
+        integrator.step()
+    integrator.destroy()
 
 
 def test_refused_zones():

@@ -81,6 +81,7 @@ EXCLUSION = 2.0          # reference distance / d_c below which a vertex and a t
 DEFAULT_DAMPING = 0.5    # zeta of the pair's penalty spring
 RESTORE_RATE = 200.0     # 1/s: the impulses' target separation rate r (fabricfem.contact.impulses), 1 / (5 ms)
 FEATURE_TOLERANCE = 1e-6  # barycentric coordinates below this name no node of the closest feature
+BLOW_UP_SPEED = 1.0e3    # m/s: no point of a garment moves at 1 km/s (3 x sound in air); a faster node is a blown-up step
 
 
 def checked_contact_distance(value: float | None, thickness: float, element_size: float) -> float:
@@ -161,6 +162,7 @@ class SelfContact:
         self.impulse, self.impulse_friction = np.zeros((N, 3)), np.zeros((N, 3))
         self.impulse_passes = 0              # the passes taken in the last step
         self._x = np.zeros((N, 3))           # the positions [m] of the step's pairs (d^{n+1})
+        self._x_last: np.ndarray | None = None   # the positions [m] of the last step (the blow-up guard of `forces`)
         self._ranks = impulses.node_ranks(s.reference)   # the pairs' sweep order (fabricfem.contact.impulses)
         self.restore_rate = RESTORE_RATE if self.passes else 0.0   # 1/s (fabricfem.contact.impulses)
         self.body = None     # the body contact (ExplicitBodyContact) whose active nodes the impulses hold
@@ -249,6 +251,9 @@ class SelfContact:
         tic = time.perf_counter()
         rows = s.nodes.dofs
         x = s.gather(s.nodes.reference + integrator.d.getArray(readonly=True)[rows])
+        if self._x_last is not None:
+            _check_speed((x - self._x_last) / integrator.dt, "step motion / dt (the step diverged before it)", t)
+        self._x_last = x
         toc = time.perf_counter()
         had_pairs = len(self.pairs) + len(self.edge_pairs) > 0
         self.pairs = pairs = self.near_pairs(x)
@@ -317,7 +322,7 @@ class SelfContact:
         rows = s.nodes.dofs
         a = integrator.a.getArray()
         u0 = s.gather(integrator.velocity_predictor.getArray(readonly=True)[rows] + dt * a[rows])
-        _check_finite(u0, "predicted velocities entering the cloth-cloth correction (the step diverged before it)", t)
+        _check_speed(u0, "predicted velocities entering the cloth-cloth correction (the step diverged before it)", t)
         u = u0.copy()
         _, inverse = self._masses(integrator)
         if self.body is not None:
@@ -330,12 +335,12 @@ class SelfContact:
             self.impulse, self.impulse_friction, _, self.impulse_passes = impulses.apply(
                 pairs, edge_pairs, self._triangles, self.edges, self._x, u, inverse, self.distance, self.mu,
                 self.passes, self.comm, self.restore_rate)
-            _check_finite(u, "velocities after the cloth-cloth impulses", t)
+            _check_speed(u, "velocities after the cloth-cloth impulses", t)
         toc = time.perf_counter()
         self.timings["impulses"] += toc - tic
         if zones:
             self._impact_zones(u, inverse, dt)
-            _check_finite(u, "velocities after the impact zones", t)
+            _check_speed(u, "velocities after the impact zones", t)
             self.timings["zones"] += time.perf_counter() - toc
         a[rows] += s.owned_rows((u - u0) / dt)
 
@@ -468,13 +473,18 @@ def _feature_share(vertex: np.ndarray, tri: np.ndarray, w: np.ndarray) -> np.nda
     return 1.0 / counts[inverse.ravel()]
 
 
-def _check_finite(u: np.ndarray, what: str, t: float) -> None:
-    """ValueError "self-contact: non-finite <what> at t = ... s (k of N nodes, node i)" unless u (N, 3) [m/s] is
-    finite."""
-    bad = ~np.isfinite(u).all(axis=1)
+def _check_speed(u: np.ndarray, what: str, t: float) -> None:
+    """ValueError "self-contact: non-finite or faster than BLOW_UP_SPEED <what> at t = ... s (k of N nodes, node i,
+    |u| = ... m/s)" unless every row of u (N, 3) [m/s] is finite and below BLOW_UP_SPEED. A blown-up step that stays
+    finite would otherwise go on: its huge positions put every triangle into one cell of the broad phase, whose
+    search then costs N x T per step and the run seems to hang."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        speed = np.sqrt(np.einsum("ij,ij->i", u, u))
+    bad = ~(speed <= BLOW_UP_SPEED)
     if bad.any():
-        raise ValueError(f"self-contact: non-finite {what} at t = {t:.6g} s ({int(bad.sum())} of {len(u)} nodes, "
-                         f"node {int(np.argmax(bad))})")
+        node = int(np.argmax(bad))
+        raise ValueError(f"self-contact: non-finite or faster than {BLOW_UP_SPEED:g} m/s {what} at t = {t:.6g} s "
+                         f"({int(bad.sum())} of {len(u)} nodes, node {node}, |u| = {speed[node]:.3g} m/s)")
 
 
 def seam_neighbours(surface: ClothSurface, joined: np.ndarray | None, edges: np.ndarray

@@ -15,7 +15,9 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 import numpy as np
+from mpi4py import MPI
 
+from fabricfem.contact.self_contact import BLOW_UP_SPEED
 from fabricfem.solvers.newton import SolverError
 
 
@@ -125,6 +127,7 @@ class _Loop:
         self.make_record, self.on_step = make_record, on_step
         self.steps_per_record, self.start_record = steps_per_record, start_record
         self.after_record, self.should_stop = after_record, should_stop
+        self.translation_rows = np.asarray(contact.nodes.dofs).ravel()    # the owned nodes' displacement rows
         self.pending = self.done = 0
         self.sums = {"loop": 0.0, "cpu": 0.0, "steps": 0, "internal": 0.0, "hooks": 0.0, "pose": 0.0, "output": 0.0}
 
@@ -143,8 +146,7 @@ class _Loop:
                 for _ in range(n_steps):
                     integ.step()
                     integ.step_count += 1
-                if not (math.isfinite(integ.d.norm()) and math.isfinite(integ.v.norm())):
-                    raise ValueError("non-finite displacement or velocity")
+                _check_state(integ, self.translation_rows)
             except ValueError as exc:
                 message = (f"{label}: the explicit run stopped in phase {phase.name!r} before t = {integ.t:.6g} s "
                            f"(step {integ.step_count}, dt = {integ.dt:.3g} s): {exc}")
@@ -190,6 +192,18 @@ class _Loop:
         out["cpu_s"] = s["cpu"]
         out["cpu_ms_per_step"] = 1e3 * s["cpu"] / max(s["steps"], 1)
         return out
+
+
+def _check_state(integrator, rows: np.ndarray) -> None:
+    """ValueError unless the state is finite and no node moves faster than BLOW_UP_SPEED [m/s]: the largest
+    velocity component of the translational `rows` (local rows of the owned nodes) over the ranks. A blown-up state
+    can stay finite for many steps while its numbers grow. (The rotation rates are left out: rad/s, not a speed.)"""
+    if not (math.isfinite(integrator.d.norm()) and math.isfinite(integrator.v.norm())):
+        raise ValueError("non-finite displacement or velocity")
+    v = integrator.v.getArray(readonly=True)[rows]
+    speed = integrator.v.comm.tompi4py().allreduce(float(np.abs(v).max(initial=0.0)), op=MPI.MAX)
+    if not speed <= BLOW_UP_SPEED:
+        raise ValueError(f"a node moves at {speed:.3g} m/s (above {BLOW_UP_SPEED:g} m/s: the steps diverged)")
 
 
 def kinetic_ratio(kinetic: np.ndarray, strain: np.ndarray) -> float:
