@@ -120,6 +120,27 @@ def test_a_pair_with_one_free_node_is_bounded_in_friction_too(s_weight):
     assert np.hypot(change[0], change[1]) <= mu * 0.1 * (1 + 1e-12)           # the friction bound: mu |u_N|
     assert np.linalg.norm(friction[1]) <= mu * np.linalg.norm(normal[1]) * (1 + 1e-12)
 
+def test_a_bounded_pair_acts_in_one_pass_only():
+    """The crossed edges above with only b free, at the weight s = 0.1 of the closest point, b approaching at 1 m/s
+    (the pair at |u_N| = s x 1 = 0.1 m/s), no sliding, 8 passes: b's change is |u_N| = 0.1 m/s (the bound of one
+    pass) and the pair acts in one pass. When every pass applied the bound again to the remaining approach
+    (1 - s) |u_N|, b's change added up to 0.1 (1 - 0.9^8) / (1 - 0.9) = 0.57 m/s here; on the pants walk a node
+    went from 4.7 to 102 m/s in one step."""
+    s_weight = 0.1
+    x = np.array([[-2.0 * s_weight, 0.0, 4e-4], [2.0 * (1.0 - s_weight), 0.0, 4e-4], [0.0, -1.0, 0.0],
+                  [0.0, 3.0, 0.0]])
+    inverse = np.array([0.0, 2.0, 0.0, 0.0])
+    u = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    edge_pairs = EdgePairs(np.array([0]), np.array([1]), np.array([4e-4]), np.array([s_weight]), np.array([0.25]))
+    after = u.copy()
+    _, _, acted, _ = impulses.apply(
+        Pairs(*(np.zeros(0, dtype=np.int64),) * 2, np.zeros(0), np.zeros((0, 3))), edge_pairs,
+        np.zeros((0, 3), dtype=np.int64), np.array([[0, 1], [2, 3]], dtype=np.int64), x, after, inverse, D_C, 0.0, 8,
+        MPI.COMM_SELF)
+    assert acted.tolist() == [1]
+    assert np.linalg.norm(after[1] - u[1]) == pytest.approx(0.1, rel=1e-12)
+
+
 def _thrown_sheets(passes: int, speed: float = 0.5, steps: int = 400, comm=MPI.COMM_WORLD) -> dict:
     """Two free sheets (case._two_rectangles, 2 mm apart), the upper thrown down at `speed` [m/s], the lower up at
     half of it; no gravity, no damping, a penalty k_N = 1e-3 Pa/m (it cannot hold them). Returns the smallest

@@ -34,7 +34,10 @@ Held nodes (a prescribed displacement, or on the body: 1 / m_k = 0) take no impu
 carry small weights (a vertex on the body over a triangle whose closest point lies near a held node) would give
 its free node a change u_N / w: the normal impulse is bounded so that no node's velocity changes by more than
 |u_N| (J_N <= |u_N| / max_k |w_k| / m_k; without the bound the sleeve's run diverged at 123-126 degrees), and
-such a pair's approach is only partly removed. The friction impulse takes the same bound (m_eff replaced by
+such a pair's approach is only partly removed, and such a pair acts in one pass of the step only: its remaining
+approach (1 - w) |u_N| would take another |u_N| in every pass, and a free node of weight w gained up to `passes` x
+|u_N| (in the pants walk with 8 passes, 4.7 to 102 m/s in one step, the start of a blow-up:
+docs/findings/2026-11-28-blow-up-speed.md). The friction impulse takes the same bound (m_eff replaced by
 1 / max(1 / m_eff, max_k |w_k| / m_k)), so that no node's velocity changes by more than |u_T| in friction and
 |J_T| <= mu J_N holds for the bounded J_N: with m_eff alone a free node of weight w took u_T / w, overshot the
 held nodes' motion and grew by about (1 / w - 1) per step (an edge-edge pair with three nodes on the body diverged
@@ -114,7 +117,8 @@ static void pair_normal(const int64_t* node, const double* w, int edge_pair, con
   contact_normal(e1, e2, offset, distance, tiny, normal);
 }
 
-/* the inelastic impulse with friction of one pair on u; 1 if it acted */
+/* the inelastic impulse with friction of one pair on u; 0 if it did not act, 1 if it acted, 2 if it acted with
+   the bound of its small-weight free nodes (max_k |w_k| / m_k above 1 / m_eff) */
 static int pair_impulse(const int64_t* node, const double* w, const double* normal, const double* inverse_mass,
                         double mu, double target, double* u, double* normal_impulse, double* friction_impulse)
 {
@@ -150,7 +154,7 @@ static int pair_impulse(const int64_t* node, const double* w, const double* norm
       u[3 * node[q] + k] += (jnk + jtk) * inverse_mass[node[q]];
       normal_impulse[3 * node[q] + k] += jnk, friction_impulse[3 * node[q] + k] += jtk;
     }
-  return 1;
+  return largest > im ? 2 : 1;
 }
 
 /* `passes` Gauss-Seidel passes over the pairs (module docstring); returns the passes taken, acted[i] the number of
@@ -172,6 +176,7 @@ int64_t impulse_passes(int64_t n_vt, const int64_t* pair_p, const int64_t* pair_
                 1e-9 * contact_distance, normals + 3 * i);
     acted[i] = 0;
   }
+  char* bounded = calloc(n > 0 ? n : 1, 1);     /* the pair acted with its bound: once per step */
   int64_t pass = 0;
   while (pass < passes)
   {
@@ -179,15 +184,19 @@ int64_t impulse_passes(int64_t n_vt, const int64_t* pair_p, const int64_t* pair_
     int64_t count = 0;
     for (int64_t i = 0; i < n; ++i)
     {
+      if (bounded[i])
+        continue;
       pair_nodes(i, n_vt, pair_p, pair_t, bary, tri, first, second, s, t, edges, node, w);
       const double gap = contact_distance - (i < n_vt ? vt_distance[i] : ee_distance[i - n_vt]);
       const int hit = pair_impulse(node, w, normals + 3 * i, inverse_mass, mu, restore_rate * fmax(gap, 0.0), u,
                                    normal_impulse, friction_impulse);
-      acted[i] += hit, count += hit;
+      bounded[i] = hit == 2;
+      acted[i] += hit > 0, count += hit > 0;
     }
     if (count == 0)
       break;
   }
+  free(bounded);
   return pass;
 }
 """
