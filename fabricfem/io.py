@@ -1,4 +1,5 @@
-"""Outputs: XDMF time series (ParaView), CSV tables and off-screen PNG renders (pyvista).
+"""Outputs: XDMF time series (ParaView), CSV tables and off-screen PNG renders (fabricfem.render; pyvista for
+render_surfaces).
 
 Everything here is parallel-correct: XDMF is written collectively, renders gather the
 owned cells to rank 0.
@@ -22,6 +23,8 @@ from xml.etree import ElementTree
 import numpy as np
 from dolfinx import fem, io
 from mpi4py import MPI
+
+from fabricfem.render import Layer, render_layers, save_with_colour_bar
 
 
 class SurfaceSeries:
@@ -247,12 +250,12 @@ def gather_field(mesh, field: fem.Function) -> np.ndarray | None:
     return np.concatenate(gathered) if mesh.comm.rank == 0 else None
 
 
-CAMERAS = ("xz", "xy", "yz", "iso")
+WHEAT = (0.96, 0.87, 0.70)      # RGB of the translucent bodies behind a rendered field
 
 
 def polydata(points: np.ndarray, cells: np.ndarray):
     """pyvista PolyData of a surface: points (n, 3) [m], cells (m, k) into points (all of one kind)."""
-    import pyvista as pv  # optional heavy package, loaded only when a render is made
+    import pyvista as pv  # optional heavy package, loaded only when a surface file is written
     cells = np.asarray(cells, dtype=np.int64)
     return pv.PolyData(np.asarray(points, dtype=float), np.hstack([np.full((len(cells), 1), cells.shape[1]),
                                                                    cells]).ravel())
@@ -270,68 +273,18 @@ def colour_range(values: np.ndarray, clim: tuple[float, float] | None = None) ->
     return float(clim[0]), float(clim[1])
 
 
-def save_with_colour_bar(path: str | Path, image: np.ndarray, title: str, clim: tuple[float, float], bar_title: str,
-                         cmap: str = "viridis", secondary: tuple[str, float] | None = None) -> None:
-    """PNG of a rendered `image` (H, W, 3) under one `title`, with a horizontal colour bar below it: `cmap` over
-    `clim`, labelled `bar_title` (the quantity and its unit), and, if `secondary` = (label, factor), a second
-    scale above the bar in another unit (value * factor, e.g. ("[mmHg]", 7.50) for kPa).
-
-    The colour bar is drawn by matplotlib, not by VTK: vtkScalarBarActor aborts the process (std::bad_alloc in
-    the std::regex of its tick-label format, vtk::to_std_format) once dolfinx is imported, with the VTK 9.x
-    wheels here."""
-    import matplotlib  # optional heavy package, loaded only when a plot is drawn
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt  # optional heavy package, loaded only when a plot is drawn
-    height, width = image.shape[:2]
-    dpi = 100
-    below, above = 130, 40                       # pixels for the colour bar and for the title
-    total = height + below + above
-    fig = plt.figure(figsize=(width / dpi, total / dpi), dpi=dpi)
-    bottom = below / total
-    view = fig.add_axes((0.0, bottom, 1.0, height / total))
-    view.imshow(image)
-    view.set_axis_off()
-    fig.text(0.01, 1.0 - 0.5 * above / total, title, fontsize=13, va="center", ha="left")
-    bar_axes = fig.add_axes((0.2, 0.45 * bottom, 0.6, 0.15 * bottom))
-    mappable = matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(*clim), cmap=cmap)
-    bar = fig.colorbar(mappable, cax=bar_axes, orientation="horizontal")
-    bar.set_label(bar_title)
-    if secondary is not None:
-        label, factor = secondary
-        top = bar_axes.secondary_xaxis("top", functions=(lambda v: v * factor, lambda v: v / factor))
-        top.set_xlabel(label)
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi)
-    plt.close(fig)
-
-
-def set_camera(plotter, camera: str, zoom: float) -> None:
-    """Point the camera of `plotter` along one of CAMERAS and zoom by `zoom` (ValueError naming camera)."""
-    if camera not in CAMERAS:
-        raise ValueError(f"camera must be one of {CAMERAS}, got {camera!r}")
-    {"xz": plotter.view_xz, "xy": plotter.view_xy, "yz": plotter.view_yz, "iso": plotter.view_isometric}[camera]()
-    plotter.camera.zoom(zoom)
-
-
 def render_field(path: str | Path, surface: tuple[np.ndarray, np.ndarray], values: np.ndarray, title: str,
                  bodies: Sequence[tuple[np.ndarray, np.ndarray]] = (), camera: str = "xy", zoom: float = 1.0,
                  clim: tuple[float, float] | None = None, scalar_bar_title: str = ""):
     """Render a gathered surface coloured by per-point `values` (viridis over `clim`, default 0 to the largest
-    value), with translucent body surfaces (points, cells) behind it, to a PNG off-screen (call on rank 0 with
-    gathered data). The title is printed once, as given; the colour bar carries `scalar_bar_title` (the
-    quantity and its unit, e.g. "contact pressure [Pa]"); pass the same `clim` to frames that share a scale."""
-    os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")
-    import pyvista as pv  # optional heavy package, loaded only when a render is made
-    cloth = polydata(*surface)
-    cloth.point_data["field"] = np.asarray(values, dtype=float)
+    value), with its cell edges and translucent body surfaces (points, cells) behind it, to a PNG off-screen
+    (fabricfem.render; call on rank 0 with gathered data). The title is printed once, as given; the colour bar
+    carries `scalar_bar_title` (the quantity and its unit, e.g. "contact pressure [Pa]"); pass the same `clim` to
+    frames that share a scale; `camera` one of fabricfem.render.CAMERAS."""
     low_high = colour_range(values, clim)
-    plotter = pv.Plotter(off_screen=True, window_size=(1200, 800))
-    for bp, bc in bodies:
-        plotter.add_mesh(polydata(bp, bc), color="wheat", opacity=0.35)
-    plotter.add_mesh(cloth, scalars="field", cmap="viridis", show_edges=True, clim=low_high, show_scalar_bar=False)
-    set_camera(plotter, camera, zoom)
-    image = plotter.screenshot(None, return_img=True)
-    plotter.close()
+    layers = [Layer(bp, bc, colour=WHEAT, opacity=0.35) for bp, bc in bodies]
+    layers.append(Layer(*surface, values=np.asarray(values, dtype=float), clim=low_high, edges=True))
+    image = render_layers(layers, camera, zoom)
     save_with_colour_bar(path, image, title, low_high, scalar_bar_title or "value")
 
 

@@ -8,7 +8,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 # optional packages, and heavy ones a run may not need (trimesh: mesh skins only; scipy: gait curves), each
 # imported at first use with a comment saying why
-OPTIONAL = {"pyvista", "matplotlib", "mpl_toolkits", "gmsh", "slepc4py", "trimesh", "scipy"}
+OPTIONAL = {"pyvista", "matplotlib", "mpl_toolkits", "gmsh", "slepc4py", "trimesh", "scipy", "vtkmodules", "PIL"}
 
 
 def test_import_linter_contracts_are_kept():

@@ -26,6 +26,7 @@ warp is the first material direction E1, weft E2 = normal x warp.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import dolfinx.cpp
@@ -35,7 +36,7 @@ import ufl
 from dolfinx.mesh import GhostMode, Mesh, MeshTagsMetaClass
 from mpi4py import MPI
 
-from . import directions
+from . import directions, mesh_cache
 from ._gmsh_session import gmsh_model
 from .fabric_mesh import DirectionField, FabricMesh
 from .sector_partition import sector_partitioner
@@ -159,6 +160,7 @@ def _partitioner(partition: str, x: np.ndarray, gdim: int):
 
 def model_to_mesh(model: Any, comm: MPI.Comm, rank: int = 0, gdim: int = 3,
                   ghost_mode: GhostMode = GhostMode.shared_facet, partition: str = "graph",
+                  save_to: Path | None = None,
                   ) -> tuple[Mesh, MeshTagsMetaClass | None, MeshTagsMetaClass, dict[str, int]]:
     """Convert the current gmsh model (meshed on ``rank`` only) to a dolfinx mesh.
 
@@ -175,6 +177,7 @@ def model_to_mesh(model: Any, comm: MPI.Comm, rank: int = 0, gdim: int = 3,
         partition: ``"graph"`` (dolfinx's graph partitioner, SCOTCH) or
             ``"sectors"`` (a tube about +x split by angle,
             fabricfem.meshes.sector_partition).
+        save_to: a cache file (fabricfem.meshes.mesh_cache) that keeps the extracted arrays.
 
     Returns:
         ``(mesh, cell_tags, facet_tags, names)``: cell tags from physical
@@ -188,15 +191,27 @@ def model_to_mesh(model: Any, comm: MPI.Comm, rank: int = 0, gdim: int = 3,
     """
     if not isinstance(gdim, (int, np.integer)) or not 1 <= gdim <= 3:
         raise ValueError(f"gdim: must be 1, 2 or 3, got {gdim!r}")
+    data: dict[str, Any] | Exception | None = None
     if comm.rank == rank:
         try:
-            data: dict[str, Any] | Exception = _extract(model, gdim)
-            header = {k: data[k] for k in ("tdim", "cell_type", "facet_type", "has_cell_tags", "names")}
-            header["nodes"] = (data["cells"].shape[1], data["facets"].shape[1])
+            data = _extract(model, gdim)
             if data["tdim"] > gdim:
                 raise ValueError(f"gdim: {gdim} is less than the cell dimension {data['tdim']}")
         except Exception as error:  # re-raised on every rank below
-            data = header = error
+            data = error
+        if save_to is not None and isinstance(data, dict):
+            mesh_cache.save(save_to, data)
+    return _distribute(data, comm, rank, gdim, ghost_mode, partition)
+
+
+def _distribute(data: dict[str, Any] | Exception | None, comm: MPI.Comm, rank: int, gdim: int,
+                ghost_mode: GhostMode, partition: str
+                ) -> tuple[Mesh, MeshTagsMetaClass | None, MeshTagsMetaClass, dict[str, int]]:
+    """The dolfinx mesh and tags of the extracted `data` on `rank` (or its error, raised on every rank)."""
+    if comm.rank == rank:
+        header: dict[str, Any] | Exception = data if isinstance(data, Exception) else {
+            **{k: data[k] for k in ("tdim", "cell_type", "facet_type", "has_cell_tags", "names")},
+            "nodes": (data["cells"].shape[1], data["facets"].shape[1])}
         header = comm.bcast(header, root=rank)
     else:
         header = comm.bcast(None, root=rank)
@@ -234,8 +249,9 @@ def model_to_mesh(model: Any, comm: MPI.Comm, rank: int = 0, gdim: int = 3,
 
 def gmsh_to_dolfinx(build: Callable[[Any], None], comm: MPI.Comm, rank: int = 0, gdim: int = 3,
                     name: str = "fabricfem", options: Mapping[str, float] | None = None,
-                   ghost_mode: GhostMode = GhostMode.shared_facet, partition: str = "graph",
-                   ) -> tuple[Mesh, MeshTagsMetaClass | None, MeshTagsMetaClass, dict[str, int]]:
+                    ghost_mode: GhostMode = GhostMode.shared_facet, partition: str = "graph",
+                    cache_key: str | None = None,
+                    ) -> tuple[Mesh, MeshTagsMetaClass | None, MeshTagsMetaClass, dict[str, int]]:
     """Run ``build(gmsh.model)`` in a fresh gmsh model on ``rank`` and convert it (``partition``: as in
     :func:`model_to_mesh`).
 
@@ -243,8 +259,15 @@ def gmsh_to_dolfinx(build: Callable[[Any], None], comm: MPI.Comm, rank: int = 0,
     initialised/cleaned up around it (see ``_gmsh_session.gmsh_model``) with
     the numeric gmsh ``options`` set meanwhile.  An error in ``build`` is
     raised on every rank (no deadlock).  Returns what :func:`model_to_mesh`
-    returns.
+    returns.  With ``cache_key`` (a string naming the code and arguments of
+    ``build``; fabricfem.meshes.mesh_cache) a mesh kept from an earlier run
+    is used instead of gmsh, and a new one is kept.
     """
+    path = mesh_cache.path_for(f"{name}|{dict(options or {})}|{gdim}|{cache_key}") if cache_key else None
+    if path is not None:
+        kept = mesh_cache.load(path) if comm.rank == rank else None
+        if comm.bcast(kept is not None, root=rank):
+            return _distribute(kept, comm, rank, gdim, ghost_mode, partition)
     with gmsh_model(comm, rank, name, options) as model:
         error = None
         if model is not None:
@@ -255,13 +278,15 @@ def gmsh_to_dolfinx(build: Callable[[Any], None], comm: MPI.Comm, rank: int = 0,
         error = comm.bcast(error, root=rank)
         if error is not None:
             raise error
-        return model_to_mesh(model, comm, rank, gdim=gdim, ghost_mode=ghost_mode, partition=partition)
+        return model_to_mesh(model, comm, rank, gdim=gdim, ghost_mode=ghost_mode, partition=partition,
+                             save_to=path)
 
 
 def mesh_from_gmsh(build: Callable[[Any], None], warp: Sequence[float] | DirectionField,
                    normal: Sequence[float] | DirectionField, comm: MPI.Comm = MPI.COMM_WORLD, name: str = "fabricfem",
                    options: Mapping[str, float] | None = None,
-                   ghost_mode: GhostMode = GhostMode.shared_facet, partition: str = "graph") -> FabricMesh:
+                   ghost_mode: GhostMode = GhostMode.shared_facet, partition: str = "graph",
+                   cache_key: str | None = None) -> FabricMesh:
     """Any surface built in gmsh as a distributed, tagged :class:`FabricMesh` (metres).
 
     ``build(model)`` runs on rank 0 in a fresh ``gmsh.model`` (``options``: numeric gmsh options meanwhile)
@@ -277,6 +302,8 @@ def mesh_from_gmsh(build: Callable[[Any], None], warp: Sequence[float] | Directi
         comm: communicator of the mesh; gmsh runs on its rank 0 only.
         partition: how the cells are split among the ranks: "graph" (SCOTCH) or "sectors" (a tube about +x,
             by angle: fabricfem.meshes.sector_partition).
+        cache_key: a string naming the code and arguments of ``build``: the mesh is kept on disk and reused
+            without gmsh (fabricfem.meshes.mesh_cache); None: always meshed.
 
     Raises:
         ValueError: on every rank, if ``build`` fails or the model cannot be converted (naming the cause), or
@@ -284,6 +311,7 @@ def mesh_from_gmsh(build: Callable[[Any], None], warp: Sequence[float] | Directi
     """
     fields = [directions.constant(v) if not callable(v) else v for v in (warp, normal)]
     mesh, cell_tags, facet_tags, names = gmsh_to_dolfinx(build, comm, 0, gdim=3, name=name, options=options,
-                                                         ghost_mode=ghost_mode, partition=partition)
+                                                         ghost_mode=ghost_mode, partition=partition,
+                                                         cache_key=cache_key)
     return FabricMesh(mesh=mesh, facet_tags=facet_tags, tags=names, warp=fields[0], normal=fields[1],
                       cell_tags=cell_tags)

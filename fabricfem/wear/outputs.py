@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import functools
 import math
-import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -19,9 +18,11 @@ from mpi4py import MPI
 from scipy.spatial import cKDTree
 
 from fabricfem import io as fio
+from fabricfem.render import Layer, render_layers, save_with_colour_bar
 
 PA_PER_MMHG = 133.322387415      # Pa
 MMHG_PER_KPA = 1000.0 / PA_PER_MMHG
+GREY, DIM_GREY = (0.5, 0.5, 0.5), (0.41, 0.41, 0.41)     # RGB of the garment's fill and edges in the renders
 
 
 TORQUE_ERROR_FROM = 10.0    # deg: a sleeve's torque curve is compared from here to the final angle
@@ -202,30 +203,22 @@ def render_skin_pressure(path: str | Path, points: np.ndarray, triangles: np.nda
     """PNG (off-screen, rank 0's data) of the body surface (points (n, 3) [m], triangles (m, 3)) coloured by
     the contact pressure `values_kPa` (n,) [kPa] over the fixed colour range `clim` = (low, high) [kPa] (pass
     the same to every frame of a run), with a colour bar "contact pressure [kPa]" and a second scale in mmHg
-    above it (io.save_with_colour_bar), the garment (points, cells) as a translucent grey surface with its edges
-    if given, `title` once, and the camera of io.render_field (`camera` in io.CAMERAS, `zoom`)."""
+    above it (fabricfem.render.save_with_colour_bar), the garment (points, cells) as a translucent grey surface
+    with its edges if given, `title` once, seen along `camera` (one of fabricfem.render.CAMERAS) zoomed by `zoom`
+    (fabricfem.render.render_layers)."""
     values = np.asarray(values_kPa, dtype=float).reshape(-1)
     if len(values) != len(points):
         raise ValueError(f"values_kPa: expected {len(points)} values (one per point), got {len(values)}")
     low, high = fio.colour_range(values, clim)
-    os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")
-    import pyvista as pv  # optional heavy package, loaded only when a render is made
-    skin = fio.polydata(points, triangles)
-    skin.point_data["pressure_kPa"] = values
-    plotter = pv.Plotter(off_screen=True, window_size=(1200, 800))
-    plotter.add_mesh(skin, scalars="pressure_kPa", cmap="viridis", clim=(low, high), smooth_shading=True,
-                     show_scalar_bar=False)
+    layers = [Layer(points, triangles, values, (low, high), smooth=True)]
     if garment_surface is not None:
         # where the garment presses, its flat cells lie on or just under the finer skin and are hidden by it:
         # the grey fill and edges show the garment where it stands off the skin
-        plotter.add_mesh(fio.polydata(*garment_surface), color="gray", opacity=0.15)
-        plotter.add_mesh(fio.polydata(*garment_surface), style="wireframe", color="dimgray", opacity=0.5,
-                         line_width=1)
-    fio.set_camera(plotter, camera, zoom)
-    image = plotter.screenshot(None, return_img=True)
-    plotter.close()
-    fio.save_with_colour_bar(path, image, title, (low, high), "contact pressure [kPa]",
-                             secondary=(f"[mmHg]  (1 kPa = {MMHG_PER_KPA:.2f} mmHg)", MMHG_PER_KPA))
+        layers += [Layer(*garment_surface, colour=GREY, opacity=0.15),
+                   Layer(*garment_surface, colour=DIM_GREY, opacity=0.5, wireframe=True)]
+    image = render_layers(layers, camera, zoom)
+    save_with_colour_bar(path, image, title, (low, high), "contact pressure [kPa]",
+                         secondary=(f"[mmHg]  (1 kPa = {MMHG_PER_KPA:.2f} mmHg)", MMHG_PER_KPA))
 
 
 # ---------------------------------------------------------------------------------------- OpenSim storage
