@@ -177,14 +177,19 @@ def _window():
 
 
 def nice_ticks(low: float, high: float, count: int = 6) -> tuple[np.ndarray, int]:
-    """About `count` tick values in [low, high] at a step of 1, 2, 2.5 or 5 x 10^k, and the decimals to print."""
-    span = high - low
-    raw = span / max(count - 1, 1)
-    power = 10.0 ** math.floor(math.log10(raw))
-    mantissa = next(m for m in (1.0, 2.0, 2.5, 5.0, 10.0) if m * power >= raw * (1.0 - 1e-9))
-    step = mantissa * power
+    """Tick values in [low, high] at a step of 1, 2, 2.5 or 5 x 10^k: the most ticks not above count + 1 (the
+    larger step on a tie), and the decimals to print them with."""
+    raw = (high - low) / max(count - 1, 1)
+    power = math.floor(math.log10(raw))
+    best: tuple[int, float] | None = None
+    for step in sorted(m * 10.0 ** k for m in (1.0, 2.0, 2.5, 5.0) for k in range(power - 1, power + 2)):
+        n = math.floor(high / step + 1e-9) - math.ceil(low / step - 1e-9) + 1
+        if n <= count + 1 and (best is None or n > best[0] or (n == best[0] and step > best[1])):
+            best = (n, step)
+    step = best[1]
     ticks = np.arange(math.ceil(low / step - 1e-9), math.floor(high / step + 1e-9) + 1) * step
-    decimals = max(0, -int(math.floor(math.log10(step) + 1e-9)) + (1 if mantissa == 2.5 else 0))
+    mantissa = step / 10.0 ** math.floor(math.log10(step) + 1e-9)
+    decimals = max(0, -int(math.floor(math.log10(step) + 1e-9)) + (1 if abs(mantissa - 2.5) < 1e-9 else 0))
     return ticks, decimals
 
 
