@@ -25,6 +25,7 @@ warp is the first material direction E1, weft E2 = normal x warp.
 """
 from __future__ import annotations
 
+import inspect
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -263,7 +264,8 @@ def gmsh_to_dolfinx(build: Callable[[Any], None], comm: MPI.Comm, rank: int = 0,
     ``build``; fabricfem.meshes.mesh_cache) a mesh kept from an earlier run
     is used instead of gmsh, and a new one is kept.
     """
-    path = mesh_cache.path_for(f"{name}|{dict(options or {})}|{gdim}|{cache_key}") if cache_key else None
+    path = (mesh_cache.path_for(f"{name}|{dict(options or {})}|{gdim}|{inspect.getsource(_extract)}|{cache_key}")
+            if cache_key else None)          # the extraction's own code is part of the key
     if path is not None:
         kept = mesh_cache.load(path) if comm.rank == rank else None
         if comm.bcast(kept is not None, root=rank):

@@ -4,8 +4,8 @@ from a gmsh model, kept per generator and arguments, so that a run that meshes t
 Loading gmsh's library alone costs about 0.2 s per process (the dlopen of libgmsh), the meshing of the shipped
 sleeve 0.03 s; the cached arrays load in a few milliseconds and give the same dolfinx mesh (the same arrays go
 into dolfinx.mesh.create_mesh). The key is the caller's description of the mesh (the generator's source and
-arguments), this module's VERSION and the installed gmsh module's file stamp, so that a change of any of them
-meshes again. Files: XDG_CACHE_HOME/fenics/fabricfem/meshes/<sha256>.npz (beside the compiled kernels), written
+arguments), the source of gmsh_io's extraction, this module's VERSION and the installed gmsh module's file stamp,
+so that a change of any of them meshes again. Files: XDG_CACHE_HOME/fenics/fabricfem/meshes/<sha256>.npz (beside the compiled kernels), written
 through a temporary name and a rename (two processes meshing at once leave one whole file). An unreadable file is
 treated as missing.
 """

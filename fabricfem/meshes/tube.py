@@ -128,7 +128,8 @@ def _cylinder(length: float, radius: float, n_around: int, n_along: int, cell: s
     # mirror plane, so both halves carry the same contact) while each rank gets at least 2 cells around; a panel,
     # or a tube on more ranks, by the graph partitioner
     by_angle = sector is None and by_sectors(comm.size, n_around)
-    key = repr((inspect.getsource(_build), length, radius, n_around, n_along, cell, order, sector))
+    key = repr((inspect.getsource(_build), inspect.getsource(_n_arcs), length, radius, n_around, n_along, cell,
+                order, sector))
     return mesh_from_gmsh(lambda model: _build(model, length, radius, n_around, n_along, cell, order, sector),
                           (1.0, 0.0, 0.0), directions.radial_from_x_axis(), comm, name=name, ghost_mode=ghost_mode,
                           partition="sectors" if by_angle else "graph", cache_key=key)
