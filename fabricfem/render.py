@@ -17,9 +17,12 @@ from __future__ import annotations
 import ast
 import importlib.util
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import lru_cache
 from pathlib import Path
+from types import ModuleType
+from typing import Any
 
 import numpy as np
 
@@ -55,25 +58,29 @@ def viridis() -> np.ndarray:
     spec = importlib.util.find_spec("matplotlib")
     folders = list(spec.submodule_search_locations or []) if spec is not None else []
     for folder in folders:
-        table = Path(folder) / "_cm_listed.py"
-        if table.exists():
-            text = table.read_text()
+        try:
+            text = (Path(folder) / "_cm_listed.py").read_text()
             start = text.index("_viridis_data = ") + len("_viridis_data = ")
-            end = text.index("]]", start) + 2
-            return np.asarray(ast.literal_eval(text[start:end]), dtype=float)
+            table = np.asarray(ast.literal_eval(text[start:text.index("]]", start) + 2]), dtype=float)
+        except (OSError, ValueError, SyntaxError):
+            continue
+        if table.shape == (256, 3):
+            return table
     import matplotlib  # optional heavy package: only when its table file is not where it is expected
     return np.asarray(matplotlib.colormaps["viridis"](np.linspace(0.0, 1.0, 256))[:, :3])
 
 
-def _vtk():
-    """The VTK classes used here (imported on first render)."""
+def _vtk() -> tuple[ModuleType, ModuleType, ModuleType, ModuleType, ModuleType]:
+    """VTK's modules used here: vtkCommonCore, vtkCommonDataModel, vtkFiltersCore, vtkRenderingCore and
+    util.numpy_support (imported on the first render)."""
     import vtkmodules.vtkRenderingOpenGL2  # noqa: F401  heavy, only when a render is made (the OpenGL back end)
     from vtkmodules import vtkCommonCore, vtkCommonDataModel, vtkFiltersCore, vtkRenderingCore  # heavy, as above
     from vtkmodules.util import numpy_support  # heavy, as above
     return vtkCommonCore, vtkCommonDataModel, vtkFiltersCore, vtkRenderingCore, numpy_support
 
 
-def _polydata(points: np.ndarray, cells: np.ndarray):
+def _polydata(points: np.ndarray, cells: np.ndarray) -> Any:
+    """vtkPolyData of a surface: points (n, 3) [m], cells (m, k) into points (all of one kind)."""
     core, data_model, _, _, convert = _vtk()
     cells = np.asarray(cells, dtype=np.int64)
     k = cells.shape[1]
@@ -88,8 +95,8 @@ def _polydata(points: np.ndarray, cells: np.ndarray):
     return poly
 
 
-def _actor(layer: Layer):
-    """The VTK actor of one layer."""
+def _actor(layer: Layer) -> Any:
+    """The vtkActor of one layer."""
     core, _, filters, rendering, convert = _vtk()
     poly = _polydata(layer.points, layer.cells)
     mapper = rendering.vtkPolyDataMapper()
@@ -167,7 +174,7 @@ def render_layers(layers: list[Layer], camera: str = "iso", zoom: float = 1.0,
 
 
 @lru_cache(maxsize=1)
-def _window():
+def _window() -> Any:
     """The process's off-screen render window, made at the first render and kept: a new window (an OpenGL
     context) per frame cost 0.13 s a frame, the kept one 0.06 s (docs/findings/2026-11-28-render-cost.md)."""
     window = _vtk()[3].vtkRenderWindow()
@@ -178,7 +185,9 @@ def _window():
 
 def nice_ticks(low: float, high: float, count: int = 6) -> tuple[np.ndarray, int]:
     """Tick values in [low, high] at a step of 1, 2, 2.5 or 5 x 10^k: the most ticks not above count + 1 (the
-    larger step on a tie), and the decimals to print them with."""
+    larger step on a tie), and the decimals to print them with (ValueError naming clim unless low < high, finite)."""
+    if not (math.isfinite(low) and math.isfinite(high) and low < high):
+        raise ValueError(f"clim must be two finite numbers (low, high) with low < high, got {(low, high)!r}")
     raw = (high - low) / max(count - 1, 1)
     power = math.floor(math.log10(raw))
     best: tuple[int, float] | None = None
@@ -194,7 +203,7 @@ def nice_ticks(low: float, high: float, count: int = 6) -> tuple[np.ndarray, int
 
 
 @lru_cache(maxsize=4)
-def _font(size: int):
+def _font(size: int) -> Any:
     """DejaVu Sans at `size` pixels (matplotlib's copy, else Debian's), else Pillow's built-in font."""
     from PIL import ImageFont  # loaded only when a colour bar is drawn
     spec = importlib.util.find_spec("matplotlib")
@@ -207,7 +216,7 @@ def _font(size: int):
     return ImageFont.load_default()
 
 
-def _scale(draw, values: np.ndarray, decimals: int, x_of, y: int, up: bool) -> None:
+def _scale(draw: Any, values: np.ndarray, decimals: int, x_of: Callable[[float], float], y: int, up: bool) -> None:
     """Tick marks at x_of(values) from the bar edge y and their labels above (`up`) or below it."""
     font = _font(13)
     for value in values:
@@ -223,13 +232,14 @@ def save_with_colour_bar(path: str | Path, image: np.ndarray, title: str, clim: 
     `clim`, labelled `bar_title` (the quantity and its unit), and, if `secondary` = (label, factor), a second
     scale above the bar in another unit (value * factor, e.g. ("[mmHg]", 7.50) for kPa)."""
     from PIL import Image, ImageDraw  # loaded only when a colour bar is drawn
+    low, high = float(clim[0]), float(clim[1])
+    ticks, decimals = nice_ticks(low, high)                       # refuses a bad clim before drawing
     height, width = image.shape[:2]
     above, below = 40, 130                       # pixels for the title and for the colour bar
     canvas = Image.new("RGB", (width, above + height + below), "white")
     canvas.paste(Image.fromarray(np.ascontiguousarray(image[:, :, :3], dtype=np.uint8)), (0, above))
     draw = ImageDraw.Draw(canvas)
     draw.text((12, above // 2), title, fill="black", font=_font(17), anchor="lm")
-    low, high = float(clim[0]), float(clim[1])
     x0, x1 = int(0.2 * width), int(0.8 * width)
     top = above + height + 44
     colours = (255.0 * viridis()[np.linspace(0, 255, x1 - x0).round().astype(int)]).astype(np.uint8)
@@ -238,7 +248,6 @@ def save_with_colour_bar(path: str | Path, image: np.ndarray, title: str, clim: 
 
     def x_of(value: float) -> float:
         return x0 + (x1 - 1 - x0) * (value - low) / (high - low)
-    ticks, decimals = nice_ticks(low, high)
     _scale(draw, ticks, decimals, x_of, top + 20, up=False)
     draw.text(((x0 + x1) // 2, top + 46), bar_title, fill="black", font=_font(14), anchor="ma")
     if secondary is not None:

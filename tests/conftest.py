@@ -5,6 +5,7 @@ import pytest
 from mpi4py import MPI
 
 os.environ.setdefault("PYVISTA_OFF_SCREEN", "true")
+os.environ.setdefault("FABRICFEM_MESH_CACHE", "0")     # the tests mesh with gmsh (tests/test_mesh_cache.py turns it on)
 
 
 SLOW_TESTS = {line.split("#")[0].strip() for line in (Path(__file__).parent / "tiers.txt").read_text().splitlines()

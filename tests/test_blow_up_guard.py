@@ -15,8 +15,8 @@ from fabricfem.wear.engine import Phase, WearError, run_phases
 
 
 class _GrowingState:
-    """A stand-in integrator whose velocity doubles every step from 1 mm/s (1.02 m/s after 10 steps, 1049 m/s after
-    20; finite for a thousand steps)."""
+    """A stand-in integrator of two nodes whose velocity components double every step from 1 mm/s (speeds of
+    sqrt(3) x 1.02 = 1.77 m/s after 10 steps, sqrt(3) x 1049 = 1816 m/s after 20; finite for a thousand steps)."""
 
     def __init__(self):
         self.d = PETSc.Vec().createMPI(6, comm=MPI.COMM_SELF)
@@ -33,19 +33,19 @@ class _GrowingState:
 
 
 def test_a_finite_but_blown_up_state_stops_at_the_record():
-    """Records of 10 steps: the first (1.02 m/s) is kept, the second (1049 m/s > BLOW_UP_SPEED) stops the run."""
-    assert 1.02 < BLOW_UP_SPEED < 1049.0
+    """Records of 10 steps: the first (1.77 m/s) is kept, the second (1816 m/s > BLOW_UP_SPEED) stops the run."""
+    assert 1.77 < BLOW_UP_SPEED < 1816.0
     integrator = _GrowingState()
     contact = SimpleNamespace(reset_means=lambda: None, timings={"pose_torque": 0.0},
                               nodes=SimpleNamespace(dofs=np.arange(6).reshape(2, 3)))
     history = SimpleNamespace(steps=[], failure="")
     phase = Phase("motion", records=3)
-    with pytest.raises(WearError, match=r"phase 'motion' before t = 0.002 s \(step 20, .*a node moves at 1.05e\+03 m/s "
+    with pytest.raises(WearError, match=r"phase 'motion' before t = 0.002 s \(step 20, .*a node moves at 1.82e\+03 m/s "
                                         r"\(above 1000 m/s") as caught:
         run_phases(integrator, contact, [phase], 10, lambda phase, k, steps: k, history)
     assert caught.value.reason == "EXPLICIT_BLOW_UP"
     assert history.failure.startswith("wear: the explicit run stopped")
-    assert history.steps == [0]                                    # the record at step 10 (1.02 m/s) only
+    assert history.steps == [0]                                    # the record at step 10 (1.77 m/s) only
     assert np.isfinite(integrator.v.norm())                        # the old check (finite state) would go on
 
 
@@ -61,3 +61,16 @@ def test_rotation_rates_are_not_speeds():
     history = SimpleNamespace(steps=[], failure="")
     run_phases(integrator, contact, [Phase("motion", records=2)], 10, lambda phase, k, steps: k, history)
     assert history.steps == [0, 1] and history.failure == ""
+
+
+def test_the_bound_is_on_the_speed_not_a_component():
+    """A node at (800, 800, 800) m/s moves at 1386 m/s: stopped, though no component exceeds 1000 m/s."""
+    integrator = _GrowingState()
+    integrator.step = lambda: None
+    integrator.v.setValues([0, 1, 2], [800.0, 800.0, 800.0])
+    integrator.v.assemble()
+    contact = SimpleNamespace(reset_means=lambda: None, timings={"pose_torque": 0.0},
+                              nodes=SimpleNamespace(dofs=np.arange(6).reshape(2, 3)))
+    history = SimpleNamespace(steps=[], failure="")
+    with pytest.raises(WearError, match=r"a node moves at 1.39e\+03 m/s"):
+        run_phases(integrator, contact, [Phase("motion", records=1)], 10, lambda phase, k, steps: k, history)

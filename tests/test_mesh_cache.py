@@ -12,7 +12,8 @@ from fabricfem.meshes.tube import tube
 
 
 def _state(fmesh) -> tuple:
-    """The gathered input-ordered geometry, cells and edge tags of a FabricMesh (comparable across builds)."""
+    """This rank's geometry (sorted), its cells' node positions (sorted) and the number of its edges tagged end0 and
+    end1, of a FabricMesh (comparable across builds on the same ranks)."""
     mesh = fmesh.mesh
     x = mesh.geometry.x
     order = np.lexsort(np.round(x / 1e-12).T)
@@ -31,6 +32,7 @@ def _without_gmsh(monkeypatch):
 def test_a_kept_tube_is_the_same_mesh_without_gmsh(tmp_path, monkeypatch, comm):
     folder = comm.bcast(str(tmp_path), root=0)
     monkeypatch.setenv("XDG_CACHE_HOME", folder)
+    monkeypatch.setenv("FABRICFEM_MESH_CACHE", "1")
     built = _state(tube(0.3, 0.05, 12, 8, "quadrilateral", comm, 2))
     assert len(list(mesh_cache.folder().glob("*.npz"))) == 1
     with monkeypatch.context() as patch:
@@ -42,10 +44,15 @@ def test_a_kept_tube_is_the_same_mesh_without_gmsh(tmp_path, monkeypatch, comm):
     tube(0.3, 0.05, 12, 9, "quadrilateral", comm, 2)                  # another argument: meshed and kept
     comm.barrier()
     assert len(list(mesh_cache.folder().glob("*.npz"))) == 2
+    monkeypatch.setenv("FABRICFEM_MESH_CACHE", "0")                    # switched off: gmsh again, nothing kept
+    tube(0.3, 0.05, 12, 10, "quadrilateral", comm, 2)
+    comm.barrier()
+    assert len(list(mesh_cache.folder().glob("*.npz"))) == 2
 
 
 def test_an_unreadable_file_is_meshed_again(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    monkeypatch.setenv("FABRICFEM_MESH_CACHE", "1")
     tube(0.3, 0.05, 12, 8, "quadrilateral", MPI.COMM_SELF, 2)
     (kept,) = mesh_cache.folder().glob("*.npz")
     whole = kept.read_bytes()

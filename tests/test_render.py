@@ -38,6 +38,11 @@ def test_colour_bar_ends_and_layout(tmp_path):
     np.testing.assert_array_equal(row[x0 + 1:x1 - 1], colours[index[1:-1]])    # inside the black outline
 
 
+def test_bad_colour_range_is_refused(tmp_path):
+    with pytest.raises(ValueError, match="clim"):
+        render.save_with_colour_bar(tmp_path / "x.png", np.zeros((4, 4, 3), np.uint8), "t", (1.0, 1.0), "p")
+
+
 def test_bad_camera_and_zoom_are_refused():
     square = render.Layer(np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0]]), np.array([[0, 1, 2]]))
     with pytest.raises(ValueError, match="camera"):

@@ -34,14 +34,14 @@ Held nodes (a prescribed displacement, or on the body: 1 / m_k = 0) take no impu
 carry small weights (a vertex on the body over a triangle whose closest point lies near a held node) would give
 its free node a change u_N / w: the normal impulse is bounded so that no node's velocity changes by more than
 |u_N| (J_N <= |u_N| / max_k |w_k| / m_k; without the bound the sleeve's run diverged at 123-126 degrees), and
-such a pair's approach is only partly removed, and such a pair acts in one pass of the step only: its remaining
+such a pair's approach is only partly removed. Such a pair acts in one pass of the step only: its remaining
 approach (1 - w) |u_N| would take another |u_N| in every pass, and a free node of weight w gained up to `passes` x
 |u_N| (in the pants walk with 8 passes, 4.7 to 102 m/s in one step, the start of a blow-up:
-docs/findings/2026-11-28-blow-up-speed.md). The friction impulse takes the same bound (m_eff replaced by
-1 / max(1 / m_eff, max_k |w_k| / m_k)), so that no node's velocity changes by more than |u_T| in friction and
-|J_T| <= mu J_N holds for the bounded J_N: with m_eff alone a free node of weight w took u_T / w, overshot the
-held nodes' motion and grew by about (1 / w - 1) per step (an edge-edge pair with three nodes on the body diverged
-the pants walk, docs/findings/2026-11-28-seam-contact.md).
+docs/findings/2026-11-28-seam-contact.md, "The second fault"). The friction impulse takes the same bound (m_eff
+replaced by 1 / max(1 / m_eff, max_k |w_k| / m_k)), so that no node's velocity changes by more than |u_T| in
+friction and |J_T| <= mu J_N holds for the bounded J_N: with m_eff alone a free node of weight w took u_T / w,
+overshot the held nodes' motion and grew by about (1 / w - 1) per step (an edge-edge pair with three nodes on the
+body diverged the pants walk, docs/findings/2026-11-28-seam-contact.md).
 
 Restoring (`restore_rate` r [1/s], default 0): the target of the relative normal velocity is r (d_c - delta)
 instead of 0, so that a pair inside d_c separates towards it within about 1 / r, which the capped penalty does not
@@ -157,8 +157,8 @@ static int pair_impulse(const int64_t* node, const double* w, const double* norm
   return largest > im ? 2 : 1;
 }
 
-/* `passes` Gauss-Seidel passes over the pairs (module docstring); returns the passes taken, acted[i] the number of
-   passes in which pair i acted */
+/* `passes` Gauss-Seidel passes over the pairs (module docstring); returns the passes taken (-1 if out of memory),
+   acted[i] the number of passes in which pair i acted */
 int64_t impulse_passes(int64_t n_vt, const int64_t* pair_p, const int64_t* pair_t, const double* vt_distance,
                        const double* bary, const int64_t* tri, int64_t n_ee, const int64_t* first,
                        const int64_t* second, const double* ee_distance, const double* s, const double* t,
@@ -177,6 +177,8 @@ int64_t impulse_passes(int64_t n_vt, const int64_t* pair_p, const int64_t* pair_
     acted[i] = 0;
   }
   char* bounded = calloc(n > 0 ? n : 1, 1);     /* the pair acted with its bound: once per step */
+  if (bounded == NULL)
+    return -1;
   int64_t pass = 0;
   while (pass < passes)
   {
@@ -238,6 +240,8 @@ def apply(pairs: Pairs, edge_pairs: EdgePairs, triangles: np.ndarray, edges: np.
         p(edges, "int64_t"), p(x, "double"), float(contact_distance), p(inverse_mass, "double"), float(mu),
         float(restore_rate), int(passes), p(u, "double"), p(normal, "double"), p(friction, "double"),
         p(normals, "double"), p(acted, "int64_t"))
+    if taken < 0:
+        raise MemoryError("impulse_passes: out of memory")
     return normal, friction, acted, int(taken)
 
 

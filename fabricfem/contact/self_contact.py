@@ -81,7 +81,7 @@ EXCLUSION = 2.0          # reference distance / d_c below which a vertex and a t
 DEFAULT_DAMPING = 0.5    # zeta of the pair's penalty spring
 RESTORE_RATE = 200.0     # 1/s: the impulses' target separation rate r (fabricfem.contact.impulses), 1 / (5 ms)
 FEATURE_TOLERANCE = 1e-6  # barycentric coordinates below this name no node of the closest feature
-BLOW_UP_SPEED = 1.0e3    # m/s: no point of a garment moves at 1 km/s (3 x sound in air); a faster node is a blown-up step
+BLOW_UP_SPEED = 1.0e3    # m/s: no point of a garment moves at 1 km/s (3 x sound in air); a faster node has blown up
 
 
 def checked_contact_distance(value: float | None, thickness: float, element_size: float) -> float:
@@ -246,7 +246,9 @@ class SelfContact:
 
     # ------------------------------------------------------------------ integrator hooks
     def forces(self, integrator, t: float, rhs) -> None:
-        """rhs += the contact forces at d^{n+1} (owned rows; module docstring)."""
+        """rhs += the contact forces at d^{n+1} (owned rows; module docstring). A node that moved faster than
+        BLOW_UP_SPEED [m/s] since the last step raises ValueError (`_check_speed`) before the broad phase: a
+        blown-up state that stays finite would put every triangle into one hash cell."""
         s = self.surface
         tic = time.perf_counter()
         rows = s.nodes.dofs
@@ -309,9 +311,9 @@ class SelfContact:
     def correct(self, integrator, t: float) -> None:
         """With `passes` > 0: the impulses of the step's pairs on u = v~ + dt a^{n+1}; with `zones`, then the impact
         zones of the step's collisions; a^{n+1} += du / dt on the owned rows (module docstring; every rank computes
-        all, as the forces). A non-finite velocity [m/s] entering or leaving the correction raises ValueError naming
-        the stage, the time t [s] and the node (every rank alike: the velocities are gathered), so the run stops with
-        that reason instead of carrying NaN into the next step."""
+        all, as the forces). A velocity [m/s] entering or leaving the correction that is non-finite or faster than
+        BLOW_UP_SPEED raises ValueError naming the stage, the time t [s] and the node (every rank alike: the
+        velocities are gathered), so the run stops with that reason instead of carrying NaN into the next step."""
         has_pairs = len(self.pairs) or len(self.edge_pairs)
         zones = self.zones and self._may_collide(integrator)
         self.impulse_passes = 0

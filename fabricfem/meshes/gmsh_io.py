@@ -25,7 +25,6 @@ warp is the first material direction E1, weft E2 = normal x warp.
 """
 from __future__ import annotations
 
-import inspect
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -201,7 +200,7 @@ def model_to_mesh(model: Any, comm: MPI.Comm, rank: int = 0, gdim: int = 3,
         except Exception as error:  # re-raised on every rank below
             data = error
         if save_to is not None and isinstance(data, dict):
-            mesh_cache.save(save_to, data)
+            mesh_cache.save(save_to, data)          # never raises
     return _distribute(data, comm, rank, gdim, ghost_mode, partition)
 
 
@@ -210,9 +209,12 @@ def _distribute(data: dict[str, Any] | Exception | None, comm: MPI.Comm, rank: i
                 ) -> tuple[Mesh, MeshTagsMetaClass | None, MeshTagsMetaClass, dict[str, int]]:
     """The dolfinx mesh and tags of the extracted `data` on `rank` (or its error, raised on every rank)."""
     if comm.rank == rank:
-        header: dict[str, Any] | Exception = data if isinstance(data, Exception) else {
-            **{k: data[k] for k in ("tdim", "cell_type", "facet_type", "has_cell_tags", "names")},
-            "nodes": (data["cells"].shape[1], data["facets"].shape[1])}
+        try:
+            header: dict[str, Any] | Exception = data if isinstance(data, Exception) else {
+                **{k: data[k] for k in ("tdim", "cell_type", "facet_type", "has_cell_tags", "names")},
+                "nodes": (data["cells"].shape[1], data["facets"].shape[1])}
+        except Exception as error:  # re-raised on every rank below
+            header = error
         header = comm.bcast(header, root=rank)
     else:
         header = comm.bcast(None, root=rank)
@@ -264,8 +266,9 @@ def gmsh_to_dolfinx(build: Callable[[Any], None], comm: MPI.Comm, rank: int = 0,
     ``build``; fabricfem.meshes.mesh_cache) a mesh kept from an earlier run
     is used instead of gmsh, and a new one is kept.
     """
-    path = (mesh_cache.path_for(f"{name}|{dict(options or {})}|{gdim}|{inspect.getsource(_extract)}|{cache_key}")
-            if cache_key else None)          # the extraction's own code is part of the key
+    source = Path(__file__).read_text() if cache_key and mesh_cache.enabled() else ""   # this module's code is
+    path = (mesh_cache.path_for(f"{name}|{dict(options or {})}|{gdim}|{source}|{cache_key}")   # part of the key
+            if source else None)
     if path is not None:
         kept = mesh_cache.load(path) if comm.rank == rank else None
         if comm.bcast(kept is not None, root=rank):

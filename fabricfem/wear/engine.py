@@ -82,10 +82,10 @@ def run_phases(integrator, contact, phases: list[Phase], steps_per_record: int |
     `history.steps`; `on_step(record)` after each. Before each record interval the contact's time averages are
     reset (`contact.reset_means()`): a record is the mean over its interval.
 
-    A non-finite displacement or velocity raises WearError naming the phase, the time and the step (or, with
-    stop_on_failure=False, sets `history.failure` and returns). Returns the wall-time breakdown
-    (`step_breakdown`) of the phases for which `timed(phase)` holds, with the process's CPU time per step;
-    `on_phase_end(phase)` is called after each completed phase (the settling diagnostics of the sleeve).
+    A non-finite displacement or velocity, or a node faster than BLOW_UP_SPEED, raises WearError naming the
+    phase, the time and the step (or, with stop_on_failure=False, sets `history.failure` and returns). Returns the
+    wall-time breakdown (`step_breakdown`) of the phases for which `timed(phase)` holds, with the process's CPU time
+    per step; `on_phase_end(phase)` is called after each completed phase (the settling diagnostics of the sleeve).
 
     `steps_per_record` may be a callable, asked before every record interval (an adaptive step: it sets the
     integrator's dt and returns the number of steps of the interval).
@@ -127,13 +127,14 @@ class _Loop:
         self.make_record, self.on_step = make_record, on_step
         self.steps_per_record, self.start_record = steps_per_record, start_record
         self.after_record, self.should_stop = after_record, should_stop
-        self.translation_rows = np.asarray(contact.nodes.dofs).ravel()    # the owned nodes' displacement rows
+        self.translation_rows = np.asarray(contact.nodes.dofs)    # (n, 3) the owned nodes' displacement rows
         self.pending = self.done = 0
         self.sums = {"loop": 0.0, "cpu": 0.0, "steps": 0, "internal": 0.0, "hooks": 0.0, "pose": 0.0, "output": 0.0}
 
     def phase(self, phase: Phase, label: str) -> tuple[int, float, bool]:
         """Run the record intervals of `phase`: (steps run, output time [s], stopped by should_stop). A non-finite
-        state sets history.failure and raises WearError naming the phase, the time and the step."""
+        state or a node faster than BLOW_UP_SPEED (after each interval), or a ValueError of a step, sets
+        history.failure and raises WearError naming the phase, the time and the step."""
         steps_run, output = 0, 0.0
         integ = self.integrator
         for k in range(phase.records):
@@ -195,13 +196,15 @@ class _Loop:
 
 
 def _check_state(integrator, rows: np.ndarray) -> None:
-    """ValueError unless the state is finite and no node moves faster than BLOW_UP_SPEED [m/s]: the largest
-    velocity component of the translational `rows` (local rows of the owned nodes) over the ranks. A blown-up state
+    """ValueError unless the state is finite and no node moves faster than BLOW_UP_SPEED [m/s]: the largest speed
+    |v| of the owned nodes, `rows` (n, 3) their local displacement rows, over the ranks. A blown-up state
     can stay finite for many steps while its numbers grow. (The rotation rates are left out: rad/s, not a speed.)"""
     if not (math.isfinite(integrator.d.norm()) and math.isfinite(integrator.v.norm())):
         raise ValueError("non-finite displacement or velocity")
     v = integrator.v.getArray(readonly=True)[rows]
-    speed = integrator.v.comm.tompi4py().allreduce(float(np.abs(v).max(initial=0.0)), op=MPI.MAX)
+    with np.errstate(over="ignore", invalid="ignore"):
+        local = float(np.sqrt(np.einsum("ij,ij->i", v, v)).max(initial=0.0))
+    speed = integrator.v.comm.tompi4py().allreduce(local, op=MPI.MAX)
     if not speed <= BLOW_UP_SPEED:
         raise ValueError(f"a node moves at {speed:.3g} m/s (above {BLOW_UP_SPEED:g} m/s: the steps diverged)")
 
