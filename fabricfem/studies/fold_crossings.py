@@ -1,4 +1,5 @@
-"""Where a wear run's cloth crosses itself: `python -m fabricfem.studies.fold_crossings RUN_DIR SCENE [--record K]`.
+"""Where a wear run's cloth crosses itself: `python -m fabricfem.studies.fold_crossings RUN_DIR SCENE [--record K]`,
+and which cells the crossing triangles belong to: `python -m fabricfem.studies.fold_crossings RUN_DIR --cells K ...`.
 
 Reads the cloth of record K (default the last) from RUN_DIR/cloth.xdmf (Q2 cells, each split into 8 triangles on
 its 3 x 3 nodes as the self-contact splits them, fabricfem.contact.cloth_surface.split_cell), lists the
@@ -7,6 +8,13 @@ the gap of their centroids to the body's skin, the skin's segment and normal the
 record, the blended skin of fabricfem.contact.projection.skin_gap). It tells a fold stacked on one side of the skin
 (both triangles' skin normals alike) from cloth pinched between two facing sheets of skin (opposed normals), and
 prints the counts. Metres, degrees.
+
+The triangles that touch across a seam are not counted (as in the run's own count): nodes that coincide within
+STITCH_TOLERANCE at the record are taken as one point (a sewn seam's stitched nodes, whose gap after the sewing is
+below 1e-3 m in the shipped garments; two unstitched nodes that close would be merged too). `--cells` sorts each
+record's pairs by the Q2 cells of their two triangles: the same cell, neighbouring cells (sharing a node), or cells
+apart. A pair within a cell or between neighbours is a cell folded tighter than its 8-triangle proxy shows; only
+a pair apart is one part of the cloth passing through another.
 """
 from __future__ import annotations
 
@@ -16,6 +24,9 @@ from pathlib import Path
 import meshio
 import numpy as np
 from mpi4py import MPI
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
 from fabricfem.contact.cloth_surface import split_cell
 from fabricfem.contact.intersections import intersecting
@@ -23,6 +34,8 @@ from fabricfem.contact.projection import skin_gap
 from fabricfem.scenes import load
 from fabricfem.scenes.build import build_wear_run
 
+STITCH_TOLERANCE = 5e-4   # m: nodes closer than this at a record count as one point (a seam's stitched nodes)
+PER_CELL = 8     # triangles per Q2 cell (split_cell)
 OPPOSED = -0.5   # cosine of the angle between the two skin normals below which the skin faces itself
 VTK_GRID = np.array([[0, 4, 1], [7, 8, 5], [3, 6, 2]])   # the file's quad9 nodes on the 3 x 3 grid (cloth_surface.GRID)
 
@@ -37,11 +50,39 @@ def cloth_triangles(folder: Path, record: int) -> tuple[np.ndarray, np.ndarray, 
     return points + next(iter(point_data.values()))[:, :3], triangles, float(time)
 
 
+def stitched_by_position(x: np.ndarray, tolerance: float = STITCH_TOLERANCE) -> np.ndarray:
+    """(N,) labels: nodes of x (N, 3) [m] joined through neighbours closer than `tolerance` share a label."""
+    close = cKDTree(x).query_pairs(tolerance, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(close)), (close[:, 0], close[:, 1])), shape=(len(x), len(x)))
+    return connected_components(graph, directed=False)[1]
+
+
+def pairs_by_cell(pairs: np.ndarray, triangles: np.ndarray, labels: np.ndarray) -> dict[str, int]:
+    """Counts of the intersecting triangle pairs (P, 2) whose triangles lie in the same Q2 cell (PER_CELL
+    consecutive triangles), in neighbouring cells (a node label in common) or in cells apart."""
+    cell = np.arange(len(triangles)) // PER_CELL
+    incidence = coo_matrix((np.ones(triangles.size), (np.repeat(cell, 3), labels[triangles].ravel())),
+                           shape=(cell[-1] + 1, labels.max() + 1)).tocsr()
+    a, b = cell[pairs[:, 0]], cell[pairs[:, 1]]
+    shared = np.asarray(incidence[a].multiply(incidence[b]).sum(axis=1)).ravel() > 0
+    same = a == b
+    return {"same_cell": int(same.sum()), "neighbouring_cells": int((shared & ~same).sum()),
+            "cells_apart": int((~shared).sum())}
+
+
+def crossing_counts(folder: Path, record: int) -> dict:
+    """The intersecting pairs of record `record` of folder/cloth.xdmf without seam neighbours, and `pairs_by_cell`."""
+    x, triangles, time = cloth_triangles(folder, record)
+    labels = stitched_by_position(x)
+    pairs = intersecting(x, triangles, same=labels)
+    return {"record": record, "time_s": time, "pairs": len(pairs), **pairs_by_cell(pairs, triangles, labels)}
+
+
 def crossing_report(folder: Path, scene_path: Path, record: int = -1) -> dict:
     """Counts of the intersecting pairs of the record by the skin's segments under their triangles and by the
     relative direction of the skin normals, and the gaps [m] of their centroids to the skin."""
     x, triangles, time = cloth_triangles(folder, record)
-    pairs = intersecting(x, triangles)
+    pairs = intersecting(x, triangles, same=stitched_by_position(x))
     run, *_ = build_wear_run(load(scene_path), MPI.COMM_SELF)
     coordinate = run.axis_at(time) if run.axis is not None else time
     bodies = run.posed_bodies(coordinate)
@@ -62,9 +103,18 @@ def crossing_report(folder: Path, scene_path: Path, record: int = -1) -> dict:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("run_dir")
-    parser.add_argument("scene")
+    parser.add_argument("scene", nargs="?", help="the run's scene file (for the skin report)")
     parser.add_argument("--record", type=int, default=-1, help="record index (default: the last)")
+    parser.add_argument("--cells", type=int, nargs="+", metavar="K",
+                        help="records whose pairs are sorted by cell (instead of the skin report)")
     args = parser.parse_args(argv)
+    if args.cells:
+        for record in args.cells:
+            print(" ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
+                           for k, v in crossing_counts(Path(args.run_dir), record).items()), flush=True)
+        return
+    if args.scene is None:
+        parser.error("scene: the skin report needs the run's scene file (or give --cells)")
     for key, value in crossing_report(Path(args.run_dir), Path(args.scene), args.record).items():
         print(f"{key:>16}  {value}")
 

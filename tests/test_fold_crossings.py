@@ -1,0 +1,28 @@
+"""fabricfem.studies.fold_crossings: the crossing pairs sorted by cell (same Q2 cell, neighbouring cells, cells
+apart) and the seam labels by position, on small hand-made cases whose answers are known by construction."""
+from __future__ import annotations
+
+import numpy as np
+
+from fabricfem.studies.fold_crossings import PER_CELL, pairs_by_cell, stitched_by_position
+
+
+def test_nodes_closer_than_the_tolerance_share_a_label():
+    x = np.array([[0.0, 0, 0], [1e-4, 0, 0], [3e-4, 0, 0], [1.0, 0, 0], [2.0, 0, 0]])
+    labels = stitched_by_position(x, tolerance=2.5e-4)
+    assert labels[0] == labels[1] == labels[2]                  # a chain 0-1-2 joins even where 0-2 is 3e-4 apart
+    assert len({labels[0], labels[3], labels[4]}) == 3
+
+
+def test_pairs_are_sorted_by_cell():
+    """Three cells of PER_CELL triangles each: cells 0 and 1 share node 5 (by label: node 9 of cell 1 is stitched to
+    node 5), cell 2 shares nothing."""
+    rng = np.random.default_rng(1)
+    triangles = np.concatenate([rng.integers(0, 5, (PER_CELL, 3)), rng.integers(6, 10, (PER_CELL, 3)),
+                                rng.integers(20, 25, (PER_CELL, 3))])
+    triangles[0] = [0, 1, 5]
+    triangles[PER_CELL] = [6, 7, 9]
+    labels = np.arange(25)
+    labels[9] = 5
+    pairs = np.array([[0, 1], [0, PER_CELL], [1, PER_CELL + 3], [0, 2 * PER_CELL], [PER_CELL, 2 * PER_CELL + 1]])
+    assert pairs_by_cell(pairs, triangles, labels) == {"same_cell": 1, "neighbouring_cells": 2, "cells_apart": 2}
