@@ -49,28 +49,28 @@ def test_a_finite_but_blown_up_state_stops_at_the_record():
     assert np.isfinite(integrator.v.norm())                        # the old check (finite state) would go on
 
 
-def test_rotation_rates_are_not_speeds():
-    """A rotation rate of 5000 rad/s (a row that is not a displacement) does not stop the run: the bound is a
-    speed [m/s]; the shell's director rates in the sewing of the pants reach a few hundred rad/s."""
+def _still_run(rows: list[int], values: list[float], nodes: int) -> SimpleNamespace:
+    """run_phases over 2 records of a state that does not change, with `values` [m/s or rad/s] in the velocity
+    `rows` and the first `nodes` x 3 rows the nodes' displacement rows; returns the history."""
     integrator = _GrowingState()
     integrator.step = lambda: None
-    integrator.v.setValues([3, 4, 5], [5e3, 5e3, 5e3])
+    integrator.v.setValues(rows, values)
     integrator.v.assemble()
     contact = SimpleNamespace(reset_means=lambda: None, timings={"pose_torque": 0.0},
-                              nodes=SimpleNamespace(dofs=np.arange(3).reshape(1, 3)))
+                              nodes=SimpleNamespace(dofs=np.arange(3 * nodes).reshape(nodes, 3)))
     history = SimpleNamespace(steps=[], failure="")
     run_phases(integrator, contact, [Phase("motion", records=2)], 10, lambda phase, k, steps: k, history)
+    return history
+
+
+def test_rotation_rates_are_not_speeds():
+    """A rate of 5000 rad/s in rows that are not displacements does not stop the run: the bound is a speed [m/s]
+    (a first version, over all rows, stopped the pants at the start of the donning on 4.8e3 in such a row)."""
+    history = _still_run([3, 4, 5], [5e3, 5e3, 5e3], nodes=1)
     assert history.steps == [0, 1] and history.failure == ""
 
 
 def test_the_bound_is_on_the_speed_not_a_component():
     """A node at (800, 800, 800) m/s moves at 1386 m/s: stopped, though no component exceeds 1000 m/s."""
-    integrator = _GrowingState()
-    integrator.step = lambda: None
-    integrator.v.setValues([0, 1, 2], [800.0, 800.0, 800.0])
-    integrator.v.assemble()
-    contact = SimpleNamespace(reset_means=lambda: None, timings={"pose_torque": 0.0},
-                              nodes=SimpleNamespace(dofs=np.arange(6).reshape(2, 3)))
-    history = SimpleNamespace(steps=[], failure="")
     with pytest.raises(WearError, match=r"a node moves at 1.39e\+03 m/s"):
-        run_phases(integrator, contact, [Phase("motion", records=1)], 10, lambda phase, k, steps: k, history)
+        _still_run([0, 1, 2], [800.0, 800.0, 800.0], nodes=2)
