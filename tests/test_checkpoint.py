@@ -115,7 +115,7 @@ def test_killed_run_resumes_on_two_ranks():
 
 def test_interrupt_stops_at_a_record():
     """should_stop answering an interrupt after the 4th record ends the run there with the reason in `failure`;
-    Ctrl-C inside interrupt_flag sets the flag instead of raising."""
+    Ctrl-C or a kill (SIGTERM) inside interrupt_flag sets the flag instead of ending the process."""
     calls = []
     history = _run(MPI.COMM_SELF).run(should_stop=lambda: (calls.append(1), "interrupted (SIGINT)" if len(calls) == 4
                                                            else "")[1])
@@ -124,6 +124,10 @@ def test_interrupt_stops_at_a_record():
         assert interrupted() == ""
         os.kill(os.getpid(), signal.SIGINT)
         assert interrupted() == "interrupted (SIGINT)"
+    with interrupt_flag(MPI.COMM_SELF) as interrupted:         # a kill (SIGTERM) stops the run the same way
+        os.kill(os.getpid(), signal.SIGTERM)
+        assert interrupted() == "interrupted (SIGTERM)"
+    assert signal.getsignal(signal.SIGTERM) == signal.SIG_DFL   # and the handlers are given back
 
 
 SQUARES = """stitches = [["l", 1, "r", 3]]

@@ -154,20 +154,28 @@ def format_wall_split(split: dict) -> str:
             f"outside the loop {split['outside_loop_share']:.1%} of {split['total_s']:.2f} s")
 
 
+INTERRUPTS = (signal.SIGINT, signal.SIGTERM)   # the signals that stop a run at its next record
+
+
 @contextmanager
 def interrupt_flag(comm: MPI.Comm):
-    """While inside: Ctrl-C (SIGINT) on any rank sets a flag instead of raising; the yielded callable returns
-    "interrupted (SIGINT)" once any rank got it (all ranks agree: an MPI reduction per call), "" before."""
+    """While inside: Ctrl-C (SIGINT) or a kill (SIGTERM, as a batch scheduler sends at its time limit) on any rank
+    sets a flag instead of ending the process; the yielded callable returns "interrupted (SIGINT)" or "interrupted
+    (SIGTERM)" once any rank got one (all ranks agree: an MPI reduction per call; SIGTERM wins), "" before."""
     got = [0]
 
     def handler(signum, frame):
-        got[0] = 1
+        got[0] = max(got[0], 1 + INTERRUPTS.index(signum))
 
-    previous = signal.signal(signal.SIGINT, handler)
+    previous = {number: signal.signal(number, handler) for number in INTERRUPTS}
     try:
-        yield lambda: "interrupted (SIGINT)" if comm.allreduce(got[0], op=MPI.MAX) else ""
+        def interrupted() -> str:
+            code = comm.allreduce(got[0], op=MPI.MAX)
+            return f"interrupted ({signal.Signals(INTERRUPTS[code - 1]).name})" if code else ""
+        yield interrupted
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for number, before in previous.items():
+            signal.signal(number, before)
 
 
 def format_statistics(stats: dict, axis_label: str) -> list[str]:
