@@ -97,8 +97,8 @@ def run_dynamic_scene(scene: Scene, comm=MPI.COMM_WORLD, resume: bool = False, s
 
     Checkpoints (`DynamicCheckpoint`) every [dynamics] checkpoint_every records (default CHECKPOINT_EVERY);
     `resume` continues from the output folder's checkpoint; Ctrl-C or a kill (SIGINT, SIGTERM; any rank) stops the
-    run at the next record with valid outputs and a checkpoint there (`DynamicRun.failure` says so). `sha`: the scene's hash
-    the checkpoint is checked against (default scene_sha256(scene))."""
+    run at the next record with valid outputs and a checkpoint there (`DynamicRun.failure` says so). `sha`: the
+    scene's hash the checkpoint is checked against (default scene_sha256(scene))."""
     say = (lambda msg: print(msg, flush=True)) if comm.rank == 0 else (lambda msg: None)
     spec = scene["dynamics"]
     d = section(DynamicsSection, spec)
