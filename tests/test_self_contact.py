@@ -189,7 +189,7 @@ def test_seam_neighbours_take_no_contact():
     joined = np.array([[a, b]])
     plain = SelfContact(model)
     sewn = SelfContact(model, joined=joined)
-    keys, edge_keys = seam_neighbours(surface, joined, sewn.edges)
+    keys, edge_keys = seam_neighbours(surface, surface.stitched(joined), sewn.edges)
     T, E = len(surface.triangles), len(sewn.edges)
     holds = [{a, b} & set(surface.cell_nodes[c]) for c in surface.triangle_cell]
     expected = sorted(v * T + t for v in (a, b) for t in range(T) if holds[t])

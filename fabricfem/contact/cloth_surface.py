@@ -92,20 +92,20 @@ class ClothSurface:
     def stitched(self, joined: np.ndarray | None = None) -> np.ndarray:
         """(N,) label of each node, equal for the nodes that the node pairs `joined` ((k, 2) global indices, a
         garment's seams) make one point of the cloth; each other node its own label."""
-        pairs = (np.asarray(joined, dtype=np.int64).reshape(-1, 2) if joined is not None
-                 else np.zeros((0, 2), dtype=np.int64))
-        graph = scipy.sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(self.count,) * 2)
-        return connected_components(graph, directed=False)[1]
+        pairs = np.asarray(joined, dtype=np.int64).reshape(-1, 2) if joined is not None else None
+        return joined_labels(pairs, self.count)
 
     def parts(self, joined: np.ndarray | None = None) -> np.ndarray:
         """(N,) label of the connected part of each node: nodes of a cell are connected, and so are the node pairs
         `joined` ((k, 2) global indices, e.g. a garment's seams)."""
-        first = np.repeat(self.cell_nodes[:, 0], self.cell_nodes.shape[1])
-        rows, cols = [first], [self.cell_nodes.ravel()]
-        if joined is not None and len(joined):
-            pairs = np.asarray(joined, dtype=np.int64).reshape(-1, 2)
-            rows.append(pairs[:, 0])
-            cols.append(pairs[:, 1])
-        rows, cols = np.concatenate(rows), np.concatenate(cols)
-        graph = scipy.sparse.coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(self.count, self.count))
-        return connected_components(graph, directed=False)[1]
+        cells = np.c_[np.repeat(self.cell_nodes[:, 0], self.cell_nodes.shape[1]), self.cell_nodes.ravel()]
+        pairs = [cells] if joined is None else [cells, np.asarray(joined, dtype=np.int64).reshape(-1, 2)]
+        return joined_labels(np.concatenate(pairs), self.count)
+
+
+def joined_labels(pairs: np.ndarray | None, count: int) -> np.ndarray:
+    """(count,) label of each of `count` nodes: the connected components of the graph of the node pairs `pairs`
+    ((k, 2) indices; None: none), so that nodes joined through any chain of pairs share a label."""
+    pairs = np.zeros((0, 2), dtype=np.int64) if pairs is None else np.asarray(pairs, dtype=np.int64).reshape(-1, 2)
+    graph = scipy.sparse.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(count, count))
+    return connected_components(graph, directed=False)[1]

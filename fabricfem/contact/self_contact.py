@@ -144,7 +144,8 @@ class SelfContact:
         self.part = s.parts(joined)
         self.use_edges = bool(edges)
         self.edges = edge_contact.surface_edges(s.triangles)
-        seam_pairs, seam_edge_pairs = seam_neighbours(s, joined, self.edges)
+        self.stitched = s.stitched(joined)   # (N,) one label per point of the cloth (a seam's stitched nodes)
+        seam_pairs, seam_edge_pairs = seam_neighbours(s, self.stitched, self.edges)
         near = self.search(s.reference, EXCLUSION * self.distance)
         same = self.part[near.vertex] == self.part[s.triangles[near.triangle, 0]]
         self._excluded = np.union1d(self._keys(near.subset(same)), seam_pairs)
@@ -161,8 +162,7 @@ class SelfContact:
         self.timings = {"gather": 0.0, "search": 0.0, "response": 0.0, "impulses": 0.0, "zones": 0.0}
         self.impulse, self.impulse_friction = np.zeros((N, 3)), np.zeros((N, 3))
         self.impulse_passes = 0              # the passes taken in the last step
-        self._x = np.zeros((N, 3))           # the positions [m] of the step's pairs (d^{n+1})
-        self._x_last: np.ndarray | None = None   # the positions [m] of the last step (the blow-up guard of `forces`)
+        self._x: np.ndarray | None = None    # the positions [m] of the last step's `forces` (d^{n+1}), None before
         self._ranks = impulses.node_ranks(s.reference)   # the pairs' sweep order (fabricfem.contact.impulses)
         self.restore_rate = RESTORE_RATE if self.passes else 0.0   # 1/s (fabricfem.contact.impulses)
         self.body = None     # the body contact (ExplicitBodyContact) whose active nodes the impulses hold
@@ -253,9 +253,8 @@ class SelfContact:
         tic = time.perf_counter()
         rows = s.nodes.dofs
         x = s.gather(s.nodes.reference + integrator.d.getArray(readonly=True)[rows])
-        if self._x_last is not None:
-            _check_speed((x - self._x_last) / integrator.dt, "step motion / dt (the step diverged before it)", t)
-        self._x_last = x
+        if self._x is not None:
+            _check_speed((x - self._x) / integrator.dt, "step motion / dt (the step diverged before it)", t)
         toc = time.perf_counter()
         had_pairs = len(self.pairs) + len(self.edge_pairs) > 0
         self.pairs = pairs = self.near_pairs(x)
@@ -480,8 +479,7 @@ def _check_speed(u: np.ndarray, what: str, t: float) -> None:
     |u| = ... m/s)" unless every row of u (N, 3) [m/s] is finite and below BLOW_UP_SPEED. A blown-up step that stays
     finite would otherwise go on: its huge positions put every triangle into one cell of the broad phase, whose
     search then costs N x T per step and the run seems to hang."""
-    with np.errstate(over="ignore", invalid="ignore"):
-        speed = np.sqrt(np.einsum("ij,ij->i", u, u))
+    speed = node_speeds(u)
     bad = ~(speed <= BLOW_UP_SPEED)
     if bad.any():
         node = int(np.argmax(bad))
@@ -489,13 +487,18 @@ def _check_speed(u: np.ndarray, what: str, t: float) -> None:
                          f"({int(bad.sum())} of {len(u)} nodes, node {node}, |u| = {speed[node]:.3g} m/s)")
 
 
-def seam_neighbours(surface: ClothSurface, joined: np.ndarray | None, edges: np.ndarray
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def node_speeds(u: np.ndarray) -> np.ndarray:
+    """(N,) |u| of the rows of u (N, 3) [m/s]; inf (not a warning) where they overflow, NaN where not finite."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        return np.sqrt(np.einsum("ij,ij->i", u, u))
+
+
+def seam_neighbours(surface: ClothSurface, labels: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The pairs that the seams make neighbours, as sorted keys: vertex-triangle (vertex x T + triangle) where the
     vertex is stitched to a node of the triangle's cell, and edge-edge (first x E + second, first < second) where
-    the two edges have stitched nodes in common (`ClothSurface.stitched`). A sewn seam holds those nodes together,
-    so these pairs touch by construction, as a vertex and its own cells do."""
-    labels = surface.stitched(joined)
+    the two edges have stitched nodes in common; `labels` (N,): one per point of the cloth
+    (`ClothSurface.stitched`). A sewn seam holds those nodes together, so these pairs touch by construction, as a
+    vertex and its own cells do."""
     sewn = np.bincount(labels)[labels] > 1
     cells, per_cell = surface.cell_nodes, len(surface.triangles) // max(len(surface.cell_nodes), 1)
     node, cell = cells.ravel(), np.repeat(np.arange(len(cells), dtype=np.int64), cells.shape[1])

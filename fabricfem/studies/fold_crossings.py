@@ -25,10 +25,9 @@ import meshio
 import numpy as np
 from mpi4py import MPI
 from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from fabricfem.contact.cloth_surface import split_cell
+from fabricfem.contact.cloth_surface import joined_labels, split_cell
 from fabricfem.contact.intersections import intersecting
 from fabricfem.contact.projection import skin_gap
 from fabricfem.scenes import load
@@ -52,9 +51,7 @@ def cloth_triangles(folder: Path, record: int) -> tuple[np.ndarray, np.ndarray, 
 
 def stitched_by_position(x: np.ndarray, tolerance: float = STITCH_TOLERANCE) -> np.ndarray:
     """(N,) labels: nodes of x (N, 3) [m] joined through neighbours closer than `tolerance` share a label."""
-    close = cKDTree(x).query_pairs(tolerance, output_type="ndarray")
-    graph = coo_matrix((np.ones(len(close)), (close[:, 0], close[:, 1])), shape=(len(x), len(x)))
-    return connected_components(graph, directed=False)[1]
+    return joined_labels(cKDTree(x).query_pairs(tolerance, output_type="ndarray"), len(x))
 
 
 def pairs_by_cell(pairs: np.ndarray, triangles: np.ndarray, labels: np.ndarray) -> dict[str, int]:

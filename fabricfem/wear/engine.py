@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 from mpi4py import MPI
 
-from fabricfem.contact.self_contact import BLOW_UP_SPEED
+from fabricfem.contact.self_contact import BLOW_UP_SPEED, node_speeds
 from fabricfem.solvers.newton import SolverError
 
 
@@ -201,9 +201,7 @@ def _check_state(integrator, rows: np.ndarray) -> None:
     can stay finite for many steps while its numbers grow. (The rotation rates are left out: rad/s, not a speed.)"""
     if not (math.isfinite(integrator.d.norm()) and math.isfinite(integrator.v.norm())):
         raise ValueError("non-finite displacement or velocity")
-    v = integrator.v.getArray(readonly=True)[rows]
-    with np.errstate(over="ignore", invalid="ignore"):
-        local = float(np.sqrt(np.einsum("ij,ij->i", v, v)).max(initial=0.0))
+    local = float(node_speeds(integrator.v.getArray(readonly=True)[rows]).max(initial=0.0))
     speed = integrator.v.comm.tompi4py().allreduce(local, op=MPI.MAX)
     if not speed <= BLOW_UP_SPEED:
         raise ValueError(f"a node moves at {speed:.3g} m/s (above {BLOW_UP_SPEED:g} m/s: the steps diverged)")

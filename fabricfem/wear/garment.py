@@ -331,8 +331,10 @@ class GarmentRun:
         of the pairs, summed over the ranks (all ranks call this); triangles joined by a seam's stitched nodes are
         neighbours (`ClothSurface.stitched`), not counted."""
         if self._surface is None:
-            self._surface = self.self_contact.surface if self.self_contact is not None else ClothSurface(self.model)
-            self._stitched = self._surface.stitched(self.seams.joined_nodes() if self.seams else None)
+            cloth = self.self_contact         # it has the same surface and seams' labels (the same SeamTies)
+            self._surface = cloth.surface if cloth is not None else ClothSurface(self.model)
+            self._stitched = (cloth.stitched if cloth is not None
+                              else self._surface.stitched(self.seams.joined_nodes() if self.seams else None))
         x = self._surface.positions(d)
         part = (self.comm.rank, self.comm.size)
         return int(self.comm.allreduce(intersecting_pairs(x, self._surface.triangles, part, self._stitched),
