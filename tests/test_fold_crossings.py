@@ -3,8 +3,9 @@ apart) and the seam labels by position, on small hand-made cases whose answers a
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
-from fabricfem.studies.fold_crossings import PER_CELL, pairs_by_cell, stitched_by_position
+from fabricfem.studies.fold_crossings import PER_CELL, main, pairs_by_cell, stitched_by_position
 
 
 def test_nodes_closer_than_the_tolerance_share_a_label():
@@ -26,3 +27,9 @@ def test_pairs_are_sorted_by_cell():
     labels[9] = 5
     pairs = np.array([[0, 1], [0, PER_CELL], [1, PER_CELL + 3], [0, 2 * PER_CELL], [PER_CELL, 2 * PER_CELL + 1]])
     assert pairs_by_cell(pairs, triangles, labels) == {"same_cell": 1, "neighbouring_cells": 2, "cells_apart": 2}
+
+
+def test_a_folder_without_a_run_is_refused_in_one_line(tmp_path, capsys):
+    with pytest.raises(SystemExit) as stop:
+        main([str(tmp_path), "--cells", "0"])
+    assert stop.value.code == 2 and "run_dir: no cloth.xdmf" in capsys.readouterr().err

@@ -105,14 +105,22 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--cells", type=int, nargs="+", metavar="K",
                         help="records whose pairs are sorted by cell (instead of the skin report)")
     args = parser.parse_args(argv)
+    folder = Path(args.run_dir)
+    if not (folder / "cloth.xdmf").is_file():
+        parser.error(f"run_dir: no cloth.xdmf in {folder} (the output folder of a wear run)")
     if args.cells:
+        with meshio.xdmf.TimeSeriesReader(str(folder / "cloth.xdmf")) as reader:
+            count = reader.num_steps
+        outside = [k for k in args.cells if not -count <= k < count]
+        if outside:
+            parser.error(f"--cells: records {outside} are not in {folder / 'cloth.xdmf'} ({count} records)")
         for record in args.cells:
             print(" ".join(f"{k} {v:.4g}" if isinstance(v, float) else f"{k} {v}"
-                           for k, v in crossing_counts(Path(args.run_dir), record).items()), flush=True)
+                           for k, v in crossing_counts(folder, record).items()), flush=True)
         return
     if args.scene is None:
         parser.error("scene: the skin report needs the run's scene file (or give --cells)")
-    for key, value in crossing_report(Path(args.run_dir), Path(args.scene), args.record).items():
+    for key, value in crossing_report(folder, Path(args.scene), args.record).items():
         print(f"{key:>16}  {value}")
 
 
