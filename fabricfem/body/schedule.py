@@ -3,6 +3,13 @@
 A group (e.g. "feet": the two foot segments) is off for t_off <= t < t_on in each of its intervals
 [s] and on otherwise (donning a pair of trousers removes the feet and restores them [Man2006, sec. 5.4]).
 `t_on = inf` keeps the group off to the end. `fabricfem.body.pose.Body.active(t)` applies it.
+
+With `regrow_time` T_g > 0 a segment that comes back at t_on regrows about its centre: its radii are scaled by
+
+    g(t) = g_0 + (1 - g_0) smoothstep((t - t_on) / T_g),   g_0 = REGROW_FROM,
+
+so that the cloth hanging where it reappears (a trouser hem round the ankle) is pushed aside over T_g instead of
+being projected out of it in one step.
 """
 from __future__ import annotations
 
@@ -10,6 +17,12 @@ import math
 from dataclasses import dataclass
 from itertools import pairwise
 from typing import Mapping, Sequence
+
+import numpy as np
+
+from fabricfem.body.blend import smoothstep
+
+REGROW_FROM = 0.2    # g_0: a returning segment's size when it reappears, relative to its full size
 
 
 @dataclass(frozen=True)
@@ -22,8 +35,12 @@ class SegmentSchedule:
     """
 
     groups: Mapping[str, tuple[Sequence[str], Sequence[tuple[float, float]]]]
+    regrow_time: float = 0.0
 
     def __post_init__(self):
+        if not (isinstance(self.regrow_time, (int, float)) and math.isfinite(self.regrow_time)
+                and self.regrow_time >= 0.0):
+            raise ValueError(f"regrow_time must be a time >= 0 [s], got {self.regrow_time!r}")
         clean = {}
         for name, entry in self.groups.items():
             if not (isinstance(entry, (tuple, list)) and len(entry) == 2):
@@ -54,3 +71,15 @@ class SegmentSchedule:
         if not math.isfinite(t):
             raise ValueError(f"t must be a finite time [s], got {t!r}")
         return {s for names, spans in self.groups.values() if any(a <= t < b for a, b in spans) for s in names}
+
+    def sizes(self, names: Sequence[str], t: float) -> np.ndarray:
+        """Size factor g(t) of each named segment at time t [s] (module docstring): 1 for a segment that is on and
+        has regrown (or with regrow_time 0); the factor of an off segment is irrelevant (it takes no contact)."""
+        g = np.ones(len(names))
+        if self.regrow_time == 0.0:
+            return g
+        for segments, spans in self.groups.values():
+            back = [b for _, b in spans if math.isfinite(b) and b <= t]     # the latest return before t
+            ramp = smoothstep((t - max(back)) / self.regrow_time) if back else 1.0
+            g[np.isin(names, segments)] = REGROW_FROM + (1.0 - REGROW_FROM) * ramp
+        return g

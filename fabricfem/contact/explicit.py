@@ -179,9 +179,11 @@ class ExplicitBodyContact:
         self.max_penetration_seen = 0.0      # m, owned nodes (reduce with max_penetration_all)
         self.trace: list[tuple[float, ...]] | None = None   # per step: (t, torque of each monitor, sum |lambda_N|)
         # donning (fabricfem.wear.donning): t -> factor on the segments' transverse radii (r2, r3), and
-        # t -> (K,) bool of the segments that take contact (an inactive segment is parked far from the garment)
+        # t -> (K,) bool of the segments that take contact (an inactive segment is parked far from the garment),
+        # t -> (K,) size factor on all three radii (a removed segment regrowing: fabricfem.body.schedule)
         self.transverse_scale: Callable[[float], float] | None = None
         self.segment_active: Callable[[float], np.ndarray] | None = None
+        self.segment_size: Callable[[float], np.ndarray] | None = None
         # the Lagrange step by the compiled loops (fabricfem.contact.compiled) or by numpy (COMPILED_CONTACT)
         self.compiled = COMPILED_CONTACT["enabled"] and method == "lagrange" and skin is None
         # the compiled loops are built here, by every rank together (fabricfem.forms.jit.compile_c waits for all
@@ -377,16 +379,17 @@ class ExplicitBodyContact:
         self._stick_local[index] = stack.to_local(points, segment)
 
     def body_at(self, t: float) -> list[Ellipsoid]:
-        """The segments as the contact sees them at time t [s]: posed, grown by `transverse_scale` and with the
-        inactive ones (`segment_active`) parked at PARKED_AT, far from any garment."""
+        """The segments as the contact sees them at time t [s]: posed, grown by `transverse_scale` and
+        `segment_size`, and with the inactive ones (`segment_active`) parked at PARKED_AT, far from any garment."""
         ellipsoids = self.poses.ellipsoids(t)
-        if self.transverse_scale is None and self.segment_active is None:
+        if self.transverse_scale is None and self.segment_active is None and self.segment_size is None:
             return ellipsoids
         scale = 1.0 if self.transverse_scale is None else float(self.transverse_scale(t))
         active = np.ones(len(ellipsoids), dtype=bool) if self.segment_active is None else self.segment_active(t)
-        return [unchecked_ellipsoid(e.center, e.rotation, e.radii * np.array([1.0, scale, scale])) if on
+        size = np.ones(len(ellipsoids)) if self.segment_size is None else self.segment_size(t)
+        return [unchecked_ellipsoid(e.center, e.rotation, e.radii * np.array([1.0, scale, scale]) * g) if on
                 else unchecked_ellipsoid(PARKED_AT + 10.0 * k, np.eye(3), np.full(3, 1e-3))
-                for k, (e, on) in enumerate(zip(ellipsoids, active))]
+                for k, (e, on, g) in enumerate(zip(ellipsoids, active, size))]
 
     def _posed(self, t: float) -> list[Ellipsoid]:
         tic = time.perf_counter()

@@ -468,11 +468,14 @@ def plan(wear: WearScene, fabric, scene_path: Path | None = None) -> WearPlan:
         raise SceneError(f"donning: {exc}") from None
     if donning.pull_edges and not (donning.pull_path and donning.pull_time > 0):
         raise SceneError("donning.pull_path: pulling edges needs a pull_path of offsets and a pull_time > 0 [s]")
+    if not (math.isfinite(donning.regrow_time) and donning.regrow_time >= 0.0):
+        raise SceneError(f"donning.regrow_time must be a time >= 0 [s], got {donning.regrow_time!r}")
     if donning.remove:
         restore = timeline.start_of("belt") if donning.restore_at is None else float(donning.restore_at)
         try:
             body.check_segments(donning.remove)
-            schedule = SegmentSchedule({"removed": (list(donning.remove), [(-1.0, restore)])})
+            schedule = SegmentSchedule({"removed": (list(donning.remove), [(-1.0, restore)])},
+                                       regrow_time=donning.regrow_time)
             body = Body(list(body.segments.values()), body.kinematics, schedule)
         except ValueError as exc:
             raise SceneError(f"donning.remove: {exc}") from None

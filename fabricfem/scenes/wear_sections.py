@@ -134,6 +134,8 @@ class WearDonningSection:
     remove: list | None = doc("segments switched off while the garment goes on (the thesis removes the feet)", None)
     restore_at: float | None = doc("time [s] at which the removed segments come back (default: the start of the "
                                    "belt phase, after the pull and the growth)", None)
+    regrow_time: float = doc("the removed segments regrow from 0.2 of their size to full size over this time [s] "
+                             "after they come back, pushing aside the cloth where they reappear (0: at once)", 0.0)
     pull_edges: list | None = doc("pattern edges \"panel.edge\" gripped and pulled along pull_path (the waistband)",
                                   None)
     pull_path: list | None = doc("[[dx, dy, dz], ...] offsets [m] of the grip at equal times over pull_time "

@@ -476,6 +476,8 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
     if posed.schedule is not None:
         names = list(posed.segments)
         contact.segment_active = lambda t: np.isin(names, posed.active(t))
+        if posed.schedule.regrow_time > 0.0:
+            contact.segment_size = lambda t: posed.schedule.sizes(names, t)
     ties = SeamTies(model, seams, sewing_time=timeline.sewing_time) if seams else None
     handles = [make(model) for make in handles]
     cloth = _self_contact(model, ties, self_contact_distance, self_friction, self_contact_passes, self_contact,

@@ -3,24 +3,32 @@ cut, sized from the lower body with ordinary trouser ease, written as a GarmentC
 
 Topology and placement conventions are those of the four-panel trousers of Garment-Pattern-Generator
 (fabricfem/patterns/pants_straight_sides.json: the same vertex order, edges, stitches, Euler rotations; its
-frame is Y-up, front +z, left +x, centimetres). Each panel, in its own plane (outer side at x = 0, the centre
-towards -x for the left front panel), has the vertices
+frame is Y-up, front +z, left +x, centimetres). Each panel, in its own plane (outer side at x = 0 at the crotch
+level, the centre towards -x for the left front panel), has the vertices
 
-    v0 = (-a, 0)        waistband, centre end          v3 = (0, -(r + L))   hem, outer end
-    v1 = (-b, 0)        waistband, side end            v4 = (-H, -(r + L))  hem, inner end
-    v2 = (0, -r)        side at the crotch level       v5 = (-T, -r)        crotch point
+    v0 = (-a, 0)                  waistband, centre end     v3 = (-(T - H) / 2, -(r + L))   hem, outer end
+    v1 = (-b, 0)                  waistband, side end       v4 = (-(T + H) / 2, -(r + L))   hem, inner end
+    v2 = (0, -r)                  side at the crotch level  v5 = (-T, -r)                   crotch point
 
 with the edges v5-v4 (inseam), v4-v3 (hem), v3-v2 (outer side), v2-v1 (hip side), v1-v0 (waistband) and v0-v5
 (the crotch curve, a quadratic Bezier bulging as in the template), and the sizes, from LowerBodyDimensions and
 PantsEase [m]:
 
     r = waist_height - crotch_height                  rise (0.210 m for the ANSUR II median male)
-    L = crotch_height - ankle_height                  inseam (0.772 m)
+    L = crotch_height - ankle_height - hem_clearance  inseam (0.692 m): the hem ends above the foot
     T = (thigh_girth + ease.thigh) / 2                half the thigh girth with ease: front + back panels
     H = (calf_girth + ease.knee) / 2                  the hem, straight from the knee down (the feet are off
                                                       while the pants go on, [Man2006, sec. 5.4])
     a - b = (waist_girth + ease.waist) / 4            a quarter of the waistband
     b = ease.side_inset                               the hip side's inset at the waistband
+
+The leg tapers on both sides, so that the leg's centre line (x = -T / 2, the front crease of a trouser draft) is
+straight from the crotch level to the hem. The panels are placed flat in front of and behind the body with that
+centre line on the leg's axis (`leg_axis` from the body's midline); the left and right front (back) panels then
+overlap near the crotch, so the right ones are placed `ease.layer_gap` farther from the body. Placed with the
+outer side straight and the crotch point at the midline instead (the template's way), the lower leg lay beside
+the shank: the seams closed around no leg, and the shank stood outside the trousers after the sewing
+(docs/findings/2026-11-28-pants-placement.md).
 
 The seat (the panel's width half-way up the rise, four panels) comes out at
 (a + T - b) / 2 x 4 = buttock girth + `seat_ease` (reported). Front and back panels have the same shape, so every
@@ -38,6 +46,7 @@ from fabricfem.body.lower_body import DEFAULT_LOWER_BODY, LowerBodyDimensions
 from fabricfem.patterns import pattern_path
 
 CM = 100.0   # GarmentCode units per metre
+SHIPPED_LEG_AXIS = 0.11   # m: scenes/pants_walk.toml's hip_spacing / 2 (the shipped pattern's placement)
 
 
 @dataclass(frozen=True)
@@ -49,14 +58,16 @@ class PantsEase:
     knee: float = 0.05
     waist: float = 0.02
     side_inset: float = 0.02
-    panel_gap: float = 0.01          # m between a panel's inner edge and the body's midline when placed
     depth: float = 0.03              # m between the body's pelvis and the placed front and back panels
+    layer_gap: float = 0.01          # m between the left and the right panels where they overlap when placed
+    hem_clearance: float = 0.08      # m between the ankle joint and the hem (the ellipsoid foot's top is 0.06-0.07
+                                     # m above it where the hem goes round)
 
 
 def pants_sizes(dims: LowerBodyDimensions = DEFAULT_LOWER_BODY, ease: PantsEase = PantsEase()) -> dict[str, float]:
     """The panel sizes [m] of the module docstring and the resulting seat ease."""
     r = dims.waist_height - dims.crotch_height
-    L = dims.crotch_height - dims.ankle_height
+    L = dims.crotch_height - dims.ankle_height - ease.hem_clearance
     T = 0.5 * (dims.thigh_girth + ease.thigh)
     H = 0.5 * (dims.calf_girth + ease.knee)
     b = ease.side_inset
@@ -70,20 +81,23 @@ def pants_sizes(dims: LowerBodyDimensions = DEFAULT_LOWER_BODY, ease: PantsEase 
 
 
 def pants_garmentcode(dims: LowerBodyDimensions = DEFAULT_LOWER_BODY, ease: PantsEase = PantsEase(),
-                      pelvis_depth: float = 0.151) -> dict:
+                      pelvis_depth: float = 0.151, leg_axis: float | None = None) -> dict:
     """The GarmentCode JSON (a dict) of the pants (module docstring); `pelvis_depth` [m] is the body's front-back
-    semi-axis at the pelvis (the panels are placed `ease.depth` in front of and behind it)."""
+    semi-axis at the pelvis (the panels are placed `ease.depth` in front of and behind it), `leg_axis` [m] the
+    distance of each hip joint from the midline (default half the body's hip joint spacing)."""
     s = pants_sizes(dims, ease)
     r, L, T, H, a, b = (s[k] for k in ("rise", "inseam", "thigh", "hem", "a", "b"))
+    axis = 0.5 * dims.hip_joint_spacing if leg_axis is None else float(leg_axis)
     template = json.loads(pattern_path("pants_straight_sides").read_text())
     out = copy.deepcopy(template)
-    left = [[-a, 0.0], [-b, 0.0], [0.0, -r], [0.0, -(r + L)], [-H, -(r + L)], [-T, -r]]   # outer side at x = 0
-    x_shift = (T + ease.panel_gap) * CM
-    z = (pelvis_depth + ease.depth) * CM
+    hem = r + L
+    left = [[-a, 0.0], [-b, 0.0], [0.0, -r], [-0.5 * (T - H), -hem], [-0.5 * (T + H), -hem], [-T, -r]]
+    x_shift = (axis + 0.5 * T) * CM                                # the leg's centre line on the leg's axis
     for name, panel in out["pattern"]["panels"].items():
         sign = -1.0 if panel["vertices"][0][0] < 0 else 1.0        # the template's mirrored panels
         panel["vertices"] = [[round((x if sign < 0 else -x) * CM, 6), round(y * CM, 6)] for x, y in left]
         side = 1.0 if name.startswith("L") else -1.0
+        z = (pelvis_depth + ease.depth + (ease.layer_gap if side < 0 else 0.0)) * CM
         panel["translation"] = [side * x_shift, 0.0, z if name.endswith("front") else -z]
     out["pattern"]["description"] = ("fabricfem pants [Man2006, sec. 5.4], four panels sized from the lower body "
                                      "(fabricfem.wear.pants)")
@@ -91,8 +105,9 @@ def pants_garmentcode(dims: LowerBodyDimensions = DEFAULT_LOWER_BODY, ease: Pant
 
 
 def write_pants_pattern(path: str | Path, dims: LowerBodyDimensions = DEFAULT_LOWER_BODY,
-                        ease: PantsEase = PantsEase()) -> Path:
-    """Write `pants_garmentcode(dims, ease)` to `path` (JSON, indent 1)."""
+                        ease: PantsEase = PantsEase(), leg_axis: float | None = SHIPPED_LEG_AXIS) -> Path:
+    """Write `pants_garmentcode(dims, ease, leg_axis=leg_axis)` to `path` (JSON, indent 1); the defaults write the
+    shipped fabricfem/patterns/pants_four_panel.json."""
     path = Path(path)
-    path.write_text(json.dumps(pants_garmentcode(dims, ease), indent=1) + "\n")
+    path.write_text(json.dumps(pants_garmentcode(dims, ease, leg_axis=leg_axis), indent=1) + "\n")
     return path
