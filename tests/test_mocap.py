@@ -236,6 +236,21 @@ def test_schedule_switches_the_feet_off_and_on():
         SegmentSchedule({"feet": (["foot_l"], [(0.0, 2.0), (1.0, 3.0)])})
 
 
+def test_a_returning_segment_regrows_from_a_fifth_of_its_size():
+    """regrow_time T_g: g(t) = 0.2 + 0.8 smoothstep((t - t_on) / T_g) after the group comes back at t_on (closed form:
+    smoothstep(1/2) = 1/2), 1 for segments of no group and before any return; a negative time is refused."""
+    from fabricfem.body.schedule import REGROW_FROM
+    schedule = SegmentSchedule({"feet": (["foot_l", "foot_r"], [(0.0, 1.0)])}, regrow_time=0.2)
+    names = ["foot_l", "shank_l", "foot_r"]
+    np.testing.assert_allclose(schedule.sizes(names, 0.5), [1.0, 1.0, 1.0])
+    np.testing.assert_allclose(schedule.sizes(names, 1.0), [REGROW_FROM, 1.0, REGROW_FROM])
+    np.testing.assert_allclose(schedule.sizes(names, 1.1), [0.6, 1.0, 0.6], rtol=1e-12)
+    np.testing.assert_allclose(schedule.sizes(names, 1.3), [1.0, 1.0, 1.0])
+    np.testing.assert_allclose(SegmentSchedule({"feet": (["foot_l"], [(0.0, 1.0)])}).sizes(names, 1.0), 1.0)
+    with pytest.raises(ValueError, match="regrow_time"):
+        SegmentSchedule({"feet": (["foot_l"], [(0.0, 1.0)])}, regrow_time=-1.0)
+
+
 def test_check_joint_and_check_segments():
     body = lower_body()
     assert body.check_joint("knee_l") == ["thigh_l", "shank_l"]

@@ -4,11 +4,14 @@ Both act on nodes of panel edges (fabricfem.contact.node_sets.PanelNodeSet) as h
 (fabricfem.dynamics.explicit):
 
 * `EdgeGrip` (pulling the garment along a path over the body, the thesis's donning of the pants [Man2006, sec.
-  5.4]): from `start` to `end` [s] the gripped nodes move rigidly with the path: the predictor of step n+2 of
-  node i is set to y_i' = x_i(start) + p(t_{n+2}) - p(start), a forward-increment constraint like the body contact
-  [Man2006, Box 5] (a^{n+1} += (y' - y) / dt^2), with p the piecewise-linear path through `waypoints`
-  (offsets [m] at equal time intervals from start to end). After `end` the grip lets go. The force the grip
-  exerts, sum m (y' - y) / dt^2 [N], is reported.
+  5.4]): from `start` to `end` [s] the gripped nodes follow the path along its direction
+  u = (p_last - p_first) / |p_last - p_first|: the predictor of step n+2 of node i is moved to
+  y_i' = y_i + ((x_i(start) + p(t_{n+2}) - p(start) - y_i) . u) u, a forward-increment constraint like the body
+  contact [Man2006, Box 5] (a^{n+1} += (y' - y) / dt^2), with p the piecewise-linear path through `waypoints`
+  (offsets [m] at equal time intervals from start to end); across u the nodes are free, as a waistband pulled up
+  by hands slides out over the hips (a path that does not move holds the nodes in all directions). From `end` to
+  `release` (default `end`) the grip holds them at the path's end the same way (hands holding the waistband up
+  while the body grows into it), then lets go. The force the grip exerts, sum m (y' - y) / dt^2 [N], is reported.
 * `Belt` (a waistband or cuff tensioned by a drawstring): each edge is an ordered chain of nodes; every segment of
   the chain carries the tension T(t) [N] (ramped from 0 at `start` to `tension` at `start + ramp`, smoothstep),
   which pulls its two end nodes towards each other: f_k += T e_k, f_{k+1} -= T e_k, e_k the unit vector of the
@@ -34,17 +37,24 @@ def _chunks(edges: Sequence[tuple[str, int, np.ndarray]]) -> tuple[list, list]:
 
 class EdgeGrip:
     """Grip the nodes of `edges` = [(name, panel cell tag, ordered points (n, 3) [m]), ...] and move them along
-    `waypoints` ((k, 3) offsets [m], the first usually 0) between `start` and `end` [s] (module docstring)."""
+    `waypoints` ((k, 3) offsets [m], the first usually 0) between `start` and `end` [s], then hold them along the
+    path's direction until `release` [s] (default `end`; module docstring)."""
 
-    def __init__(self, model, edges, waypoints, start: float, end: float):
+    def __init__(self, model, edges, waypoints, start: float, end: float, release: float | None = None):
         if not (math.isfinite(start) and math.isfinite(end) and end > start >= 0.0):
             raise ValueError(f"pull: needs 0 <= start < end [s], got start = {start!r}, end = {end!r}")
+        release = end if release is None else float(release)
+        if not (math.isfinite(release) and release >= end):
+            raise ValueError(f"pull: the release {release!r} [s] must be a time at or after the pull's end {end!r}")
         path = np.asarray(waypoints, dtype=float)
         if path.ndim != 2 or path.shape[1] != 3 or len(path) < 2 or not np.all(np.isfinite(path)):
             raise ValueError(f"pull_path: needs at least two finite [x, y, z] offsets [m], got {waypoints!r}")
         chunks, names = _chunks(edges)
         self.nodes = PanelNodeSet(model, chunks, names)
-        self.start, self.end, self.path = float(start), float(end), path
+        self.start, self.end, self.release, self.path = float(start), float(end), release, path
+        travel = path[-1] - path[0]
+        norm = float(np.linalg.norm(travel))
+        self._direction = travel / norm if norm > 0.0 else None
         self._anchor = None          # (k, 3) positions of the owned gripped nodes at the start
         self.force = np.zeros(3)     # N, the grip's force on the garment in the last step (this rank's nodes)
 
@@ -70,7 +80,7 @@ class EdgeGrip:
         dt = integrator.dt
         t_next = t + dt
         self.force = np.zeros(3)
-        if not (self.start <= t < self.end):
+        if not (self.start <= t < self.release):
             return
         rows = self.nodes.rows[~self.nodes.held]
         d = integrator.d.getArray(readonly=True)
@@ -80,6 +90,8 @@ class EdgeGrip:
         a = integrator.a.getArray()
         y = self.nodes.reference[~self.nodes.held] + d[rows] + dt * v[rows] + dt ** 2 * a[rows]
         change = self._anchor + self.offset(t_next) - self.offset(self.start) - y
+        if self._direction is not None:         # along the path's direction only
+            change = np.outer(change @ self._direction, self._direction)
         a[rows] += change / dt ** 2
         m = integrator.denominator.getArray(readonly=True)[rows]
         self.force = (m * change).sum(axis=0) / dt ** 2

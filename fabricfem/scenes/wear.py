@@ -543,8 +543,9 @@ def handle_specs(donning: WearDonningSection, timeline: Timeline) -> list[tuple[
     out = []
     if donning.pull_edges:
         start = timeline.start_of("pull")
+        hold = timeline.start_of("belt") if donning.pull_hold else start + donning.pull_time
         out.append(("grip", list(donning.pull_edges), {"waypoints": donning.pull_path, "start": start,
-                                                        "end": start + donning.pull_time}))
+                                                        "end": start + donning.pull_time, "release": hold}))
     if donning.belt_edges:
         out.append(("belt", list(donning.belt_edges), {"tension": donning.belt_tension,
                                                         "start": timeline.start_of("belt"),

@@ -141,6 +141,8 @@ class WearDonningSection:
     pull_path: list | None = doc("[[dx, dy, dz], ...] offsets [m] of the grip at equal times over pull_time "
                                  "(the first usually [0, 0, 0])", None)
     pull_time: float = doc("duration of the pull [s]", 0.0)
+    pull_hold: bool = doc("after the pull, hold the pulled edges at their height (along the pull) while the body "
+                          "grows, letting go when the belt phase starts (hands holding a waistband up)", False)
     belt_edges: list | None = doc("pattern edges \"panel.edge\" tensioned as one drawstring (a belt, a cuff)", None)
     belt_tension: float = doc("the belt's tension [N] (a drawstring force along the edges)", 0.0)
     belt_time: float = doc("the belt's tension ramps from 0 over this time [s]", 0.0)

@@ -14,8 +14,9 @@ with the edges v5-v4 (inseam), v4-v3 (hem), v3-v2 (outer side), v2-v1 (hip side)
 (the crotch curve, a quadratic Bezier bulging as in the template), and the sizes, from LowerBodyDimensions and
 PantsEase [m]:
 
-    r = waist_height - crotch_height                  rise (0.210 m for the ANSUR II median male)
-    L = crotch_height - ankle_height - hem_clearance  inseam (0.692 m): the hem ends above the foot
+    r = waist_height - crotch_height + ease.rise      rise (0.210 m for the ANSUR II median male, + 0.06 m)
+    L = crotch_height - ankle_height - hem_clearance - ease.rise
+                                                      inseam (0.632 m): the hem ends above the foot
     T = (thigh_girth + ease.thigh) / 2                half the thigh girth with ease: front + back panels
     H = (calf_girth + ease.knee) / 2                  the hem, straight from the knee down (the feet are off
                                                       while the pants go on, [Man2006, sec. 5.4])
@@ -60,14 +61,16 @@ class PantsEase:
     side_inset: float = 0.02
     depth: float = 0.03              # m between the body's pelvis and the placed front and back panels
     layer_gap: float = 0.01          # m between the left and the right panels where they overlap when placed
+    rise: float = 0.06               # m added to the rise (the crotch curve's depth) and taken from the inseam: the
+                                     # body's crotch length (pelvis, waist to waist between the legs) is ~0.60 m
     hem_clearance: float = 0.08      # m between the ankle joint and the hem (the ellipsoid foot's top is 0.06-0.07
                                      # m above it where the hem goes round)
 
 
 def pants_sizes(dims: LowerBodyDimensions = DEFAULT_LOWER_BODY, ease: PantsEase = PantsEase()) -> dict[str, float]:
     """The panel sizes [m] of the module docstring and the resulting seat ease."""
-    r = dims.waist_height - dims.crotch_height
-    L = dims.crotch_height - dims.ankle_height - ease.hem_clearance
+    r = dims.waist_height - dims.crotch_height + ease.rise
+    L = dims.crotch_height - dims.ankle_height - ease.hem_clearance - ease.rise
     T = 0.5 * (dims.thigh_girth + ease.thigh)
     H = 0.5 * (dims.calf_girth + ease.knee)
     b = ease.side_inset

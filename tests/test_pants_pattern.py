@@ -1,0 +1,78 @@
+"""The shipped pants (fabricfem.wear.pants, fabricfem/patterns/pants_four_panel.json) are worn as trousers: each
+leg's centre line lies on the leg's axis when placed, and after the donning of scenes/pants_walk.toml each leg of
+the trousers goes round a leg of the body and the waistband is at the waist (checked on the written cloth.xdmf, an
+independent look at the state: the angles of the cloth's nodes round each leg). Before 2026-11-28 the lower legs
+of the trousers lay beside the shanks (docs/findings/2026-11-28-pants-placement.md)."""
+import json
+import math
+
+import meshio
+import numpy as np
+from toml_text import dumps
+
+from fabricfem import cli
+from fabricfem.body.lower_body import DEFAULT_LOWER_BODY
+from fabricfem.patterns import pattern_path
+from fabricfem.verify.pants import quick_pants_data
+from fabricfem.wear.pants import CM, SHIPPED_LEG_AXIS, PantsEase, pants_garmentcode, pants_sizes
+
+LEG_AXIS = 0.11          # m: scenes/pants_walk.toml's hip_spacing / 2
+
+
+def test_the_shipped_pattern_is_the_builders():
+    """pants_four_panel.json is what write_pants_pattern writes (the two cannot drift apart)."""
+    shipped = json.loads(pattern_path("pants_four_panel").read_text())
+    assert shipped == json.loads(json.dumps(pants_garmentcode(leg_axis=SHIPPED_LEG_AXIS)))
+    assert SHIPPED_LEG_AXIS == LEG_AXIS
+
+
+def test_each_legs_centre_line_is_on_the_legs_axis():
+    """In GarmentCode's frame (x left, cm) the midpoint of every panel's hem and of its width at the crotch level
+    (vertices v3, v4 and v2, v5, turned by the panel's rotation about y (0 or 180 deg) and translated) lies at
+    x = +-11 cm, and the hem ends hem_clearance above the
+    ankle when the waistband is at the waist (closed form of the module docstring; round-off 1e-9 cm)."""
+    panels = json.loads(pattern_path("pants_four_panel").read_text())["pattern"]["panels"]
+    sizes, ease = pants_sizes(), PantsEase()
+    for name, panel in panels.items():
+        turn = math.cos(math.radians(panel["rotation"][1]))             # +1 front, -1 back (turned about y)
+        v = np.array(panel["vertices"]) * [turn, 1.0] + np.array(panel["translation"][:2])
+        side = 1.0 if name.startswith("L") else -1.0
+        assert math.isclose(0.5 * (v[3, 0] + v[4, 0]), side * LEG_AXIS * CM, abs_tol=1e-9)
+        assert math.isclose(0.5 * (v[2, 0] + v[5, 0]), side * LEG_AXIS * CM, abs_tol=1e-9)
+        assert math.isclose(abs(v[3, 0] - v[4, 0]), sizes["hem"] * CM, abs_tol=1e-9)
+        hem_below_waist = -(panel["vertices"][3][1]) / CM
+        expected = DEFAULT_LOWER_BODY.waist_height - DEFAULT_LOWER_BODY.ankle_height - ease.hem_clearance
+        assert math.isclose(hem_below_waist, expected, abs_tol=1e-9)
+
+
+def _largest_angle_gap(points: np.ndarray, axis_y: float) -> float:
+    """Largest gap [deg] between the angles of `points` (n, 3) round the vertical line x = 0, y = axis_y."""
+    angles = np.sort(np.degrees(np.arctan2(points[:, 1] - axis_y, points[:, 0])))
+    return float(np.max(np.diff(np.concatenate([angles, angles[:1] + 360.0]))))
+
+
+def test_the_donned_pants_go_round_the_legs_and_stay_at_the_waist(tmp_path):
+    """The shipped scene's donning (sewing, pull, growth with the feet regrowing, belt, 0.1 s standing) on h = 0.1 m
+    (fabricfem.verify.pants.quick_pants_data). At the last record, at mid-thigh (z = 0.65 m) and mid-shank
+    (z = 0.28 m), the cloth's nodes within 3 cm of that height surround each leg: the largest gap between their
+    angles round the leg's axis is below 120 deg (a tube round the leg: measured 50-70 deg on this mesh; a trouser
+    leg beside the leg leaves a gap above 180 deg). The waistband's nodes are on average within 3 cm of the waist
+    height (measured +1 cm: the belt sits on the pelvis' upper slope; before the grip held it while the body grew it
+    ended 18 cm lower, at the hips)."""
+    data = quick_pants_data()
+    data["output"] = {"dir": str(tmp_path / "out"), "render": False}
+    scene = tmp_path / "pants.toml"
+    scene.write_text(dumps(data))
+    assert cli.main(["run", str(scene)]) in (0, 3)
+    with meshio.xdmf.TimeSeriesReader(str(tmp_path / "out" / "cloth.xdmf")) as reader:
+        reference, _ = reader.read_points_cells()
+        _, point_data, _ = reader.read_data(reader.num_steps - 1)
+    x = reference + point_data["displacement"][:, :3]
+    for height in (0.65, 0.28):
+        band = x[np.abs(x[:, 2] - height) < 0.03]
+        for axis_y in (LEG_AXIS, -LEG_AXIS):
+            leg = band[band[:, 1] * np.sign(axis_y) > 0.0]          # this leg's side of the midline
+            assert len(leg) >= 6
+            assert _largest_angle_gap(leg, axis_y) < 120.0, (height, axis_y)
+    top = reference[:, 2] > reference[:, 2].max() - 1e-9
+    assert abs(x[top, 2].mean() - DEFAULT_LOWER_BODY.waist_height) < 0.03
