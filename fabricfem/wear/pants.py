@@ -62,7 +62,7 @@ class PantsEase:
     depth: float = 0.03              # m between the body's pelvis and the placed front and back panels
     layer_gap: float = 0.01          # m between the left and the right panels where they overlap when placed
     rise: float = 0.06               # m added to the rise (the crotch curve's depth) and taken from the inseam: the
-                                     # body's crotch length (pelvis, waist to waist between the legs) is ~0.60 m
+                                     # body's crotch length (pelvis, waist to waist between the legs) is 0.596 m
     hem_clearance: float = 0.08      # m between the ankle joint and the hem (the ellipsoid foot's top is 0.06-0.07
                                      # m above it where the hem goes round)
 
