@@ -417,6 +417,16 @@ class GarmentRun:
         return history
 
 
+def _follow_schedule(contact: ExplicitBodyContact, posed: Body) -> None:
+    """The contact sees the body's segment schedule: segments switched off, and returning ones regrowing."""
+    if posed.schedule is None:
+        return
+    names = list(posed.segments)
+    contact.segment_active = lambda t: np.isin(names, posed.active(t))
+    if posed.schedule.regrow_time > 0.0:
+        contact.segment_size = lambda t: posed.schedule.sizes(names, t)
+
+
 def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Sequence[SeamSpec] = (),
                       holds: Sequence[str] = (), clamped: Sequence[str] = (), torques: Sequence[TorqueSpec] = (), timeline: Timeline = Timeline(),
                       settings: ExplicitSettings = ExplicitSettings(), contact_method: str = "lagrange",
@@ -473,11 +483,7 @@ def build_garment_run(name: str, fmesh, fabric: Fabric, body: Body, *, seams: Se
         contact.transverse_scale = lambda t: g0 + (1.0 - g0) * smoothstep((t - t_don0) / t_don)
         if skin is not None and hasattr(skin, "transverse_scale"):
             skin.transverse_scale = contact.transverse_scale
-    if posed.schedule is not None:
-        names = list(posed.segments)
-        contact.segment_active = lambda t: np.isin(names, posed.active(t))
-        if posed.schedule.regrow_time > 0.0:
-            contact.segment_size = lambda t: posed.schedule.sizes(names, t)
+    _follow_schedule(contact, posed)
     ties = SeamTies(model, seams, sewing_time=timeline.sewing_time) if seams else None
     handles = [make(model) for make in handles]
     cloth = _self_contact(model, ties, self_contact_distance, self_friction, self_contact_passes, self_contact,
