@@ -19,8 +19,8 @@ from fabricfem.wear.garment import build_garment_run
 
 KNEE_AXIS = (0.0, 1.0, 0.0)      # knee flexion of the lower body (x forward, y left, z up): the shank swings back
 BELOW_KNEE = ("shank_r", "foot_r")
-BELT_TENSION = 20.0    # N, the pants-donning check (the scene's 5 N is of the order of the fabric's own hoop force
-#                        at the waistband: measured 5.67 N of contact per 2 pi for a 5 N belt, 13 % above it)
+BELT_TENSION = 20.0    # N, the pants-donning check and the scene's belt (5 N, of the order of the fabric's own hoop
+#                        force at the waistband, gave 5.67 N of contact per 2 pi, 13 % above it)
 
 
 BELT_CHECK_BLEND = 1e-3  # m: the pants-donning check's blend at the knees (fabricfem.body.blended). It verifies the
@@ -75,7 +75,7 @@ def quick_pants_data(thickness: float = 1e-3, h: float = 0.1) -> dict:
 def pants_donning() -> list:
     """The thesis's donning of the pants [Man2006, sec. 5.4] on a coarse mesh (h = 0.1 m): sewn 0.12 m below the
     waist around a body at 0.6 of its girths, pulled up by the waistband, the body grown to full size, the feet
-    back, a belt of T = 5 N at the waistband, 0.2 s of standing. Checks at the end: (1) no garment node inside a
+    back, a belt of T = 20 N at the waistband, 0.2 s of standing. Checks at the end: (1) no garment node inside a
     body segment beyond the contact tolerance (largest penetration of the last record below 1 mm: the explicit
     Lagrange contact leaves none but where a node is trapped between overlapping segments at the hip, reported);
     (2) the seams closed (largest distance of stitched nodes below 1e-6 m); (3) the belt's tension carried to the
