@@ -53,6 +53,7 @@ class WearStep:
     layers: dict[str, float] = field(default_factory=dict)   # per garment of several (fabricfem.wear.layers): N, Pa
     sensor_pressure: float = math.nan  # Pa, the largest mean over a sensor's disc (fabricfem.wear.sensor; nan: none)
     max_local_strain: float = math.nan  # largest warp/weft Green strain at a quadrature point (nan: not measured)
+    relative_kinetic_energy: float = math.nan   # J, relative to the body's motion (fabricfem.wear.relative_motion)
 
     @property
     def coordinate(self) -> float:
@@ -159,14 +160,16 @@ class WearHistory:
                 "peak_pressure_mmHg", "peak_segment", "peak_x_m", "peak_y_m", "peak_z_m", "mean_pressure_Pa",
                 "max_penetration_m", "contact_force_N", "seam_gap_m", *(f"seam_{n}_N_per_m" for n in self.seams),
                 "max_strain", "time_steps", "kinetic_energy_J", "strain_energy_J", "wall_s", "newton_iterations",
-                "drag_ratio", "intersecting_pairs", "sensor_pressure_Pa", "max_local_strain", *self.layer_columns)
+                "drag_ratio", "intersecting_pairs", "sensor_pressure_Pa", "max_local_strain", "kinetic_energy_rel_J",
+                *self.layer_columns)
 
     def rows(self) -> list[list]:
         return [[s.time, s.phase, s.coordinate, *s.torques.values(), s.peak_pressure, s.peak_pressure / PA_PER_MMHG,
                  s.peak_segment, *s.peak_position, s.mean_pressure, s.max_penetration, s.contact_force, s.seam_gap,
                  *s.seam_forces.values(), s.max_strain, s.time_steps, s.kinetic_energy, s.strain_energy, s.wall,
                  s.newton_iterations, s.drag_ratio, "" if s.intersecting_pairs is None else s.intersecting_pairs,
-                 s.sensor_pressure, s.max_local_strain, *(s.layers[c] for c in self.layer_columns)]
+                 s.sensor_pressure, s.max_local_strain, s.relative_kinetic_energy,
+                 *(s.layers[c] for c in self.layer_columns)]
                 for s in self.steps]
 
     def torque_curves(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:

@@ -54,6 +54,7 @@ from fabricfem.shell import ShellModel
 from fabricfem.wear.contract import WearHistory, WearStep
 from fabricfem.wear.engine import Phase, run_phases
 from fabricfem.wear.layers import LayerMonitor
+from fabricfem.wear.relative_motion import relative_kinetic_energy
 from fabricfem.wear.sensor import SENSOR_DIAMETER, sensor_pressure
 
 # the self-contact's penalty spring at most this fraction of the shell's highest frequency: the critical step
@@ -402,7 +403,8 @@ class GarmentRun:
                 wall=time.perf_counter() - t0, axis_value=self.axis_at(integ.t, phase),
                 intersecting_pairs=self.intersections(d),
                 layers=self.layers.values(pressure, contact) if self.layers is not None else {},
-                sensor_pressure=sensor, max_local_strain=local)
+                sensor_pressure=sensor, max_local_strain=local,
+                relative_kinetic_energy=relative_kinetic_energy(integ, contact, integ.t))
 
         save = None
         if checkpoint is not None:
