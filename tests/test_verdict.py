@@ -70,6 +70,19 @@ def test_each_check_compares_its_record_values_with_its_bound(values, failed):
     assert all(c.line().startswith(f"CHECK FAILED {c.name}") for c in checks if not c.passed)
 
 
+def test_the_kinetic_check_takes_the_energy_relative_to_the_body_where_a_record_has_it():
+    """A record whose ground-frame kinetic energy equals its strain energy (ratio 1, above the bound 0.5) passes when
+    its energy relative to the body (fabricfem.wear.relative_motion) is a tenth of it, and fails without that
+    measurement (nan)."""
+    def check(step):
+        history = WearHistory("walk", steps=[_step(phase="settle"), step], initial_gap=0.01)
+        return {c.name: c for c in wear_checks(history, Bounds(), failure_strain=0.3)}["kinetic energy"]
+    relative = check(_step(kinetic_energy=1e-2, relative_kinetic_energy=1e-3))
+    assert relative.passed and relative.value == 0.1
+    ground = check(_step(kinetic_energy=1e-2))
+    assert not ground.passed and ground.value == 1.0
+
+
 def test_the_local_strain_is_reported_and_never_fails():
     """The records' largest quadrature-point strain is information: its check passes above the failure strain, it
     is in the summary, and records that did not measure it (nan) leave both out."""
