@@ -5,25 +5,32 @@ independent look at the state: the angles of the cloth's nodes round each leg). 
 of the trousers lay beside the shanks (docs/findings/2026-11-28-pants-placement.md)."""
 import json
 import math
+import tomllib
+from pathlib import Path
 
 import meshio
 import numpy as np
+from mpi4py import MPI
 from toml_text import dumps
 
 from fabricfem import cli
 from fabricfem.body.lower_body import DEFAULT_LOWER_BODY
 from fabricfem.patterns import pattern_path
+from fabricfem.scenes import load
+from fabricfem.scenes.wear import garment_mesh
 from fabricfem.verify.pants import quick_pants_data
-from fabricfem.wear.pants import CM, SHIPPED_LEG_AXIS, PantsEase, pants_garmentcode, pants_sizes
+from fabricfem.wear.pants import CM, PANTS_BODY, PantsEase, pants_garmentcode, pants_sizes
 
-LEG_AXIS = 0.11          # m: scenes/pants_walk.toml's hip_spacing / 2
+SCENE = Path(__file__).resolve().parents[1] / "scenes" / "pants_walk.toml"
+LEG_AXIS = 0.5 * tomllib.loads(SCENE.read_text())["body"]["hip_spacing"]     # m: the scene's body, 0.11
 
 
 def test_the_shipped_pattern_is_the_builders():
-    """pants_four_panel.json is what write_pants_pattern writes (the two cannot drift apart)."""
+    """pants_four_panel.json is what write_pants_pattern writes, for the scene's own body (the three cannot drift
+    apart)."""
     shipped = json.loads(pattern_path("pants_four_panel").read_text())
-    assert shipped == json.loads(json.dumps(pants_garmentcode(leg_axis=SHIPPED_LEG_AXIS)))
-    assert SHIPPED_LEG_AXIS == LEG_AXIS
+    assert shipped == json.loads(json.dumps(pants_garmentcode()))
+    assert 0.5 * PANTS_BODY.hip_joint_spacing == LEG_AXIS
 
 
 def test_each_legs_centre_line_is_on_the_legs_axis():
@@ -83,13 +90,7 @@ def test_the_crotch_is_as_long_as_the_bodys():
     waist to the back waist round the pelvis: at least the arc length of the pelvis ellipsoid's midline section
     between the two waist points (0.596 m, summed numerically on 20001 points), with at most 5 % of ease (measured
     0.607 m; the pattern before 2026-11-28 had 0.482 m)."""
-    from pathlib import Path
-
-    from mpi4py import MPI
-
-    from fabricfem.scenes import load
-    from fabricfem.scenes.wear import garment_mesh
-    scene = load(Path(__file__).resolve().parents[1] / "scenes" / "pants_walk.toml")
+    scene = load(SCENE)
     _, seams, _, _ = garment_mesh(scene.parsed, scene.path, MPI.COMM_SELF)
     crotch = sum(s.length for s in seams if s.name in ("Rfront.5-Lfront.5", "Rback.5-Lback.5"))
     dims = DEFAULT_LOWER_BODY

@@ -19,8 +19,8 @@ from fabricfem.wear.garment import build_garment_run
 
 KNEE_AXIS = (0.0, 1.0, 0.0)      # knee flexion of the lower body (x forward, y left, z up): the shank swings back
 BELOW_KNEE = ("shank_r", "foot_r")
-BELT_TENSION = 20.0    # N, the pants-donning check and the scene's belt (5 N, of the order of the fabric's own hoop
-#                        force at the waistband, gave 5.67 N of contact per 2 pi, 13 % above it)
+BELT_TENSION = 20.0    # N, the pants-donning check (set here, as in scenes/pants_walk.toml since 2026-11-28; a 5 N
+#                        belt, of the order of the fabric's own hoop force, gave 5.67 N of contact per 2 pi)
 
 
 BELT_CHECK_BLEND = 1e-3  # m: the pants-donning check's blend at the knees (fabricfem.body.blended). It verifies the

@@ -25,7 +25,7 @@ PantsEase [m]:
 
 The leg tapers on both sides, so that the leg's centre line (x = -T / 2, the front crease of a trouser draft) is
 straight from the crotch level to the hem. The panels are placed flat in front of and behind the body with that
-centre line on the leg's axis (`leg_axis` from the body's midline); the left and right front (back) panels then
+centre line on the leg's axis (half the body's hip joint spacing from the midline); the left and right front (back) panels then
 overlap near the crotch, so the right ones are placed `ease.layer_gap` farther from the body. Placed with the
 outer side straight and the crotch point at the midline instead (the template's way), the lower leg lay beside
 the shank: the seams closed around no leg, and the shank stood outside the trousers after the sewing
@@ -40,14 +40,14 @@ from __future__ import annotations
 
 import copy
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from fabricfem.body.lower_body import DEFAULT_LOWER_BODY, LowerBodyDimensions
 from fabricfem.patterns import pattern_path
 
 CM = 100.0   # GarmentCode units per metre
-SHIPPED_LEG_AXIS = 0.11   # m: scenes/pants_walk.toml's hip_spacing / 2 (the shipped pattern's placement)
+PANTS_BODY = replace(DEFAULT_LOWER_BODY, hip_spacing=0.22)   # scenes/pants_walk.toml's body (the shipped pattern's)
 
 
 @dataclass(frozen=True)
@@ -83,14 +83,14 @@ def pants_sizes(dims: LowerBodyDimensions = DEFAULT_LOWER_BODY, ease: PantsEase 
             "seat_ease": seat - dims.buttock_girth}
 
 
-def pants_garmentcode(dims: LowerBodyDimensions = DEFAULT_LOWER_BODY, ease: PantsEase = PantsEase(),
-                      pelvis_depth: float = 0.151, leg_axis: float | None = None) -> dict:
-    """The GarmentCode JSON (a dict) of the pants (module docstring); `pelvis_depth` [m] is the body's front-back
-    semi-axis at the pelvis (the panels are placed `ease.depth` in front of and behind it), `leg_axis` [m] the
-    distance of each hip joint from the midline (default half the body's hip joint spacing)."""
+def pants_garmentcode(dims: LowerBodyDimensions = PANTS_BODY, ease: PantsEase = PantsEase(),
+                      pelvis_depth: float = 0.151) -> dict:
+    """The GarmentCode JSON (a dict) of the pants (module docstring) for the body `dims` (its hip joint spacing
+    places the legs); `pelvis_depth` [m] is the body's front-back semi-axis at the pelvis (the panels are placed
+    `ease.depth` in front of and behind it)."""
     s = pants_sizes(dims, ease)
     r, L, T, H, a, b = (s[k] for k in ("rise", "inseam", "thigh", "hem", "a", "b"))
-    axis = 0.5 * dims.hip_joint_spacing if leg_axis is None else float(leg_axis)
+    axis = 0.5 * dims.hip_joint_spacing
     template = json.loads(pattern_path("pants_straight_sides").read_text())
     out = copy.deepcopy(template)
     hem = r + L
@@ -107,10 +107,10 @@ def pants_garmentcode(dims: LowerBodyDimensions = DEFAULT_LOWER_BODY, ease: Pant
     return out
 
 
-def write_pants_pattern(path: str | Path, dims: LowerBodyDimensions = DEFAULT_LOWER_BODY,
-                        ease: PantsEase = PantsEase(), leg_axis: float | None = SHIPPED_LEG_AXIS) -> Path:
-    """Write `pants_garmentcode(dims, ease, leg_axis=leg_axis)` to `path` (JSON, indent 1); the defaults write the
-    shipped fabricfem/patterns/pants_four_panel.json."""
+def write_pants_pattern(path: str | Path, dims: LowerBodyDimensions = PANTS_BODY,
+                        ease: PantsEase = PantsEase()) -> Path:
+    """Write `pants_garmentcode(dims, ease)` to `path` (JSON, indent 1); the defaults write the shipped
+    fabricfem/patterns/pants_four_panel.json."""
     path = Path(path)
-    path.write_text(json.dumps(pants_garmentcode(dims, ease, leg_axis=leg_axis), indent=1) + "\n")
+    path.write_text(json.dumps(pants_garmentcode(dims, ease), indent=1) + "\n")
     return path
