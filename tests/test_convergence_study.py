@@ -12,11 +12,14 @@ from fabricfem.studies.convergence import ladder_rows
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _level(folder: Path, mean: float, scale: float) -> None:
-    """A level's outputs: summary.json with the window mean, torque.csv with T = scale x sin(axis)."""
+def _level(folder: Path, mean: float, scale: float, p95: float | None = None) -> None:
+    """A level's outputs: summary.json with the window mean (and the statistics' p95 |T|), torque.csv with
+    T = scale x sin(axis)."""
     folder.mkdir(parents=True)
-    (folder / "summary.json").write_text(json.dumps({"torque_knee": {"window_mean_Nm": mean}, "ndofs": 10,
-                                                     "status": "completed", "wall_s": 1.0}))
+    summary = {"torque_knee": {"window_mean_Nm": mean}, "ndofs": 10, "status": "completed", "wall_s": 1.0}
+    if p95 is not None:
+        summary["statistics"] = {"torque_knee": {"p95_abs_Nm": p95}}
+    (folder / "summary.json").write_text(json.dumps(summary))
     x = np.linspace(0.0, 1.0, 21)
     with open(folder / "torque.csv", "w", newline="") as f:
         w = csv.writer(f)
@@ -25,20 +28,24 @@ def _level(folder: Path, mean: float, scale: float) -> None:
 
 
 def test_a_second_order_ladder_extrapolates_to_its_limit(tmp_path):
-    """Window means q_k = 1 + 0.1 h_k^2 on h_k = 1.5^-k: observed order 2 and extrapolated value 1 (exact to
+    """Window means q_k = 1 + 0.1 h_k^2 on h_k = 1.5^-k (p95 |T| 2 - 0.3 h_k^1.5): observed order 2 and extrapolated
+    values 1 (2) (exact to
     round-off: the Richardson formula is exact for a pure power law); curve differences 1 - s_k / s_fine of
     T = s_k sin(x) relative to the finest's mean |T|, by hand."""
     ratio, folders, levels = 1.5, [], []
     for k in range(3):
         h = ratio ** -k
         folders.append(tmp_path / f"level_{k}")
-        _level(folders[-1], 1.0 + 0.1 * h ** 2, 1.0 + 0.1 * h ** 2)
+        _level(folders[-1], 1.0 + 0.1 * h ** 2, 1.0 + 0.1 * h ** 2, p95=2.0 - 0.3 * h ** 1.5)
         levels.append({"garment": {"builder": "tube", "n_around": 10 * (k + 1), "n_along": 13}})
     rows = ladder_rows(levels, folders, ratio)
     assert [r["level"] for r in rows] == [0, 1, 2]
     assert rows[-1]["observed_order"] == pytest.approx(2.0, rel=1e-6)
     assert rows[-1]["extrapolated_Nm"] == pytest.approx(1.0, rel=1e-12)
     assert rows[-1]["note"] == "asymptotic"
+    assert rows[-1]["p95_extrapolated_Nm"] == pytest.approx(2.0, rel=1e-12) and rows[-1]["p95_note"] == "asymptotic"
+    assert rows[0]["p95_abs_difference"] == pytest.approx(0.3 * (1 - ratio ** -3) / (2.0 - 0.3 * ratio ** -3),
+                                                          rel=1e-12)
     x = np.linspace(0.0, 1.0, 21)
     fine = (1.0 + 0.1 / ratio ** 4) * np.sin(x)
     coarse = 1.1 * np.sin(x)

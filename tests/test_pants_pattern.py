@@ -11,6 +11,7 @@ from pathlib import Path
 import meshio
 import numpy as np
 from mpi4py import MPI
+from scipy.spatial.transform import Rotation
 from toml_text import dumps
 
 from fabricfem import cli
@@ -51,6 +52,22 @@ def test_each_legs_centre_line_is_on_the_legs_axis():
         expected = DEFAULT_LOWER_BODY.waist_height - DEFAULT_LOWER_BODY.ankle_height - ease.hem_clearance
         assert math.isclose(hem_below_waist, expected, abs_tol=1e-9)
 
+
+
+def test_each_panels_hem_is_placed_near_the_leg():
+    """Placed by its Euler angles (R = Rz Ry Rx, scipy's extrinsic "xyz") and translation, every panel's waistband
+    lies ease.depth off the pelvis (its front-back semi-axis, 0.1514 m, which the builder takes rounded to the mm:
+    0.05 cm) and its hem's midpoint ease.hem_depth in front of or behind the leg's axis (x = 0 of the standing
+    body), the right panels layer_gap farther out (closed form of the module docstring; round-off 1e-6 cm)."""
+    panels = json.loads(pattern_path("pants_four_panel").read_text())["pattern"]["panels"]
+    ease, pelvis_depth = PantsEase(), DEFAULT_LOWER_BODY.pelvis_radii[1]
+    for name, panel in panels.items():
+        rotation = Rotation.from_euler("xyz", panel["rotation"], degrees=True).as_matrix()
+        v = np.column_stack([np.array(panel["vertices"]), np.zeros(6)]) @ rotation.T + panel["translation"]
+        gap = ease.layer_gap if name.startswith("R") else 0.0
+        front = 1.0 if name.endswith("front") else -1.0
+        assert np.allclose(v[[0, 1], 2], front * (pelvis_depth + ease.depth + gap) * CM, atol=0.05)
+        assert math.isclose(0.5 * (v[3, 2] + v[4, 2]), front * (ease.hem_depth + gap) * CM, abs_tol=1e-6)
 
 def _largest_angle_gap(points: np.ndarray, axis_y: float) -> float:
     """Largest gap [deg] between the angles of `points` (n, 3) round the vertical line x = 0, y = axis_y."""

@@ -164,6 +164,10 @@ def _add_sleeve_studies(names: Subparsers) -> dict[str, argparse.ArgumentParser]
     return {"sleeve": sleeve, "sleeve-fit": fit, "sleeve-methods": methods}
 
 
+def _number(value: float | None) -> str:
+    return "-" if value is None else f"{value:.4e}"
+
+
 def _convergence(args: argparse.Namespace) -> int:
     """study convergence: fabricfem.studies.convergence.run_convergence of a wear scene."""
     _check_groups(args)
@@ -172,7 +176,8 @@ def _convergence(args: argparse.Namespace) -> int:
     rows = run_convergence(scene, out, args.levels, args.ratio, args.quick, ranks_per_variant=args.ranks_per_variant)
     for row in rows:
         say(f"  level {row['level']} ({row['mesh']}) {row['monitor']}: curve {100 * row['curve_rms_difference']:.2f} % "
-            f"RMS from the finest, window mean {row['window_mean_Nm']:.4e} N m ({row['note']})")
+            f"RMS from the finest, window mean {row['window_mean_Nm']:.4e} N m ({row['note']}), p95 |T| "
+            f"{_number(row['p95_abs_Nm'])} N m ({row['p95_note']})")
     say(f"wrote {out}/convergence.csv and convergence.png")
     return 0
 

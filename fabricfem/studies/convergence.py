@@ -10,9 +10,14 @@ same scene is read back, not rerun). For every torque monitor the study reports,
     windowed mean      the monitor's mean over the first [output] window (fabricfem.wear.statistics) and its
                        relative difference to the finest level's
 
+    p95 |T|            the 95th percentile of |T| over the motion records (the statistics' percentile peak), the
+                       robust size of a moment whose windowed mean is near zero (the pants' knee), and its
+                       relative difference to the finest level's
+
 and, from the three finest levels, the observed order and the Richardson-extrapolated windowed mean with the
 grid convergence index of each level [Celik2008, eqs. 3-5; Roache1994] (fabricfem.scenes.richardson, plausible
-orders of a dynamic scene: the explicit step follows the mesh), or the reason the ladder is not asymptotic. Writes
+orders of a dynamic scene: the explicit step follows the mesh), or the reason the ladder is not asymptotic; the
+same extrapolation of p95 |T| and its note. Writes
 <out>/convergence.csv (a row per level and monitor) and <out>/convergence.png (every level's curves of the first
 monitor). `quick` (the tests): two levels, ratio 1.5, a tube's level 0 coarsened to about QUICK_CELLS cells (the
 shipped sleeve's 44 x 57 to the thesis's mesh I, 10 x 13), and a short motion (an elbow flexion to 6 degrees in
@@ -32,14 +37,15 @@ from fabricfem import io as fio
 from fabricfem.scenes import wear
 from fabricfem.scenes.batch import Job, check, completed, read_summary, run_batch
 from fabricfem.scenes.build import build_fabric, scene_name, scene_sha256, validate
-from fabricfem.scenes.richardson import ORDERS, richardson
+from fabricfem.scenes.richardson import ORDERS, Estimate, richardson
 from fabricfem.scenes.run import run_scene
 from fabricfem.scenes.schema import Scene
 from fabricfem.wear.outputs import plot_torque, torque_rms_error
 
 QUICK_CELLS = 130          # cells of a tube's level 0 in the quick study, at most
 COLUMNS = ("level", "mesh", "ndofs", "monitor", "curve_rms_difference", "window_mean_Nm",
-           "window_mean_difference", "extrapolated_Nm", "gci", "observed_order", "note", "wall_s", "status")
+           "window_mean_difference", "extrapolated_Nm", "gci", "observed_order", "note", "p95_abs_Nm",
+           "p95_abs_difference", "p95_extrapolated_Nm", "p95_note", "wall_s", "status")
 
 
 def level_data(scene: Scene, k: int, ratio: float, out: Path, quick: bool) -> dict:
@@ -83,6 +89,27 @@ def _curve(folder: Path, monitor: str) -> tuple[np.ndarray, np.ndarray]:
     return np.array([float(r["axis"]) for r in rows]), np.array([float(r[f"{monitor}_torque_Nm"]) for r in rows])
 
 
+def _relative(value: float | None, finest: float | None) -> float:
+    """|value - finest| / |finest|, NaN where either is missing or the finest is 0."""
+    return abs(value - finest) / abs(finest) if value is not None and finest else math.nan
+
+
+def _extrapolate(values: list[float | None], ratio: float) -> Estimate | None:
+    """Richardson's estimate from the three finest of `values` (coarse to fine), None with fewer or a gap."""
+    if len(values) < 3 or any(v is None for v in values[-3:]):
+        return None
+    sizes = tuple(ratio ** -k for k in range(len(values) - 3, len(values)))
+    return richardson(values[-3:], sizes, ORDERS["dynamic"])
+
+
+def _note(estimate: Estimate | None, values: list[float | None]) -> str:
+    """The ladder's note: why there is no extrapolation, or "asymptotic"."""
+    if estimate is None:
+        return ("fewer than three levels: no extrapolation" if len(values) < 3 else
+                "a level without this statistic: no extrapolation")
+    return estimate.note or "asymptotic"
+
+
 def ladder_rows(levels: list[dict], folders: list[Path], ratio: float) -> list[dict]:
     """The rows of convergence.csv (module docstring) from the levels' outputs, coarse to fine."""
     summaries = [read_summary(f) for f in folders]
@@ -91,26 +118,22 @@ def ladder_rows(levels: list[dict], folders: list[Path], ratio: float) -> list[d
     for monitor in monitors:
         fine_x, fine_y = _curve(folders[-1], monitor)
         means = [s.get(f"torque_{monitor}", {}).get("window_mean_Nm") for s in summaries]
-        estimate = None
-        if len(levels) >= 3 and all(m is not None for m in means[-3:]):
-            sizes = tuple(ratio ** -k for k in range(len(levels) - 3, len(levels)))
-            estimate = richardson(means[-3:], sizes, ORDERS["dynamic"])
+        peaks = [s.get("statistics", {}).get(f"torque_{monitor}", {}).get("p95_abs_Nm") for s in summaries]
+        estimate, peak_estimate = _extrapolate(means, ratio), _extrapolate(peaks, ratio)
+        errors = estimate.errors if estimate is not None else []
         for k, (data, summary, folder) in enumerate(zip(levels, summaries, folders)):
             x, y = _curve(folder, monitor)
-            start = float(fine_x[0]) if len(fine_x) else 0.0
-            fine_mean = means[-1]
-            errors = estimate.errors if estimate is not None else []
             index = k - (len(levels) - 3)
             rows.append({"level": k, "mesh": mesh_label(data), "ndofs": summary.get("ndofs"), "monitor": monitor,
-                         "curve_rms_difference": torque_rms_error(x, y, fine_x, fine_y, start=start),
-                         "window_mean_Nm": means[k],
-                         "window_mean_difference": (abs(means[k] - fine_mean) / abs(fine_mean)
-                                                    if means[k] is not None and fine_mean else math.nan),
+                         "curve_rms_difference": torque_rms_error(x, y, fine_x, fine_y,
+                                                                  start=float(fine_x[0]) if len(fine_x) else 0.0),
+                         "window_mean_Nm": means[k], "window_mean_difference": _relative(means[k], means[-1]),
                          "extrapolated_Nm": None if estimate is None else estimate.extrapolated,
                          "gci": errors[index] if 0 <= index < len(errors) else None,
-                         "observed_order": None if estimate is None else estimate.order,
-                         "note": ("fewer than three levels: no extrapolation" if estimate is None else
-                                  estimate.note or "asymptotic"),
+                         "observed_order": None if estimate is None else estimate.order, "note": _note(estimate, means),
+                         "p95_abs_Nm": peaks[k], "p95_abs_difference": _relative(peaks[k], peaks[-1]),
+                         "p95_extrapolated_Nm": None if peak_estimate is None else peak_estimate.extrapolated,
+                         "p95_note": _note(peak_estimate, peaks),
                          "wall_s": summary.get("wall_s"), "status": summary.get("status")})
     return rows
 

@@ -26,7 +26,14 @@ PantsEase [m]:
 The leg tapers on both sides, so that the leg's centre line (x = -T / 2, the front crease of a trouser draft) is
 straight from the crotch level to the hem. The panels are placed flat in front of and behind the body with that
 centre line on the leg's axis (half the body's hip joint spacing from the midline); the left and right front (back) panels then
-overlap near the crotch, so the right ones are placed `ease.layer_gap` farther from the body. Placed with the
+overlap near the crotch, so the right ones are placed `ease.layer_gap` farther from the body. Each panel is tilted
+about its waistband line (the Euler angle about GarmentCode's x, the same for all four) so that its hem lies
+`ease.hem_depth` in front of (behind) the leg's axis, while the waistband stays `ease.depth` off the pelvis:
+
+    sin(tilt) = (pelvis_depth + depth - hem_depth) / (r + L)          (7.07 deg; the hem rises (r + L)(1 - cos) = 7 mm)
+
+Placed upright, 0.18 m in front of and behind the thin shank, each pair of leg panels was drawn by its seams into a
+slit a few centimetres wide through the shank, and on a fine mesh a trouser leg closed beside it. Placed with the
 outer side straight and the crotch point at the midline instead (the template's way), the lower leg lay beside
 the shank: the seams closed around no leg, and the shank stood outside the trousers after the sewing
 (docs/findings/2026-11-28-pants-placement.md).
@@ -40,6 +47,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -65,6 +73,8 @@ class PantsEase:
                                      # body's crotch length (pelvis, waist to waist between the legs) is 0.596 m
     hem_clearance: float = 0.08      # m between the ankle joint and the hem (the ellipsoid foot's top is 0.06-0.07
                                      # m above it where the hem goes round)
+    hem_depth: float = 0.07          # m between the leg's axis and the placed hem, in front and behind: H / pi, the
+                                     # radius of a hem as round as its girth allows
 
 
 def pants_sizes(dims: LowerBodyDimensions = DEFAULT_LOWER_BODY, ease: PantsEase = PantsEase()) -> dict[str, float]:
@@ -100,8 +110,11 @@ def pants_garmentcode(dims: LowerBodyDimensions = PANTS_BODY, ease: PantsEase = 
         sign = -1.0 if panel["vertices"][0][0] < 0 else 1.0        # the template's mirrored panels
         panel["vertices"] = [[round((x if sign < 0 else -x) * CM, 6), round(y * CM, 6)] for x, y in left]
         side = 1.0 if name.startswith("L") else -1.0
-        z = (pelvis_depth + ease.depth + (ease.layer_gap if side < 0 else 0.0)) * CM
+        gap = ease.layer_gap if side < 0 else 0.0
+        z = (pelvis_depth + ease.depth + gap) * CM
         panel["translation"] = [side * x_shift, 0.0, z if name.endswith("front") else -z]
+        tilt = math.degrees(math.asin((pelvis_depth + ease.depth - ease.hem_depth) / hem))
+        panel["rotation"] = [round(tilt, 6), 0.0 if name.endswith("front") else 180.0, 0.0]
     out["pattern"]["description"] = ("fabricfem pants [Man2006, sec. 5.4], four panels sized from the lower body "
                                      "(fabricfem.wear.pants)")
     return out
