@@ -10,8 +10,8 @@ measures is the mean over a sensor's area. The sensor pressure of a record is
 the area-weighted mean of the nodal pressures p_j [Pa] (with the nodes' current cloth areas A_j [m^2], the nodes
 without contact counted with p_j = 0) over the cloth nodes within a ball of diameter D [m] around a node in
 contact: on the skin, a disc of diameter D (its area pi D^2 / 4 once D is several node spacings; on a mesh coarser
-than D, one node, and p_D is the nodal peak). It converges with the mesh where the nodal peak does not
-(docs/studies/sleeve.md, "Peak pressure"). Units: metres, pascals.
+than D, one node, and p_D is the nodal peak). It has a mesh limit also where the nodal peak has none (a line
+contact); docs/studies/sleeve.md, "Peak pressure", and docs/studies/pants.md compare the two. Units: metres, pascals.
 """
 from __future__ import annotations
 
