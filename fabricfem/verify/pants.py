@@ -120,7 +120,12 @@ def pants_donning() -> list:
 STUDY_DIRS = (Path("docs/figures/pants"), Path("results/pants_study"))
 
 
-@reproduction("pants-knee-torque", in_tests=False)
+@reproduction("pants-knee-torque", in_tests=False, deviation=(
+    "measured (docs/findings/2026-11-28-pants-tilt.md): the share of records compares two chaotic trajectories "
+    "record by record (a 1e-13 change of the density moves the knee moment by 4 % of its peak within 0.6 s); on the "
+    "tilted pants of 2026-11-28 the 2 mm moment is the larger in 85 % of the walk's records and 80 % of the "
+    "crossing's (90 and 91 % on the earlier garment), while its peak and mean exceed the 1 mm ones (ratios 1.57 and "
+    "2.19)"))
 def pants_knee_torque() -> list:
     """[Man2006, sec. 5.4, Fig. 49]: "the thicker pants exert greater resistance torques than do the pants with
     the thinner fabric" (the moment magnitude about the right knee of the contact forces at the knee and below,
