@@ -10,6 +10,7 @@ from pathlib import Path
 
 import meshio
 import numpy as np
+import pytest
 from mpi4py import MPI
 from scipy.spatial.transform import Rotation
 from toml_text import dumps
@@ -117,3 +118,10 @@ def test_the_crotch_is_as_long_as_the_bodys():
     theta = np.linspace(start, -math.pi - start, 20001)
     arc = np.sum(np.hypot(np.diff(r_ap * np.cos(theta)), np.diff(r_v * np.sin(theta))))
     assert arc <= crotch <= 1.05 * arc, (crotch, arc)
+
+
+def test_a_hem_depth_outside_the_waistbands_is_refused():
+    """A hem placed farther from the leg's axis than the waistband (or at or behind it) is refused, naming the key."""
+    for depth in (0.0, 0.5):
+        with pytest.raises(ValueError, match="hem_depth"):
+            pants_garmentcode(ease=PantsEase(hem_depth=depth))

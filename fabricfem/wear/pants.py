@@ -101,6 +101,9 @@ def pants_garmentcode(dims: LowerBodyDimensions = PANTS_BODY, ease: PantsEase = 
     s = pants_sizes(dims, ease)
     r, L, T, H, a, b = (s[k] for k in ("rise", "inseam", "thigh", "hem", "a", "b"))
     axis = 0.5 * dims.hip_joint_spacing
+    if not 0.0 < ease.hem_depth <= pelvis_depth + ease.depth:
+        raise ValueError(f"ease.hem_depth must lie in (0, {pelvis_depth + ease.depth:.3f}] m (the waistband's distance "
+                         f"from the leg's axis), got {ease.hem_depth!r}")
     template = json.loads(pattern_path("pants_straight_sides").read_text())
     out = copy.deepcopy(template)
     hem = r + L
