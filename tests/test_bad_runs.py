@@ -44,11 +44,11 @@ def _check(summary: dict, name: str) -> dict:
 def test_two_stride_pants_crossing_in_stride_two(tmp_path, capsys):
     """scenes/pants_walk.toml shortened to two strides with the obstacle crossed in the second, on h = 0.2 m (1940
     dofs, about three cells round a thigh; the shipped h = 0.07 m), one knee monitor, records of 0.04 s (0.02 s
-    shipped). Measured after the pants' placement was mended (2026-11-28; the shipped mesh's whole walk now stays
-    at strain 0.35 and 41 kPa): Green strain 0.89 (above the fabric's failure strain 0.3) and a peak skin pressure of
-    135 kPa at t = 4.32 s, inside the crossing stride: this coarse mesh cannot follow the crossing. Its kinetic /
-    strain energy ratio, 1.70 in the ground frame, is 0.11 relative to the walking body (fabricfem.wear.
-    relative_motion) and passes its bound 0.5. The pressure was below the default bound of 100 kPa on earlier
+    shipped). Measured on the tilted panels of 2026-11-28 (the shipped mesh's whole walk stays at strain 0.43 and
+    33 kPa): Green strain 0.68 (above the fabric's failure strain 0.3) and a peak skin pressure of 2.6 MPa at the
+    pelvis at t = 4.52 s, inside the crossing stride: this coarse mesh cannot follow the crossing. Its kinetic /
+    strain energy ratio relative to the walking body (fabricfem.wear.relative_motion) is 0.11 and passes its bound
+    0.5. The pressure was below the default bound of 100 kPa on earlier
     versions of the scene (a chaotic walk), so this test sets [checks] max_skin_pressure = 5 kPa, which the
     crossing must exceed."""
     from fabricfem.studies.pants import crossing_window
