@@ -55,6 +55,7 @@ import functools
 
 import numpy as np
 
+from fabricfem.contact import stitch_groups
 from fabricfem.contact.proximity import CLOSEST_C
 from fabricfem.forms.jit import KERNEL_FLAGS, built_once, pointer
 
@@ -402,7 +403,8 @@ def pair_nodes(vertex: np.ndarray, triangle: np.ndarray, triangles: np.ndarray, 
 
 
 def resolve(candidates, x: np.ndarray, u: np.ndarray, dt: float, mass: np.ndarray, held: np.ndarray, eta: float,
-            iterations: int, comm, release: int | None = None, releasable: np.ndarray | None = None) -> dict:
+            iterations: int, comm, release: int | None = None, releasable: np.ndarray | None = None,
+            joined: np.ndarray | None = None) -> dict:
     """Detection and rigid zones until the step x -> x + dt u is collision-free or `iterations` rounds (module
     docstring); u (N, 3) [m/s] changed in place; from round `release` (0-based; None: RELEASE_ROUND) on, the held
     nodes of the zones with a collision left are released (module docstring), those of `releasable` (N,) bool only
@@ -438,6 +440,9 @@ def resolve(candidates, x: np.ndarray, u: np.ndarray, dt: float, mass: np.ndarra
             break
         nodes = pair_nodes(vertex, triangle, triangles, first, second, edges)[hit]
         report["zone_nodes"] = merge(nodes, parent, comm)
+        if joined is not None and len(joined):
+            stitch_groups.join_zones(joined, parent, lambda rows, zones: merge(rows, zones, comm))
+            report["zone_nodes"] = int((parent >= 0).sum())
         if round_ >= release:              # the zones still colliding: their held nodes join the rigid motion
             released |= np.isin(parent, parent[nodes.ravel()]) & releasable
             report["released"] = int(released.sum())

@@ -71,7 +71,7 @@ import time
 import numpy as np
 from mpi4py import MPI
 
-from fabricfem.contact import cloth_kernel, edge_contact, impact_zones, impulses, nodal
+from fabricfem.contact import cloth_kernel, edge_contact, impact_zones, impulses, nodal, stitch_groups
 from fabricfem.contact import friction as friction_law
 from fabricfem.contact.cloth_surface import ClothSurface
 from fabricfem.contact.edge_contact import EdgePairs
@@ -145,6 +145,7 @@ class SelfContact:
         self.use_edges = bool(edges)
         self.edges = edge_contact.surface_edges(s.triangles)
         self.stitched = s.stitched(joined)   # (N,) one label per point of the cloth (a seam's stitched nodes)
+        self._star = stitch_groups.star_pairs(self.stitched, s.held)   # the groups kept together in `correct`
         seam_pairs, seam_edge_pairs = seam_neighbours(s, self.stitched, self.edges)
         near = self.search(s.reference, EXCLUSION * self.distance)
         same = self.part[near.vertex] == self.part[s.triangles[near.triangle, 0]]
@@ -330,17 +331,20 @@ class SelfContact:
             on_body = np.zeros(len(s.nodes.dofs))
             on_body[self.body.moving] = self.body.active
             inverse = np.where(s.gather(on_body[:, None])[:, 0] > 0.0, 0.0, inverse)
+        sewn = stitch_groups.closed(self._star, self._x, s.nodes.element_size)
         if self.passes and has_pairs:
             pairs, edge_pairs = impulses.canonical(self.pairs, self.edge_pairs, self._triangles, self.edges,
                                                    self._ranks)
             self.impulse, self.impulse_friction, _, self.impulse_passes = impulses.apply(
                 pairs, edge_pairs, self._triangles, self.edges, self._x, u, inverse, self.distance, self.mu,
                 self.passes, self.comm, self.restore_rate)
+            stitch_groups.weld(u, u0, sewn, self._finite_mass, inverse == 0.0)
             _check_speed(u, "velocities after the cloth-cloth impulses", t)
         toc = time.perf_counter()
         self.timings["impulses"] += toc - tic
         if zones:
-            self._impact_zones(u, inverse, dt)
+            self._impact_zones(u, inverse, dt, sewn)
+            stitch_groups.weld(u, u0, sewn, self._finite_mass, inverse == 0.0)
             _check_speed(u, "velocities after the impact zones", t)
             self.timings["zones"] += time.perf_counter() - toc
         a[rows] += s.owned_rows((u - u0) / dt)
@@ -358,10 +362,11 @@ class SelfContact:
         fastest = self.comm.allreduce(local if math.isfinite(local) else math.inf, op=MPI.MAX)   # NaN: checked
         return 2.0 * dt * fastest + impact_zones.TOLERANCE * self.distance >= self.distance
 
-    def _impact_zones(self, u: np.ndarray, inverse: np.ndarray, dt: float) -> None:
+    def _impact_zones(self, u: np.ndarray, inverse: np.ndarray, dt: float, sewn: np.ndarray) -> None:
         """The detection and rigid zones of fabricfem.contact.impact_zones on u (N, 3) [m/s] in place, from the
         step's positions `_x`; candidates: the Verlet list while it covers the step's motion, else a search within
-        1.5 times that motion, at most the mesh size (a node moving further in one step: pairs missed)."""
+        1.5 times that motion, at most the mesh size (a node moving further in one step: pairs missed); `sewn`: the
+        stitched groups a zone takes whole (fabricfem.contact.stitch_groups)."""
         x, eta = self._x, impact_zones.TOLERANCE * self.distance
         searched: dict[float, tuple] = {}
 
@@ -381,7 +386,8 @@ class SelfContact:
 
         # a node with a prescribed component is never released: the integrator imposes its motion whatever u says
         report = impact_zones.resolve(candidates, x, u, dt, self._finite_mass, inverse == 0.0, eta,
-                                      self.zone_iterations, self.comm, releasable=~self.surface.held)
+                                      self.zone_iterations, self.comm, releasable=~self.surface.held,
+                                      joined=sewn)
         self.zone_report = report
         totals = self.zone_totals
         totals["steps"] += report["collisions"] > 0
