@@ -2,9 +2,12 @@
 apart) and the seam labels by position, on small hand-made cases whose answers are known by construction."""
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
+from fabricfem.studies import fold_crossings
 from fabricfem.studies.fold_crossings import PER_CELL, main, pairs_by_cell, stitched_by_position
 
 
@@ -33,3 +36,15 @@ def test_a_folder_without_a_run_is_refused_in_one_line(tmp_path, capsys):
     with pytest.raises(SystemExit) as stop:
         main([str(tmp_path), "--cells", "0"])
     assert stop.value.code == 2 and "run_dir: no cloth.xdmf" in capsys.readouterr().err
+
+
+def test_a_segment_removed_for_the_donning_leaves_the_names_and_widths():
+    """The pants' feet are removed during the donning: the posed bodies are then the active segments only, and so
+    must be the names and the blend widths the skin gap takes (before: a (6, 6) skin against (8, 8) widths, refused)."""
+    widths = np.arange(9.0).reshape(3, 3)
+    run = SimpleNamespace(body=SimpleNamespace(segments={"thigh": 0, "shank": 1, "foot": 2}), time_at=lambda c: c,
+                          contact=SimpleNamespace(widths=widths, segment_active=lambda t: [True, t > 1.0, True]))
+    names, active_widths = fold_crossings._active_segments(run, 0.5)
+    assert names == ["thigh", "foot"]
+    np.testing.assert_array_equal(active_widths, [[0.0, 2.0], [6.0, 8.0]])
+    assert fold_crossings._active_segments(run, 2.0)[0] == ["thigh", "shank", "foot"]

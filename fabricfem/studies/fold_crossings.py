@@ -83,10 +83,10 @@ def crossing_report(folder: Path, scene_path: Path, record: int = -1) -> dict:
     run, *_ = build_wear_run(load(scene_path), MPI.COMM_SELF)
     coordinate = run.axis_at(time) if run.axis is not None else time
     bodies = run.posed_bodies(coordinate)
-    names = list(run.body.segments)
+    names, widths = _active_segments(run, coordinate)
     centroid = x[triangles].mean(axis=1)
-    first = skin_gap(centroid[pairs[:, 0]], bodies, run.contact.widths)
-    second = skin_gap(centroid[pairs[:, 1]], bodies, run.contact.widths)
+    first = skin_gap(centroid[pairs[:, 0]], bodies, widths)
+    second = skin_gap(centroid[pairs[:, 1]], bodies, widths)
     cosine = np.sum(first[1] * second[1], axis=1)
     segments = {f"{names[a]}-{names[b]}": int(np.sum((first[2] == a) & (second[2] == b)))
                 for a in range(len(names)) for b in range(len(names))}
@@ -95,6 +95,16 @@ def crossing_report(folder: Path, scene_path: Path, record: int = -1) -> dict:
             "opposed_normals": int(np.sum(cosine < OPPOSED)), "same_side": int(np.sum(cosine > -OPPOSED)),
             "gap_median_m": float(np.median(gaps)) if len(gaps) else float("nan"),
             "gap_max_m": float(gaps.max()) if len(gaps) else float("nan")}
+
+
+def _active_segments(run, coordinate: float) -> tuple[list[str], np.ndarray | None]:
+    """The names and the blend widths [m] of the segments `run.posed_bodies(coordinate)` returns (a segment removed
+    for the donning, the pants' feet, is left out of both)."""
+    names = list(run.body.segments)
+    active = (np.ones(len(names), dtype=bool) if run.contact.segment_active is None
+              else np.asarray(run.contact.segment_active(run.time_at(coordinate)), dtype=bool))
+    widths = None if run.contact.widths is None else np.asarray(run.contact.widths)[np.ix_(active, active)]
+    return [n for n, on in zip(names, active) if on], widths
 
 
 def main(argv: list[str] | None = None) -> None:
