@@ -1,0 +1,35 @@
+"""fabricfem.studies.sewing_paths: the stitches whose sewing line crosses another panel, on a hand-made case whose
+answer is known by construction, and on the shipped pants (the right inseam through the left leg's panels)."""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from fabricfem.studies.sewing_paths import crossing_stitches, sewing_report
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_a_stitch_line_through_a_third_panel_is_found():
+    """A unit square (two triangles, panel 3) in the plane z = 0; stitches from z = +0.1 to z = -0.1 between panels 1
+    and 2: over the square it is crossed, beside it not; the square counted as one of the stitch's own panels, not;
+    a stitch whose line ends on the square (its end on the plane) not (the ends are left out)."""
+    points = np.array([[0.0, 0, 0], [1.0, 0, 0], [1.0, 1, 0], [0.0, 1, 0]])
+    triangles = np.array([[0, 1, 2], [0, 2, 3]])
+    tags = np.array([3, 3])
+    a = np.array([[0.3, 0.6, 0.1], [1.5, 0.5, 0.1], [0.4, 0.2, 0.1]])
+    b = np.array([[0.3, 0.6, -0.1], [1.5, 0.5, -0.1], [0.4, 0.2, 0.0]])
+    np.testing.assert_array_equal(crossing_stitches(a, b, (1, 2), points, triangles, tags), [True, False, False])
+    np.testing.assert_array_equal(crossing_stitches(a, b, (1, 3), points, triangles, tags), [False, False, False])
+
+
+def test_the_pants_right_inseam_is_sewn_through_the_left_leg():
+    """scenes/pants_walk.toml: each leg's flat panels overlap the other leg's across the midline, the right leg's
+    outside the left's, so every stitch of the right inseam crosses a left-leg panel and no other seam's does
+    (docs/findings/2026-11-28-stitched-zones.md)."""
+    rows = {row["seam"]: row for row in sewing_report(ROOT / "scenes" / "pants_walk.toml")}
+    inseam = rows.pop("Rfront.4-Rback.0")
+    assert inseam["pairs"] > 0 and inseam["through_another_panel"] == inseam["pairs"]
+    assert inseam["a_y"][0] >= -1e-12 and inseam["a_y"][1] > 0.05      # on the left of the midline
+    assert all(row["through_another_panel"] == 0 for row in rows.values())
