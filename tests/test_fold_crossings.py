@@ -42,8 +42,9 @@ def test_a_segment_removed_for_the_donning_leaves_the_names_and_widths():
     """The pants' feet are removed during the donning: the posed bodies are then the active segments only, and so
     must be the names and the blend widths the skin gap takes (before: a (6, 6) skin against (8, 8) widths, refused)."""
     widths = np.arange(9.0).reshape(3, 3)
-    run = SimpleNamespace(body=SimpleNamespace(segments={"thigh": 0, "shank": 1, "foot": 2}), time_at=lambda c: c,
-                          contact=SimpleNamespace(widths=widths, segment_active=lambda t: [True, t > 1.0, True]))
+    run = SimpleNamespace(body=SimpleNamespace(segments={"thigh": 0, "shank": 1, "foot": 2}),
+                          active_segments=lambda c: np.array([True, c > 1.0, True]),
+                          contact=SimpleNamespace(widths=widths))
     names, active_widths = fold_crossings._active_segments(run, 0.5)
     assert names == ["thigh", "foot"]
     np.testing.assert_array_equal(active_widths, [[0.0, 2.0], [6.0, 8.0]])

@@ -5,8 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
-from fabricfem.studies.sewing_paths import crossing_stitches, sewing_report
+from fabricfem.studies.sewing_paths import crossing_stitches, main, sewing_report
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -33,3 +34,11 @@ def test_the_pants_right_inseam_is_sewn_through_the_left_leg():
     assert inseam["pairs"] > 0 and inseam["through_another_panel"] == inseam["pairs"]
     assert inseam["a_y"][0] >= -1e-12 and inseam["a_y"][1] > 0.05      # on the left of the midline
     assert all(row["through_another_panel"] == 0 for row in rows.values())
+
+
+def test_a_scene_without_a_pattern_or_a_missing_file_is_refused_in_one_line(tmp_path, capsys):
+    """A tube garment has no seams to sew, a missing file is no scene: exit 2 with the reason (argparse's error)."""
+    for scene, reason in ((ROOT / "scenes" / "sleeve.toml", "is not a pattern"), (tmp_path / "none.toml", "scene:")):
+        with pytest.raises(SystemExit) as stop:
+            main([str(scene)])
+        assert stop.value.code == 2 and reason in capsys.readouterr().err

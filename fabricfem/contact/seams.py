@@ -56,6 +56,15 @@ class SeamSpec:
     length: float
 
 
+def group_means(group: np.ndarray, weight: np.ndarray, values: np.ndarray, count: int | None = None) -> np.ndarray:
+    """(count, 3) weighted mean sum_G w v / sum_G w of the rows `values` (n, 3) in each group, `group` (n,) the
+    group index of each row (0 .. count - 1; count default max + 1), `weight` (n,) positive."""
+    count = int(group.max()) + 1 if count is None else count
+    total = np.bincount(group, weight, count)
+    sums = np.stack([np.bincount(group, weight * values[:, i], count) for i in range(3)], axis=1)
+    return sums / total[:, None]
+
+
 class SeamTies:
     """The seams of a garment (module docstring) as an explicit contact hook (fabricfem.solvers.system.ExplicitHook:
     `correct`; `forces` is a no-op) that keeps the masses M + dt/2 C of its nodes (`on_time_step` drops them).
@@ -117,9 +126,7 @@ class SeamTies:
 
     def _centroids(self, x: np.ndarray, m: np.ndarray) -> np.ndarray:
         """Mass-weighted centre of each member's group, per member (members, 3)."""
-        total = np.bincount(self.group, m, self.n_groups)
-        c = np.stack([np.bincount(self.group, m * x[:, i], self.n_groups) for i in range(3)], axis=1)
-        return (c / total[:, None])[self.group]
+        return group_means(self.group, m, x, self.n_groups)[self.group]
 
     def closure(self, t: float) -> float:
         """s(t) in [0, 1]: how far the sewing has closed the seams at time t [s] (1: closed)."""

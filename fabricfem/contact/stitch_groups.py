@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fabricfem.contact.seams import HELD_MASS_FACTOR
+from fabricfem.contact.seams import HELD_MASS_FACTOR, group_means
 
 
 def star_pairs(labels: np.ndarray, held: np.ndarray | None = None) -> np.ndarray:
@@ -60,10 +60,7 @@ def weld(u: np.ndarray, u0: np.ndarray, star: np.ndarray, mass: np.ndarray, held
     nodes = np.unique(star)
     group = np.searchsorted(np.unique(star[:, 1]), _representative(star, nodes))
     weight = mass[nodes] * np.where(held[nodes], HELD_MASS_FACTOR, 1.0)
-    change = u[nodes] - u0[nodes]
-    total = np.bincount(group, weight)
-    mean = np.stack([np.bincount(group, weight * change[:, i]) for i in range(3)], axis=1) / total[:, None]
-    u[nodes] = u0[nodes] + mean[group]
+    u[nodes] = u0[nodes] + group_means(group, weight, u[nodes] - u0[nodes])[group]
 
 
 def join_zones(star: np.ndarray, parent: np.ndarray, merge) -> None:

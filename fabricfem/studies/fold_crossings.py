@@ -100,9 +100,7 @@ def crossing_report(folder: Path, scene_path: Path, record: int = -1) -> dict:
 def _active_segments(run, coordinate: float) -> tuple[list[str], np.ndarray | None]:
     """The names and the blend widths [m] of the segments `run.posed_bodies(coordinate)` returns (a segment removed
     for the donning, the pants' feet, is left out of both)."""
-    names = list(run.body.segments)
-    active = (np.ones(len(names), dtype=bool) if run.contact.segment_active is None
-              else np.asarray(run.contact.segment_active(run.time_at(coordinate)), dtype=bool))
+    names, active = list(run.body.segments), run.active_segments(coordinate)
     widths = None if run.contact.widths is None else np.asarray(run.contact.widths)[np.ix_(active, active)]
     return [n for n, on in zip(names, active) if on], widths
 

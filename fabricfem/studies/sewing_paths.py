@@ -59,7 +59,7 @@ def sewing_report(scene_path: Path) -> list[dict]:
     scene = load(scene_path)
     fabric, seams, _, garment = garment_mesh(scene.parsed, scene.path, MPI.COMM_SELF)
     if garment is None:
-        raise ValueError(f"{scene_path}: the garment is not a pattern (no seams to sew)")
+        raise ValueError(f"{scene_path}: [garment] is not a pattern (no seams to sew)")
     points, triangles, tags = panel_triangles(fabric)
     rows = []
     for seam in seams:
@@ -74,7 +74,11 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scene", type=Path, help="a wear scene with a pattern garment")
     args = parser.parse_args(argv)
-    for row in sewing_report(args.scene):
+    try:
+        rows = sewing_report(args.scene)
+    except ValueError as exc:        # SceneError is one: a bad or missing scene
+        parser.error(f"scene: {exc}")
+    for row in rows:
         ranges = "  ".join(f"{k} [{v[0]:+.3f}, {v[1]:+.3f}]" for k, v in row.items() if isinstance(v, tuple))
         print(f"{row['seam']:20s} pairs {row['pairs']:3d}  through another panel {row['through_another_panel']:3d}  "
               f"{ranges}")

@@ -268,13 +268,18 @@ class GarmentRun:
         """Contact pressure on the body [Pa] per unit deformed cloth area, mean over the last record."""
         return self.contact.pressure_field()
 
+    def active_segments(self, coordinate: float) -> np.ndarray:
+        """(S,) bool over `body.segments`: the segments in the body at the record coordinate (time [s] or the axis
+        value); False for one removed for the donning."""
+        if self.contact.segment_active is None:
+            return np.ones(len(self.body.segments), dtype=bool)
+        return np.asarray(self.contact.segment_active(self.time_at(coordinate)), dtype=bool)
+
     def posed_bodies(self, coordinate: float) -> list:
         """The body's segments as the contact sees them at the record coordinate (time [s] or the axis value;
-        grown, inactive ones left out)."""
-        time_s = self.time_at(coordinate)
-        active = (np.ones(len(self.body.segments), dtype=bool) if self.contact.segment_active is None
-                  else self.contact.segment_active(time_s))
-        return [e for e, on in zip(self.contact.body_at(time_s), active) if on]
+        grown, inactive ones left out: `active_segments`)."""
+        bodies = self.contact.body_at(self.time_at(coordinate))
+        return [e for e, on in zip(bodies, self.active_segments(coordinate)) if on]
 
     def adaptive_steps(self) -> int:
         """Steps of the next record interval, with dt set for it: the St. Venant-Kirchhoff membrane stiffens under
