@@ -7,7 +7,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fabricfem.studies.sewing_paths import crossing_stitches, main, sewing_report
+from fabricfem.meshes.sewing_lines import crossing_stitches
+from fabricfem.studies.sewing_paths import main, sewing_report
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -42,3 +43,34 @@ def test_a_scene_without_a_pattern_or_a_missing_file_is_refused_in_one_line(tmp_
         with pytest.raises(SystemExit) as stop:
             main([str(scene)])
         assert stop.value.code == 2 and reason in capsys.readouterr().err
+
+
+def test_the_wrapped_pants_sew_no_stitch_through_another_panel():
+    """scenes/pants_walk_self.toml: each leg's panels rolled round its own leg (fabricfem.wear.pants.pants_wraps),
+    every seam closes in the open."""
+    rows = sewing_report(ROOT / "scenes" / "pants_walk_self.toml")
+    assert len(rows) == 8 and all(row["through_another_panel"] == 0 for row in rows)
+
+
+def test_the_panel_triangles_cover_each_flat_panel_once():
+    """The 8 triangles per 9-node cell of scenes/pants_walk.toml's flat panels: per panel, their area equals the
+    outline's (fabricfem.meshes.pattern.outline_area: the curved crotch edge as a Bezier; the mesh's Q2 edge departs
+    from it by the interpolation error, 1e-3 relative allowed) and their normals all point one way (no folded or
+    doubled triangle: the split follows dolfinx's node order)."""
+    from mpi4py import MPI
+
+    from fabricfem.meshes.pattern import outline_area
+    from fabricfem.meshes.sewing_lines import panel_triangles
+    from fabricfem.scenes.build import load
+    from fabricfem.scenes.wear import garment_mesh
+    scene = load(ROOT / "scenes" / "pants_walk.toml")
+    fabric, _, _, garment = garment_mesh(scene.parsed, scene.path, MPI.COMM_SELF)
+    points, triangles, tags = panel_triangles(fabric)
+    p = points[triangles]
+    cross = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    for name, tag in garment.panel_tags.items():
+        mine = cross[tags == tag]
+        assert 0.5 * np.linalg.norm(mine, axis=1).sum() == pytest.approx(outline_area(garment.pattern.panels[name]),
+                                                                         rel=1e-3), name
+        unit = mine / np.linalg.norm(mine, axis=1, keepdims=True)
+        assert np.all(unit @ unit[0] > 0.999), name

@@ -23,6 +23,7 @@ from fabricfem.dynamics import CentralDifference, NewmarkIntegrator, critical_ti
 from fabricfem.dynamics.ts import GeneralizedAlphaIntegrator
 from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
 from fabricfem.meshes import plate, tube
+from fabricfem.meshes.sewing_lines import sewn_through
 from fabricfem.scenes import schema, wear
 from fabricfem.scenes.contract import WearScene
 from fabricfem.scenes.garments import attach_layers, check_layer_gaps
@@ -517,6 +518,17 @@ def limb_scene_run(scene: Scene, comm) -> GarmentRun:
         raise SceneError(f"body: {exc}") from None
 
 
+def refuse_sewing_through(fmesh, seams, scene_path: Path | None, comm) -> None:
+    """With self-contact, a seam sewn through another panel cannot close (fabricfem.meshes.sewing_lines): SceneError
+    naming the seams and their counts, before the time loop."""
+    crossed = [(seam.name, int(c.sum()), len(c)) for seam, c in zip(seams, sewn_through(fmesh, seams, comm)) if c.any()]
+    if crossed:
+        listed = ", ".join(f"{name} ({n} of {total})" for name, n, total in crossed)
+        raise SceneError(f"garment: with contact.self_contact, stitches of {listed} are sewn through another panel, "
+                         f"so the seams cannot close; place the panels so that each seam closes in the open (e.g. "
+                         f"garment.wrap; python -m fabricfem.studies.sewing_paths {scene_path or 'SCENE'} lists them)")
+
+
 def garment_scene_run(scene: Scene, comm, skin: Skin | None = None) -> GarmentRun:
     """The explicit engine's GarmentRun of a wear scene (fabricfem.scenes.wear.plan and garment_mesh); `skin`: a
     Skin of the scene's body (fabricfem.body.skin) instead of the scene's own (a benchmark's variant)."""
@@ -527,6 +539,8 @@ def garment_scene_run(scene: Scene, comm, skin: Skin | None = None) -> GarmentRu
     if plan.handles and pattern_garment is None:
         raise SceneError("donning: pull_edges and belt_edges name pattern edges; this garment is a tube")
     handles = wear.edge_handles(plan.handles, pattern_garment) if plan.handles else []
+    if plan.contact.self_contact and seams and parsed.garment.sewing_time > 0.0:
+        refuse_sewing_through(fmesh, seams, scene.path, comm)
     garment = parsed.garment
     run = build_garment_run(scene_name(scene), fmesh, fabric, plan.body, seams=seams, holds=holds,
                             torques=plan.torques, timeline=plan.timeline, settings=plan.settings,

@@ -36,20 +36,20 @@ from fabricfem.dynamics.stability import step_safety
 from fabricfem.fabrics import load_fabric
 from fabricfem.meshes import tube
 from fabricfem.meshes.pattern import (
-    Panel,
     check_held_stitches,
     check_pattern,
     outline_polyline,
     read_garmentcode,
     read_pattern_toml,
 )
-from fabricfem.meshes.pattern_mesh import RigidPlacement, mesh_pattern
+from fabricfem.meshes.pattern_mesh import mesh_pattern
 from fabricfem.patterns import pattern_path
 from fabricfem.scenes.contract import WearScene
 from fabricfem.scenes.errors import SceneError
 from fabricfem.scenes.errors import suggest as _suggest
 from fabricfem.scenes.garments import check_layers, first_garment, garment_tables, layered_garment_mesh
 from fabricfem.scenes.mesh_body import check_mesh_keys, scene_skin
+from fabricfem.scenes.panel_placement import check_wrap, panel_placements
 from fabricfem.scenes.wear_sections import GarmentSection, WearDonningSection, WearMotionSection
 from fabricfem.wear.compression import StillPose, limb_body
 from fabricfem.wear.config import ROUTE_METHODS, ContactSpec
@@ -130,6 +130,7 @@ def check_wear(data: dict) -> None:
     for key in ("rotate", "translate"):
         if key in garment:
             _vector(f"garment.{key}", garment[key])
+    check_wrap(garment.get("wrap"))
     _choice("body.type", body["type"], BODY_TYPES)
     if body["type"] == "limb":
         for key in ("center", "radii"):
@@ -321,16 +322,6 @@ def _motion_file(motion: WearMotionSection, scene_path: Path | None, body_names)
         raise SceneError(f"motion.path: {exc}") from None
 
 
-def garment_frame(garment: GarmentSection) -> tuple[np.ndarray, np.ndarray]:
-    """(rotation (3, 3), shift (3,) [m]) of garment.rotate and garment.translate, applied to a pattern's placed
-    panels: x = rotation x_panel + shift."""
-    rotation = np.eye(3)
-    if garment.rotate is not None:
-        rotation = Panel("frame", np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]]), rotation=tuple(garment.rotate)
-                         ).rotation_matrix()
-    return rotation, np.zeros(3) if garment.translate is None else np.asarray(garment.translate, dtype=float)
-
-
 def garment_box(wear: WearScene, scene_path: Path | None) -> tuple[np.ndarray, np.ndarray]:
     """(lower, upper) [m]: the garment's reference bounding box before meshing: a tube's 0 <= x <= length,
     |y|, |z| <= radius; the box of a pattern's panel outlines (curved edges as 64-segment polylines) placed as
@@ -338,9 +329,9 @@ def garment_box(wear: WearScene, scene_path: Path | None) -> tuple[np.ndarray, n
     g = wear.garment
     if g.builder == "tube":
         return np.array([0.0, -g.radius, -g.radius]), np.array([g.length, g.radius, g.radius])
-    rotation, shift = garment_frame(g)
-    points = np.vstack([RigidPlacement.of(panel).map(outline_polyline(panel)[0]) @ rotation.T + shift
-                        for panel in read_pattern(wear, scene_path).panels.values()])
+    pattern = read_pattern(wear, scene_path)
+    places = panel_placements(g, pattern)
+    points = np.vstack([places[name].map(outline_polyline(panel)[0]) for name, panel in pattern.panels.items()])
     return points.min(axis=0), points.max(axis=0)
 
 
@@ -585,13 +576,8 @@ def garment_mesh(wear: WearScene, scene_path: Path | None, comm):
         return tube(g.length, g.radius, g.n_around, g.n_along, cell="quadrilateral", order=g.order, comm=comm), [], \
             list(g.hold), None
     pattern = read_pattern(wear, scene_path)
-    rotation, shift = garment_frame(g)
-    placements = {}
-    for name, panel in pattern.panels.items():
-        own = RigidPlacement.of(panel)
-        placements[name] = RigidPlacement(rotation @ own.rotation, rotation @ own.translation + shift)
     try:
-        garment = mesh_pattern(pattern, g.h, order=g.order, placements=placements,
+        garment = mesh_pattern(pattern, g.h, order=g.order, placements=panel_placements(g, pattern),
                                stitch_length_tolerance=g.stitch_tolerance, comm=comm)
     except ValueError as exc:
         raise SceneError(f"garment.pattern: {exc}") from None

@@ -25,6 +25,10 @@ class GarmentSection:
     rotate: list | None = doc("pattern: [rx, ry, rz] extrinsic XYZ Euler angles [deg] applied to the placed garment "
                               "(GarmentCode files are Y-up: [90, 0, 0] turns them Z-up)", None)
     translate: list | None = doc("pattern: [x, y, z] [m] added after `rotate`", None)
+    wrap: dict | None = doc("pattern: panels rolled onto cylinders instead of their own placement, panel name -> "
+                            "{axis_point = [x, y, z] [m], axis = [x, y, z], radius [m], zero_direction = [x, y, z], "
+                            "angle0 [deg]} in the scene's frame (`rotate` and `translate` do not apply; "
+                            "fabricfem.scenes.panel_placement)", None)
     hold: list = doc("edge tags whose nodes are held in place (tube: end0 at x = 0, end1)", default_factory=list)
     length: float | None = doc("tube: length along x [m]", None)
     radius: float | None = doc("tube: radius [m]", None)

@@ -123,6 +123,36 @@ def pants_garmentcode(dims: LowerBodyDimensions = PANTS_BODY, ease: PantsEase = 
     return out
 
 
+def pants_wraps(dims: LowerBodyDimensions = PANTS_BODY, ease: PantsEase = PantsEase(), waistband_height: float = 0.935,
+                radius: float = 0.12, inseam_clearance: float = 0.005) -> dict[str, dict]:
+    """The scene's `[garment.wrap]` (fabricfem.scenes.panel_placement) rolling each panel of `pants_garmentcode`
+    onto a vertical cylinder of `radius` [m] round its own leg, in the body frame (x front, y left, z up):
+
+        axis through (0, +-c, waistband_height), c = inseam_clearance + radius sin(T / (2 radius))
+        zero_direction = +-y (the leg's outer side), angle0 = +-(pi / 2 - T / (2 radius))
+
+    so that the leg's centre line (panel x = -+T / 2) lies straight in front of (behind) the axis, the outer side
+    seam's two edges lie 2 (pi / 2 - T / (2 radius)) radius apart round the outside and the inseam ends
+    `inseam_clearance` [m] from the midline on the leg's own side: no seam is sewn across the other leg. The panel's
+    y = 0 (the waistband line) lies at `waistband_height` [m]. Needs T / pi <= radius (the panel goes at most
+    half-way round)."""
+    T = pants_sizes(dims, ease)["thigh"]
+    if not (math.isfinite(radius) and radius >= T / math.pi):
+        raise ValueError(f"radius: must be at least T / pi = {T / math.pi:.4f} m (a panel goes at most half-way "
+                         f"round), got {radius!r}")
+    if not (math.isfinite(inseam_clearance) and inseam_clearance > 0.0):
+        raise ValueError(f"inseam_clearance: must be a positive length [m], got {inseam_clearance!r}")
+    centre = inseam_clearance + radius * math.sin(0.5 * T / radius)
+    start = math.degrees(0.5 * math.pi - 0.5 * T / radius)
+    wraps = {}
+    for name in ("Lfront", "Lback", "Rfront", "Rback"):
+        side = 1.0 if name[0] == "L" else -1.0
+        x_sign = 1.0 if name in ("Lback", "Rfront") else -1.0          # the panels' x runs from 0 to +-T
+        wraps[name] = {"axis_point": [0.0, round(side * centre, 6), waistband_height], "axis": [0.0, 0.0, 1.0],
+                       "radius": radius, "zero_direction": [0.0, side, 0.0], "angle0": round(x_sign * start, 6)}
+    return wraps
+
+
 def write_pants_pattern(path: str | Path, dims: LowerBodyDimensions = PANTS_BODY,
                         ease: PantsEase = PantsEase()) -> Path:
     """Write `pants_garmentcode(dims, ease)` to `path` (JSON, indent 1); the defaults write the shipped
