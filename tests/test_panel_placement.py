@@ -1,6 +1,6 @@
 """[garment.wrap]: pattern panels rolled onto cylinders in the scene's frame (fabricfem.scenes.panel_placement), the
 pants' wraps round their own legs (fabricfem.wear.pants.pants_wraps), and the setup's refusal of a self-contact run
-whose seams are sewn through another panel (fabricfem.meshes.sewing_lines). Checked against the geometry itself:
+whose seams are sewn through another panel (fabricfem.contact.sewing_lines). Checked against the geometry itself:
 the distance of the placed nodes from the axis, the stitched edges' lengths, the side of the midline."""
 from __future__ import annotations
 

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fabricfem.meshes.sewing_lines import crossing_stitches
+from fabricfem.contact.sewing_lines import crossing_stitches
 from fabricfem.studies.sewing_paths import main, sewing_report
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -59,8 +59,8 @@ def test_the_panel_triangles_cover_each_flat_panel_once():
     doubled triangle: the split follows dolfinx's node order)."""
     from mpi4py import MPI
 
+    from fabricfem.contact.sewing_lines import panel_triangles
     from fabricfem.meshes.pattern import outline_area
-    from fabricfem.meshes.sewing_lines import panel_triangles
     from fabricfem.scenes.build import load
     from fabricfem.scenes.wear import garment_mesh
     scene = load(ROOT / "scenes" / "pants_walk.toml")

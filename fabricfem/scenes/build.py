@@ -19,11 +19,11 @@ from fabricfem.body.arm import ArmDimensions
 from fabricfem.body.ellipsoid import Ellipsoid
 from fabricfem.body.skin import Skin
 from fabricfem.contact.obstacles import Plane, RoundedBox, table_top
+from fabricfem.contact.sewing_lines import sewn_through
 from fabricfem.dynamics import CentralDifference, NewmarkIntegrator, critical_time_step, node_monitor, stability
 from fabricfem.dynamics.ts import GeneralizedAlphaIntegrator
 from fabricfem.materials import Fabric, KawabataBending, SquareRootBending
 from fabricfem.meshes import plate, tube
-from fabricfem.meshes.sewing_lines import sewn_through
 from fabricfem.scenes import schema, wear
 from fabricfem.scenes.contract import WearScene
 from fabricfem.scenes.garments import attach_layers, check_layer_gaps
@@ -519,7 +519,7 @@ def limb_scene_run(scene: Scene, comm) -> GarmentRun:
 
 
 def refuse_sewing_through(fmesh, seams, scene_path: Path | None, comm) -> None:
-    """With self-contact, a seam sewn through another panel cannot close (fabricfem.meshes.sewing_lines): SceneError
+    """With self-contact, a seam sewn through another panel cannot close (fabricfem.contact.sewing_lines): SceneError
     naming the seams and their counts, before the time loop."""
     crossed = [(seam.name, int(c.sum()), len(c)) for seam, c in zip(seams, sewn_through(fmesh, seams, comm)) if c.any()]
     if crossed:

@@ -3,8 +3,8 @@ SCENE`.
 
 The sewing draws each pair of stitched nodes together along the straight line between them; this study meshes the
 scene's pattern garment as the run does (fabricfem.scenes.wear.garment_mesh, serially) and counts, per seam, the
-stitched pairs whose line crosses a panel other than the two it joins (fabricfem.meshes.sewing_lines, the test a run
-with self-contact makes at setup). It also prints the range of each side's reference positions. Metres.
+stitched pairs whose line crosses a panel other than the two it joins (fabricfem.contact.sewing_lines, the test a
+run with self-contact makes at setup). It also prints the range of each side's reference positions. Metres.
 """
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from pathlib import Path
 
 from mpi4py import MPI
 
-from fabricfem.meshes.sewing_lines import sewn_through
+from fabricfem.contact.sewing_lines import sewn_through
 from fabricfem.scenes.build import load
 from fabricfem.scenes.wear import garment_mesh
 

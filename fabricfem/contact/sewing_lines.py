@@ -4,11 +4,11 @@ The sewing draws each pair of stitched nodes together along the straight line be
 both move to the pair's centre). If that line crosses a third panel, no contact can close the seam without passing
 cloth through cloth: with self-contact the seam stays open or closes through the panel, without it the cloth
 crosses itself (docs/findings/2026-11-28-stitched-zones.md). The panels are triangulated on their geometry nodes
-(a 9-node quadrilateral split into 8 triangles on its 3 x 3 nodes, a 4-node one into 2: the chord of a panel rolled
-onto a cylinder of radius r departs from it by h^2 / (32 r) with h the cell size) and each stitch's line is tested
-against the triangles of the panels other than the two it joins (libigl's `ray_mesh_intersect`, the library of the
-intersection count's degenerate cases; hit parameters t in (1e-9, 1 - 1e-9) of the line from a to b, its ends left
-out). Metres. Parallel: each rank tests its own cells, the answers are OR-ed.
+(a 9-node quadrilateral split into 8 triangles on its 3 x 3 nodes as the self-contact splits it,
+fabricfem.contact.cloth_surface.SPLIT, a 4-node one into 2; the chord of a panel rolled onto a cylinder of radius r
+departs from it by h^2 / (32 r) with h the cell size) and each stitch's line is tested against the triangles of
+the panels other than the two it joins (libigl's `ray_mesh_intersect`, the library of the intersection count's
+degenerate cases; hit parameters t in (1e-9, 1 - 1e-9) of the line from a to b, its ends left out). Metres. Parallel: each rank tests its own cells, the answers are OR-ed.
 """
 from __future__ import annotations
 
@@ -18,20 +18,9 @@ import igl
 import numpy as np
 from mpi4py import MPI
 
+from fabricfem.contact.cloth_surface import SPLIT
+
 END_MARGIN = 1e-9     # fraction of a stitch's line left out at each end (its own panels' edges lie there)
-# dolfinx's quadrilateral nodes on the reference square: corners 0 (0,0), 1 (1,0), 2 (0,1), 3 (1,1); mid-edge 4 (0-1),
-# 5 (0-2), 6 (1-3), 7 (2-3); centre 8. Rows of the 3 x 3 grid, bottom to top:
-_Q2_GRID = np.array([[0, 4, 1], [5, 8, 6], [2, 7, 3]])
-
-
-def _grid_triangles(grid: np.ndarray) -> np.ndarray:
-    """Local node triples (2 (n-1)^2, 3) splitting an n x n node grid into triangles."""
-    out = []
-    for i in range(grid.shape[0] - 1):
-        for j in range(grid.shape[1] - 1):
-            a, b, c, d = grid[i, j], grid[i, j + 1], grid[i + 1, j], grid[i + 1, j + 1]
-            out += [[a, b, d], [a, d, c]]
-    return np.array(out)
 
 
 def panel_triangles(fabric) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -39,7 +28,7 @@ def panel_triangles(fabric) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     FabricMesh (module docstring)."""
     mesh = fabric.mesh
     nodes = mesh.geometry.dofmap.array.reshape(mesh.topology.index_map(2).size_local, -1)
-    local = _grid_triangles(_Q2_GRID if nodes.shape[1] == 9 else np.array([[0, 1], [2, 3]]))
+    local = SPLIT if nodes.shape[1] == 9 else np.array([[0, 1, 3], [0, 3, 2]])
     tags = np.zeros(len(nodes), dtype=np.int64)
     owned = fabric.cell_tags.indices < len(nodes)
     tags[fabric.cell_tags.indices[owned]] = fabric.cell_tags.values[owned]
