@@ -74,3 +74,18 @@ def test_the_panel_triangles_cover_each_flat_panel_once():
                                                                          rel=1e-3), name
         unit = mine / np.linalg.norm(mine, axis=1, keepdims=True)
         assert np.all(unit @ unit[0] > 0.999), name
+
+
+@pytest.mark.mpi
+def test_sewn_through_on_a_distributed_mesh_agrees_with_the_serial_answer():
+    """Under mpirun -n 2 each rank tests its own cells: the OR over the ranks finds every stitch of the right inseam
+    of scenes/pants_walk.toml and no other (the serial answer of the test above), the same on every rank."""
+    from mpi4py import MPI
+
+    from fabricfem.contact.sewing_lines import sewn_through
+    from fabricfem.scenes.build import load
+    from fabricfem.scenes.wear import garment_mesh
+    scene = load(ROOT / "scenes" / "pants_walk.toml")
+    fabric, seams, _, _ = garment_mesh(scene.parsed, scene.path, MPI.COMM_WORLD)
+    crossed = {seam.name: c for seam, c in zip(seams, sewn_through(fabric, seams, MPI.COMM_WORLD))}
+    assert crossed.pop("Rfront.4-Rback.0").all() and not any(c.any() for c in crossed.values())

@@ -59,5 +59,7 @@ def sewn_through(fabric, seams: Sequence, comm: MPI.Comm) -> list[np.ndarray]:
     out = []
     for seam in seams:
         crossed = crossing_stitches(seam.points_a, seam.points_b, (seam.tag_a, seam.tag_b), points, triangles, tags)
-        out.append(comm.allreduce(crossed.astype(np.int8), op=MPI.MAX).astype(bool))
+        total = np.zeros(len(crossed), dtype=np.int32)
+        comm.Allreduce(crossed.astype(np.int32), total, op=MPI.SUM)
+        out.append(total > 0)
     return out
