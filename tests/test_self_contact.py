@@ -178,8 +178,8 @@ def test_stitched_labels_join_the_seams_pairs_and_leave_other_nodes_alone():
 
 def test_seam_neighbours_take_no_contact():
     """Two far nodes a, b of a sheet stitched together (a seam's pair): `seam_neighbours` lists, against a brute
-    force over all vertex-triangle and edge-edge pairs, the vertex a or b with every triangle of a cell holding a or
-    b, and the edges that have a or b as an end; with a moved onto b (the seam sewn), the pairs of a with b's
+    force over all vertex-triangle and edge-edge pairs, the vertex a or b with every triangle that has a or b as a
+    node, and the edges that have a or b as an end; with a moved onto b (the seam sewn), the pairs of a with b's
     triangles take contact without the seam and none with it."""
     from fabricfem.contact.self_contact import seam_neighbours
     model = _small_model()
@@ -191,7 +191,7 @@ def test_seam_neighbours_take_no_contact():
     sewn = SelfContact(model, joined=joined)
     keys, edge_keys = seam_neighbours(surface, surface.stitched(joined), sewn.edges)
     T, E = len(surface.triangles), len(sewn.edges)
-    holds = [{a, b} & set(surface.cell_nodes[c]) for c in surface.triangle_cell]
+    holds = [{a, b} & set(triangle) for triangle in surface.triangles]
     expected = sorted(v * T + t for v in (a, b) for t in range(T) if holds[t])
     assert keys.tolist() == expected
     ends = [set(e) & {a, b} for e in sewn.edges]
@@ -199,7 +199,7 @@ def test_seam_neighbours_take_no_contact():
     assert edge_keys.tolist() == expected_edges
     x = x0.copy()
     x[a] = x0[b] + np.array([0.0, 0.0, 0.2 * case.THICKNESS])      # sewn, a hair above b's cells
-    of_b = {t for t in range(T) if b in set(surface.cell_nodes[surface.triangle_cell[t]])}
+    of_b = {t for t in range(T) if b in set(surface.triangles[t])}
     assert any(v == a and t in of_b for v, t in zip(*_pair_lists(plain.contact_pairs(x))))
     assert not any(v == a and t in of_b for v, t in zip(*_pair_lists(sewn.contact_pairs(x))))
 

@@ -4,11 +4,14 @@ every other garment panel in the same mesh), penalty with Coulomb friction ([Bri
 Geometry (fabricfem.contact.cloth_surface, fabricfem.contact.proximity): the Q2 cells split into triangles through
 their nodes; every vertex p closer than the contact distance d_c (default the shell's thickness) to a triangle
 (a, b, c) that is not a neighbour forms a pair, with x_c = sum_i w_i x_i the closest point (barycentric w) and
-delta = |x_p - x_c| [m]. Neighbours: the vertex is a node of the triangle's cell, or the two belong to the same
-connected part of the mesh (its cells, joined by the node pairs `joined`, e.g. a garment's seams) and are closer
-than EXCLUSION x d_c in the reference (stress-free) configuration, where they touch by construction and contact
-would fight the shell's own stiffness. Separate parts (two sheets, two garments) are never neighbours, however
-close their reference positions.
+delta = |x_p - x_c| [m]. Neighbours: the vertex is a node of the triangle, or the two belong to the same connected
+part of the mesh (its cells, joined by the node pairs `joined`, e.g. a garment's seams) and are closer than
+EXCLUSION x d_c in the reference (stress-free) configuration, where they touch by construction and contact would
+fight the shell's own stiffness. Separate parts (two sheets, two garments) are never neighbours, however close
+their reference positions. A vertex and the other triangles of its own cells are not neighbours: a cell folded onto
+itself or into the next one within d_c is a fold like any other, and the independent crossing count
+(fabricfem.contact.intersections: triangles that share no node) counts it
+(docs/findings/2026-11-29-wrapped-pants.md).
 
 Response, in `forces` (before the division of the step; d^{n+1} and v~ = v^n + dt/2 a^n of the integrator):
 
@@ -188,9 +191,9 @@ class SelfContact:
 
     def search(self, x: np.ndarray, radius: float | None = None) -> Pairs:
         """The vertex-triangle pairs of the positions x (N, 3) [m] closer than `radius` (default d_c), the vertex not
-        a node of the triangle's cell (fabricfem.contact.proximity.compiled_pairs)."""
+        a node of the triangle (fabricfem.contact.proximity.compiled_pairs)."""
         s = self.surface
-        return compiled_pairs(x, s.triangles, s.triangle_cell, s.cell_nodes,
+        return compiled_pairs(x, s.triangles, s.triangle_index, s.triangles,
                               self.distance if radius is None else radius, self.comm)
 
     def search_edges(self, x: np.ndarray, radius: float | None = None, interior: bool = True) -> EdgePairs:
@@ -501,12 +504,12 @@ def node_speeds(u: np.ndarray) -> np.ndarray:
 
 def seam_neighbours(surface: ClothSurface, labels: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The pairs that the seams make neighbours, as sorted keys: vertex-triangle (vertex x T + triangle) where the
-    vertex is stitched to a node of the triangle's cell, and edge-edge (first x E + second, first < second) where
+    vertex is stitched to a node of the triangle, and edge-edge (first x E + second, first < second) where
     the two edges have stitched nodes in common; `labels` (N,): one per point of the cloth
     (`ClothSurface.stitched`). A sewn seam holds those nodes together, so these pairs touch by construction, as a
-    vertex and its own cells do."""
+    vertex and its own triangles do."""
     sewn = np.bincount(labels)[labels] > 1
-    cells, per_cell = surface.cell_nodes, len(surface.triangles) // max(len(surface.cell_nodes), 1)
+    cells, per_cell = surface.triangles, 1
     node, cell = cells.ravel(), np.repeat(np.arange(len(cells), dtype=np.int64), cells.shape[1])
     label_cell = np.unique(np.c_[labels[node[sewn[node]]], cell[sewn[node]]], axis=0)
     vertex, row = _same_label(labels, np.flatnonzero(sewn), label_cell[:, 0])

@@ -8,7 +8,8 @@ crosses itself (docs/findings/2026-11-28-stitched-zones.md). The panels are tria
 fabricfem.contact.cloth_surface.SPLIT, a 4-node one into 2; the chord of a panel rolled onto a cylinder of radius r
 departs from it by h^2 / (32 r) with h the cell size) and each stitch's line is tested against the triangles of
 the panels other than the two it joins (libigl's `ray_mesh_intersect`, the library of the intersection count's
-degenerate cases; hit parameters t in (1e-9, 1 - 1e-9) of the line from a to b, its ends left out). Metres. Parallel: each rank tests its own cells, the answers are OR-ed.
+degenerate cases; hit parameters t in (1e-9, 1 - 1e-9) of the line from a to b, its ends left out).
+Metres. Parallel: each rank tests its own cells, the answers are OR-ed.
 """
 from __future__ import annotations
 

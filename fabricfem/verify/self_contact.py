@@ -339,7 +339,7 @@ def fold(self_contact: bool = True, steps: int = FOLD_STEPS, records: int = FOLD
 
 def _reference_neighbours(surface: ClothSurface) -> np.ndarray:
     """Sorted keys p T + t of the vertex-triangle pairs closer than EXCLUSION t in the reference (ipctk)."""
-    pairs = ipctk_pairs(surface.reference, surface.triangles, surface.triangle_cell, surface.cell_nodes,
+    pairs = ipctk_pairs(surface.reference, surface.triangles, surface.triangle_index, surface.triangles,
                         EXCLUSION * THICKNESS)
     return np.sort(pairs.vertex * len(surface.triangles) + pairs.triangle)
 
@@ -347,7 +347,7 @@ def _reference_neighbours(surface: ClothSurface) -> np.ndarray:
 def _smallest_distance(surface: ClothSurface, x: np.ndarray, neighbours: np.ndarray) -> float:
     """Smallest distance [m] of a vertex to a triangle that is not its neighbour at the positions x (ipctk's
     candidates, the numpy closest point), THICKNESS if none is closer."""
-    pairs = ipctk_pairs(x, surface.triangles, surface.triangle_cell, surface.cell_nodes, THICKNESS)
+    pairs = ipctk_pairs(x, surface.triangles, surface.triangle_index, surface.triangles, THICKNESS)
     far = ~np.isin(pairs.vertex * len(surface.triangles) + pairs.triangle, neighbours)
     return float(pairs.distance[far].min()) if far.any() else THICKNESS
 
