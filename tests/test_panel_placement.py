@@ -105,3 +105,12 @@ def test_a_self_contact_run_with_a_seam_sewn_through_a_panel_is_refused_at_setup
     data["output"]["dir"] = str(tmp_path / "out")
     line = refused_in_one_line(tmp_path / "sewn_through.toml", data, "Rfront.4-Rback.0 (21 of 21)", capsys)
     assert "contact.self_contact" in line and not (tmp_path / "out" / "torque.csv").exists()
+
+
+def test_a_wrap_on_a_tube_is_refused(tmp_path, capsys, no_meshing):
+    """[garment.wrap] places pattern panels; on a tube garment it would be ignored, so the scene is refused."""
+    data = tomllib.loads((ROOT / "scenes" / "sleeve_layers.toml").read_text())
+    garment = data["garment"][0] if isinstance(data["garment"], list) else data["garment"]
+    garment["wrap"] = {"P": GOOD}
+    data["output"]["dir"] = str(tmp_path / "out")
+    refused_in_one_line(tmp_path / "tube_wrap.toml", data, "garment.wrap", capsys)

@@ -130,6 +130,8 @@ def check_wear(data: dict) -> None:
     for key in ("rotate", "translate"):
         if key in garment:
             _vector(f"garment.{key}", garment[key])
+    if "wrap" in garment and garment.get("builder", "pattern") == "tube":
+        raise SceneError("garment.wrap: rolls the panels of a pattern; this garment is a tube")
     check_wrap(garment.get("wrap"))
     _choice("body.type", body["type"], BODY_TYPES)
     if body["type"] == "limb":
