@@ -6,6 +6,7 @@ import json
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -183,3 +184,35 @@ def test_a_child_does_not_inherit_this_process_s_mpi_job(monkeypatch):
     env = child_environment({"EXTRA": "1"})
     assert "PMIX_RANK" not in env and "OMPI_COMM_WORLD_SIZE" not in env
     assert env["FABRICFEM_TEST_KEPT"] == "yes" and env["EXTRA"] == "1" and env["OMPI_ALLOW_RUN_AS_ROOT"] == "1"
+
+
+LEAVE_SCRIPT = """
+import sys, time
+from mpi4py import MPI
+from fabricfem.cli.common import leave_together
+world = MPI.COMM_WORLD
+exit_comm = world.Dup()
+if sys.argv[1] == "both" or world.rank == 0:
+    print("code", leave_together(exit_comm, 2, "a test error", wait=2.0), flush=True)
+else:
+    world.bcast(None, root=0)      # rank 0 never sends: a rank left waiting in a collective
+"""
+
+
+@pytest.mark.parametrize("who", ["both", "rank0"])
+def test_ranks_leave_together_or_the_job_is_aborted(who, tmp_path):
+    """fabricfem.cli.common.leave_together under `mpirun -n 2`: when both ranks stop with the error they leave with
+    its code at once; when rank 0 alone stops and rank 1 waits in a collective, rank 0 says so and aborts the job
+    after the wait (2 s here) instead of hanging (the subprocess's own bound, 120 s, would catch a hang)."""
+    if shutil.which("mpirun") is None:
+        pytest.skip("needs mpirun")
+    script = tmp_path / "leave.py"
+    script.write_text(LEAVE_SCRIPT)
+    started = time.monotonic()
+    done = subprocess.run(["mpirun", "-n", "2", sys.executable, str(script), who], capture_output=True, text=True,
+                          env=child_environment(), timeout=120)
+    if who == "both":
+        assert done.returncode == 0 and done.stdout.count("code 2") == 2, done.stderr
+    else:
+        assert done.returncode != 0 and "aborting the MPI job" in done.stderr and "a test error" in done.stderr
+        assert time.monotonic() - started < 60

@@ -12,6 +12,9 @@ they print goes to stderr, so that stdout holds the JSON alone. The other comman
 Exit codes: 0 done; 1 a run that stopped early (its summary.json says why), a verification that failed or a
 study's variants that failed (a rerun resumes); 2 an input error (one line on stderr naming the file, section and
 key or the option; --debug: the Python traceback instead) or a command line argparse refuses.
+
+Under mpirun every rank leaves through fabricfem.cli.common.leave_together: a rank that stops with an error the
+others do not reach (they wait in a collective) aborts the job after LEAVE_WAIT seconds instead of hanging.
 """
 from __future__ import annotations
 
@@ -19,9 +22,11 @@ import argparse
 import logging
 import sys
 
+from mpi4py import MPI
+
 from fabricfem import scenes as scene_module
 from fabricfem.cli.bench import add_bench_command
-from fabricfem.cli.common import global_flags, say
+from fabricfem.cli.common import global_flags, leave_together, say
 from fabricfem.cli.scene import add_scene_commands
 from fabricfem.cli.study import add_study_command
 from fabricfem.cli.verify import add_verify_commands
@@ -51,10 +56,18 @@ def main(argv: list[str] | None = None) -> int:
     # FFCx's logging.basicConfig and the compiler's (setuptools) root-logger level print every JIT compilation at
     # INFO: hidden unless --verbose (global, since the level of the root logger is changed by those packages)
     logging.disable(logging.NOTSET if args.verbose else logging.INFO)
+    exit_comm = MPI.COMM_WORLD.Dup() if MPI.COMM_WORLD.size > 1 else None   # only for leave_together
+    reason = "done"
     try:
-        return args.handler(args)
+        code = args.handler(args)
     except (BatchError, *USER_ERRORS) as exc:   # BatchError: failed variants, named after the others ran
+        reason = " ".join(str(exc).split())
         if args.debug:
+            leave_together(exit_comm, 2, reason)
             raise
-        say(f"fabricfem {args.command}: {' '.join(str(exc).split())}", file=sys.stderr)
-        return 1 if isinstance(exc, BatchError) else 2
+        say(f"fabricfem {args.command}: {reason}", file=sys.stderr)
+        code = 1 if isinstance(exc, BatchError) else 2
+    except BaseException as exc:                 # a fault: its traceback, once the ranks leave together
+        leave_together(exit_comm, 1, f"{type(exc).__name__}: {' '.join(str(exc).split())}")
+        raise
+    return leave_together(exit_comm, code, reason)   # every rank, also after success (module docstring)

@@ -1,6 +1,6 @@
 """What the command-line modules share (fabricfem.cli and its scene, verify, study and bench modules): the global
-flags, the subcommand builder that sets every parser's `handler` and `command`, output on rank 0, JSON on stdout
-and comma-separated option values."""
+flags, the subcommand builder that sets every parser's `handler` and `command`, output on rank 0, JSON on stdout,
+comma-separated option values, and how the ranks of an MPI job leave after an error."""
 from __future__ import annotations
 
 import argparse
@@ -8,6 +8,7 @@ import contextlib
 import json
 import math
 import sys
+import time
 from collections.abc import Callable, Iterator
 
 from mpi4py import MPI
@@ -20,6 +21,28 @@ def say(*args, **kw) -> None:
     """print on rank 0 only, flushed (every rank runs the same command)."""
     if MPI.COMM_WORLD.rank == 0:
         print(*args, **kw, flush=True)
+
+
+LEAVE_WAIT = 10.0   # s a rank that stopped with an error waits for the others to stop too before it aborts the job
+
+
+def leave_together(exit_comm: MPI.Comm | None, code: int, reason: str, wait: float = LEAVE_WAIT) -> int:
+    """`code`, once every rank of `exit_comm` (a communicator kept for this alone, duplicated from COMM_WORLD at the
+    start) has come here too. An error raised on one rank only would leave the others waiting in a collective and
+    the job hanging in MPI_Finalize: after `wait` [s] without them this rank says so on stderr, naming `reason`,
+    and aborts the MPI job with `code`. A non-blocking barrier on the kept communicator cannot be matched by the
+    collectives the others are blocked in; it is freed once all have come. None (one rank): `code` at once."""
+    if exit_comm is None or exit_comm.size == 1:
+        return code
+    request, deadline = exit_comm.Ibarrier(), time.monotonic() + wait
+    while not request.Test():
+        if time.monotonic() > deadline:
+            print(f"fabricfem: rank {exit_comm.rank} stopped ({reason}) and the other ranks did not within "
+                  f"{wait:g} s: aborting the MPI job", file=sys.stderr, flush=True)
+            exit_comm.Abort(code)
+        time.sleep(0.01)
+    exit_comm.Free()
+    return code
 
 
 def split_list(text: str) -> tuple[str, ...]:
