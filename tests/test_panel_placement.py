@@ -39,7 +39,7 @@ GOOD = {"axis_point": [0.0, 0.1, 0.9], "axis": [0.0, 0.0, 1.0], "radius": 0.12, 
 ])
 def test_a_bad_wrap_is_refused_naming_the_key(table, key):
     with pytest.raises(SceneError) as info:
-        check_wrap({"P": table})
+        check_wrap({"wrap": {"P": table}})
     assert key in str(info.value), str(info.value)
 
 

@@ -38,8 +38,8 @@ class ClothSurface:
         nodes: fabricfem.contact.nodal.ContactNodes of the owned nodes of this rank.
         owned: (n,) global indices of this rank's owned nodes (the order of `nodes`).
         count: N, the number of nodes of the whole cloth.
-        triangles: (T, 3) global node indices of the triangles; triangle_cell: (T,) their cells (rows of
-            cell_nodes); cell_nodes: (C, 9) global node indices of every cell; triangle_index: (T,) 0 ... T - 1
+        triangles: (T, 3) global node indices of the triangles (8 per cell, in cell order); cell_nodes: (C, 9)
+            global node indices of every cell; triangle_index: (T,) 0 ... T - 1
             (each triangle its own row of `triangles`: with `triangles` as the proximity's `cell_nodes`, a vertex is
             left out only against the triangles it is a node of, fabricfem.contact.self_contact).
         reference: (N, 3) reference positions [m]; area: (N,) lumped reference areas [m^2]; held: (N,) True for
@@ -58,9 +58,7 @@ class ClothSurface:
         cells = local_to_global[np.asarray(scalar.dofmap.list.array).reshape(-1, 9)[:n_cells]]
         self.cell_nodes = np.concatenate(self.comm.allgather(cells)).astype(np.int64)
         self.count = int(index_map.size_global)
-        C = len(self.cell_nodes)
         self.triangles = self.cell_nodes[:, SPLIT].reshape(-1, 3)
-        self.triangle_cell = np.repeat(np.arange(C, dtype=np.int64), len(SPLIT))
         self.triangle_index = np.arange(len(self.triangles), dtype=np.int64)
         self._counts = np.array(self.comm.allgather(len(self.owned)), dtype=np.int64)
         self._order = self._gather_ints(self.owned)

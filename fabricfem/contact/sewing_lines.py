@@ -57,10 +57,9 @@ def sewn_through(fabric, seams: Sequence, comm: MPI.Comm) -> list[np.ndarray]:
     """Per seam (objects with points_a, points_b (n, 3) [m], tag_a, tag_b), the (n,) bool of its stitches whose
     sewing line crosses another panel of `fabric` on any rank; collective on `comm`, the same on every rank."""
     points, triangles, tags = panel_triangles(fabric)
-    out = []
-    for seam in seams:
-        crossed = crossing_stitches(seam.points_a, seam.points_b, (seam.tag_a, seam.tag_b), points, triangles, tags)
-        total = np.zeros(len(crossed), dtype=np.int32)
-        comm.Allreduce(crossed.astype(np.int32), total, op=MPI.SUM)
-        out.append(total > 0)
-    return out
+    mine = [crossing_stitches(seam.points_a, seam.points_b, (seam.tag_a, seam.tag_b), points, triangles, tags)
+            for seam in seams]
+    local = np.concatenate(mine + [np.zeros(0, dtype=bool)]).astype(np.int32)
+    total = np.zeros_like(local)
+    comm.Allreduce(local, total, op=MPI.SUM)           # one collective for all seams
+    return np.split(total > 0, np.cumsum([len(c) for c in mine])[:-1])

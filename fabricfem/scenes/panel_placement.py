@@ -21,7 +21,7 @@ import numpy as np
 
 from fabricfem.meshes.pattern import Panel, Pattern
 from fabricfem.meshes.pattern_mesh import Placement, RigidPlacement, wrap_on_cylinder
-from fabricfem.scenes.errors import SceneError
+from fabricfem.scenes.errors import SceneError, finite_vector
 from fabricfem.scenes.wear_sections import GarmentSection
 
 WRAP_KEYS = {"axis_point": True, "axis": True, "radius": True, "zero_direction": True, "angle0": False}
@@ -37,18 +37,15 @@ def garment_frame(garment: GarmentSection) -> tuple[np.ndarray, np.ndarray]:
     return rotation, np.zeros(3) if garment.translate is None else np.asarray(garment.translate, dtype=float)
 
 
-def _vector(where: str, value) -> list[float]:
-    if (not isinstance(value, list) or len(value) != 3
-            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)):
-        raise SceneError(f"{where}: expected [x, y, z] (3 finite numbers), got {value!r}")
-    return [float(v) for v in value]
-
-
-def check_wrap(wrap) -> None:
-    """[garment.wrap] before any meshing: a table of panel name -> wrap table (module docstring) with known keys,
-    3-vectors, a positive radius, a non-zero axis and a zero_direction not along it (SceneError naming the key)."""
+def check_wrap(garment: dict) -> None:
+    """[garment.wrap] of the garment table before any meshing: on a pattern garment only, a table of panel name ->
+    wrap table (module docstring) with known keys, 3-vectors, a positive radius, a non-zero axis and a
+    zero_direction not along it (SceneError naming the key)."""
+    wrap = garment.get("wrap")
     if wrap is None:
         return
+    if garment.get("builder", "pattern") == "tube":
+        raise SceneError("garment.wrap: rolls the panels of a pattern; this garment is a tube")
     if not isinstance(wrap, dict):
         raise SceneError(f"garment.wrap: a table of panel name -> cylinder, got {wrap!r}")
     for name, table in wrap.items():
@@ -60,7 +57,7 @@ def check_wrap(wrap) -> None:
         if unknown or missing:
             raise SceneError(f"{where}: " + (f"unknown key(s) {unknown}; " if unknown else "")
                              + (f"missing {missing}; " if missing else "") + f"allowed: {sorted(WRAP_KEYS)}")
-        vectors = {k: _vector(f"{where}.{k}", table[k]) for k in ("axis_point", "axis", "zero_direction")}
+        vectors = {k: finite_vector(f"{where}.{k}", table[k]) for k in ("axis_point", "axis", "zero_direction")}
         for key, value, kind in (("radius", table["radius"], "positive length [m]"),
                                  ("angle0", table.get("angle0", 0.0), "finite angle [deg]")):
             if (isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value)

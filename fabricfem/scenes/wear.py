@@ -45,7 +45,7 @@ from fabricfem.meshes.pattern import (
 from fabricfem.meshes.pattern_mesh import mesh_pattern
 from fabricfem.patterns import pattern_path
 from fabricfem.scenes.contract import WearScene
-from fabricfem.scenes.errors import SceneError
+from fabricfem.scenes.errors import SceneError, finite_vector
 from fabricfem.scenes.errors import suggest as _suggest
 from fabricfem.scenes.garments import check_layers, first_garment, garment_tables, layered_garment_mesh
 from fabricfem.scenes.mesh_body import check_mesh_keys, scene_skin
@@ -61,13 +61,6 @@ BODY_TYPES = ("arm", "default_arm", "limb", "lower_body", "mesh")
 MOTION_TYPES = ("elbow_flexion", "still", "walking", "obstacle_walk", "file")
 PLACES = ("garment",)
 BUILDERS = ("tube", "pattern")
-
-
-def _vector(where: str, value, n: int = 3) -> np.ndarray:
-    if not (isinstance(value, list) and len(value) == n and all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)):
-        raise SceneError(f"{where}: expected {n} finite numbers, got {value!r}")
-    return np.array(value, dtype=float)
 
 
 def _choice(where: str, value, options) -> None:
@@ -129,16 +122,14 @@ def check_wear(data: dict) -> None:
         raise SceneError("garment.pattern: a pattern garment needs a pattern file or a shipped pattern name")
     for key in ("rotate", "translate"):
         if key in garment:
-            _vector(f"garment.{key}", garment[key])
-    if "wrap" in garment and garment.get("builder", "pattern") == "tube":
-        raise SceneError("garment.wrap: rolls the panels of a pattern; this garment is a tube")
-    check_wrap(garment.get("wrap"))
+            finite_vector(f"garment.{key}", garment[key])
+    check_wrap(garment)
     _choice("body.type", body["type"], BODY_TYPES)
     if body["type"] == "limb":
         for key in ("center", "radii"):
             if key not in body:
                 raise SceneError(f"body.{key}: a limb needs its {key}")
-            _vector(f"body.{key}", body[key])
+            finite_vector(f"body.{key}", body[key])
         if min(body["radii"]) <= 0:
             raise SceneError(f"body.radii: must be positive, got {body['radii']}")
     if body["type"] == "mesh":
@@ -164,7 +155,7 @@ def check_wear(data: dict) -> None:
         if not (math.isfinite(time) and time > 0.0):
             raise SceneError(f"donning.time: growing the body needs a growth time > 0 [s], got {time!r}")
     for i, spec in enumerate(data.get("torque", [])):
-        _vector(f"torque[{i}].axis", spec["axis"])
+        finite_vector(f"torque[{i}].axis", spec["axis"])
         if not spec["segments"] or not all(isinstance(s, str) for s in spec["segments"]):
             raise SceneError(f"torque[{i}].segments: a list of segment names, got {spec['segments']!r}")
     route = route_of(data)
